@@ -1,0 +1,185 @@
+"""Records the detector takes and returns: camera intrinsics, parameters, detections."""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field, replace
+
+from holescan.errors import InputError
+
+
+@dataclass(frozen=True)
+class CameraIntrinsics:
+    """Pinhole intrinsics of the (depth-registered) camera.
+
+    Pixel ``(u, v)`` with depth ``Z`` metres back-projects to
+    ``X = (u - cx) Z / fx``, ``Y = (v - cy) Z / fy`` in the optical frame
+    (x right, y down, z forward).
+    """
+
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    depth_unit_m: float = 0.001
+
+    def __post_init__(self) -> None:
+        if self.width <= 0 or self.height <= 0:
+            raise InputError(f"camera size must be positive, got {self.width}x{self.height}")
+        if self.fx <= 0 or self.fy <= 0:
+            raise InputError(f"camera focal lengths must be positive, got {self.fx}, {self.fy}")
+
+    @classmethod
+    def xtion(cls, width: int = 640, height: int = 480) -> CameraIntrinsics:
+        """Asus Xtion Pro at ``width`` x ``height``: 58 x 45 deg FOV, f = 570.3 px at 640x480."""
+        s = width / 640.0
+        return cls(width, height, 570.3 * s, 570.3 * s, (width - 1) / 2, (height - 1) / 2)
+
+    def scaled(self, factor: float) -> CameraIntrinsics:
+        """Intrinsics of the image resized by ``factor`` (0.25 = quarter resolution)."""
+        return CameraIntrinsics(
+            round(self.width * factor),
+            round(self.height * factor),
+            self.fx * factor,
+            self.fy * factor,
+            (self.cx + 0.5) * factor - 0.5,
+            (self.cy + 0.5) * factor - 0.5,
+            self.depth_unit_m,
+        )
+
+    def to_dict(self) -> dict[str, float]:
+        return {
+            "width": self.width,
+            "height": self.height,
+            "fx": self.fx,
+            "fy": self.fy,
+            "cx": self.cx,
+            "cy": self.cy,
+            "depth_unit_m": self.depth_unit_m,
+        }
+
+
+class Mode(enum.Enum):
+    """Which detector runs: the method as published, or holescan's default."""
+
+    PAPER = "paper"
+    DEFAULT = "default"
+
+
+@dataclass(frozen=True)
+class Searcher:
+    """Who has to fit through the hole: sizes in metres (ALGORITHM.md, Panero & Zelnik 1979).
+
+    A region scores 1 on width when its major/minor axes reach ``major_m``/``minor_m`` and 0
+    at ``min_fraction`` of those; its depth scores 0 at ``depth_low_m`` and 1 at
+    ``depth_high_m`` below the rim.
+    """
+
+    name: str
+    major_m: float
+    minor_m: float
+    depth_low_m: float
+    depth_high_m: float
+    min_fraction: float = 0.5
+
+
+HUMAN = Searcher("human", major_m=0.655, minor_m=0.368, depth_low_m=0.200, depth_high_m=1.951)
+DOG = Searcher("dog", major_m=0.45, minor_m=0.25, depth_low_m=0.15, depth_high_m=1.2)
+ROBOT = Searcher("robot", major_m=0.35, minor_m=0.20, depth_low_m=0.10, depth_high_m=0.8)
+SEARCHERS: dict[str, Searcher] = {s.name: s for s in (HUMAN, DOG, ROBOT)}
+
+
+@dataclass(frozen=True)
+class DetectParams:
+    """Everything that changes what the detector finds.
+
+    ``PAPER`` is the method as published (Kong et al. 2015); ``DEFAULT`` is holescan's.
+    Use :func:`dataclasses.replace` (or :meth:`with_searcher`) to derive variants.
+    """
+
+    mode: Mode = Mode.DEFAULT
+    searcher: Searcher = HUMAN
+    superpixels: int = 9
+    # Paper mode: ERS settings (prototype defaults) and score thresholds.
+    ers_lambda: float = 0.5
+    ers_sigma: float = 5.0
+    dark_threshold: float = 0.274
+    contrast_threshold: float = 0.267
+    weights: tuple[float, float, float, float, float] = (0.2, 0.2, 0.2, 0.2, 0.2)
+    bias: float = 0.0
+    # Default mode.
+    work_scale: float = 0.25
+    max_range_m: float = 4.0
+    min_score: float = 0.05
+    nms_iou: float = 0.3
+    extra: dict[str, float] = field(default_factory=dict, compare=False, hash=False)
+
+    def with_searcher(self, searcher: Searcher | str) -> DetectParams:
+        s = SEARCHERS[searcher] if isinstance(searcher, str) else searcher
+        return replace(self, searcher=s)
+
+
+PAPER = DetectParams(mode=Mode.PAPER)
+DEFAULT = DetectParams(mode=Mode.DEFAULT)
+
+
+@dataclass(frozen=True)
+class FeatureScores:
+    """The paper's five attribute scores, each in [0, 1] (1 = more hole-like).
+
+    depth (Sd), width (Sw), fill (Sr, aspect/fill ratio), darkness (Sb, absolute
+    brightness), contrast (Sc, darker than the neighbours).
+    """
+
+    depth: float
+    width: float
+    fill: float
+    darkness: float
+    contrast: float
+
+    def as_tuple(self) -> tuple[float, float, float, float, float]:
+        return (self.depth, self.width, self.fill, self.darkness, self.contrast)
+
+
+@dataclass(frozen=True)
+class Detection:
+    """One candidate access hole in one image.
+
+    box : (x, y, w, h) pixels, x/y of the top-left corner.
+    score : confidence in [0, 1].
+    features : the five attribute scores that explain the score.
+    depth_rel_m : how far the region lies below its rim (a lower bound when
+        ``beyond_range``).
+    major_m, minor_m : metric axes of the opening.
+    rim_depth_m : camera depth of the opening's rim (the surrounding terrain), used to
+        geotag the hole; the floor is deeper or unread.
+    beyond_range : the floor gave no depth reading (deeper than the sensor's range).
+    """
+
+    box: tuple[int, int, int, int]
+    score: float
+    features: FeatureScores
+    depth_rel_m: float
+    major_m: float
+    minor_m: float
+    rim_depth_m: float
+    beyond_range: bool = False
+
+    @property
+    def centre_px(self) -> tuple[float, float]:
+        x, y, w, h = self.box
+        return (x + w / 2.0 - 0.5, y + h / 2.0 - 0.5)
+
+    def explain(self) -> str:
+        """One line a rescuer can read: why this is (or is not) a hole."""
+        f = self.features
+        depth = f">{self.depth_rel_m:.1f} m (no floor reading)" if self.beyond_range else (
+            f"{self.depth_rel_m:.2f} m"
+        )
+        return (
+            f"score {self.score:.2f}: {self.major_m:.2f} x {self.minor_m:.2f} m opening, "
+            f"{depth} deep; depth {f.depth:.2f} width {f.width:.2f} fill {f.fill:.2f} "
+            f"dark {f.darkness:.2f} contrast {f.contrast:.2f}"
+        )

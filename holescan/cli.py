@@ -1,0 +1,56 @@
+"""``holescan <verb>``: parse arguments, call one library function, map errors to exit codes.
+
+Each verb lives in a ``holescan/_cmd_*.py`` module exposing ``register(subparsers)``; the
+module sets ``func`` on its parser. No logic here.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import sys
+from collections.abc import Sequence
+
+from holescan import __version__
+from holescan.errors import HolescanError
+
+_COMMAND_MODULES = (
+    "holescan._cmd_detect",
+    "holescan._cmd_dataset",
+    "holescan._cmd_eval",
+)
+
+EXIT_INPUT = 2
+EXIT_INTERRUPTED = 130
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="holescan", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"holescan {__version__}")
+    parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    sub = parser.add_subparsers(dest="verb", required=True, metavar="VERB")
+    for name in _COMMAND_MODULES:
+        importlib.import_module(name).register(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.INFO,
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+    )
+    try:
+        return int(args.func(args) or 0)
+    except HolescanError as err:
+        print(f"holescan {args.verb}: error: {err}", file=sys.stderr)
+        return EXIT_INPUT
+    except KeyboardInterrupt:
+        print(f"holescan {args.verb}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+if __name__ == "__main__":
+    sys.exit(main())
