@@ -5,6 +5,9 @@ Two modes share one feature framework (depth, width, fill, darkness, contrast):
 accurate detector.
 """
 
+from detect._baseline import detect_baseline
+from detect._default import box_iou
+from detect._detector import detect_holes
 from detect._scores import luminance, ramp
 from detect._types import (
     DEFAULT,
@@ -34,6 +37,9 @@ __all__ = [
     "FeatureScores",
     "Mode",
     "Searcher",
+    "box_iou",
+    "detect_baseline",
+    "detect_holes",
     "luminance",
     "ramp",
 ]

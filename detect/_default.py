@@ -1,0 +1,272 @@
+"""holescan's default detector: depth basins below their spill level, scored like the paper.
+
+The paper over-segments depth into K superpixels and asks which superpixel is deeper than
+its neighbours. That fails in the ways ALGORITHM.md lists (one K for every hole size,
+no-reading pixels treated as noise, sizes in pixels of a fixed K). Here the candidates are
+the *basins* of the depth image instead, found at every scale at once:
+
+1. Depth is block-averaged to ``work_scale`` (valid readings only) and turned into a height
+   ``H = -Z`` (camera axial depth ``Z``, metres). Pixels with no reading get a height below
+   every reading: enclosed by valid rubble, no reading means *deeper than the sensor's range*.
+2. Grey-level reconstruction by erosion (``skimage.morphology.reconstruction``) fills every
+   basin of ``H`` up to its spill level; ``pit = filled - H`` is how far each pixel lies below
+   the lowest point of the rim around it. A tilted plane has no basin; a basin open to the
+   image border spills there, so holes cut by the border are not reported (the dataset marks
+   those ``iscrowd``).
+3. Candidates are connected components of ``pit > deep_m`` (or no reading); each candidate's
+   region is its whole basin (``pit > shallow_m``) unless that basin is much larger than the
+   deep core (a hole at the bottom of a broad depression): then the core alone.
+4. Each region is measured in metres: the rim is the ring of valid pixels around it; a plane
+   fitted to the rim's 3-D points is the opening, and the region's pixel rays meet it in
+   points whose principal axes give the opening's major/minor axes (``4 sqrt(lambda)``, the
+   ellipse of equal second moments, as the paper's ellipse fit).
+5. The five attribute scores of the paper are kept (so a rescuer sees *why*), but combined so
+   that geometry is necessary: ``score = sqrt(Sd) * Sw * (0.6 + 0.25 Sr + 0.15 max(Sb, Sc))``.
+   A dark stain or a shadow has no depth and never becomes a candidate; a shallow dip scores
+   low on Sd, a crack or a small hole low on Sw. Overlapping boxes are suppressed (NMS).
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+from skimage.morphology import reconstruction
+
+from detect._scores import contrast_score, darkness_score, luminance, ramp, width_score
+from detect._types import CameraIntrinsics, DetectParams, Detection, FeatureScores
+from detect._validate import check_frame
+
+# Region thresholds (metres below the spill level). SHALLOW is a few block-averaged noise
+# sigmas at 4 m (Xtion: 1.425e-6 Z^2 mm per pixel -> 23 mm, /4 after 4x4 averaging).
+SHALLOW_M = 0.05
+DEEP_M = 0.25
+# A basin more than this many times larger than its deep core is a depression holding a hole.
+BASIN_CORE_RATIO = 2.0
+# A block counts as read when at least this fraction of its pixels have a reading.
+MIN_VALID_FRACTION = 0.25
+# Openings larger than this (major axis, m) are broad terrain, not holes: width score fades.
+OVERSIZE_START_M = 3.5
+OVERSIZE_END_M = 6.0
+RING_PX = 2
+
+
+def block_depth(
+    depth: npt.NDArray[np.uint16], factor: int, unit_m: float
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]:
+    """Mean of the valid readings in each ``factor`` x ``factor`` block.
+
+    Returns ``(z, valid_fraction)``: z (h, w) float32 metres, NaN where fewer than
+    :data:`MIN_VALID_FRACTION` of the block's pixels had a reading.
+    """
+    h, w = depth.shape[0] // factor, depth.shape[1] // factor
+    d = depth[: h * factor, : w * factor].reshape(h, factor, w, factor)
+    valid = (d > 0).sum(axis=(1, 3), dtype=np.int32)
+    total = d.sum(axis=(1, 3), dtype=np.int64)
+    frac = (valid / float(factor * factor)).astype(np.float32)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        z = (total / np.maximum(valid, 1) * unit_m).astype(np.float32)
+    z[frac < MIN_VALID_FRACTION] = np.nan
+    return z, frac
+
+
+def basin_depth(
+    z: npt.NDArray[np.float32],
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_], float]:
+    """Depth of every pixel below the spill level of its basin (metres; inf for no reading).
+
+    Returns ``(pit, invalid, z_far)`` where ``z_far`` is the farthest reading in the image.
+    """
+    invalid = np.isnan(z)
+    z_far = float(np.nanmax(z))
+    height = -z.astype(np.float64)
+    floor = -(z_far + 1.0)
+    height[invalid] = floor
+    seed = height.copy()
+    seed[1:-1, 1:-1] = height.max()
+    filled = reconstruction(seed, height, method="erosion")
+    pit = filled - height
+    pit[invalid & (pit > 0)] = np.inf
+    return pit, invalid, z_far
+
+
+def _candidate_regions(
+    pit: npt.NDArray[np.float64], min_px: int
+) -> list[tuple[npt.NDArray[np.bool_], tuple[int, int, int, int]]]:
+    """Regions (mask cropped to its box, box x, y, w, h) of the basins holding a deep core."""
+    shallow = (pit > SHALLOW_M).astype(np.uint8)
+    deep = (pit > DEEP_M).astype(np.uint8)
+    n_a, lab_a, stats_a, _ = cv2.connectedComponentsWithStats(shallow, connectivity=8)
+    n_b, lab_b, stats_b, _ = cv2.connectedComponentsWithStats(deep, connectivity=8)
+    cores_per_basin: dict[int, list[int]] = {}
+    for b in range(1, n_b):
+        if stats_b[b, cv2.CC_STAT_AREA] < min_px:
+            continue
+        x, y = stats_b[b, cv2.CC_STAT_LEFT], stats_b[b, cv2.CC_STAT_TOP]
+        w, h = stats_b[b, cv2.CC_STAT_WIDTH], stats_b[b, cv2.CC_STAT_HEIGHT]
+        sub = lab_b[y : y + h, x : x + w] == b
+        parent = int(lab_a[y : y + h, x : x + w][sub][0])
+        cores_per_basin.setdefault(parent, []).append(b)
+    regions = []
+    for parent, cores in cores_per_basin.items():
+        basin_area = stats_a[parent, cv2.CC_STAT_AREA]
+        core_area = sum(int(stats_b[b, cv2.CC_STAT_AREA]) for b in cores)
+        if len(cores) == 1 and basin_area <= BASIN_CORE_RATIO * core_area:
+            picks = [(lab_a, stats_a, parent)]
+        else:
+            picks = [(lab_b, stats_b, b) for b in cores]
+        for lab, stats, i in picks:
+            x, y = int(stats[i, cv2.CC_STAT_LEFT]), int(stats[i, cv2.CC_STAT_TOP])
+            w, h = int(stats[i, cv2.CC_STAT_WIDTH]), int(stats[i, cv2.CC_STAT_HEIGHT])
+            regions.append((lab[y : y + h, x : x + w] == i, (x, y, w, h)))
+    return regions
+
+
+def _rays(
+    us: npt.NDArray[np.float64], vs: npt.NDArray[np.float64], cam: CameraIntrinsics
+) -> npt.NDArray[np.float64]:
+    return np.stack([(us - cam.cx) / cam.fx, (vs - cam.cy) / cam.fy, np.ones_like(us)], axis=1)
+
+
+def opening_axes(
+    region_uv: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]],
+    rim_uvz: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]],
+    cam: CameraIntrinsics,
+) -> tuple[float, float, float, float]:
+    """Metric size of an opening: ``(major_m, minor_m, area_m2, rim_depth_m)``.
+
+    region_uv : pixel coordinates of the region; rim_uvz : pixel coordinates and depth (m)
+    of the valid ring around it. The rim's 3-D points define the opening plane (least
+    squares); the region's rays meet that plane; their second moments (plus each pixel's own
+    footprint) give the axes of the ellipse with the same moments.
+    """
+    ru, rv, rz = rim_uvz
+    rim_pts = _rays(ru, rv, cam) * rz[:, None]
+    centre = rim_pts.mean(axis=0)
+    normal = np.array([0.0, 0.0, 1.0])
+    if len(rim_pts) >= 6:
+        _, sv, vt = np.linalg.svd(rim_pts - centre, full_matrices=False)
+        if sv[1] > 1e-6 and abs(vt[2][2]) > 0.3:  # a plane, facing the camera
+            normal = vt[2] / np.linalg.norm(vt[2])
+    rays = _rays(region_uv[0], region_uv[1], cam)
+    t = (centre @ normal) / (rays @ normal)
+    pts = rays * t[:, None]
+    # In-plane basis.
+    e1 = np.cross(normal, [0.0, 1.0, 0.0])
+    if np.linalg.norm(e1) < 1e-6:
+        e1 = np.cross(normal, [1.0, 0.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(normal, e1)
+    p2 = np.stack([pts @ e1, pts @ e2], axis=1)
+    cos_incidence = np.abs(rays @ normal) / np.linalg.norm(rays, axis=1)
+    pix_area = (t**2) / (cam.fx * cam.fy) / np.maximum(cos_incidence, 0.2)
+    area = float(pix_area.sum())
+    cov = np.cov(p2.T) if len(p2) > 1 else np.zeros((2, 2))
+    cov = cov + np.eye(2) * float(np.mean(pix_area)) / 12.0
+    lam = np.sort(np.linalg.eigvalsh(cov))[::-1]
+    major, minor = 4.0 * math.sqrt(max(lam[0], 0.0)), 4.0 * math.sqrt(max(lam[1], 0.0))
+    return major, minor, area, float(np.median(rz))
+
+
+def _nms(dets: list[Detection], iou_max: float) -> list[Detection]:
+    keep: list[Detection] = []
+    for d in sorted(dets, key=lambda d: -d.score):
+        if all(box_iou(d.box, k.box) <= iou_max for k in keep):
+            keep.append(d)
+    return keep
+
+
+def box_iou(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> float:
+    """Intersection over union of two (x, y, w, h) boxes."""
+    ix = max(0, min(a[0] + a[2], b[0] + b[2]) - max(a[0], b[0]))
+    iy = max(0, min(a[1] + a[3], b[1] + b[3]) - max(a[1], b[1]))
+    inter = ix * iy
+    union = a[2] * a[3] + b[2] * b[3] - inter
+    return inter / union if union > 0 else 0.0
+
+
+def detect_default(
+    rgb: npt.NDArray[np.uint8],
+    depth: npt.NDArray[np.uint16],
+    camera: CameraIntrinsics,
+    params: DetectParams,
+) -> list[Detection]:
+    """Detect access holes with holescan's default method (module docstring).
+
+    Parameters
+    ----------
+    rgb : (H, W, 3) uint8 ndarray, RGB, registered to depth.
+    depth : (H, W) uint16 ndarray, millimetres, 0 = no reading.
+    camera : intrinsics of the (H, W) images.
+    params : detector parameters (``searcher`` sets the sizes and depths).
+
+    Returns
+    -------
+    Detections sorted by score, highest first.
+    """
+    check_frame(rgb, depth, camera)
+    factor = max(1, round(1.0 / params.work_scale))
+    z, _ = block_depth(depth, factor, camera.depth_unit_m)
+    if np.isnan(z).all():
+        return []
+    cam = camera.scaled(1.0 / factor)
+    y_img = cv2.resize(luminance(rgb), (z.shape[1], z.shape[0]), interpolation=cv2.INTER_AREA)
+    pit, invalid, z_far = basin_depth(z)
+    range_m = max(params.max_range_m, z_far)
+    s = params.searcher
+    # Smallest region worth measuring: a quarter of the searcher's minimum opening at the
+    # farthest depth in view, in work pixels.
+    min_side_px = s.min_fraction * s.minor_m * cam.fx / max(z_far, 0.5)
+    min_px = max(2, int(0.25 * min_side_px**2))
+    dets: list[Detection] = []
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * RING_PX + 1, 2 * RING_PX + 1))
+    for mask, (x, y, w, h) in _candidate_regions(pit, min_px):
+        x0, y0 = max(0, x - RING_PX), max(0, y - RING_PX)
+        x1, y1 = min(z.shape[1], x + w + RING_PX), min(z.shape[0], y + h + RING_PX)
+        big = np.zeros((y1 - y0, x1 - x0), np.uint8)
+        big[y - y0 : y - y0 + h, x - x0 : x - x0 + w] = mask
+        ring = cv2.dilate(big, kernel).astype(bool) & ~big.astype(bool)
+        zc, inv_c = z[y0:y1, x0:x1], invalid[y0:y1, x0:x1]
+        ring &= ~inv_c
+        if ring.sum() < 3:
+            continue
+        inside = big.astype(bool)
+        rv, ru = np.nonzero(ring)
+        iv, iu = np.nonzero(inside)
+        major, minor, area, rim_z = opening_axes(
+            (iu + float(x0), iv + float(y0)),
+            (ru + float(x0), rv + float(y0), zc[ring].astype(np.float64)),
+            cam,
+        )
+        floor_valid = inside & ~inv_c
+        no_read = float((inside & inv_c).sum()) / float(inside.sum())
+        seen = float(np.percentile(zc[floor_valid], 90) - rim_z) if floor_valid.any() else 0.0
+        beyond = no_read > 0.3
+        depth_rel = max(seen, range_m - rim_z) if beyond else seen
+        sd = ramp(depth_rel, s.depth_low_m, s.depth_high_m)
+        sw = width_score(major, minor, s.major_m, s.minor_m, s.min_fraction)
+        sw *= 1.0 - ramp(major, OVERSIZE_START_M, OVERSIZE_END_M)
+        fill = area / (major * minor) if major * minor > 0 else 0.0
+        sr = ramp(fill, 0.3, 0.7)
+        yc = y_img[y0:y1, x0:x1]
+        y_in, y_ring = float(yc[inside].mean()), float(yc[ring].mean())
+        sb = darkness_score(y_in, params.dark_threshold)
+        sc = contrast_score(y_in, y_ring, params.contrast_threshold)
+        score = math.sqrt(sd) * sw * (0.6 + 0.25 * sr + 0.15 * max(sb, sc))
+        if score < params.min_score:
+            continue
+        dets.append(
+            Detection(
+                box=(x * factor, y * factor, w * factor, h * factor),
+                score=float(score),
+                features=FeatureScores(sd, sw, sr, sb, sc),
+                depth_rel_m=float(depth_rel),
+                major_m=major,
+                minor_m=minor,
+                rim_depth_m=rim_z,
+                beyond_range=beyond,
+            )
+        )
+    return _nms(dets, params.nms_iou)

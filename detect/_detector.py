@@ -1,0 +1,41 @@
+"""``detect_holes``: one entry point for both detector modes."""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+from detect._default import detect_default
+from detect._types import DEFAULT, CameraIntrinsics, DetectParams, Detection, Mode
+
+
+def detect_holes(
+    rgb: npt.NDArray[np.uint8],
+    depth: npt.NDArray[np.uint16],
+    camera: CameraIntrinsics,
+    params: DetectParams = DEFAULT,
+) -> list[Detection]:
+    """Find access holes in one registered RGB-D frame.
+
+    Parameters
+    ----------
+    rgb : (H, W, 3) uint8 ndarray, RGB order, registered to ``depth``.
+    depth : (H, W) uint16 ndarray, millimetres, 0 = no reading.
+    camera : intrinsics of the (H, W) images.
+    params : ``DEFAULT`` (holescan's detector) or ``PAPER`` (Kong et al. 2015), or a variant.
+
+    Returns
+    -------
+    list of Detection, highest score first.
+
+    Raises
+    ------
+    holescan.errors.InputError
+        Wrong shapes or dtypes, sizes that do not match ``camera``, no depth at all.
+    """
+    if params.mode is Mode.PAPER:
+        # Imported here: paper mode compiles ERS with numba on first use.
+        from detect._paper import detect_paper
+
+        return detect_paper(rgb, depth, camera, params)
+    return detect_default(rgb, depth, camera, params)
