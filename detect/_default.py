@@ -35,7 +35,7 @@ import numpy as np
 import numpy.typing as npt
 from skimage.morphology import reconstruction
 
-from detect._scores import contrast_score, darkness_score, luminance, ramp, width_score
+from detect._scores import contrast_score, darkness_score, ramp, width_score
 from detect._types import CameraIntrinsics, DetectParams, Detection, FeatureScores
 from detect._validate import check_frame
 
@@ -61,13 +61,11 @@ def block_depth(
     Returns ``(z, valid_fraction)``: z (h, w) float32 metres, NaN where fewer than
     :data:`MIN_VALID_FRACTION` of the block's pixels had a reading.
     """
-    h, w = depth.shape[0] // factor, depth.shape[1] // factor
-    d = depth[: h * factor, : w * factor].reshape(h, factor, w, factor)
-    valid = (d > 0).sum(axis=(1, 3), dtype=np.int32)
-    total = d.sum(axis=(1, 3), dtype=np.int64)
-    frac = (valid / float(factor * factor)).astype(np.float32)
+    size = (depth.shape[1] // factor, depth.shape[0] // factor)
+    total = cv2.resize(depth.astype(np.float32), size, interpolation=cv2.INTER_AREA)
+    frac = cv2.resize((depth > 0).astype(np.float32), size, interpolation=cv2.INTER_AREA)
     with np.errstate(invalid="ignore", divide="ignore"):
-        z = (total / np.maximum(valid, 1) * unit_m).astype(np.float32)
+        z = total / frac * np.float32(unit_m)
     z[frac < MIN_VALID_FRACTION] = np.nan
     return z, frac
 
@@ -212,7 +210,8 @@ def detect_default(
     if np.isnan(z).all():
         return []
     cam = camera.scaled(1.0 / factor)
-    y_img = cv2.resize(luminance(rgb), (z.shape[1], z.shape[0]), interpolation=cv2.INTER_AREA)
+    grey = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)  # BT.601 Y, as the paper's YUV
+    y_img = cv2.resize(grey, (z.shape[1], z.shape[0]), interpolation=cv2.INTER_AREA) / 255.0
     pit, invalid, z_far = basin_depth(z)
     range_m = max(params.max_range_m, z_far)
     s = params.searcher
@@ -270,3 +269,21 @@ def detect_default(
             )
         )
     return _nms(dets, params.nms_iou)
+
+
+def basin_labels(
+    depth: npt.NDArray[np.uint16], camera: CameraIntrinsics, params: DetectParams
+) -> npt.NDArray[np.int32]:
+    """(H, W) int32 labels of the depth basins the default detector considers (0 = none).
+
+    For display: nearest-neighbour upsampling of the work-resolution basin components.
+    """
+    factor = max(1, round(1.0 / params.work_scale))
+    z, _ = block_depth(depth, factor, camera.depth_unit_m)
+    if np.isnan(z).all():
+        return np.zeros(depth.shape, np.int32)
+    pit, _, _ = basin_depth(z)
+    _, lab = cv2.connectedComponents((pit > SHALLOW_M).astype(np.uint8), connectivity=8)
+    up = cv2.resize(lab.astype(np.int32), (depth.shape[1], depth.shape[0]),
+                    interpolation=cv2.INTER_NEAREST)
+    return up.astype(np.int32)

@@ -1,0 +1,178 @@
+"""The default detector on small synthetic scenes with known answers."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from detect import DEFAULT, DOG, CameraIntrinsics, Detection, detect_holes
+from detect._default import basin_depth, block_depth, opening_axes
+from holescan.errors import InputError
+
+CAM = CameraIntrinsics.xtion()
+F = CAM.fx
+
+
+def scene(
+    z0: float = 2.8,
+    holes: tuple[tuple[float, float, float, float, float], ...] = (),
+    seed: int = 0,
+    noise: bool = True,
+    range_m: float = 4.0,
+) -> tuple[np.ndarray, np.ndarray, list[tuple[float, float, float, float]]]:
+    """Flat floor at ``z0`` with rectangular holes (u, v centre px, w, h metres, floor z m)."""
+    rng = np.random.default_rng(seed)
+    v, u = np.mgrid[0:480, 0:640].astype(np.float64)
+    z = np.full((480, 640), z0)
+    boxes = []
+    for cu, cv, wm, hm, zf in holes:
+        w, h = wm * F / z0, hm * F / z0
+        m = (np.abs(u - cu) < w / 2) & (np.abs(v - cv) < h / 2)
+        z[m] = zf
+        boxes.append((cu - w / 2, cv - h / 2, w, h))
+    if noise:
+        z = z + rng.normal(0, 1, z.shape) * 1.425e-6 * (z * 1000) ** 2 / 1000
+    depth = np.round(z * 1000).astype(np.uint16)
+    depth[z > range_m] = 0
+    rgb = np.full((480, 640, 3), 100, np.uint8)
+    return rgb, depth, boxes
+
+
+def iou(a: tuple[float, ...], b: tuple[float, ...]) -> float:
+    ix = max(0.0, min(a[0] + a[2], b[0] + b[2]) - max(a[0], b[0]))
+    iy = max(0.0, min(a[1] + a[3], b[1] + b[3]) - max(a[1], b[1]))
+    return ix * iy / (a[2] * a[3] + b[2] * b[3] - ix * iy)
+
+
+def top(dets: list[Detection]) -> Detection:
+    assert dets, "expected a detection"
+    return dets[0]
+
+
+def test_flat_floor_has_no_hole() -> None:
+    rgb, depth, _ = scene()
+    assert detect_holes(rgb, depth, CAM) == []
+
+
+def test_deep_hole_with_visible_floor() -> None:
+    rgb, depth, boxes = scene(holes=((320, 240, 1.0, 0.6, 3.8),))
+    d = top(detect_holes(rgb, depth, CAM))
+    assert iou(d.box, boxes[0]) > 0.85
+    assert d.depth_rel_m == pytest.approx(1.0, abs=0.05)
+    assert d.rim_depth_m == pytest.approx(2.8, abs=0.02)
+    assert not d.beyond_range
+    # Axes of the ellipse with a 1.0 x 0.6 rectangle's moments: side * 4 / sqrt(12).
+    assert d.major_m == pytest.approx(1.0 * 4 / np.sqrt(12), rel=0.06)
+    assert d.minor_m == pytest.approx(0.6 * 4 / np.sqrt(12), rel=0.08)
+    assert d.features.width == 1.0
+    assert d.features.depth == pytest.approx((1.0 - 0.2) / (1.951 - 0.2), abs=0.03)
+
+
+def test_hole_beyond_range_is_a_hole_not_noise() -> None:
+    rgb, depth, boxes = scene(holes=((250, 200, 0.9, 0.7, 6.0),))
+    d = top(detect_holes(rgb, depth, CAM))
+    assert d.beyond_range
+    assert iou(d.box, boxes[0]) > 0.85
+    assert d.depth_rel_m >= 4.0 - 2.8 - 0.05  # at least down to the sensor's range
+
+
+def test_small_hole_and_shallow_dip_score_low() -> None:
+    rgb, depth, _ = scene(holes=((150, 150, 0.2, 0.2, 4.5), (450, 300, 1.2, 1.0, 2.95)))
+    for d in detect_holes(rgb, depth, CAM):
+        assert d.score < 0.2, d.explain()
+
+
+def test_dog_finds_a_hole_too_small_for_a_person() -> None:
+    rgb, depth, _ = scene(holes=((320, 240, 0.4, 0.3, 4.5),))
+    human = detect_holes(rgb, depth, CAM)
+    dog = detect_holes(rgb, depth, CAM, DEFAULT.with_searcher(DOG))
+    assert all(d.features.width < 0.5 for d in human)
+    assert top(dog).features.width > 0.9
+
+
+def test_two_holes_found_separately_and_ranked_by_depth() -> None:
+    rgb, depth, boxes = scene(holes=((180, 240, 0.8, 0.8, 3.3), (460, 240, 0.8, 0.8, 5.0)))
+    dets = [d for d in detect_holes(rgb, depth, CAM) if d.score > 0.3]
+    assert len(dets) == 2
+    assert iou(dets[0].box, boxes[1]) > 0.8  # the deeper one first
+    assert iou(dets[1].box, boxes[0]) > 0.8
+
+
+def test_hole_cut_by_border_is_not_reported() -> None:
+    rgb, depth, _ = scene(holes=((20, 240, 1.0, 0.8, 5.0),))
+    assert all(d.box[0] > 0 for d in detect_holes(rgb, depth, CAM))
+
+
+def test_darkness_and_contrast_explain() -> None:
+    rgb, depth, boxes = scene(holes=((320, 240, 1.0, 0.8, 5.0),))
+    x, y, w, h = (int(v) for v in boxes[0])
+    rgb[y : y + h, x : x + w] = 10
+    d = top(detect_holes(rgb, depth, CAM))
+    assert d.features.darkness == pytest.approx(1 - (10 / 255) / 0.274, abs=0.05)
+    assert d.features.contrast > 0.2
+    assert "deep" in d.explain()
+
+
+def test_block_depth_ignores_missing_readings() -> None:
+    d = np.full((8, 8), 2000, np.uint16)
+    d[0, 0] = 0
+    d[4:, 4:] = 0
+    z, frac = block_depth(d, 4, 0.001)
+    assert z[0, 0] == pytest.approx(2.0)
+    assert frac[0, 0] == pytest.approx(15 / 16)
+    assert np.isnan(z[1, 1])
+
+
+def test_basin_depth_of_a_pit_and_a_tilted_plane() -> None:
+    v, u = np.mgrid[0:40, 0:50].astype(np.float32)
+    plane = 2.0 + 0.01 * u + 0.02 * v
+    pit, _, _ = basin_depth(plane)
+    assert float(np.abs(pit).max()) < 1e-5
+    plane[10:20, 10:20] += 0.7
+    pit, _, _ = basin_depth(plane)
+    # Below the lowest rim point (u = v = 20: 0.05 + 0.10 m farther than the centre's plane).
+    assert float(pit[15, 15]) == pytest.approx(0.7 - 0.01 * 5 - 0.02 * 5, abs=1e-5)
+
+
+def test_opening_axes_on_a_tilted_plane() -> None:
+    # A 1 m x 1 m square on a plane tilted 30 deg about the camera's x axis, 3 m away.
+    cam = CAM.scaled(0.25)
+    tilt = np.deg2rad(30)
+    normal = np.array([0.0, -np.sin(tilt), np.cos(tilt)])
+    e1, e2 = np.array([1.0, 0, 0]), np.cross(normal, [1.0, 0, 0])
+    centre = np.array([0.0, 0.0, 3.0])
+    s = np.linspace(-0.5, 0.5, 60)
+    a, b = np.meshgrid(s, s)
+    pts = centre + a.reshape(-1, 1) * e1 + b.reshape(-1, 1) * e2
+    uv = np.stack([pts[:, 0] / pts[:, 2] * cam.fx + cam.cx, pts[:, 1] / pts[:, 2] * cam.fy + cam.cy])
+    mask = np.zeros((cam.height, cam.width), bool)
+    mask[np.round(uv[1]).astype(int), np.round(uv[0]).astype(int)] = True
+    big = np.linspace(-0.8, 0.8, 120)
+    a2, b2 = np.meshgrid(big, big)
+    keep = (np.abs(a2) > 0.55) | (np.abs(b2) > 0.55)
+    rim = centre + a2[keep].reshape(-1, 1) * e1 + b2[keep].reshape(-1, 1) * e2
+    ru, rv = rim[:, 0] / rim[:, 2] * cam.fx + cam.cx, rim[:, 1] / rim[:, 2] * cam.fy + cam.cy
+    iv, iu = np.nonzero(mask)
+    major, minor, area, _ = opening_axes((iu.astype(float), iv.astype(float)),
+                                         (ru, rv, rim[:, 2]), cam)
+    assert area == pytest.approx(1.0, rel=0.1)
+    side = 4 / np.sqrt(12)
+    assert major == pytest.approx(side, rel=0.1)
+    assert minor == pytest.approx(side, rel=0.1)
+
+
+@pytest.mark.parametrize(
+    ("rgb", "depth", "message"),
+    [
+        (np.zeros((480, 640), np.uint8), np.ones((480, 640), np.uint16), "rgb must be"),
+        (np.zeros((480, 640, 3), np.float32), np.ones((480, 640), np.uint16), "uint8"),
+        (np.zeros((480, 640, 3), np.uint8), np.ones((480, 640), np.uint8), "uint16"),
+        (np.zeros((480, 640, 3), np.uint8), np.ones((480, 640), np.float32), "uint16"),
+        (np.zeros((240, 320, 3), np.uint8), np.ones((240, 320), np.uint16), "camera"),
+        (np.zeros((480, 640, 3), np.uint8), np.zeros((480, 640), np.uint16), "no reading"),
+        (np.zeros((480, 640, 3), np.uint8), np.ones((480, 600), np.uint16), "differ"),
+    ],
+)
+def test_bad_input_is_a_clear_error(rgb: np.ndarray, depth: np.ndarray, message: str) -> None:
+    with pytest.raises(InputError, match=message):
+        detect_holes(rgb, depth, CAM)
