@@ -1,0 +1,223 @@
+"""The detection worker: a separate process fed through shared memory, newest frame first.
+
+Capture must never wait for detection. Frames go into a ring of three shared-memory slots:
+one the worker is reading, one published and not yet taken, one free for the next frame.
+``offer()`` copies the frame into the free slot (one memcpy, no pickling) and publishes it;
+a published frame that the worker had not taken yet is overwritten by a newer one and
+counted as skipped. The worker process maps the slots once and reads frames in place.
+Results come back on a queue as :class:`WorkerResult`.
+"""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing as mp
+import queue
+import time
+from dataclasses import dataclass
+from multiprocessing import shared_memory
+from multiprocessing.synchronize import Event as EventT
+from types import TracebackType
+from typing import Any
+
+import numpy as np
+
+from capture._errors import CaptureError
+from capture._frame import Frame
+from detect import CameraIntrinsics, DetectParams, Detection
+
+log = logging.getLogger(__name__)
+
+N_SLOTS = 3
+# Control words in the shared int64 array.
+_BUSY, _LATEST, _OFFERED, _SKIPPED, _DONE = range(5)
+_META = 4  # per slot: frame index, t_mono_ns, t_sensor_ns, sequence
+
+
+@dataclass(frozen=True)
+class WorkerResult:
+    """Detections of one frame. ``detect_ms`` is the worker's time on it."""
+
+    frame_index: int
+    t_mono_ns: int
+    t_sensor_ns: int
+    detections: tuple[Detection, ...]
+    detect_ms: float
+    error: str | None = None
+
+
+@dataclass(frozen=True)
+class WorkerStats:
+    offered: int
+    skipped: int
+    done: int
+
+
+def _slot_views(
+    buf: memoryview, h: int, w: int
+) -> list[tuple[np.ndarray[Any, Any], np.ndarray[Any, Any]]]:
+    size = h * w * 5
+    out = []
+    for i in range(N_SLOTS):
+        rgb = np.ndarray((h, w, 3), np.uint8, buf, i * size)
+        depth = np.ndarray((h, w), np.uint16, buf, i * size + h * w * 3)
+        out.append((rgb, depth))
+    return out
+
+
+def _worker_main(
+    shm_name: str,
+    ctrl: Any,
+    meta: Any,
+    wake: EventT,
+    stop: EventT,
+    results: mp.Queue[WorkerResult | None],
+    camera: CameraIntrinsics,
+    params: DetectParams,
+) -> None:
+    from detect import detect_holes
+
+    shm = shared_memory.SharedMemory(name=shm_name)
+    try:
+        views = _slot_views(shm.buf, camera.height, camera.width)
+        while not stop.is_set():
+            if not wake.wait(0.1):
+                continue
+            with ctrl.get_lock():
+                slot = int(ctrl[_LATEST])
+                wake.clear()
+                if slot < 0:
+                    continue
+                ctrl[_BUSY], ctrl[_LATEST] = slot, -1
+                index, t_mono, t_sensor = (int(v) for v in meta[slot * _META : slot * _META + 3])
+            rgb, depth = views[slot]
+            t0 = time.perf_counter()
+            try:
+                dets = tuple(detect_holes(rgb, depth, camera, params))
+                err = None
+            except Exception as exc:  # reported to the daemon, which logs it; worker goes on
+                dets, err = (), f"{type(exc).__name__}: {exc}"
+            ms = (time.perf_counter() - t0) * 1000.0
+            with ctrl.get_lock():
+                ctrl[_BUSY] = -1
+                ctrl[_DONE] += 1
+            results.put(WorkerResult(index, t_mono, t_sensor, dets, ms, err))
+    finally:
+        del views
+        shm.close()
+        results.put(None)
+
+
+class DetectionWorker:
+    """Run :func:`detect.detect_holes` in a child process on the newest offered frame.
+
+    Use as a context manager. ``offer(frame)`` never blocks on detection; ``results()``
+    drains what the worker finished.
+    """
+
+    def __init__(self, camera: CameraIntrinsics, params: DetectParams) -> None:
+        self.camera = camera
+        self.params = params
+        ctx = mp.get_context("spawn")
+        size = camera.height * camera.width * 5
+        self._shm = shared_memory.SharedMemory(create=True, size=size * N_SLOTS)
+        self._views = _slot_views(self._shm.buf, camera.height, camera.width)
+        self._ctrl = ctx.Array("q", [-1, -1, 0, 0, 0])
+        self._meta = ctx.Array("q", [0] * (_META * N_SLOTS), lock=False)
+        self._wake = ctx.Event()
+        self._stop = ctx.Event()
+        self._results: mp.Queue[WorkerResult | None] = ctx.Queue()
+        self._proc = ctx.Process(
+            target=_worker_main,
+            args=(self._shm.name, self._ctrl, self._meta, self._wake, self._stop,
+                  self._results, camera, params),
+            name="holescan-detect",
+            daemon=True,
+        )
+        self._seq = 0
+        self._started = False
+
+    def __enter__(self) -> DetectionWorker:
+        self._proc.start()
+        self._started = True
+        return self
+
+    def __exit__(
+        self, et: type[BaseException] | None, ev: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+    def offer(self, frame: Frame) -> None:
+        """Hand ``frame`` to the worker; returns at once (one copy into shared memory)."""
+        if frame.depth.shape != (self.camera.height, self.camera.width):
+            raise CaptureError(
+                f"frame is {frame.depth.shape[::-1]}, worker expects "
+                f"{self.camera.width}x{self.camera.height}"
+            )
+        with self._ctrl.get_lock():
+            taken = {int(self._ctrl[_BUSY]), int(self._ctrl[_LATEST])}
+        slot = next(i for i in range(N_SLOTS) if i not in taken)
+        rgb, depth = self._views[slot]
+        np.copyto(rgb, frame.rgb)
+        np.copyto(depth, frame.depth)
+        self._meta[slot * _META : slot * _META + 4] = [
+            frame.index, frame.t_mono_ns, frame.t_sensor_ns, self._seq
+        ]
+        self._seq += 1
+        with self._ctrl.get_lock():
+            if self._ctrl[_LATEST] >= 0:
+                self._ctrl[_SKIPPED] += 1
+            self._ctrl[_LATEST] = slot
+            self._ctrl[_OFFERED] += 1
+        self._wake.set()
+
+    def results(self, timeout: float = 0.0) -> list[WorkerResult]:
+        """Everything finished so far (waits up to ``timeout`` s for the first one)."""
+        out: list[WorkerResult] = []
+        try:
+            item = self._results.get(timeout=timeout) if timeout > 0 else self._results.get_nowait()
+            while item is not None:
+                out.append(item)
+                item = self._results.get_nowait()
+        except queue.Empty:
+            pass
+        return out
+
+    def stats(self) -> WorkerStats:
+        with self._ctrl.get_lock():
+            return WorkerStats(int(self._ctrl[_OFFERED]), int(self._ctrl[_SKIPPED]),
+                               int(self._ctrl[_DONE]))
+
+    @property
+    def alive(self) -> bool:
+        return self._proc.is_alive()
+
+    def drain(self, timeout: float) -> list[WorkerResult]:
+        """Wait until the published frame (if any) is processed, then return all results."""
+        deadline = time.monotonic() + timeout
+        out: list[WorkerResult] = []
+        while time.monotonic() < deadline and self._proc.is_alive():
+            out += self.results(timeout=0.05)
+            with self._ctrl.get_lock():
+                idle = self._ctrl[_LATEST] < 0 and self._ctrl[_BUSY] < 0
+            if idle:
+                break
+        return out + self.results()
+
+    def close(self) -> None:
+        """Stop the worker process and free the shared memory."""
+        if self._started:
+            self._stop.set()
+            self._wake.set()
+            self._proc.join(timeout=5.0)
+            if self._proc.is_alive():
+                log.warning("detection worker did not stop in 5 s; terminating it")
+                self._proc.terminate()
+                self._proc.join(timeout=2.0)
+            self._started = False
+        self._views = []
+        try:
+            self._shm.close()
+            self._shm.unlink()
+        except FileNotFoundError:
+            pass
