@@ -1,0 +1,523 @@
+"""Frame sources through the real OpenNI2 library: the live Xtion and ``.oni`` playback.
+
+Both open a depth (DEPTH_1_MM) and a colour (RGB888) stream on one OpenNI2 device, copy
+each frame out of the library's buffer, and pair depth with colour by timestamp (within
+half a frame period) into :class:`capture.Frame` records.
+
+The library's pitfalls (FIELD-NOTES.md, Debian libopenni2-0 2.2.0.33) shape this module:
+``seek()`` never returns (never called here); ``read_frame()`` blocks forever at the end of
+a file (always ``wait_for_any_stream`` with a timeout first, and stop at the frame count);
+playback speed 0 drops frames (speed -1, one record per wait, or 1.0 real time); closing
+the device with streams open segfaults (stop and close the streams, then the device).
+OpenNI2 is initialised once per process, lazily, on the first source opened.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import logging
+import math
+import os
+import threading
+import time
+from collections import deque
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+from typing import Any, Final
+
+import numpy as np
+import numpy.typing as npt
+
+from capture._errors import SensorError
+from capture._frame import Frame
+from capture._oni import OniInfo, scan_oni
+from capture._usb import XTION_VENDOR_ID, find_xtion
+from detect import CameraIntrinsics
+from holescan.errors import HolescanError, InputError
+
+__all__ = ["OniSource", "OpenNI2Device", "camera_from_fov", "openni2_library"]
+
+_log = logging.getLogger(__name__)
+
+_LIBRARY_NAME: Final = "libOpenNI2.so.0"
+_LIBRARY_DIRS: Final = (
+    "/usr/lib/x86_64-linux-gnu",
+    "/usr/lib/aarch64-linux-gnu",
+    "/usr/lib/arm-linux-gnueabihf",
+    "/usr/lib",
+    "/usr/local/lib",
+)
+_PIXEL_DEPTH_1_MM: Final = 100
+_PIXEL_RGB888: Final = 200
+_init_lock = threading.Lock()
+
+
+def openni2_library() -> Any:
+    """The ``openni.openni2`` bindings with libOpenNI2 loaded and initialised.
+
+    The first call loads Debian's ``libOpenNI2.so.0`` and initialises OpenNI2 (process
+    global); later calls return at once. Safe from several threads.
+
+    Raises
+    ------
+    SensorError
+        The ``openni`` bindings or libOpenNI2 (Debian ``libopenni2-0``) are missing.
+    """
+    with _init_lock:
+        try:
+            from openni import openni2
+            from openni.utils import InitializationError, OpenNIError
+        except ImportError as err:
+            raise SensorError("the openni bindings are missing: pip install openni") from err
+        if openni2.is_initialized():
+            return openni2
+        if openni2.loaded_dll_directory is None:
+            libdir = next(
+                (d for d in _LIBRARY_DIRS if os.path.isfile(os.path.join(d, _LIBRARY_NAME))),
+                None,
+            )
+            if libdir is None:
+                raise SensorError(
+                    f"{_LIBRARY_NAME} not found in {', '.join(_LIBRARY_DIRS)}: "
+                    "apt-get install libopenni2-0"
+                )
+            openni2._dll_name = _LIBRARY_NAME
+            dirs: list[str] = [libdir]
+        else:  # loaded before, then unloaded: initialise again
+            dirs = [openni2.loaded_dll_directory]
+        try:
+            openni2.initialize(dirs)
+        except (InitializationError, OpenNIError) as err:
+            raise SensorError(f"OpenNI2 failed to initialise: {_message(err)}") from err
+        _log.debug("OpenNI2 %s initialised from %s", openni2.get_version(), dirs[0])
+        return openni2
+
+
+def _message(err: BaseException) -> str:
+    """The library's text from an OpenNIError (code, message, logfile) or any exception."""
+    if len(err.args) >= 2:
+        msg = err.args[1]
+        text = msg.decode(errors="replace") if isinstance(msg, bytes) else str(msg)
+        return text or f"status {err.args[0]}"
+    return str(err)
+
+
+def _openni_error() -> type[Exception]:
+    from openni.utils import OpenNIError
+
+    return OpenNIError  # type: ignore[no-any-return]
+
+
+def camera_from_fov(width: int, height: int, hfov: float, vfov: float) -> CameraIntrinsics:
+    """Pinhole intrinsics from a field of view: f = W / (2 tan(hfov / 2)), centred.
+
+    hfov, vfov : radians. The principal point is put at the image centre.
+    """
+    if not (0 < hfov < math.pi and 0 < vfov < math.pi):
+        raise InputError(f"field of view must be in (0, pi) rad, got {hfov}, {vfov}")
+    return CameraIntrinsics(
+        width,
+        height,
+        width / (2.0 * math.tan(hfov / 2.0)),
+        height / (2.0 * math.tan(vfov / 2.0)),
+        (width - 1) / 2.0,
+        (height - 1) / 2.0,
+    )
+
+
+@dataclass(frozen=True)
+class _Raw:
+    """One frame copied out of OpenNI2."""
+
+    index: int  # OpenNI frameIndex
+    ts_us: int  # device clock
+    t_mono_ns: int
+    pixels: npt.NDArray[np.uint8] | npt.NDArray[np.uint16]
+
+
+def _copy_frame(frame: Any, width: int, height: int, channels: int, t_mono_ns: int) -> _Raw:
+    """Copy an OpenNI VideoFrame's pixels (honouring its stride) into a new array."""
+    if frame.width != width or frame.height != height:
+        raise ValueError(f"frame is {frame.width}x{frame.height}, stream is {width}x{height}")
+    itemsize = 2 if channels == 1 else 1
+    row = width * channels * itemsize
+    stride = frame.stride or row
+    if stride < row or frame.dataSize < stride * (height - 1) + row or not frame.data:
+        raise ValueError(f"frame buffer of {frame.dataSize} bytes is too small")
+    buf = (ctypes.c_uint8 * frame.dataSize).from_address(frame.data)
+    flat = np.frombuffer(buf, dtype=np.uint8)
+    rows = np.lib.stride_tricks.as_strided(flat, shape=(height, row), strides=(stride, 1))
+    if channels == 1:
+        pixels: Any = rows.copy().view("<u2").astype(np.uint16, copy=False)
+    else:
+        pixels = rows.reshape(height, width, channels).copy()
+    return _Raw(int(frame.frameIndex), int(frame.timestamp), t_mono_ns, pixels)
+
+
+class _Pairer:
+    """Match depth and colour frames whose timestamps lie within ``tolerance_us``."""
+
+    def __init__(self, tolerance_us: int) -> None:
+        self.tolerance_us = tolerance_us
+        self.depth: deque[_Raw] = deque()
+        self.image: deque[_Raw] = deque()
+        self.dropped = 0
+
+    def push(self, raw: _Raw, *, is_depth: bool) -> list[tuple[_Raw, _Raw]]:
+        (self.depth if is_depth else self.image).append(raw)
+        pairs = []
+        while self.depth and self.image:
+            d, c = self.depth[0], self.image[0]
+            if abs(d.ts_us - c.ts_us) <= self.tolerance_us:
+                pairs.append((self.depth.popleft(), self.image.popleft()))
+            else:  # the older one has no partner: drop it
+                (self.depth if d.ts_us < c.ts_us else self.image).popleft()
+                self.dropped += 1
+        return pairs
+
+
+class _OpenNISource:
+    """Depth + colour streams of one OpenNI2 device, read and paired into Frames."""
+
+    camera: CameraIntrinsics
+    _error: type[HolescanError] = SensorError
+
+    def __init__(self, timeout_s: float) -> None:
+        if timeout_s <= 0:
+            raise InputError(f"timeout_s must be > 0, got {timeout_s}")
+        self.timeout_s = timeout_s
+        self._lib: Any = None
+        self._device: Any = None
+        self._depth: Any = None
+        self._color: Any = None
+        self._size = (0, 0)
+        self._fps = 30
+        self._expected: tuple[int, int] | None = None  # frames to read (depth, colour)
+        self._first_index: int | None = None
+        self.frames_dropped = 0
+
+    # -- subclass hooks
+    def _describe(self) -> str:
+        raise NotImplementedError
+
+    def _open_device(self, lib: Any) -> Any:
+        raise NotImplementedError
+
+    def _configure(self, device: Any, depth: Any, color: Any) -> None:
+        raise NotImplementedError
+
+    # -- lifecycle
+    def __enter__(self) -> _OpenNISource:
+        self.open()
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def open(self) -> None:
+        """Open the device and start both streams (called by ``with``)."""
+        if self._device is not None:
+            return
+        lib = openni2_library()
+        openni_error = _openni_error()
+        device = self._open_device(lib)
+        self._lib, self._device = lib, device
+        try:
+            self._depth = device.create_depth_stream()
+            self._color = device.create_color_stream()
+            if self._depth is None or self._color is None:
+                raise self._error(f"{self._describe()} lacks a depth or a colour stream")
+            self._configure(device, self._depth, self._color)
+            self._depth.start()
+            self._color.start()
+        except openni_error as err:
+            self.close()
+            raise self._error(f"{self._describe()}: {_message(err)}") from err
+        except BaseException:
+            self.close()
+            raise
+
+    def close(self) -> None:
+        """Stop and close the streams, then the device (this order never crashed)."""
+        openni_error = _openni_error() if self._lib is not None else Exception
+        for stream in (self._depth, self._color):
+            if stream is not None:
+                try:
+                    stream.stop()
+                    stream.close()
+                except openni_error as err:
+                    _log.warning("closing a stream of %s: %s", self._describe(), _message(err))
+        self._depth = self._color = None
+        if self._device is not None:
+            try:
+                self._device.close()
+            except openni_error as err:
+                _log.warning("closing %s: %s", self._describe(), _message(err))
+        self._device = None
+
+    def _check_modes(self) -> None:
+        """Both streams are the same size and in the pixel formats Frame needs."""
+        dm, cm = self._depth.get_video_mode(), self._color.get_video_mode()
+        if int(dm.pixelFormat.value) != _PIXEL_DEPTH_1_MM:
+            raise self._error(f"{self._describe()}: depth is {dm.pixelFormat}, need DEPTH_1_MM")
+        if int(cm.pixelFormat.value) != _PIXEL_RGB888:
+            raise self._error(f"{self._describe()}: colour is {cm.pixelFormat}, need RGB888")
+        if (dm.resolutionX, dm.resolutionY) != (cm.resolutionX, cm.resolutionY):
+            raise self._error(
+                f"{self._describe()}: depth {dm.resolutionX}x{dm.resolutionY} and colour "
+                f"{cm.resolutionX}x{cm.resolutionY} differ (depth not registered to colour)"
+            )
+        self._size = (int(dm.resolutionX), int(dm.resolutionY))
+        self._fps = int(cm.fps) if cm.fps > 0 else 30
+
+    def _fov_camera(self) -> CameraIntrinsics:
+        w, h = self._size
+        return camera_from_fov(
+            w, h, self._color.get_horizontal_fov(), self._color.get_vertical_fov()
+        )
+
+    # -- frames
+    def __iter__(self) -> Iterator[Frame]:
+        if self._device is None:
+            raise self._error(f"{self._describe()} is not open: use it in a with block")
+        lib, depth, color = self._lib, self._depth, self._color
+        openni_error = _openni_error()
+        w, h = self._size
+        pairer = _Pairer(tolerance_us=500_000 // self._fps)
+        counts = [0, 0]
+        extra = 0
+        while (
+            self._expected is None or counts[0] < self._expected[0] or counts[1] < self._expected[1]
+        ):
+            try:
+                ready = lib.wait_for_any_stream([depth, color], self.timeout_s)
+            except openni_error as err:
+                raise self._error(f"{self._describe()}: {_message(err)}") from err
+            if ready is None:
+                raise self._stalled(counts)
+            is_depth = ready is depth
+            try:
+                vf = ready.read_frame()
+            except openni_error as err:
+                raise self._error(f"{self._describe()}: {_message(err)}") from err
+            t_mono_ns = time.monotonic_ns()
+            try:
+                raw = _copy_frame(vf, w, h, 1 if is_depth else 3, t_mono_ns)
+            except ValueError as err:
+                raise self._error(f"{self._describe()}: {err}") from err
+            finally:
+                vf.close()
+            k = 0 if is_depth else 1
+            if self._expected is not None and counts[k] >= self._expected[k]:
+                extra += 1  # a replay after the end: the other stream is short
+                if extra > 4:
+                    raise self._stalled(counts)
+                continue
+            counts[k] += 1
+            if is_depth and self._first_index is None:
+                self._first_index = raw.index
+            for d, c in pairer.push(raw, is_depth=is_depth):
+                yield Frame(
+                    index=d.index - (self._first_index or 0),
+                    rgb=c.pixels,  # type: ignore[arg-type]
+                    depth=d.pixels,  # type: ignore[arg-type]
+                    t_mono_ns=d.t_mono_ns,
+                    t_sensor_ns=d.ts_us * 1000,
+                )
+            if pairer.dropped != self.frames_dropped:
+                self.frames_dropped = pairer.dropped
+                _log.debug("%s: %d unpaired frames dropped", self._describe(), pairer.dropped)
+
+    def _stalled(self, counts: list[int]) -> HolescanError:
+        return self._error(
+            f"{self._describe()}: no frame for {self.timeout_s:g} s "
+            f"(after {counts[0]} depth and {counts[1]} colour frames)"
+        )
+
+
+class OniSource(_OpenNISource):
+    """Play an ``.oni`` recording through libOpenNI2, every frame in order.
+
+    A :class:`capture.FrameSource`: use as a context manager and iterate; iteration ends
+    after the last frame. The file is checked first (:func:`capture.scan_oni`), so a
+    missing, truncated or corrupt file raises :class:`InputError` before the library sees
+    it.
+
+    Parameters
+    ----------
+    path : str or Path
+        The recording: a depth stream (DEPTH_1_MM) and a colour stream (RGB888) of the same
+        size, depth registered to colour.
+    timeout_s : float
+        How long to wait for the library's next frame before declaring the file broken.
+    realtime : bool
+        Pace frames at the recording's rate (playback speed 1.0) instead of as fast as
+        they are read (speed -1, manual stepping). No frame is dropped either way.
+
+    Attributes
+    ----------
+    camera : CameraIntrinsics
+        Exact intrinsics when holescan wrote the file; else from the colour stream's field
+        of view, f = W / (2 tan(hfov / 2)), principal point at the centre.
+    info : OniInfo
+        What :func:`scan_oni` found in the file.
+
+    Frames: ``index`` = OpenNI frame id - 1; ``t_sensor_ns`` = the depth frame's timestamp
+    (us) x 1000; ``t_mono_ns`` = ``time.monotonic_ns()`` when the depth frame was read.
+    """
+
+    _error = InputError
+
+    def __init__(
+        self, path: str | os.PathLike[str], *, timeout_s: float = 2.0, realtime: bool = False
+    ) -> None:
+        super().__init__(timeout_s)
+        self.path = Path(path)
+        self.info: OniInfo = scan_oni(self.path)
+        self._realtime = realtime
+        depth, image = self.info.stream("depth"), self.info.stream("image")
+        self._exact_camera = image.camera or depth.camera
+        self.camera = self._exact_camera or _scan_fov_camera(self.info)
+
+    def __enter__(self) -> OniSource:
+        self.open()
+        return self
+
+    def _describe(self) -> str:
+        return str(self.path)
+
+    def _open_device(self, lib: Any) -> Any:
+        try:
+            return lib.Device.open_file(os.fsencode(self.path))
+        except _openni_error() as err:
+            raise InputError(f"{self.path}: OpenNI2 cannot play it: {_message(err)}") from err
+
+    def _configure(self, device: Any, depth: Any, color: Any) -> None:
+        device.playback.repeat = True  # stop at the frame count instead (FIELD-NOTES.md)
+        device.playback.speed = 1.0 if self._realtime else -1.0
+        self._check_modes()
+        n_depth = int(depth.get_number_of_frames())
+        n_color = int(color.get_number_of_frames())
+        found = (self.info.stream("depth").frames_found, self.info.stream("image").frames_found)
+        if (n_depth, n_color) != found:
+            _log.warning(
+                "%s: OpenNI2 counts %s frames, the file holds %s",
+                self.path,
+                (n_depth, n_color),
+                found,
+            )
+        self._expected = (min(n_depth, found[0]), min(n_color, found[1]))
+        if self._exact_camera is None:
+            self.camera = self._fov_camera()
+
+
+def _scan_fov_camera(info: OniInfo) -> CameraIntrinsics:
+    s = info.stream("image")
+    if not (s.width > 0 and s.height > 0 and math.isfinite(s.hfov) and math.isfinite(s.vfov)):
+        raise InputError(f"{info.path}: the colour stream has no video mode or field of view")
+    return camera_from_fov(s.width, s.height, s.hfov, s.vfov)
+
+
+class OpenNI2Device(_OpenNISource):
+    """The live Asus Xtion through OpenNI2: depth registered to colour, frame sync on.
+
+    A :class:`capture.FrameSource`: use as a context manager and iterate; iteration runs
+    until the source is closed.
+
+    Parameters
+    ----------
+    uri : str, optional
+        OpenNI2 device URI (e.g. ``"1d27/0601@1/5"``); None opens the first sensor, after
+        checking on USB that an Xtion is attached.
+    width, height, fps : int
+        Video mode of both streams (the Xtion: 640x480 or 320x240 at 30 fps).
+    timeout_s : float
+        A gap of this long without frames raises :class:`SensorError` (the daemon then
+        resets the sensor with :func:`capture.reset_xtion` and opens it again).
+
+    Attributes
+    ----------
+    camera : CameraIntrinsics
+        From the colour stream's field of view (depth is registered to colour).
+
+    Frames: ``index`` counts depth frames from the first one (gaps = dropped frames);
+    ``t_sensor_ns`` = the depth frame's device timestamp (us) x 1000; ``t_mono_ns`` =
+    ``time.monotonic_ns()`` when the depth frame was read.
+    """
+
+    _error = SensorError
+
+    def __init__(
+        self,
+        uri: str | None = None,
+        *,
+        width: int = 640,
+        height: int = 480,
+        fps: int = 30,
+        timeout_s: float = 2.0,
+    ) -> None:
+        super().__init__(timeout_s)
+        self.uri = uri
+        self._mode = (width, height, fps)
+        self.camera = CameraIntrinsics.xtion(width, height)  # replaced from the FOV on open
+
+    def __enter__(self) -> OpenNI2Device:
+        self.open()
+        return self
+
+    def _describe(self) -> str:
+        return f"Xtion {self.uri}" if self.uri else "Xtion"
+
+    def open(self) -> None:
+        """Check USB for an Xtion (when no ``uri``), open it and start both streams."""
+        if self._device is None and self.uri is None and not find_xtion():
+            raise SensorError(
+                f"no Xtion found on USB (vendor {XTION_VENDOR_ID:#06x}): check its cable and "
+                "power; `lsusb -d 1d27:` should list it"
+            )
+        super().open()
+
+    def _open_device(self, lib: Any) -> Any:
+        try:
+            device = lib.Device(self.uri.encode() if self.uri else None)
+        except _openni_error() as err:
+            raise SensorError(f"OpenNI2 cannot open {self._describe()}: {_message(err)}") from err
+        if device.is_file():
+            device.close()
+            raise InputError(f"{self.uri} is a recording: use OniSource")
+        return device
+
+    def _configure(self, device: Any, depth: Any, color: Any) -> None:
+        lib = self._lib
+        w, h, fps = self._mode
+        for stream, fmt in ((depth, _PIXEL_DEPTH_1_MM), (color, _PIXEL_RGB888)):
+            modes = stream.get_sensor_info().videoModes
+            match = [
+                m
+                for m in modes
+                if (m.resolutionX, m.resolutionY, m.fps) == (w, h, fps)
+                and int(m.pixelFormat.value) == fmt
+            ]
+            if not match:
+                have = sorted(
+                    {(m.resolutionX, m.resolutionY, m.fps, int(m.pixelFormat.value)) for m in modes}
+                )
+                raise SensorError(f"{self._describe()} has no {w}x{h}@{fps} mode {fmt}: {have}")
+            stream.set_video_mode(match[0])
+            if stream.is_property_supported(lib.c_api.ONI_STREAM_PROPERTY_MIRRORING):
+                stream.set_mirroring_enabled(False)
+        mode = lib.IMAGE_REGISTRATION_DEPTH_TO_COLOR
+        if device.is_image_registration_mode_supported(mode):
+            device.set_image_registration_mode(mode)
+        else:
+            _log.warning("%s cannot register depth to colour", self._describe())
+        device.set_depth_color_sync_enabled(True)
+        self._check_modes()
+        self.camera = self._fov_camera()
