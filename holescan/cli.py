@@ -19,6 +19,7 @@ _COMMAND_MODULES = (
     "holescan._cmd_detect",
     "holescan._cmd_dataset",
     "holescan._cmd_eval",
+    "holescan._cmd_log",
 )
 
 EXIT_INPUT = 2

@@ -1,0 +1,619 @@
+"""The MCAP flight log writer: everything a flight saw, written off the capture thread.
+
+``write_*`` calls only stamp the record (log time, per-topic sequence number) and put it
+on a bounded queue; a writer thread encodes (Foxglove protobuf / JSON), writes zstd
+chunks of ``chunk_size`` bytes, flushes and fsyncs about every ``sync_interval_s`` and
+rotates files by size and age (``PREFIX_0000.mcap``, ``PREFIX_0001.mcap``, ...). A full
+queue never blocks the caller: the record is dropped, counted, and its sequence number is
+left as a gap a reader can see. Topics and frames: see :mod:`capture._mcapschemas`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import os
+import platform
+import queue
+import threading
+import time
+from collections import Counter
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import IO, Any, Final, Literal
+
+import mcap
+import numpy as np
+import pymap3d
+from mcap.well_known import MessageEncoding, SchemaEncoding
+from mcap.writer import CompressionType
+from mcap.writer import Writer as McapWriter
+from mcap_protobuf.schema import build_file_descriptor_set
+
+import holescan
+from capture import _mcapschemas as sch
+from capture._frame import Frame
+from detect import CameraIntrinsics, Detection
+from geotag import CameraMount, VehiclePose
+from holescan.errors import InputError
+
+__all__ = [
+    "FlightLogError",
+    "FlightLogWriter",
+    "LogOptions",
+    "WriterStats",
+    "log_file_path",
+]
+
+_log = logging.getLogger(__name__)
+
+_COMPRESSION: Final = {
+    "zstd": CompressionType.ZSTD,
+    "lz4": CompressionType.LZ4,
+    "none": CompressionType.NONE,
+}
+_FRAME_TOPICS: Final = (sch.TOPIC_FRAME_INFO, sch.TOPIC_COLOR, sch.TOPIC_DEPTH)
+
+
+class FlightLogError(InputError):
+    """A flight log cannot be written, or a file is not a readable flight log."""
+
+
+@dataclasses.dataclass(frozen=True)
+class LogOptions:
+    """How the flight log is written.
+
+    chunk_size : bytes of messages per compressed chunk (1 MiB: a steady ~11 ms per frame;
+        larger chunks stall the writer longer when they close).
+    compression : chunk compression; zstd (level 3, ~1.5x on RGB-D) or lz4 or none.
+    max_file_bytes, max_file_s : start a new file when the current one reaches this size
+        or age (a crash then costs at most one file's index; ``recover_log`` rebuilds it).
+    sync_interval_s : flush the open chunk and fsync this often (bounds what a power loss
+        loses), also the period of the logger's ``/health`` and camera_info records.
+    max_queued_frames : RGB-D frames waiting for the writer before new ones are dropped
+        (1.2 MB each at 640x480).
+    max_queued_messages : all records waiting (frames included) before records are dropped.
+    """
+
+    chunk_size: int = 1 << 20
+    compression: Literal["zstd", "lz4", "none"] = "zstd"
+    max_file_bytes: int = 1 << 30
+    max_file_s: float = 60.0
+    sync_interval_s: float = 1.0
+    max_queued_frames: int = 60
+    max_queued_messages: int = 20_000
+
+    def __post_init__(self) -> None:
+        if self.compression not in _COMPRESSION:
+            raise InputError(f"compression must be one of {sorted(_COMPRESSION)}")
+        if self.chunk_size < 1024 or self.max_file_bytes < self.chunk_size:
+            raise InputError("chunk_size must be >= 1024 and <= max_file_bytes")
+        if self.max_file_s <= 0 or self.sync_interval_s <= 0:
+            raise InputError("max_file_s and sync_interval_s must be positive")
+        if self.max_queued_frames < 1 or self.max_queued_messages < self.max_queued_frames:
+            raise InputError("max_queued_frames >= 1 and max_queued_messages >= it")
+
+
+@dataclasses.dataclass(frozen=True)
+class WriterStats:
+    """Counters of a :class:`FlightLogWriter` (a snapshot).
+
+    enqueued, written, dropped : per topic (a frame counts once, under ``frames``).
+    frames_synced : frames written and fsynced (what a power loss cannot take).
+    queue_depth, queue_depth_max : records waiting now / at most so far.
+    frames_queued_max : RGB-D frames waiting at most so far.
+    frame_write_ms_mean, frame_write_ms_max : writer-thread time to encode and write one
+        frame (amortising the chunk compression it triggers).
+    enqueue_ms_max : the longest a ``write_*`` call took on the caller's thread.
+    """
+
+    enqueued: Mapping[str, int]
+    written: Mapping[str, int]
+    dropped: Mapping[str, int]
+    frames_synced: int
+    queue_depth: int
+    queue_depth_max: int
+    frames_queued_max: int
+    frame_write_ms_mean: float
+    frame_write_ms_max: float
+    enqueue_ms_max: float
+    bytes_written: int
+    files: tuple[Path, ...]
+    error: str | None
+
+
+def log_file_path(prefix: str | os.PathLike[str], index: int) -> Path:
+    """``PREFIX_0003.mcap`` for file ``index`` 3 of the log ``PREFIX`` (``.mcap`` stripped)."""
+    p = Path(prefix)
+    if p.suffix == ".mcap":
+        p = p.with_suffix("")
+    return p.with_name(f"{p.name}_{index:04d}.mcap")
+
+
+class _File:
+    """One open MCAP file: stream, mcap writer, lazily registered schemas and channels."""
+
+    def __init__(self, path: Path, options: LogOptions) -> None:
+        try:
+            self.stream: IO[bytes] = open(path, "xb")  # noqa: SIM115 (closed in close())
+        except FileExistsError as err:
+            raise FlightLogError(f"{path} exists: choose another log name") from err
+        except OSError as err:
+            raise FlightLogError(f"cannot create {path}: {err.strerror}") from err
+        self.path = path
+        self.writer = McapWriter(
+            self.stream,
+            chunk_size=options.chunk_size,
+            compression=_COMPRESSION[options.compression],
+            enable_data_crcs=True,
+        )
+        self.writer.start(library=f"holescan/{holescan.__version__} mcap-python/{mcap_version()}")
+        self.opened_mono_ns = time.monotonic_ns()
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, int] = {}
+
+    def channel(self, topic: str, proto_class: Any | None) -> int:
+        cid = self._channels.get(topic)
+        if cid is not None:
+            return cid
+        if proto_class is not None:
+            name = proto_class.DESCRIPTOR.full_name
+            sid = self._schemas.get(name)
+            if sid is None:
+                fds = build_file_descriptor_set(proto_class).SerializeToString()
+                sid = self.writer.register_schema(name, SchemaEncoding.Protobuf, fds)
+                self._schemas[name] = sid
+            encoding = MessageEncoding.Protobuf
+        else:
+            name, schema = sch.JSON_SCHEMAS[topic]
+            sid = self.writer.register_schema(name, SchemaEncoding.JSONSchema, sch.to_json(schema))
+            encoding = MessageEncoding.JSON
+        cid = self.writer.register_channel(topic, encoding, sid)
+        self._channels[topic] = cid
+        return cid
+
+    def sync(self) -> None:
+        self.writer.flush()
+        os.fsync(self.stream.fileno())
+
+    def close(self) -> None:
+        self.writer.finish()
+        self.stream.flush()
+        os.fsync(self.stream.fileno())
+        self.stream.close()
+
+
+def mcap_version() -> str:
+    return getattr(mcap.writer, "__version__", "unknown")
+
+
+class FlightLogWriter:
+    """Context manager writing a flight to ``PREFIX_NNNN.mcap`` files.
+
+    Parameters
+    ----------
+    prefix : path and name of the log, e.g. ``/data/flight-0612`` (``.mcap`` optional);
+        existing files are never overwritten (:class:`FlightLogError`).
+    camera : intrinsics of the depth-registered RGB image (``/camera/color/camera_info``).
+    config : the run's configuration, stored as MCAP metadata ``holescan.config``
+        (values as JSON).
+    mount : how the camera sits on the vehicle (default: nadir, image top towards the
+        nose); logged as the ``/tf`` transform base_link -> camera and as metadata
+        ``holescan.mount``. A gimbal attitude in it is not logged.
+    options : :class:`LogOptions`.
+
+    Every ``write_*`` returns at once: True when queued, False when dropped (queue full
+    or writer failed). ``t_unix_ns`` arguments are when the thing happened (capture or
+    receive time, Unix clock) and become the MCAP ``publish_time``; ``log_time`` is
+    ``time.time_ns()`` at the call.
+    """
+
+    def __init__(
+        self,
+        prefix: str | os.PathLike[str],
+        camera: CameraIntrinsics,
+        *,
+        config: Mapping[str, Any] | None = None,
+        mount: CameraMount | None = None,
+        options: LogOptions | None = None,
+    ) -> None:
+        self.options = options or LogOptions()
+        self.camera = camera
+        self._prefix = Path(prefix)
+        mount = mount or CameraMount()
+        self._mount_rot = np.asarray(mount.rotation, dtype=np.float64)
+        self._mount_offset = tuple(float(v) for v in mount.offset_m)
+        self._metadata = {
+            "holescan": {
+                "version": holescan.__version__,
+                "python": platform.python_version(),
+                "mcap": mcap_version(),
+                "host": platform.node(),
+                "log_prefix": str(self._prefix),
+            },
+            "holescan.config": {k: sch.to_json(v).decode() for k, v in (config or {}).items()},
+            "holescan.camera": {k: repr(v) for k, v in camera.to_dict().items()},
+            "holescan.mount": {
+                "rotation_frd_from_camera": sch.to_json(self._mount_rot).decode(),
+                "offset_frd_m": sch.to_json(self._mount_offset).decode(),
+            },
+        }
+        self._queue: queue.Queue[tuple[Any, ...]] = queue.Queue(self.options.max_queued_messages)
+        self._lock = threading.Lock()
+        self._seq: Counter[str] = Counter()
+        self._enqueued: Counter[str] = Counter()
+        self._written: Counter[str] = Counter()
+        self._dropped: Counter[str] = Counter()
+        self._frames_queued = 0
+        self._frames_queued_max = 0
+        self._queue_max = 0
+        self._frames_synced = 0
+        self._frame_write_ns_total = 0
+        self._frame_write_ns_max = 0
+        self._enqueue_ns_max = 0
+        self._bytes_closed = 0
+        self._files: list[Path] = []
+        self._file: _File | None = None
+        self._origin: tuple[float, float, float] | None = None
+        self._error: BaseException | None = None
+        self._closing = threading.Event()
+        self._closed = False
+        self._open_next_file()  # fail here, on the caller's thread, if the path is bad
+        self._thread = threading.Thread(target=self._run, name="flight-log-writer", daemon=True)
+        self._thread.start()
+
+    # ------------------------------------------------------------------ caller side
+
+    def __enter__(self) -> FlightLogWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    @property
+    def paths(self) -> tuple[Path, ...]:
+        """Files written so far (the last one may still be open)."""
+        with self._lock:
+            return tuple(self._files)
+
+    def write_frame(
+        self,
+        frame: Frame,
+        t_unix_ns: int,
+        *,
+        pose: VehiclePose | None = None,
+        t_boot_ns: int | None = None,
+    ) -> bool:
+        """Queue an RGB-D frame (its arrays must not be modified afterwards).
+
+        t_unix_ns : capture time on the Unix clock (image timestamps, publish_time).
+        pose, t_boot_ns : the vehicle pose at capture and the capture time on the
+            autopilot's boot clock, when known; stored with the frame.
+        """
+        h, w = self.camera.height, self.camera.width
+        if frame.rgb.shape != (h, w, 3) or frame.rgb.dtype != np.uint8:
+            raise InputError(f"frame.rgb must be ({h}, {w}, 3) uint8, got {frame.rgb.shape}")
+        if frame.depth.shape != (h, w) or frame.depth.dtype != np.uint16:
+            raise InputError(f"frame.depth must be ({h}, {w}) uint16, got {frame.depth.shape}")
+        return self._put("frames", "frame", frame, int(t_unix_ns), pose, t_boot_ns)
+
+    def write_pose(self, pose: VehiclePose, t_unix_ns: int) -> bool:
+        """Queue a vehicle pose: ``/mavlink/location`` (GPS), ``/tf`` world -> base_link and
+        the exact record on ``/mavlink/pose``. ``t_unix_ns``: the pose's time, Unix clock."""
+        return self._put(sch.TOPIC_POSE, "pose", pose, int(t_unix_ns))
+
+    def write_mavlink(self, packet: bytes, t_unix_ns: int, name: str = "") -> bool:
+        """Queue one raw MAVLink packet (``msg.get_msgbuf()``) received at ``t_unix_ns``."""
+        return self._put(sch.TOPIC_MAVLINK_RAW, "mavlink", bytes(packet), int(t_unix_ns), name)
+
+    def write_detections(
+        self, frame_index: int, detections: Sequence[Detection], t_unix_ns: int
+    ) -> bool:
+        """Queue the detections of frame ``frame_index`` captured at ``t_unix_ns``: boxes
+        on ``/detections/annotations`` and the full records on ``/detections``."""
+        dets = tuple(detections)
+        return self._put(sch.TOPIC_DETECTIONS, "detections", int(frame_index), dets, int(t_unix_ns))
+
+    def write_holes(self, holes: Sequence[Any], t_unix_ns: int) -> bool:
+        """Queue the current hole list (records or mappings with at least ``lat_deg`` and
+        ``lon_deg``) on ``/holes`` (JSON) and ``/holes/geojson``."""
+        records = tuple(sch.jsonable(h) for h in holes)
+        for rec in records:
+            if not isinstance(rec, dict) or "lat_deg" not in rec or "lon_deg" not in rec:
+                raise InputError("each hole needs lat_deg and lon_deg fields")
+        return self._put(sch.TOPIC_HOLES, "holes", records, int(t_unix_ns))
+
+    def write_health(
+        self, values: Mapping[str, Any], t_unix_ns: int | None = None, source: str = "daemon"
+    ) -> bool:
+        """Queue a health record (frame drops, queue depths, clock offset, ...) on ``/health``."""
+        record = {"source": source, **sch.jsonable(values)}
+        t = time.time_ns() if t_unix_ns is None else int(t_unix_ns)
+        return self._put(sch.TOPIC_HEALTH, "health", record, t)
+
+    def stats(self) -> WriterStats:
+        with self._lock:
+            frames = self._written["frames"]
+            return WriterStats(
+                enqueued=dict(self._enqueued),
+                written=dict(self._written),
+                dropped=dict(self._dropped),
+                frames_synced=self._frames_synced,
+                queue_depth=self._queue.qsize(),
+                queue_depth_max=self._queue_max,
+                frames_queued_max=self._frames_queued_max,
+                frame_write_ms_mean=self._frame_write_ns_total / max(frames, 1) / 1e6,
+                frame_write_ms_max=self._frame_write_ns_max / 1e6,
+                enqueue_ms_max=self._enqueue_ns_max / 1e6,
+                bytes_written=self._bytes_closed + self._open_bytes(),
+                files=tuple(self._files),
+                error=None if self._error is None else repr(self._error),
+            )
+
+    def close(self) -> None:
+        """Write everything queued, finish the file (summary, indexes), fsync, close.
+
+        Raises :class:`FlightLogError` if the writer thread failed (the files written up
+        to the failure can be repaired with ``recover_log``).
+        """
+        if self._closed:
+            return
+        self._closed = True
+        self._closing.set()
+        self._thread.join()
+        f, self._file = self._file, None
+        if f is not None:
+            try:
+                f.close()
+            except (OSError, ValueError) as err:
+                self._error = self._error or err
+            with self._lock:
+                self._bytes_closed += os.path.getsize(f.path)
+                self._frames_synced = self._written["frames"]
+        if self._error is not None:
+            raise FlightLogError(f"flight log writer failed: {self._error}") from self._error
+        st = self.stats()
+        _log.info(
+            "flight log closed: %d files, %d frames written, %d dropped, %.1f MB",
+            len(st.files),
+            st.written.get("frames", 0),
+            sum(st.dropped.values()),
+            st.bytes_written / 1e6,
+        )
+
+    def _put(self, topic: str, kind: str, *payload: Any) -> bool:
+        t0 = time.perf_counter_ns()
+        log_time = time.time_ns()
+        is_frame = kind == "frame"
+        with self._lock:
+            seq = self._seq[topic]
+            self._seq[topic] = seq + 1
+            self._enqueued[topic] += 1
+            ok = self._error is None and not self._closed
+            if ok and is_frame and self._frames_queued >= self.options.max_queued_frames:
+                ok = False
+            if ok:
+                try:
+                    self._queue.put_nowait((kind, seq, log_time, *payload))
+                except queue.Full:
+                    ok = False
+            if ok:
+                depth = self._queue.qsize()
+                self._queue_max = max(self._queue_max, depth)
+                if is_frame:
+                    self._frames_queued += 1
+                    self._frames_queued_max = max(self._frames_queued_max, self._frames_queued)
+            else:
+                self._dropped[topic] += 1
+            self._enqueue_ns_max = max(self._enqueue_ns_max, time.perf_counter_ns() - t0)
+        return ok
+
+    # ------------------------------------------------------------------ writer thread
+
+    def _run(self) -> None:
+        interval_ns = int(self.options.sync_interval_s * 1e9)
+        next_sync = time.monotonic_ns() + interval_ns
+        handlers: dict[str, Callable[..., None]] = {
+            "frame": self._on_frame,
+            "pose": self._on_pose,
+            "mavlink": self._on_mavlink,
+            "detections": self._on_detections,
+            "holes": self._on_holes,
+            "health": self._on_health,
+        }
+        try:
+            while True:
+                timeout = max(next_sync - time.monotonic_ns(), 0) / 1e9
+                try:
+                    item = self._queue.get(timeout=min(timeout, 0.05))
+                except queue.Empty:
+                    item = None
+                if item is not None:
+                    self._maybe_rotate()
+                    handlers[item[0]](*item[1:])
+                if time.monotonic_ns() >= next_sync:
+                    self._periodic()
+                    next_sync = time.monotonic_ns() + interval_ns
+                if item is None and self._closing.is_set() and self._queue.empty():
+                    return
+        except Exception as err:  # disk full, I/O error: keep capture running, report
+            _log.exception("flight log writer stopped")
+            with self._lock:
+                self._error = err
+
+    def _write(
+        self, topic: str, proto: Any | None, data: bytes, seq: int, log_time: int, pub: int
+    ) -> None:
+        assert self._file is not None
+        cid = self._file.channel(topic, None if proto is None else type(proto))
+        self._file.writer.add_message(cid, log_time, data, pub, seq)
+
+    def _proto(self, topic: str, msg: Any, seq: int, log_time: int, pub: int) -> None:
+        self._write(topic, msg, msg.SerializeToString(), seq, log_time, pub)
+
+    def _json(self, topic: str, obj: Any, seq: int, log_time: int, pub: int) -> None:
+        self._write(topic, None, sch.to_json(obj), seq, log_time, pub)
+
+    def _own_seq(self, topic: str) -> int:
+        with self._lock:
+            seq = self._seq[topic]
+            self._seq[topic] = seq + 1
+            self._enqueued[topic] += 1
+            return seq
+
+    def _count(self, topic: str) -> None:
+        with self._lock:
+            self._written[topic] += 1
+
+    def _on_frame(
+        self,
+        seq: int,
+        log_time: int,
+        frame: Frame,
+        t_unix_ns: int,
+        pose: VehiclePose | None,
+        t_boot_ns: int | None,
+    ) -> None:
+        t0 = time.perf_counter_ns()
+        info = {
+            "index": frame.index,
+            "t_mono_ns": frame.t_mono_ns,
+            "t_sensor_ns": frame.t_sensor_ns,
+            "t_unix_ns": t_unix_ns,
+            "t_boot_ns": t_boot_ns,
+            "pose": None if pose is None else sch.pose_json(pose),
+        }
+        self._json(sch.TOPIC_FRAME_INFO, info, seq, log_time, t_unix_ns)
+        self._proto(
+            sch.TOPIC_COLOR, sch.raw_image_message(frame.rgb, t_unix_ns), seq, log_time, t_unix_ns
+        )
+        self._proto(
+            sch.TOPIC_DEPTH, sch.raw_image_message(frame.depth, t_unix_ns), seq, log_time, t_unix_ns
+        )
+        dt = time.perf_counter_ns() - t0
+        with self._lock:
+            self._written["frames"] += 1
+            self._frames_queued -= 1
+            self._frame_write_ns_total += dt
+            self._frame_write_ns_max = max(self._frame_write_ns_max, dt)
+
+    def _on_pose(self, seq: int, log_time: int, pose: VehiclePose, t_unix_ns: int) -> None:
+        if self._origin is None:
+            self._origin = (pose.lat_deg, pose.lon_deg, pose.alt_m)
+            self._write_origin()
+        enu = pymap3d.geodetic2enu(pose.lat_deg, pose.lon_deg, pose.alt_m, *self._origin)
+        self._json(sch.TOPIC_POSE, sch.pose_json(pose), seq, log_time, t_unix_ns)
+        loc_seq, tf_seq = self._own_seq(sch.TOPIC_LOCATION), self._own_seq(sch.TOPIC_TF)
+        self._proto(
+            sch.TOPIC_LOCATION, sch.location_message(pose, t_unix_ns), loc_seq, log_time, t_unix_ns
+        )
+        tf = sch.vehicle_transform(pose, [float(v) for v in enu], t_unix_ns)
+        self._proto(sch.TOPIC_TF, tf, tf_seq, log_time, t_unix_ns)
+        for topic in (sch.TOPIC_POSE, sch.TOPIC_LOCATION, sch.TOPIC_TF):
+            self._count(topic)
+
+    def _on_mavlink(
+        self, seq: int, log_time: int, packet: bytes, t_unix_ns: int, name: str
+    ) -> None:
+        self._json(sch.TOPIC_MAVLINK_RAW, sch.mavlink_json(packet, name), seq, log_time, t_unix_ns)
+        self._count(sch.TOPIC_MAVLINK_RAW)
+
+    def _on_detections(
+        self, seq: int, log_time: int, frame_index: int, dets: tuple[Detection, ...], t: int
+    ) -> None:
+        record = {
+            "frame_index": frame_index,
+            "t_unix_ns": t,
+            "detections": [sch.detection_json(d) for d in dets],
+        }
+        self._json(sch.TOPIC_DETECTIONS, record, seq, log_time, t)
+        ann_seq = self._own_seq(sch.TOPIC_DETECTION_ANNOTATIONS)
+        self._proto(
+            sch.TOPIC_DETECTION_ANNOTATIONS, sch.annotations_message(dets, t), ann_seq, log_time, t
+        )
+        self._count(sch.TOPIC_DETECTIONS)
+        self._count(sch.TOPIC_DETECTION_ANNOTATIONS)
+
+    def _on_holes(self, seq: int, log_time: int, holes: tuple[dict[str, Any], ...], t: int) -> None:
+        self._json(sch.TOPIC_HOLES, {"holes": list(holes)}, seq, log_time, t)
+        geo_seq = self._own_seq(sch.TOPIC_HOLES_GEOJSON)
+        self._proto(sch.TOPIC_HOLES_GEOJSON, sch.holes_geojson_message(holes), geo_seq, log_time, t)
+        self._count(sch.TOPIC_HOLES)
+        self._count(sch.TOPIC_HOLES_GEOJSON)
+
+    def _on_health(self, seq: int, log_time: int, record: dict[str, Any], t: int) -> None:
+        self._json(sch.TOPIC_HEALTH, record, seq, log_time, t)
+        self._count(sch.TOPIC_HEALTH)
+
+    # ------------------------------------------------------------ files, sync, health
+
+    def _open_bytes(self) -> int:
+        f = self._file
+        return 0 if f is None or f.stream.closed else f.stream.tell()
+
+    def _open_next_file(self) -> None:
+        path = log_file_path(self._prefix, len(self._files))
+        self._file = _File(path, self.options)
+        with self._lock:
+            self._files.append(path)
+        now = time.time_ns()
+        meta = {**self._metadata["holescan"], "file_index": str(len(self._files) - 1)}
+        self._file.writer.add_metadata("holescan", meta)
+        for name, values in self._metadata.items():
+            if name != "holescan":
+                self._file.writer.add_metadata(name, values)
+        if self._origin is not None:
+            self._write_origin()
+        mount = sch.camera_mount_transform(self._mount_rot, self._mount_offset, now)
+        self._proto(sch.TOPIC_TF, mount, self._own_seq(sch.TOPIC_TF), now, now)
+        self._count(sch.TOPIC_TF)
+        self._write_calibration(now)
+
+    def _write_origin(self) -> None:
+        assert self._file is not None
+        assert self._origin is not None
+        lat, lon, alt = self._origin
+        values = {"lat_deg": repr(lat), "lon_deg": repr(lon), "alt_m": repr(alt), "frame": "ENU"}
+        self._file.writer.add_metadata("holescan.world_origin", values)
+
+    def _write_calibration(self, now: int) -> None:
+        msg = sch.calibration_message(self.camera, now)
+        self._proto(sch.TOPIC_CAMERA_INFO, msg, self._own_seq(sch.TOPIC_CAMERA_INFO), now, now)
+        self._count(sch.TOPIC_CAMERA_INFO)
+
+    def _maybe_rotate(self) -> None:
+        f = self._file
+        assert f is not None
+        too_big = f.stream.tell() >= self.options.max_file_bytes
+        too_old = time.monotonic_ns() - f.opened_mono_ns >= self.options.max_file_s * 1e9
+        if too_big or too_old:
+            f.close()
+            with self._lock:
+                self._bytes_closed += os.path.getsize(f.path)
+                self._frames_synced = self._written["frames"]
+            self._file = None
+            self._open_next_file()
+
+    def _periodic(self) -> None:
+        assert self._file is not None
+        now = time.time_ns()
+        st = self.stats()
+        health = {
+            "source": "logger",
+            "queue_depth": st.queue_depth,
+            "queue_depth_max": st.queue_depth_max,
+            "frames_queued_max": st.frames_queued_max,
+            "frames_written": st.written.get("frames", 0),
+            "dropped": dict(st.dropped),
+            "frame_write_ms_mean": round(st.frame_write_ms_mean, 3),
+            "frame_write_ms_max": round(st.frame_write_ms_max, 3),
+            "bytes_written": st.bytes_written,
+            "file_index": len(st.files) - 1,
+        }
+        self._json(sch.TOPIC_HEALTH, health, self._own_seq(sch.TOPIC_HEALTH), now, now)
+        self._count(sch.TOPIC_HEALTH)
+        self._write_calibration(now)
+        written = st.written.get("frames", 0)
+        self._file.sync()
+        with self._lock:
+            self._frames_synced = written

@@ -1,0 +1,507 @@
+"""What the flight log stores on which topic, and how records become MCAP messages and back.
+
+Pure conversions (no files, no clocks): Foxglove protobuf messages for what Foxglove
+Studio shows (images, calibration, transforms, GPS, annotations, GeoJSON) and JSON
+(MCAP ``jsonschema`` channels) for holescan's own records, which must round-trip exactly.
+
+Frames of reference written to ``/tf``: ``world`` is ENU (x east, y north, z up) with its
+origin at the first logged vehicle position (the ``holescan.world_origin`` metadata);
+``base_link`` is the vehicle body FLU (x forward, y left, z up, the ROS convention);
+``camera`` is the optical frame (x right, y down, z forward) of the depth-registered RGB
+image.
+"""
+
+from __future__ import annotations
+
+import base64
+import dataclasses
+import enum
+import json
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any, Final
+
+import numpy as np
+import numpy.typing as npt
+from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
+from foxglove_schemas_protobuf.Color_pb2 import Color
+from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
+from foxglove_schemas_protobuf.GeoJSON_pb2 import GeoJSON
+from foxglove_schemas_protobuf.ImageAnnotations_pb2 import ImageAnnotations
+from foxglove_schemas_protobuf.LocationFix_pb2 import LocationFix
+from foxglove_schemas_protobuf.Point2_pb2 import Point2
+from foxglove_schemas_protobuf.PointsAnnotation_pb2 import PointsAnnotation
+from foxglove_schemas_protobuf.Quaternion_pb2 import Quaternion
+from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+from foxglove_schemas_protobuf.TextAnnotation_pb2 import TextAnnotation
+from foxglove_schemas_protobuf.Vector3_pb2 import Vector3
+from google.protobuf.timestamp_pb2 import Timestamp
+
+from detect import CameraIntrinsics, Detection, FeatureScores
+from geotag import VehiclePose
+from holescan.errors import InputError
+
+__all__ = [
+    "BODY_FRAME",
+    "CAMERA_FRAME",
+    "JSON_SCHEMAS",
+    "TOPIC_CAMERA_INFO",
+    "TOPIC_COLOR",
+    "TOPIC_DEPTH",
+    "TOPIC_DETECTIONS",
+    "TOPIC_DETECTION_ANNOTATIONS",
+    "TOPIC_FRAME_INFO",
+    "TOPIC_HEALTH",
+    "TOPIC_HOLES",
+    "TOPIC_HOLES_GEOJSON",
+    "TOPIC_LOCATION",
+    "TOPIC_MAVLINK_RAW",
+    "TOPIC_POSE",
+    "TOPIC_TF",
+    "WORLD_FRAME",
+    "annotations_message",
+    "calibration_message",
+    "camera_from_calibration",
+    "camera_mount_transform",
+    "decode_detection",
+    "decode_pose",
+    "detection_json",
+    "from_json",
+    "holes_geojson_message",
+    "image_from_raw",
+    "jsonable",
+    "location_message",
+    "mavlink_header",
+    "mavlink_json",
+    "pose_json",
+    "raw_image_message",
+    "to_json",
+    "transform_message",
+    "vehicle_transform",
+]
+
+TOPIC_COLOR: Final = "/camera/color/image_raw"
+TOPIC_DEPTH: Final = "/camera/depth/image_raw"
+TOPIC_FRAME_INFO: Final = "/camera/frame_info"
+TOPIC_CAMERA_INFO: Final = "/camera/color/camera_info"
+TOPIC_TF: Final = "/tf"
+TOPIC_LOCATION: Final = "/mavlink/location"
+TOPIC_POSE: Final = "/mavlink/pose"
+TOPIC_MAVLINK_RAW: Final = "/mavlink/raw"
+TOPIC_DETECTION_ANNOTATIONS: Final = "/detections/annotations"
+TOPIC_DETECTIONS: Final = "/detections"
+TOPIC_HOLES: Final = "/holes"
+TOPIC_HOLES_GEOJSON: Final = "/holes/geojson"
+TOPIC_HEALTH: Final = "/health"
+
+CAMERA_FRAME: Final = "camera"
+BODY_FRAME: Final = "base_link"
+WORLD_FRAME: Final = "world"
+
+_INT: Final = {"type": "integer"}
+_NUM: Final = {"type": "number"}
+_NUM_OR_NULL: Final = {"type": ["number", "null"]}
+_POSE_SCHEMA: Final[dict[str, Any]] = {
+    "type": "object",
+    "description": "geotag.VehiclePose: autopilot boot clock, WGS84 degrees, metres, radians",
+    "properties": {
+        name: (_INT if name in ("t_boot_ns", "age_ns") else _NUM_OR_NULL)
+        for name in (f.name for f in dataclasses.fields(VehiclePose))
+    },
+    "required": [f.name for f in dataclasses.fields(VehiclePose)],
+}
+_DETECTION_SCHEMA: Final[dict[str, Any]] = {
+    "type": "object",
+    "properties": {
+        "box": {"type": "array", "items": _INT, "minItems": 4, "maxItems": 4},
+        "score": _NUM,
+        "features": {
+            "type": "object",
+            "properties": {f.name: _NUM for f in dataclasses.fields(FeatureScores)},
+        },
+        "depth_rel_m": _NUM,
+        "major_m": _NUM,
+        "minor_m": _NUM,
+        "rim_depth_m": _NUM,
+        "beyond_range": {"type": "boolean"},
+    },
+}
+
+JSON_SCHEMAS: Final[dict[str, tuple[str, dict[str, Any]]]] = {
+    TOPIC_FRAME_INFO: (
+        "holescan.FrameInfo",
+        {
+            "type": "object",
+            "description": "Clocks and telemetry of the RGB-D frame with the same sequence",
+            "properties": {
+                "index": _INT,
+                "t_mono_ns": _INT,
+                "t_sensor_ns": _INT,
+                "t_unix_ns": _INT,
+                "t_boot_ns": {"type": ["integer", "null"]},
+                "pose": {"oneOf": [_POSE_SCHEMA, {"type": "null"}]},
+            },
+            "required": ["index", "t_mono_ns", "t_sensor_ns", "t_unix_ns"],
+        },
+    ),
+    TOPIC_POSE: ("holescan.VehiclePose", _POSE_SCHEMA),
+    TOPIC_MAVLINK_RAW: (
+        "holescan.MavlinkRaw",
+        {
+            "type": "object",
+            "description": "One MAVLink packet as received (v1 or v2), base64",
+            "properties": {
+                "msgid": _INT,
+                "name": {"type": "string"},
+                "sysid": _INT,
+                "compid": _INT,
+                "data": {"type": "string", "contentEncoding": "base64"},
+            },
+            "required": ["data"],
+        },
+    ),
+    TOPIC_DETECTIONS: (
+        "holescan.Detections",
+        {
+            "type": "object",
+            "properties": {
+                "frame_index": _INT,
+                "t_unix_ns": _INT,
+                "detections": {"type": "array", "items": _DETECTION_SCHEMA},
+            },
+            "required": ["frame_index", "t_unix_ns", "detections"],
+        },
+    ),
+    TOPIC_HOLES: (
+        "holescan.Holes",
+        {
+            "type": "object",
+            "description": "The current list of geotagged holes (lat_deg, lon_deg, ...)",
+            "properties": {"holes": {"type": "array", "items": {"type": "object"}}},
+            "required": ["holes"],
+        },
+    ),
+    TOPIC_HEALTH: (
+        "holescan.Health",
+        {
+            "type": "object",
+            "description": "Daemon and logger health: frame drops, queue depths, clock offset",
+            "properties": {"source": {"type": "string"}},
+            "additionalProperties": True,
+        },
+    ),
+}
+
+
+# --------------------------------------------------------------------------- JSON helpers
+
+
+def jsonable(obj: Any) -> Any:
+    """``obj`` as plain JSON types: dataclasses and mappings become dicts, enums their
+    value, tuples/arrays lists, NaN/inf ``None`` (JSON has no NaN)."""
+    if obj is None or isinstance(obj, bool | int | str):
+        return obj
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, np.generic):
+        return jsonable(obj.item())
+    if isinstance(obj, np.ndarray):
+        return [jsonable(v) for v in obj.tolist()]
+    if isinstance(obj, enum.Enum):
+        return jsonable(obj.value)
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return {f.name: jsonable(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+    if isinstance(obj, Mapping):
+        return {str(k): jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, Sequence | set | frozenset):
+        return [jsonable(v) for v in obj]
+    raise InputError(f"cannot log a {type(obj).__name__} as JSON: pass numbers, strings, dicts")
+
+
+def to_json(obj: Any) -> bytes:
+    """Compact UTF-8 JSON of :func:`jsonable` ``obj``."""
+    return json.dumps(jsonable(obj), separators=(",", ":"), allow_nan=False).encode()
+
+
+def from_json(data: bytes) -> Any:
+    return json.loads(data)
+
+
+def _float(value: Any) -> float:
+    return math.nan if value is None else float(value)
+
+
+# ------------------------------------------------------------------------ frames, camera
+
+
+def _stamp(t_ns: int) -> Timestamp:
+    return Timestamp(seconds=t_ns // 1_000_000_000, nanos=t_ns % 1_000_000_000)
+
+
+def _stamp_ns(ts: Timestamp) -> int:
+    return int(ts.seconds) * 1_000_000_000 + int(ts.nanos)
+
+
+def raw_image_message(image: npt.NDArray[Any], t_unix_ns: int) -> RawImage:
+    """``foxglove.RawImage`` of an (H, W, 3) uint8 RGB (``rgb8``) or an (H, W) uint16
+    millimetre depth image (``16UC1``, little-endian, step = 2 W, 0 = no reading)."""
+    h, w = image.shape[:2]
+    if image.ndim == 3:
+        encoding, step, data = "rgb8", 3 * w, np.ascontiguousarray(image).tobytes()
+    else:
+        encoding, step = "16UC1", 2 * w
+        data = np.ascontiguousarray(image, dtype="<u2").tobytes()
+    return RawImage(
+        timestamp=_stamp(t_unix_ns),
+        frame_id=CAMERA_FRAME,
+        width=w,
+        height=h,
+        encoding=encoding,
+        step=step,
+        data=data,
+    )
+
+
+def image_from_raw(msg: RawImage) -> npt.NDArray[Any]:
+    """Inverse of :func:`raw_image_message`: a writable (H, W, 3) uint8 or (H, W) uint16."""
+    h, w = int(msg.height), int(msg.width)
+    if msg.encoding == "rgb8":
+        flat = np.frombuffer(msg.data, np.uint8)
+        return flat.reshape(h, msg.step)[:, : 3 * w].reshape(h, w, 3).copy()
+    if msg.encoding in ("16UC1", "mono16"):
+        flat = np.frombuffer(msg.data, "<u2")
+        return flat.reshape(h, msg.step // 2)[:, :w].astype(np.uint16)
+    raise InputError(f"unsupported image encoding {msg.encoding!r} (expected rgb8 or 16UC1)")
+
+
+def calibration_message(camera: CameraIntrinsics, t_unix_ns: int) -> CameraCalibration:
+    """``foxglove.CameraCalibration`` (pinhole, no distortion) of ``camera``."""
+    fx, fy, cx, cy = camera.fx, camera.fy, camera.cx, camera.cy
+    return CameraCalibration(
+        timestamp=_stamp(t_unix_ns),
+        frame_id=CAMERA_FRAME,
+        width=camera.width,
+        height=camera.height,
+        distortion_model="plumb_bob",
+        D=[0.0] * 5,
+        K=[fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0],
+        R=[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+        P=[fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0],
+    )
+
+
+def camera_from_calibration(msg: CameraCalibration, depth_unit_m: float) -> CameraIntrinsics:
+    k = list(msg.K)
+    return CameraIntrinsics(int(msg.width), int(msg.height), k[0], k[4], k[2], k[5], depth_unit_m)
+
+
+# ------------------------------------------------------------------ transforms and poses
+
+_FLU_FROM_FRD: Final = np.diag([1.0, -1.0, -1.0])
+_ENU_FROM_NED: Final = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+
+
+def _quat_xyzw(rot: npt.NDArray[np.float64]) -> tuple[float, float, float, float]:
+    """Unit quaternion (x, y, z, w) of a 3x3 rotation matrix (Shepperd's method)."""
+    m = rot
+    tr = m[0, 0] + m[1, 1] + m[2, 2]
+    if tr > 0:
+        s = 2.0 * math.sqrt(tr + 1.0)
+        q = ((m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, s / 4)
+    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
+        q = (s / 4, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s, (m[2, 1] - m[1, 2]) / s)
+    elif m[1, 1] > m[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
+        q = ((m[0, 1] + m[1, 0]) / s, s / 4, (m[1, 2] + m[2, 1]) / s, (m[0, 2] - m[2, 0]) / s)
+    else:
+        s = 2.0 * math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
+        q = ((m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, s / 4, (m[1, 0] - m[0, 1]) / s)
+    n = math.sqrt(sum(c * c for c in q))
+    return (float(q[0] / n), float(q[1] / n), float(q[2] / n), float(q[3] / n))
+
+
+def transform_message(
+    parent: str,
+    child: str,
+    translation_m: Sequence[float],
+    rotation: npt.NDArray[np.float64],
+    t_unix_ns: int,
+) -> FrameTransform:
+    """``foxglove.FrameTransform``: pose of ``child`` in ``parent`` (rotation parent<-child)."""
+    x, y, z, w = _quat_xyzw(np.asarray(rotation, dtype=np.float64))
+    tx, ty, tz = (float(v) for v in translation_m)
+    return FrameTransform(
+        timestamp=_stamp(t_unix_ns),
+        parent_frame_id=parent,
+        child_frame_id=child,
+        translation=Vector3(x=tx, y=ty, z=tz),
+        rotation=Quaternion(x=x, y=y, z=z, w=w),
+    )
+
+
+def camera_mount_transform(
+    rotation_frd_cam: npt.NDArray[np.float64], offset_frd_m: Sequence[float], t_unix_ns: int
+) -> FrameTransform:
+    """``base_link`` (FLU) -> ``camera`` (optical) from a mount given in the FRD body frame."""
+    rot = _FLU_FROM_FRD @ np.asarray(rotation_frd_cam, dtype=np.float64)
+    offset = _FLU_FROM_FRD @ np.asarray(offset_frd_m, dtype=np.float64)
+    return transform_message(BODY_FRAME, CAMERA_FRAME, offset, rot, t_unix_ns)
+
+
+def _rot_ned_frd(roll: float, pitch: float, yaw: float) -> npt.NDArray[np.float64]:
+    cr, sr, cp, sp, cy, sy = (
+        math.cos(roll),
+        math.sin(roll),
+        math.cos(pitch),
+        math.sin(pitch),
+        math.cos(yaw),
+        math.sin(yaw),
+    )
+    rz = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
+    ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
+    rx = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])
+    out: npt.NDArray[np.float64] = rz @ ry @ rx
+    return out
+
+
+def vehicle_transform(pose: VehiclePose, enu_m: Sequence[float], t_unix_ns: int) -> FrameTransform:
+    """``world`` (ENU) -> ``base_link`` (FLU) from the vehicle's NED/FRD attitude."""
+    rot = _ENU_FROM_NED @ _rot_ned_frd(pose.roll, pose.pitch, pose.yaw) @ _FLU_FROM_FRD
+    return transform_message(WORLD_FRAME, BODY_FRAME, enu_m, rot, t_unix_ns)
+
+
+def location_message(pose: VehiclePose, t_unix_ns: int) -> LocationFix:
+    """``foxglove.LocationFix``: WGS84 position, altitude MSL, horizontal variance from eph."""
+    cov: list[float] = [0.0] * 9
+    cov_type = LocationFix.PositionCovarianceType.UNKNOWN
+    if math.isfinite(pose.eph_m):
+        var = pose.eph_m**2
+        cov = [var, 0.0, 0.0, 0.0, var, 0.0, 0.0, 0.0, 4.0 * var]
+        cov_type = LocationFix.PositionCovarianceType.APPROXIMATED
+    return LocationFix(
+        timestamp=_stamp(t_unix_ns),
+        frame_id=BODY_FRAME,
+        latitude=pose.lat_deg,
+        longitude=pose.lon_deg,
+        altitude=pose.alt_m,
+        position_covariance=cov,
+        position_covariance_type=cov_type,
+    )
+
+
+def pose_json(pose: VehiclePose) -> dict[str, Any]:
+    out: dict[str, Any] = jsonable(pose)
+    return out
+
+
+def decode_pose(obj: Mapping[str, Any]) -> VehiclePose:
+    """Inverse of :func:`pose_json` (``null`` floats come back as NaN)."""
+    kwargs: dict[str, Any] = {}
+    for f in dataclasses.fields(VehiclePose):
+        if f.name in obj:
+            value = obj[f.name]
+            kwargs[f.name] = int(value) if f.name in ("t_boot_ns", "age_ns") else _float(value)
+    return VehiclePose(**kwargs)
+
+
+# --------------------------------------------------------------------------- detections
+
+
+def detection_json(det: Detection) -> dict[str, Any]:
+    out: dict[str, Any] = jsonable(det)
+    return out
+
+
+def decode_detection(obj: Mapping[str, Any]) -> Detection:
+    f = obj["features"]
+    x, y, w, h = (int(v) for v in obj["box"])
+    return Detection(
+        box=(x, y, w, h),
+        score=_float(obj["score"]),
+        features=FeatureScores(**{k: _float(f[k]) for k in FeatureScores.__dataclass_fields__}),
+        depth_rel_m=_float(obj["depth_rel_m"]),
+        major_m=_float(obj["major_m"]),
+        minor_m=_float(obj["minor_m"]),
+        rim_depth_m=_float(obj["rim_depth_m"]),
+        beyond_range=bool(obj.get("beyond_range", False)),
+    )
+
+
+def _score_color(score: float) -> Color:
+    s = min(max(score, 0.0), 1.0)
+    return Color(r=1.0, g=1.0 - s, b=0.0, a=1.0)
+
+
+def annotations_message(detections: Sequence[Detection], t_unix_ns: int) -> ImageAnnotations:
+    """Boxes as LINE_LOOP outlines (yellow -> red with the score) and the score as text."""
+    stamp = _stamp(t_unix_ns)
+    msg = ImageAnnotations()
+    for det in detections:
+        x, y, w, h = det.box
+        color = _score_color(det.score)
+        corners = [(x, y), (x + w, y), (x + w, y + h), (x, y + h)]
+        msg.points.append(
+            PointsAnnotation(
+                timestamp=stamp,
+                type=PointsAnnotation.Type.LINE_LOOP,
+                points=[Point2(x=float(u) - 0.5, y=float(v) - 0.5) for u, v in corners],
+                outline_color=color,
+                thickness=2.0,
+            )
+        )
+        msg.texts.append(
+            TextAnnotation(
+                timestamp=stamp,
+                position=Point2(x=float(x), y=float(max(y - 4, 0))),
+                text=f"{det.score:.2f}",
+                font_size=14.0,
+                text_color=color,
+                background_color=Color(r=0.0, g=0.0, b=0.0, a=0.6),
+            )
+        )
+    return msg
+
+
+# --------------------------------------------------------------------------------- holes
+
+
+def holes_geojson_message(holes: Sequence[Mapping[str, Any]]) -> GeoJSON:
+    """``foxglove.GeoJSON`` FeatureCollection: one Point (lon, lat order) per hole; the
+    hole's other fields become the feature's properties."""
+    features = []
+    for hole in holes:
+        props = {k: v for k, v in hole.items() if k not in ("lat_deg", "lon_deg")}
+        features.append(
+            {
+                "type": "Feature",
+                "geometry": {"type": "Point", "coordinates": [hole["lon_deg"], hole["lat_deg"]]},
+                "properties": props,
+            }
+        )
+    doc = {"type": "FeatureCollection", "features": features}
+    return GeoJSON(geojson=json.dumps(doc, separators=(",", ":"), allow_nan=False))
+
+
+# ------------------------------------------------------------------------------- MAVLink
+
+
+def mavlink_header(packet: bytes) -> tuple[int, int, int]:
+    """(msgid, sysid, compid) from a raw MAVLink v1 (0xFE) or v2 (0xFD) packet; -1s when
+    the bytes are not a MAVLink packet."""
+    if len(packet) >= 10 and packet[0] == 0xFD:
+        return (int.from_bytes(packet[7:10], "little"), packet[5], packet[6])
+    if len(packet) >= 6 and packet[0] == 0xFE:
+        return (packet[5], packet[3], packet[4])
+    return (-1, -1, -1)
+
+
+def mavlink_json(packet: bytes, name: str) -> dict[str, Any]:
+    msgid, sysid, compid = mavlink_header(packet)
+    return {
+        "msgid": msgid,
+        "name": name,
+        "sysid": sysid,
+        "compid": compid,
+        "data": base64.b64encode(packet).decode("ascii"),
+    }
