@@ -7,7 +7,9 @@ half a frame period) into :class:`capture.Frame` records.
 The library's pitfalls (FIELD-NOTES.md, Debian libopenni2-0 2.2.0.33) shape this module:
 ``seek()`` never returns (never called here); ``read_frame()`` blocks forever at the end of
 a file (always ``wait_for_any_stream`` with a timeout first, and stop at the frame count);
-playback speed 0 drops frames (speed -1, one record per wait, or 1.0 real time); closing
+playback speed 0 drops frames, and speed 1.0 can overwrite the last frame with the first
+one of the replay (measured): files are stepped manually (speed -1, one record per wait) and
+paced in Python when real time is wanted; closing
 the device with streams open segfaults (stop and close the streams, then the device).
 OpenNI2 is initialised once per process, lazily, on the first source opened.
 """
@@ -15,6 +17,7 @@ OpenNI2 is initialised once per process, lazily, on the first source opened.
 from __future__ import annotations
 
 import ctypes
+import dataclasses
 import logging
 import math
 import os
@@ -196,6 +199,7 @@ class _OpenNISource:
         self._fps = 30
         self._expected: tuple[int, int] | None = None  # frames to read (depth, colour)
         self._first_index: int | None = None
+        self._realtime = False
         self.frames_dropped = 0
 
     # -- subclass hooks
@@ -293,6 +297,7 @@ class _OpenNISource:
         pairer = _Pairer(tolerance_us=500_000 // self._fps)
         counts = [0, 0]
         extra = 0
+        clock_start: tuple[int, int] | None = None  # (monotonic ns, sensor us) for pacing
         while (
             self._expected is None or counts[0] < self._expected[0] or counts[1] < self._expected[1]
         ):
@@ -320,10 +325,21 @@ class _OpenNISource:
                 if extra > 4:
                     raise self._stalled(counts)
                 continue
+            if self._expected is not None and raw.index != counts[k] + 1:
+                raise self._error(
+                    f"{self._describe()}: OpenNI2 delivered {'depth' if is_depth else 'colour'} "
+                    f"frame {raw.index} where {counts[k] + 1} was due"
+                )
             counts[k] += 1
             if is_depth and self._first_index is None:
                 self._first_index = raw.index
             for d, c in pairer.push(raw, is_depth=is_depth):
+                if self._realtime:
+                    if clock_start is None:
+                        clock_start = (time.monotonic_ns(), d.ts_us)
+                    due_ns = clock_start[0] + (d.ts_us - clock_start[1]) * 1000
+                    time.sleep(max(0, due_ns - time.monotonic_ns()) / 1e9)
+                    d = dataclasses.replace(d, t_mono_ns=time.monotonic_ns())
                 yield Frame(
                     index=d.index - (self._first_index or 0),
                     rgb=c.pixels,  # type: ignore[arg-type]
@@ -358,8 +374,8 @@ class OniSource(_OpenNISource):
     timeout_s : float
         How long to wait for the library's next frame before declaring the file broken.
     realtime : bool
-        Pace frames at the recording's rate (playback speed 1.0) instead of as fast as
-        they are read (speed -1, manual stepping). No frame is dropped either way.
+        Pace frames at the recording's timestamps instead of delivering them as fast as
+        they are read. No frame is dropped either way.
 
     Attributes
     ----------
@@ -370,7 +386,8 @@ class OniSource(_OpenNISource):
         What :func:`scan_oni` found in the file.
 
     Frames: ``index`` = OpenNI frame id - 1; ``t_sensor_ns`` = the depth frame's timestamp
-    (us) x 1000; ``t_mono_ns`` = ``time.monotonic_ns()`` when the depth frame was read.
+    (us) x 1000; ``t_mono_ns`` = ``time.monotonic_ns()`` when the depth frame was read (or,
+    with ``realtime``, when it was due).
     """
 
     _error = InputError
@@ -401,7 +418,7 @@ class OniSource(_OpenNISource):
 
     def _configure(self, device: Any, depth: Any, color: Any) -> None:
         device.playback.repeat = True  # stop at the frame count instead (FIELD-NOTES.md)
-        device.playback.speed = 1.0 if self._realtime else -1.0
+        device.playback.speed = -1.0  # manual: one record per wait, none dropped
         self._check_modes()
         n_depth = int(depth.get_number_of_frames())
         n_color = int(color.get_number_of_frames())
