@@ -17,7 +17,7 @@ from capture._mcapread import (
     read_flight_log,
 )
 from capture._mcaptools import LogInfo, RecoveryReport, TopicInfo, log_info, recover_log
-from capture._oni import OniInfo, OniStreamInfo, OniWriter, scan_oni, write_oni
+from capture._oni import OniInfo, OniStreamInfo, OniWriter, export_oni, scan_oni, write_oni
 from capture._openni import OniSource, OpenNI2Device, camera_from_fov
 from capture._usb import UsbDeviceInfo, find_xtion, reset_xtion
 
@@ -49,6 +49,7 @@ __all__ = [
     "UsbDeviceInfo",
     "WriterStats",
     "camera_from_fov",
+    "export_oni",
     "find_xtion",
     "log_info",
     "read_flight_log",

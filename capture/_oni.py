@@ -25,8 +25,8 @@ import logging
 import math
 import os
 import struct
-from collections.abc import Iterable
-from dataclasses import dataclass, field
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import TracebackType
 from typing import BinaryIO, Final
@@ -41,6 +41,7 @@ __all__ = [
     "OniInfo",
     "OniStreamInfo",
     "OniWriter",
+    "export_oni",
     "scan_oni",
     "write_oni",
 ]
@@ -410,6 +411,46 @@ def write_oni(
         for frame in frames:
             writer.write(frame)
     return writer.frame_count
+
+
+def export_oni(
+    logs: str | os.PathLike[str] | Iterable[str | os.PathLike[str]],
+    path: str | os.PathLike[str],
+    *,
+    fps: int = 30,
+) -> int:
+    """Write the frames of an MCAP flight log to an ``.oni`` file; return how many.
+
+    Parameters
+    ----------
+    logs : one flight log, or its rotated files in order (``PREFIX_0000.mcap``, ...).
+    path : the ``.oni`` file to write (for NiViewer, RTAB-Map, OpenNI tools).
+    fps : nominal frame rate stored in the video mode.
+
+    Sensor timestamps that jump back (the Xtion's clock restarts after a USB reset) are
+    shifted to continue after the previous frame, by the companion clock's interval.
+    """
+    from capture._mcapread import McapSource  # the MCAP stack, only when exporting
+
+    source = McapSource(logs)
+    return write_oni(path, _continuous_sensor_time(source), source.camera, fps)
+
+
+def _continuous_sensor_time(frames: Iterable[Frame]) -> Iterator[Frame]:
+    offset_ns = 0
+    prev: Frame | None = None
+    for frame in frames:
+        if prev is not None and frame.t_sensor_ns + offset_ns < prev.t_sensor_ns:
+            step_ns = max(frame.t_mono_ns - prev.t_mono_ns, 0)
+            offset_ns = prev.t_sensor_ns + step_ns - frame.t_sensor_ns
+            _log.warning(
+                "frame %d: sensor clock went back (sensor reset?); shifted by %d ns",
+                frame.index,
+                offset_ns,
+            )
+        out = replace(frame, t_sensor_ns=frame.t_sensor_ns + offset_ns) if offset_ns else frame
+        yield out
+        prev = out
 
 
 # --------------------------------------------------------------------------- scanner

@@ -20,6 +20,7 @@ _COMMAND_MODULES = (
     "holescan._cmd_dataset",
     "holescan._cmd_eval",
     "holescan._cmd_log",
+    "holescan._cmd_export_oni",
 )
 
 EXIT_INPUT = 2

@@ -7,6 +7,7 @@ import struct
 import subprocess
 import sys
 import textwrap
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -279,3 +280,77 @@ def test_killed_writer_leaves_only_a_partial_file(tmp_path: Path) -> None:
     assert partial.is_file()
     with pytest.raises(InputError, match="5 depth, 5 image frames before the cut"):
         scan_oni(partial)
+
+
+def read_data_records(path: Path) -> dict[int, list[tuple[int, int, bytes]]]:
+    """(timestamp us, frame id, payload) of every NEW_DATA record, per node id."""
+    data = path.read_bytes()
+    out: dict[int, list[tuple[int, int, bytes]]] = {1: [], 2: []}
+    pos = 24
+    while True:
+        rtype, node, fields, payload, _undo, _magic = read_record(data, pos)
+        if rtype == 0x0B:
+            return out
+        if rtype == 0x0A:
+            ts, frame_id = struct.unpack_from("<QI", data, pos + 28)
+            out[node].append((ts, frame_id, data[pos + fields : pos + fields + payload]))
+        pos += fields + payload
+
+
+def write_flight_log(prefix: Path, frames: list[Frame]) -> Path:
+    from capture import FlightLogWriter
+
+    with FlightLogWriter(prefix, CAM) as log:
+        for f in frames:
+            assert log.write_frame(f, 1_700_000_000_000_000_000 + f.t_mono_ns)
+    (path,) = log.paths
+    return path
+
+
+def test_export_oni_from_a_flight_log(tmp_path: Path) -> None:
+    from capture import export_oni
+
+    frames = [replace(f, t_mono_ns=10_000 + i * 33_000_000) for i, f in enumerate(make_frames(6))]
+    log = write_flight_log(tmp_path / "flight", frames)
+    out = tmp_path / "flight.oni"
+    assert export_oni(log, out, fps=30) == 6
+    records = read_data_records(out)
+    for i, f in enumerate(frames):
+        ts, frame_id, depth = records[1][i]
+        assert (ts, frame_id) == (f.t_sensor_ns // 1000, i + 1)
+        assert depth == f.depth.astype("<u2").tobytes()
+        assert records[2][i][2] == f.rgb.tobytes()
+    assert scan_oni(out).stream("image").camera == CAM
+
+
+def test_export_oni_continues_time_across_a_sensor_clock_reset(tmp_path: Path) -> None:
+    from capture import export_oni
+
+    frames = make_frames(5)
+    mono = [i * 33_000_000 for i in range(5)]
+    sensor = [9_000_000_000, 9_033_000_000, 1_000_000, 34_000_000, 67_000_000]  # USB reset
+    frames = [
+        replace(f, t_mono_ns=m, t_sensor_ns=s) for f, m, s in zip(frames, mono, sensor, strict=True)
+    ]
+    out = tmp_path / "reset.oni"
+    assert export_oni(write_flight_log(tmp_path / "reset", frames), out) == 5
+    ts_us = [ts for ts, _id, _px in read_data_records(out)[1]]
+    assert ts_us == [9_000_000, 9_033_000, 9_066_000, 9_099_000, 9_132_000]
+
+
+def test_export_oni_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    import argparse
+
+    from holescan import _cmd_export_oni
+
+    parser = argparse.ArgumentParser(prog="holescan")
+    _cmd_export_oni.register(parser.add_subparsers(dest="verb", required=True))
+    log = write_flight_log(tmp_path / "cli", make_frames(3))
+    out = tmp_path / "cli.oni"
+    args = parser.parse_args(["export-oni", str(log), str(out), "--fps", "15"])
+    assert args.func(args) == 0
+    assert capsys.readouterr().out.strip() == f"{out}: 3 frames"
+    assert scan_oni(out).stream("depth").fps == 15
+    missing = parser.parse_args(["export-oni", str(tmp_path / "none.mcap"), str(out)])
+    with pytest.raises(InputError):
+        missing.func(missing)
