@@ -27,7 +27,6 @@ from collections import deque
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from types import TracebackType
 from typing import Any, Final
 
 import numpy as np
@@ -217,12 +216,7 @@ class _OpenNISource:
         self.open()
         return self
 
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
     def open(self) -> None:
@@ -527,7 +521,14 @@ class OpenNI2Device(_OpenNISource):
                     {(m.resolutionX, m.resolutionY, m.fps, int(m.pixelFormat.value)) for m in modes}
                 )
                 raise SensorError(f"{self._describe()} has no {w}x{h}@{fps} mode {fmt}: {have}")
-            stream.set_video_mode(match[0])
+            cur = stream.get_video_mode()
+            if (cur.resolutionX, cur.resolutionY, cur.fps, int(cur.pixelFormat.value)) != (
+                w,
+                h,
+                fps,
+                fmt,
+            ):
+                stream.set_video_mode(match[0])
             if stream.is_property_supported(lib.c_api.ONI_STREAM_PROPERTY_MIRRORING):
                 stream.set_mirroring_enabled(False)
         mode = lib.IMAGE_REGISTRATION_DEPTH_TO_COLOR

@@ -214,3 +214,64 @@ def test_pairer_matches_within_tolerance_and_drops_orphans() -> None:
     assert p.push(raw(100_990), is_depth=False) == []
     [(d, c)] = p.push(raw(101_000), is_depth=True)
     assert (d.ts_us, c.ts_us) == (101_000, 100_990)
+
+
+LIVE_ON_PLAYBACK = textwrap.dedent(
+    """
+    import json, sys
+    import numpy as np
+    from capture import OpenNI2Device, SensorError
+
+    class PlaybackAsLive(OpenNI2Device):
+        # The live source's own configuration, pairing and stamping, fed by the file
+        # player instead of a USB sensor (none is attached to the test machine).
+        def open(self):
+            super(OpenNI2Device, self).open()
+
+        def _open_device(self, lib):
+            device = lib.Device.open_file(sys.argv[1].encode())
+            device.playback.speed = -1.0
+            device.playback.repeat = True
+            return device
+
+    out = {"frames": [], "error": None}
+    try:
+        with PlaybackAsLive(width=80, height=60, fps=30, timeout_s=0.5) as dev:
+            out["camera"] = dev.camera.to_dict()
+            for i, f in zip(range(int(sys.argv[2])), dev):
+                out["frames"].append([f.index, f.t_sensor_ns, int(f.depth.sum()), int(f.rgb.sum())])
+    except SensorError as err:
+        out["error"] = str(err)
+    print(json.dumps(out))
+    """
+)
+
+
+def run_live_on_playback(path: Path, n: int) -> dict[str, Any]:
+    proc = subprocess.run(
+        [sys.executable, "-c", LIVE_ON_PLAYBACK, str(path), str(n)],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def test_live_source_configures_pairs_and_times_out_with_sensor_error(tmp_path: Path) -> None:
+    frames = make_frames(SMALL, 6)
+    path = tmp_path / "live.oni"
+    write_oni(path, frames, SMALL)
+    out = run_live_on_playback(path, 6)
+    assert out["error"] is None
+    assert out["frames"] == [
+        [i, f.t_sensor_ns, int(f.depth.sum()), int(f.rgb.sum())] for i, f in enumerate(frames)
+    ]
+    assert out["camera"]["fx"] == pytest.approx(SMALL.fx, abs=1e-3)  # from the FOV
+    assert out["camera"]["cx"] == (SMALL.width - 1) / 2
+    # A sensor that stops delivering frames: SensorError after the timeout.
+    path.write_bytes(path.read_bytes().replace(b"xnCropping", b"xnCroppinX"))
+    out = run_live_on_playback(path, 6)
+    assert out["frames"] == []
+    assert out["error"] == "Xtion: no frame for 0.5 s (after 0 depth and 0 colour frames)"
