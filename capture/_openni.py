@@ -244,16 +244,19 @@ class _OpenNISource:
 
     def close(self) -> None:
         """Stop and close the streams, then the device (this order never crashed)."""
-        openni_error = _openni_error() if self._lib is not None else Exception
+        lib = self._lib
+        # After OpenNI2 was unloaded (at interpreter exit) every handle is already closed.
+        alive = lib is not None and lib.is_initialized()
+        openni_error = _openni_error() if lib is not None else Exception
         for stream in (self._depth, self._color):
-            if stream is not None:
+            if stream is not None and alive and stream:  # a false handle is closed
                 try:
                     stream.stop()
                     stream.close()
                 except openni_error as err:
                     _log.warning("closing a stream of %s: %s", self._describe(), _message(err))
         self._depth = self._color = None
-        if self._device is not None:
+        if self._device is not None and alive and self._device:
             try:
                 self._device.close()
             except openni_error as err:
@@ -283,6 +286,7 @@ class _OpenNISource:
 
     # -- frames
     def __iter__(self) -> Iterator[Frame]:
+        """Frames in order; iterate once per ``open`` (a file ends after its last frame)."""
         if self._device is None:
             raise self._error(f"{self._describe()} is not open: use it in a with block")
         lib, depth, color = self._lib, self._depth, self._color

@@ -275,3 +275,34 @@ def test_live_source_configures_pairs_and_times_out_with_sensor_error(tmp_path: 
     out = run_live_on_playback(path, 6)
     assert out["frames"] == []
     assert out["error"] == "Xtion: no frame for 0.5 s (after 0 depth and 0 colour frames)"
+
+
+def test_openni2_initialises_once_and_survives_an_unload(tmp_path: Path) -> None:
+    path = tmp_path / "init.oni"
+    write_oni(path, make_frames(SMALL, 4), SMALL)
+    child = textwrap.dedent(
+        """
+        import sys
+        import capture._openni as co
+        from capture import OniSource
+        assert not co._init_lock.locked()
+        lib = co.openni2_library()
+        assert co.openni2_library() is lib and lib.is_initialized()
+        src = OniSource(sys.argv[1])
+        src.open()
+        next(iter(src))
+        lib.unload()          # what the bindings do at exit, with the source still open
+        src.close()           # must not touch the unloaded library
+        with OniSource(sys.argv[1]) as again:   # initialises OpenNI2 again
+            print(sum(1 for _ in again))
+        """
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", child, str(path)],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.split() == ["4"]
