@@ -228,7 +228,13 @@ class OniWriter:
         except OSError as err:
             raise InputError(f"cannot write {self._partial}: {err.strerror}") from err
         self._pos = 0  # end of the last complete record
-        self._write_preamble()
+        try:
+            self._write_preamble()
+        except OSError as err:
+            self._file.close()
+            self._file = None
+            self._partial.unlink(missing_ok=True)
+            raise InputError(f"cannot write {self._partial}: {err.strerror}") from err
 
     @property
     def frame_count(self) -> int:
