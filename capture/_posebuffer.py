@@ -1,0 +1,371 @@
+"""Vehicle pose at an arbitrary instant from buffered telemetry samples (pure).
+
+Position (GLOBAL_POSITION_INT) is interpolated linearly between the two samples that bracket
+the requested time, or dead-reckoned from the newest sample's velocity over a short gap.
+Attitude (ATTITUDE / ATTITUDE_QUATERNION) is slerped (shortest arc, so yaw wrapping through
++-pi is harmless), or propagated with the newest body rates over a short gap. A pose is
+refused (:class:`PoseUnavailable`) when the bracketing samples are too far apart, when the
+newest sample is too old, or when the time is older than the buffer holds.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Generic, TypeVar
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from capture._errors import CaptureError
+from geotag import VehiclePose
+
+__all__ = [
+    "AttitudeSample",
+    "GpsFix",
+    "PoseBuffer",
+    "PoseUnavailable",
+    "PositionSample",
+    "quat_from_euler",
+]
+
+_WGS84_A = 6_378_137.0
+_WGS84_E2 = 6.694379990141317e-3
+
+
+class PoseUnavailable(CaptureError):  # noqa: N818 (name from the design: "pose unavailable")
+    """No trustworthy pose at the requested time; the message says why."""
+
+
+@dataclass(frozen=True)
+class PositionSample:
+    """One GLOBAL_POSITION_INT, in SI units.
+
+    t_boot_ns : autopilot boot time, ns. lat_deg, lon_deg : WGS84. alt_m : above MSL, m.
+    rel_alt_m : above home, m. vn, ve, vd : NED velocity, m/s.
+    """
+
+    t_boot_ns: int
+    lat_deg: float
+    lon_deg: float
+    alt_m: float
+    rel_alt_m: float
+    vn: float
+    ve: float
+    vd: float
+
+
+@dataclass(frozen=True)
+class AttitudeSample:
+    """One ATTITUDE / ATTITUDE_QUATERNION.
+
+    t_boot_ns : autopilot boot time, ns.
+    quat_wxyz : rotation body (FRD) -> NED as a unit quaternion (w, x, y, z).
+    rate_frd : body angular rates (roll, pitch, yaw speed), rad/s.
+    """
+
+    t_boot_ns: int
+    quat_wxyz: tuple[float, float, float, float]
+    rate_frd: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class GpsFix:
+    """One GPS_RAW_INT, in SI units.
+
+    t_boot_ns : autopilot boot time the fix was received at (estimated), ns.
+    fix_type : MAVLink GPS_FIX_TYPE (0-1 none, 2 = 2D, 3 = 3D, 4 DGPS, 5/6 RTK float/fixed).
+    satellites : visible satellites (-1 unknown).
+    hdop : horizontal dilution of precision (NaN unknown).
+    h_acc_m, v_acc_m : 1-sigma position accuracy the receiver reports, m (NaN unknown).
+    lat_deg, lon_deg, alt_m : the receiver's own position (MSL), unfiltered.
+    """
+
+    t_boot_ns: int
+    fix_type: int
+    satellites: int
+    hdop: float
+    h_acc_m: float
+    v_acc_m: float
+    lat_deg: float
+    lon_deg: float
+    alt_m: float
+
+    @property
+    def eph_m(self) -> float:
+        """1-sigma horizontal accuracy, m: ``h_acc_m``; inf without a fix; NaN if unreported."""
+        if self.fix_type < 2:
+            return math.inf
+        return self.h_acc_m
+
+
+def quat_from_euler(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
+    """MAVLink Euler angles (rad; yaw-pitch-roll, body FRD to NED) -> (w, x, y, z)."""
+    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
+    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
+    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+    return (
+        cr * cp * cy + sr * sp * sy,
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+    )
+
+
+def _rotation(q: tuple[float, float, float, float]) -> Rotation:
+    w, x, y, z = q
+    return Rotation.from_quat([x, y, z, w])
+
+
+S = TypeVar("S", PositionSample, AttitudeSample)
+
+
+class _Series(Generic[S]):
+    """Time-sorted samples with a bounded length (amortised trimming)."""
+
+    def __init__(self, capacity: int) -> None:
+        self.capacity = capacity
+        self.items: list[S] = []
+        self.times: list[int] = []
+
+    def add(self, s: S) -> bool:
+        if self.times and s.t_boot_ns <= self.times[-1]:
+            return False
+        self.items.append(s)
+        self.times.append(s.t_boot_ns)
+        if len(self.items) > 2 * self.capacity:
+            del self.items[: -self.capacity]
+            del self.times[: -self.capacity]
+        return True
+
+    def clear(self) -> None:
+        self.items.clear()
+        self.times.clear()
+
+    def oldest_ns(self) -> int:
+        return self.times[max(0, len(self.times) - self.capacity)]
+
+
+class PoseBuffer:
+    """Ring buffers of position and attitude samples; :meth:`pose_at` any recent instant.
+
+    Thread-safe (one lock): the telemetry thread adds, the capture thread asks.
+
+    Parameters
+    ----------
+    capacity : samples kept per series (older ones are forgotten).
+    max_gap_ns : refuse to interpolate between samples further apart than this, ns.
+    max_extrapolation_ns : extrapolate past the newest sample at most this far, ns.
+    reboot_ns : a sample this much older than the newest means the autopilot rebooted
+        (its boot clock restarted): the buffer is cleared, ns.
+    """
+
+    def __init__(
+        self,
+        *,
+        capacity: int = 1024,
+        max_gap_ns: int = 500_000_000,
+        max_extrapolation_ns: int = 200_000_000,
+        reboot_ns: int = 2_000_000_000,
+    ) -> None:
+        if capacity < 2 or max_gap_ns <= 0 or max_extrapolation_ns < 0:
+            raise ValueError("need capacity >= 2, max_gap_ns > 0, max_extrapolation_ns >= 0")
+        self.max_gap_ns = max_gap_ns
+        self.max_extrapolation_ns = max_extrapolation_ns
+        self._reboot_ns = reboot_ns
+        self._pos: _Series[PositionSample] = _Series(capacity)
+        self._att: _Series[AttitudeSample] = _Series(capacity)
+        self._fixes: list[GpsFix] = []
+        self._lock = threading.Lock()
+        self.n_rejected = 0
+        self.n_reboots = 0
+
+    # -- input ----------------------------------------------------------------------------
+
+    def add_position(self, s: PositionSample) -> bool:
+        """Add a position; False when dropped (not newer than the newest: duplicate/late)."""
+        with self._lock:
+            self._check_reboot(s.t_boot_ns)
+            ok = self._pos.add(s)
+            self.n_rejected += not ok
+            return ok
+
+    def add_attitude(self, s: AttitudeSample) -> bool:
+        """Add an attitude; False when dropped (not newer than the newest: duplicate/late)."""
+        with self._lock:
+            self._check_reboot(s.t_boot_ns)
+            ok = self._att.add(s)
+            self.n_rejected += not ok
+            return ok
+
+    def add_gps(self, fix: GpsFix) -> None:
+        """Remember a GPS fix (its accuracy is attached to poses after it)."""
+        with self._lock:
+            self._fixes.append(fix)
+            if len(self._fixes) > 64:
+                del self._fixes[:-32]
+
+    def clear(self) -> None:
+        with self._lock:
+            self._pos.clear()
+            self._att.clear()
+            self._fixes.clear()
+
+    def _check_reboot(self, t_boot_ns: int) -> None:
+        newest = max(self._pos.times[-1:] + self._att.times[-1:], default=None)
+        if newest is not None and t_boot_ns < newest - self._reboot_ns:
+            self.n_reboots += 1
+            self._pos.clear()
+            self._att.clear()
+            self._fixes.clear()
+
+    # -- output ---------------------------------------------------------------------------
+
+    @property
+    def newest_t_boot_ns(self) -> int | None:
+        """Boot time of the newest position or attitude sample (the older of the two), ns."""
+        with self._lock:
+            if not self._pos.times or not self._att.times:
+                return None
+            return min(self._pos.times[-1], self._att.times[-1])
+
+    def latest_gps(self) -> GpsFix | None:
+        with self._lock:
+            return self._fixes[-1] if self._fixes else None
+
+    def pose_at(self, t_boot_ns: int) -> VehiclePose:
+        """Vehicle pose at autopilot boot time ``t_boot_ns``.
+
+        Raises
+        ------
+        PoseUnavailable
+            No samples yet, samples bracketing ``t_boot_ns`` more than ``max_gap_ns`` apart,
+            newest sample older than ``max_extrapolation_ns``, or ``t_boot_ns`` older than the
+            buffer holds.
+        """
+        with self._lock:
+            pos, pos_age = _at(self._pos, t_boot_ns, "position", self, _lerp_position, _dr)
+            q, att_age = _at(self._att, t_boot_ns, "attitude", self, _slerp, _propagate)
+            fix = self._fix_at(t_boot_ns)
+        yaw, pitch, roll = _rotation(q).as_euler("ZYX")
+        return VehiclePose(
+            t_boot_ns=t_boot_ns,
+            lat_deg=pos.lat_deg,
+            lon_deg=pos.lon_deg,
+            alt_m=pos.alt_m,
+            rel_alt_m=pos.rel_alt_m,
+            roll=float(roll),
+            pitch=float(pitch),
+            yaw=float(yaw),
+            vn=pos.vn,
+            ve=pos.ve,
+            vd=pos.vd,
+            eph_m=fix.eph_m if fix is not None else math.nan,
+            age_ns=max(pos_age, att_age),
+        )
+
+    def _fix_at(self, t_boot_ns: int) -> GpsFix | None:
+        before = [f for f in self._fixes if f.t_boot_ns <= t_boot_ns]
+        if before:
+            return before[-1]
+        return self._fixes[0] if self._fixes else None
+
+
+T = TypeVar("T")
+
+
+def _at(
+    series: _Series[S],
+    t: int,
+    what: str,
+    buf: PoseBuffer,
+    interp: Callable[[S, S, float], T],
+    extrap: Callable[[S, int], T],
+) -> tuple[T, int]:
+    """Interpolate/extrapolate ``series`` at ``t``; return (value, age of nearest sample ns)."""
+    times = series.times
+    if not times:
+        raise PoseUnavailable(f"no {what} telemetry received yet")
+    oldest = series.oldest_ns()
+    if t < oldest:
+        raise PoseUnavailable(
+            f"time is {(oldest - t) / 1e9:.3f} s older than the oldest buffered {what} sample"
+        )
+    i = bisect.bisect_right(times, t)
+    if i == len(times):
+        newest = series.items[-1]
+        dt = t - newest.t_boot_ns
+        if dt > buf.max_extrapolation_ns:
+            raise PoseUnavailable(
+                f"newest {what} sample is {dt / 1e9:.3f} s old "
+                f"(limit {buf.max_extrapolation_ns / 1e9:.3f} s)"
+            )
+        return extrap(newest, dt), dt
+    a, b = series.items[i - 1], series.items[i]
+    gap = b.t_boot_ns - a.t_boot_ns
+    if gap > buf.max_gap_ns:
+        raise PoseUnavailable(
+            f"{what} samples around the time are {gap / 1e9:.3f} s apart "
+            f"(limit {buf.max_gap_ns / 1e9:.3f} s)"
+        )
+    f = (t - a.t_boot_ns) / gap
+    return interp(a, b, f), min(t - a.t_boot_ns, b.t_boot_ns - t)
+
+
+def _lerp_position(a: PositionSample, b: PositionSample, f: float) -> PositionSample:
+    dlon = (b.lon_deg - a.lon_deg + 180.0) % 360.0 - 180.0  # across the antimeridian
+    lon = a.lon_deg + f * dlon
+    lon = (lon + 180.0) % 360.0 - 180.0
+    return PositionSample(
+        t_boot_ns=a.t_boot_ns + round(f * (b.t_boot_ns - a.t_boot_ns)),
+        lat_deg=a.lat_deg + f * (b.lat_deg - a.lat_deg),
+        lon_deg=lon,
+        alt_m=a.alt_m + f * (b.alt_m - a.alt_m),
+        rel_alt_m=a.rel_alt_m + f * (b.rel_alt_m - a.rel_alt_m),
+        vn=a.vn + f * (b.vn - a.vn),
+        ve=a.ve + f * (b.ve - a.ve),
+        vd=a.vd + f * (b.vd - a.vd),
+    )
+
+
+def _dr(s: PositionSample, dt_ns: int) -> PositionSample:
+    """Dead-reckon ``dt_ns`` ahead at constant NED velocity on the WGS84 ellipsoid."""
+    dt = dt_ns / 1e9
+    lat = math.radians(s.lat_deg)
+    k = 1.0 - _WGS84_E2 * math.sin(lat) ** 2
+    m = _WGS84_A * (1.0 - _WGS84_E2) / k**1.5  # meridian radius of curvature
+    n = _WGS84_A / math.sqrt(k)  # prime vertical radius
+    h = s.alt_m
+    dlat = s.vn * dt / (m + h)
+    dlon = s.ve * dt / ((n + h) * max(math.cos(lat), 1e-9))
+    lon = (s.lon_deg + math.degrees(dlon) + 180.0) % 360.0 - 180.0
+    return PositionSample(
+        t_boot_ns=s.t_boot_ns + dt_ns,
+        lat_deg=s.lat_deg + math.degrees(dlat),
+        lon_deg=lon,
+        alt_m=s.alt_m - s.vd * dt,
+        rel_alt_m=s.rel_alt_m - s.vd * dt,
+        vn=s.vn,
+        ve=s.ve,
+        vd=s.vd,
+    )
+
+
+def _slerp(a: AttitudeSample, b: AttitudeSample, f: float) -> tuple[float, float, float, float]:
+    ra, rb = _rotation(a.quat_wxyz), _rotation(b.quat_wxyz)
+    step = (ra.inv() * rb).as_rotvec()  # shortest arc, |angle| <= pi
+    return _wxyz(ra * Rotation.from_rotvec(f * step))
+
+
+def _propagate(s: AttitudeSample, dt_ns: int) -> tuple[float, float, float, float]:
+    """Rotate by the body rates for ``dt_ns`` (rates in the body frame: right-multiply)."""
+    rotvec = np.asarray(s.rate_frd, dtype=float) * (dt_ns / 1e9)
+    return _wxyz(_rotation(s.quat_wxyz) * Rotation.from_rotvec(rotvec))
+
+
+def _wxyz(r: Rotation) -> tuple[float, float, float, float]:
+    x, y, z, w = (float(v) for v in r.as_quat())
+    return (w, x, y, z)
