@@ -173,11 +173,11 @@ class _File:
         return cid
 
     def sync(self) -> None:
-        self.writer.flush()
+        self.writer.flush()  # type: ignore[no-untyped-call]
         os.fsync(self.stream.fileno())
 
     def close(self) -> None:
-        self.writer.finish()
+        self.writer.finish()  # type: ignore[no-untyped-call]
         self.stream.flush()
         os.fsync(self.stream.fileno())
         self.stream.close()
@@ -435,6 +435,7 @@ class FlightLogWriter:
                     self._periodic()
                     next_sync = time.monotonic_ns() + interval_ns
                 if item is None and self._closing.is_set() and self._queue.empty():
+                    self._periodic()  # final health record: drops up to the end
                     return
         except Exception as err:  # disk full, I/O error: keep capture running, report
             _log.exception("flight log writer stopped")

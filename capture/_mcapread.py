@@ -12,9 +12,9 @@ import dataclasses
 import logging
 import os
 import struct
-from collections.abc import Collection, Iterable, Iterator
+from collections.abc import Collection, Generator, Iterable, Iterator
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, Any, cast
 
 import zstandard
 from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
@@ -191,7 +191,7 @@ def scan_records(path: str | os.PathLike[str], state: ScanState | None = None) -
         st = state
     with f:
         reader = StreamReader(f, validate_crcs=True, emit_chunks=True)
-        records = reader.records
+        records = cast(Generator[McapRecord, None, None], reader.records)
         try:
             while True:
                 try:

@@ -324,7 +324,7 @@ def _quat_xyzw(rot: npt.NDArray[np.float64]) -> tuple[float, float, float, float
 def transform_message(
     parent: str,
     child: str,
-    translation_m: Sequence[float],
+    translation_m: Sequence[float] | npt.NDArray[np.float64],
     rotation: npt.NDArray[np.float64],
     t_unix_ns: int,
 ) -> FrameTransform:

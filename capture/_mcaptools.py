@@ -58,6 +58,8 @@ class LogInfo:
     start_t_unix_ns, end_t_unix_ns : first and last message log time (Unix clock).
     frames : complete RGB-D frames; dropped_frames : frame sequence numbers the logger
         dropped; frame_index_gaps : frame indices missing from the sensor's numbering.
+    logger_dropped : records the logger dropped per topic, from its last ``/health``
+        record (also counts drops after the last message written, which leave no gap).
     metadata : the MCAP metadata records of the first file (``holescan``,
         ``holescan.config``, ``holescan.camera``, ...), later files' names added.
     """
@@ -74,6 +76,7 @@ class LogInfo:
     frame_index_gaps: tuple[int, ...]
     metadata: Mapping[str, Mapping[str, str]]
     truncated: tuple[str, ...]
+    logger_dropped: Mapping[str, int]
 
     @property
     def duration_s(self) -> float:
@@ -86,6 +89,7 @@ class LogInfo:
             f"duration: {self.duration_s:.2f} s, {self.message_count} messages",
             f"frames: {self.frames}, dropped by logger: {len(self.dropped_frames)}, "
             f"missing sensor indices: {len(self.frame_index_gaps)}",
+            f"logger drops: {dict(self.logger_dropped)}",
         ]
         for t in sorted(self.topics.values(), key=lambda t: t.topic):
             gaps = f", {len(t.missing_sequences)} missing" if t.missing_sequences else ""
@@ -133,6 +137,7 @@ def log_info(
     frame_indices: list[int] = []
     metadata: dict[str, dict[str, str]] = {}
     truncated: list[str] = []
+    logger_dropped: dict[str, int] = {}
     start, end, total_bytes, chunks, count = 2**64, 0, 0, 0, 0
     for path in files:
         state = ScanState(path)
@@ -149,6 +154,10 @@ def log_info(
                 start, end, count = min(start, rec.log_time), max(end, rec.log_time), count + 1
                 if ch.topic == sch.TOPIC_FRAME_INFO:
                     frame_indices.append(int(sch.from_json(rec.data)["index"]))
+                elif ch.topic == sch.TOPIC_HEALTH:
+                    health = sch.from_json(rec.data)
+                    if health.get("source") == "logger":
+                        logger_dropped = dict(health.get("dropped", {}))
             elif isinstance(rec, Schema):
                 schemas[rec.id] = rec
             elif isinstance(rec, Channel):
@@ -197,6 +206,7 @@ def log_info(
         frame_index_gaps=_missing(frame_indices),
         metadata=metadata,
         truncated=tuple(truncated),
+        logger_dropped=logger_dropped,
     )
 
 
@@ -311,7 +321,7 @@ def recover_log(src: str | os.PathLike[str], dst: str | os.PathLike[str]) -> Rec
                 )
         if writer is None or stream is None:
             raise FlightLogError(f"{src_p}: nothing to recover (cut off inside its header)")
-        writer.finish()
+        writer.finish()  # type: ignore[no-untyped-call]
         stream.flush()
         os.fsync(stream.fileno())
         stream.close()
