@@ -550,7 +550,10 @@ class FlightLogWriter:
 
     def _open_bytes(self) -> int:
         f = self._file
-        return 0 if f is None or f.stream.closed else f.stream.tell()
+        try:
+            return 0 if f is None else f.stream.tell()
+        except ValueError:  # closed by a rotation meanwhile
+            return 0
 
     def _open_next_file(self) -> None:
         path = log_file_path(self._prefix, len(self._files))

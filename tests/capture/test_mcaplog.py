@@ -19,7 +19,7 @@ import numpy as np
 import pymap3d
 import pytest
 from mcap.reader import make_reader
-from mcap.records import Message
+from mcap.records import Footer, Message
 from mcap.stream_reader import StreamReader
 from mcap_protobuf.decoder import DecoderFactory
 from pymavlink.dialects.v20 import common as mavlink2
@@ -534,6 +534,27 @@ def test_damaged_chunk_stops_reading_there(
     assert "damaged" in (report.stop_reason or "")
 
 
+def test_summary_and_data_section_crcs_are_checked(
+    chunked_log: tuple[Path, list[Frame]], tmp_path: Path
+) -> None:
+    path, _ = chunked_log
+    data = path.read_bytes()
+    footer = next(r for r in StreamReader(str(path)).records if isinstance(r, Footer))
+    # A byte of the summary offsets (parsed by no one): only the summary CRC notices.
+    bad = bytearray(data)
+    bad[footer.summary_offset_start + 1 + 8 + 1 + 7] ^= 0x01
+    (tmp_path / "summary.mcap").write_bytes(bytes(bad))
+    with pytest.raises(FlightLogError, match="summary section CRC"):
+        log_info(tmp_path / "summary.mcap")
+    # A byte of the config metadata (outside any chunk): only the data section CRC notices.
+    bad = bytearray(data)
+    at = data.index(b"holescan.mount")
+    bad[at + 1] ^= 0x20  # "holescan.mount" -> "hOlescan.mount"
+    (tmp_path / "meta.mcap").write_bytes(bytes(bad))
+    with pytest.raises(TruncatedLogError, match="CRC"):
+        log_info(tmp_path / "meta.mcap")
+
+
 @pytest.mark.parametrize(
     ("content", "message"),
     [
@@ -698,3 +719,52 @@ def test_writer_keeps_up_at_30_fps(tmp_path: Path) -> None:
     assert final.frames_queued_max <= 20  # of 60: it never comes close to filling
     assert max(calls) < 0.05  # enqueueing never stalls capture
     assert final.frame_write_ms_mean < 33.3  # keeps up with 30 fps
+
+
+_DISK_FULL_CHILD = textwrap.dedent(
+    """
+    import json, resource, signal, sys, time
+    from capture import FlightLogError, FlightLogWriter, LogOptions
+    from tests.capture.test_mcaplog import SMALL, make_frame
+
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # writes past the limit fail with EFBIG
+    resource.setrlimit(resource.RLIMIT_FSIZE, (300_000, 300_000))
+    w = FlightLogWriter(sys.argv[1], SMALL, options=LogOptions(chunk_size=50_000))
+    accepted = []
+    for i in range(200):
+        accepted.append(w.write_frame(make_frame(i), i))
+        time.sleep(0.002)
+    error = None
+    try:
+        w.close()
+    except FlightLogError as err:
+        error = str(err)
+    print(json.dumps({"accepted": accepted, "error": error, "stats_error": w.stats().error}))
+    """
+)
+
+
+def test_write_failure_keeps_capture_running_and_is_reported(tmp_path: Path) -> None:
+    """A file-size limit (as a full disk) stops the writer thread; write_frame keeps
+    returning at once (False) and close() raises; what was written is recoverable."""
+    out = subprocess.run(
+        [sys.executable, "-c", _DISK_FULL_CHILD, str(tmp_path / "full")],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+        timeout=120,
+        check=True,
+    )
+    result = json.loads(out.stdout.strip().splitlines()[-1])
+    assert result["error"] is not None
+    assert "flight log writer failed" in result["error"]
+    assert result["stats_error"] is not None
+    accepted = result["accepted"]
+    assert accepted[0]
+    assert not accepted[-1]  # after the failure frames are refused, not queued forever
+    (path,) = tmp_path.glob("full_*.mcap")
+    report = recover_log(path, tmp_path / "saved.mcap")
+    assert report.frames >= 8  # 300 kB of 24 kB frames, less the chunk cut by the limit
+    got = [r.frame for r in read_flight_log(report.dst, kinds={LoggedFrame})]
+    assert all(frames_equal(a, make_frame(a.index)) for a in got)
