@@ -21,6 +21,7 @@ _COMMAND_MODULES = (
     "holescan._cmd_eval",
     "holescan._cmd_log",
     "holescan._cmd_export_oni",
+    "holescan._cmd_plan",
 )
 
 EXIT_INPUT = 2
