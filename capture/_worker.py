@@ -71,6 +71,7 @@ def _worker_main(
     meta: Any,
     wake: EventT,
     stop: EventT,
+    ready: EventT,
     results: mp.Queue[WorkerResult | None],
     camera: CameraIntrinsics,
     params: DetectParams,
@@ -80,6 +81,7 @@ def _worker_main(
     shm = shared_memory.SharedMemory(name=shm_name)
     try:
         views = _slot_views(shm.buf, camera.height, camera.width)
+        ready.set()
         while not stop.is_set():
             if not wake.wait(0.1):
                 continue
@@ -126,11 +128,12 @@ class DetectionWorker:
         self._meta = ctx.Array("q", [0] * (_META * N_SLOTS), lock=False)
         self._wake = ctx.Event()
         self._stop = ctx.Event()
+        self._ready = ctx.Event()
         self._results: mp.Queue[WorkerResult | None] = ctx.Queue()
         self._proc = ctx.Process(
             target=_worker_main,
             args=(self._shm.name, self._ctrl, self._meta, self._wake, self._stop,
-                  self._results, camera, params),
+                  self._ready, self._results, camera, params),
             name="holescan-detect",
             daemon=True,
         )
@@ -138,9 +141,16 @@ class DetectionWorker:
         self._started = False
 
     def __enter__(self) -> DetectionWorker:
+        self.start()
+        return self
+
+    def start(self, timeout_s: float = 60.0) -> None:
+        """Start the process and wait until it has imported the detector (startup only)."""
         self._proc.start()
         self._started = True
-        return self
+        if not self._ready.wait(timeout_s):
+            self.close()
+            raise CaptureError(f"detection worker did not start within {timeout_s:.0f} s")
 
     def __exit__(
         self, et: type[BaseException] | None, ev: BaseException | None, tb: TracebackType | None

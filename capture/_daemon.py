@@ -1,0 +1,454 @@
+"""The capture daemon: frames -> flight log and detection worker -> geotags -> ground crew.
+
+Threads and processes of one flight:
+
+- **capture** (the caller's thread): reads frames from the source through a pump thread
+  with a timeout, stamps each on the autopilot's clock, queues it to the log writer and
+  offers it to the detection worker. Neither ever makes it wait.
+- **log writer** thread (:class:`capture._mcaplog.FlightLogWriter`).
+- **telemetry** receiver thread (:class:`capture._mavlink.Telemetry`): every MAVLink
+  message is logged raw; each position message also logs the interpolated pose.
+- **detection worker** process (:class:`capture._worker.DetectionWorker`).
+- **results** thread: logs detections, poses the frame they came from (interpolated, once
+  the telemetry after it has arrived), geotags, merges sightings into holes, logs the holes,
+  serves them to the ground station and announces them; writes ``/health`` every second.
+
+A sensor that fails (raises, or delivers nothing for ``frame_timeout_s``) is closed, reset
+on USB when a reset function is given, and reopened with back-off; telemetry and logging
+go on meanwhile. Frames that cannot be posed (MAVLink silent, clock not synchronised) are
+still logged, marked unposed, and counted.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from capture._clock import ClockUnavailable
+from capture._errors import SensorError
+from capture._frame import Frame, FrameSource
+from capture._mavlink import Telemetry
+from capture._mcaplog import FlightLogWriter, LogOptions, WriterStats
+from capture._posebuffer import PoseUnavailable
+from capture._worker import DetectionWorker, WorkerResult
+from detect import DEFAULT, CameraIntrinsics, DetectParams
+from geotag import CameraMount, Hole, HoleTracker, VehiclePose, geotag_frame
+
+log = logging.getLogger(__name__)
+
+SourceFactory = Callable[[], FrameSource]
+HoleListener = Callable[[list[Hole], list[Hole]], None]
+
+
+@dataclass(frozen=True)
+class FlightConfig:
+    """How one flight is captured.
+
+    log_prefix : path prefix of the MCAP files (``PREFIX_0000.mcap`` ...).
+    params : detector parameters. mount : camera mount on the vehicle.
+    frame_timeout_s : no frame for this long = the sensor stalled.
+    retry_backoff_s : waits between sensor reopen attempts (the last one repeats).
+    announce_min_sightings : a hole is served/announced once seen in this many frames.
+    pose_wait_s : how long the results thread waits for telemetry after a frame's time.
+    max_frames, max_duration_s : stop after this many frames / seconds (None: until the
+        source ends or a stop is requested).
+    """
+
+    log_prefix: Path
+    params: DetectParams = DEFAULT
+    mount: CameraMount = field(default_factory=CameraMount)
+    log_options: LogOptions = field(default_factory=LogOptions)
+    frame_timeout_s: float = 3.0
+    retry_backoff_s: tuple[float, ...] = (0.5, 1.0, 2.0, 4.0, 8.0)
+    announce_min_sightings: int = 3
+    health_period_s: float = 1.0
+    pose_wait_s: float = 0.15
+    max_frames: int | None = None
+    max_duration_s: float | None = None
+    config_record: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class FlightCounters:
+    frames_captured: int = 0
+    frames_log_dropped: int = 0
+    frames_unposed: int = 0
+    frames_detected: int = 0
+    detections: int = 0
+    detect_ms_total: float = 0.0
+    detect_errors: int = 0
+    pose_refusals: int = 0
+    sensor_failures: int = 0
+    sensor_reopens: int = 0
+    announcements: int = 0
+
+
+@dataclass(frozen=True)
+class FlightSummary:
+    counters: FlightCounters
+    log: WriterStats
+    holes: tuple[Hole, ...]
+    detect_offered: int
+    detect_skipped: int
+    duration_s: float
+    telemetry: dict[str, Any]
+
+    @property
+    def frames_logged(self) -> int:
+        return int(self.log.written.get("frames", 0))
+
+
+_END = object()
+
+
+def frames_with_timeout(
+    source: FrameSource, timeout_s: float, stop: threading.Event
+) -> Iterator[Frame]:
+    """Iterate ``source`` in a pump thread; raise :class:`SensorError` on a stall or fault."""
+    q: queue.Queue[Any] = queue.Queue(maxsize=8)
+
+    def pump() -> None:
+        try:
+            for frame in source:
+                while not stop.is_set():
+                    try:
+                        q.put(frame, timeout=0.1)
+                        break
+                    except queue.Full:
+                        continue
+                if stop.is_set():
+                    return
+            q.put(_END)
+        except BaseException as exc:  # handed to the capture thread, which decides
+            q.put(exc)
+
+    threading.Thread(target=pump, name="frame-pump", daemon=True).start()
+    last = time.monotonic()
+    while not stop.is_set():
+        try:
+            item = q.get(timeout=0.1)
+        except queue.Empty:
+            if time.monotonic() - last > timeout_s:
+                raise SensorError(f"no frame from the sensor for {timeout_s:.1f} s") from None
+            continue
+        last = time.monotonic()
+        if item is _END:
+            return
+        if isinstance(item, SensorError):
+            raise item
+        if isinstance(item, Exception) and not isinstance(item, ValueError):
+            raise SensorError(f"sensor failed: {type(item).__name__}: {item}") from item
+        if isinstance(item, BaseException):
+            raise item
+        yield item
+
+
+def _close_quietly(source: FrameSource, timeout_s: float = 3.0) -> None:
+    """Close a (possibly hung) source without letting it hang the flight."""
+
+    def close() -> None:
+        try:
+            source.__exit__(None, None, None)
+        except Exception as err:
+            log.warning("closing the sensor failed: %s", err)
+
+    t = threading.Thread(target=close, name="sensor-close", daemon=True)
+    t.start()
+    t.join(timeout_s)
+    if t.is_alive():
+        log.warning("sensor did not close in %.0f s; abandoning it", timeout_s)
+
+
+class Flight:
+    """One capture run; see the module docstring. ``run()`` blocks until the end."""
+
+    def __init__(
+        self,
+        config: FlightConfig,
+        source_factory: SourceFactory,
+        camera: CameraIntrinsics,
+        *,
+        mavlink: str | None = None,
+        telemetry_factory: Callable[..., Telemetry] = Telemetry,
+        usb_reset: Callable[[], None] | None = None,
+        on_holes: HoleListener | None = None,
+    ) -> None:
+        self.config = config
+        self.camera = camera
+        self._source_factory = source_factory
+        self._mavlink = mavlink
+        self._telemetry_factory = telemetry_factory
+        self._usb_reset = usb_reset
+        self._on_holes = on_holes
+        self.counters = FlightCounters()
+        self.tracker = HoleTracker()
+        self.stop = threading.Event()
+        self._writer: FlightLogWriter | None = None
+        self._telemetry: Telemetry | None = None
+        self._worker: DetectionWorker | None = None
+        self._announced: dict[int, tuple[float, float, float]] = {}
+        self._lock = threading.Lock()
+        self._unix_minus_mono = time.time_ns() - time.monotonic_ns()
+
+    # -- clocks ---------------------------------------------------------------------------
+
+    def unix_ns(self, t_mono_ns: int) -> int:
+        """Unix time of a companion monotonic time: the autopilot's UTC when known."""
+        tel = self._telemetry
+        if tel is not None:
+            try:
+                return tel.clock.mono_to_unix_ns(t_mono_ns)
+            except ClockUnavailable:
+                pass
+        return t_mono_ns + self._unix_minus_mono
+
+    def pose(self, t_mono_ns: int, wait_s: float = 0.0) -> VehiclePose | None:
+        tel = self._telemetry
+        if tel is None:
+            return None
+        try:
+            return tel.pose_at_mono(t_mono_ns, wait_s=wait_s)
+        except PoseUnavailable as err:
+            log.debug("frame at mono %d not posed: %s", t_mono_ns, err)
+            return None
+
+    # -- telemetry --------------------------------------------------------------------------
+
+    def _on_mavlink(self, msg: Any, t_mono_ns: int) -> None:
+        writer = self._writer
+        if writer is None:
+            return
+        t_unix = self.unix_ns(t_mono_ns)
+        try:
+            writer.write_mavlink(msg.get_msgbuf(), t_unix, msg.get_type())
+        except Exception as err:  # never let logging kill the receiver thread
+            log.debug("raw MAVLink not logged: %s", err)
+        if msg.get_type() == "GLOBAL_POSITION_INT" and self._telemetry is not None:
+            try:
+                pose = self._telemetry.pose_at(int(msg.time_boot_ms) * 1_000_000)
+            except PoseUnavailable:
+                return
+            writer.write_pose(pose, t_unix)
+
+    # -- results ----------------------------------------------------------------------------
+
+    def _handle_result(self, r: WorkerResult) -> None:
+        assert self._writer is not None
+        c = self.counters
+        c.frames_detected += 1
+        c.detect_ms_total += r.detect_ms
+        if r.error:
+            c.detect_errors += 1
+            log.warning("detection failed on frame %d: %s", r.frame_index, r.error)
+            return
+        c.detections += len(r.detections)
+        self._writer.write_detections(r.frame_index, r.detections, self.unix_ns(r.t_mono_ns))
+        if not r.detections:
+            return
+        pose = self.pose(r.t_mono_ns, wait_s=self.config.pose_wait_s)
+        if pose is None:
+            c.pose_refusals += 1
+            return
+        sightings = geotag_frame(
+            r.detections, self.camera, self.config.mount, pose, frame_index=r.frame_index
+        )
+        changed = self.tracker.update(sightings)
+        if not changed:
+            return
+        holes = self.tracker.holes()
+        self._writer.write_holes(holes, self.unix_ns(r.t_mono_ns))
+        confirmed = [h for h in holes if h.sightings >= self.config.announce_min_sightings]
+        news = [h for h in changed if h.sightings >= self.config.announce_min_sightings
+                and self._worth_announcing(h)]
+        for h in news:
+            self._announced[h.id] = (h.lat_deg, h.lon_deg, h.score)
+            c.announcements += 1
+        if self._on_holes is not None and news:
+            self._on_holes(confirmed, news)
+
+    def _worth_announcing(self, h: Hole) -> bool:
+        """New, moved more than 0.5 m, or score up by 0.05 since the last announcement."""
+        last = self._announced.get(h.id)
+        if last is None:
+            return True
+        import pymap3d
+
+        _, _, dist = pymap3d.geodetic2aer(h.lat_deg, h.lon_deg, 0.0, last[0], last[1], 0.0)
+        return bool(dist > 0.5 or h.score > last[2] + 0.05)
+
+    def _health(self) -> dict[str, Any]:
+        assert self._writer is not None and self._worker is not None
+        ws = self._worker.stats()
+        ls = self._writer.stats()
+        c = self.counters
+        out: dict[str, Any] = {
+            "frames_captured": c.frames_captured,
+            "frames_logged": ls.written.get("frames", 0),
+            "frames_log_dropped": ls.dropped.get("frames", 0),
+            "log_queue_depth": ls.queue_depth,
+            "detect_offered": ws.offered,
+            "detect_skipped": ws.skipped,
+            "detect_done": ws.done,
+            "detect_ms_mean": c.detect_ms_total / max(c.frames_detected, 1),
+            "frames_unposed": c.frames_unposed,
+            "pose_refusals": c.pose_refusals,
+            "sensor_failures": c.sensor_failures,
+            "holes": len(self.tracker.holes()),
+        }
+        tel = self._telemetry
+        if tel is not None:
+            ts = tel.stats()
+            out.update(
+                mavlink_bad_bytes=ts.bad_bytes,
+                mavlink_bad_packets=ts.bad_packets,
+                mavlink_age_s=tel.last_message_age_s(),
+                clock_source=tel.clock.source,
+            )
+            try:
+                out.update(clock_offset_ns=tel.clock.offset_ns,
+                           clock_uncertainty_ns=tel.clock.uncertainty_ns)
+            except ClockUnavailable:
+                pass
+        return out
+
+    def _results_loop(self, done: threading.Event) -> None:
+        assert self._worker is not None and self._writer is not None
+        next_health = time.monotonic()
+        while True:
+            finished = done.is_set()
+            for r in self._worker.results(timeout=0.05):
+                try:
+                    self._handle_result(r)
+                except Exception:  # a bad record must not stop the flight
+                    log.exception("handling detections of frame %d failed", r.frame_index)
+            if time.monotonic() >= next_health:
+                self._writer.write_health(self._health())
+                next_health += self.config.health_period_s
+            if finished:
+                return
+
+    # -- capture ----------------------------------------------------------------------------
+
+    def _on_frame(self, frame: Frame) -> None:
+        assert self._writer is not None and self._worker is not None
+        c = self.counters
+        frame = replace(frame, index=c.frames_captured)
+        c.frames_captured += 1
+        pose = self.pose(frame.t_mono_ns)
+        if pose is None:
+            c.frames_unposed += 1
+        t_boot = None
+        if self._telemetry is not None:
+            try:
+                t_boot = self._telemetry.clock.mono_to_boot_ns(frame.t_mono_ns)
+            except ClockUnavailable:
+                t_boot = None
+        if not self._writer.write_frame(frame, self.unix_ns(frame.t_mono_ns), pose=pose,
+                                        t_boot_ns=t_boot):
+            c.frames_log_dropped += 1
+        self._worker.offer(frame)
+
+    def _capture(self, t_end: float | None) -> None:
+        cfg = self.config
+        attempt = 0
+        while not self.stop.is_set():
+            try:
+                source = self._source_factory()
+                source.__enter__()
+            except SensorError as err:
+                self._sensor_failed(err, attempt)
+                attempt += 1
+                continue
+            try:
+                for frame in frames_with_timeout(source, cfg.frame_timeout_s, self.stop):
+                    attempt = 0
+                    self._on_frame(frame)
+                    if cfg.max_frames is not None and self.counters.frames_captured >= cfg.max_frames:
+                        self.stop.set()
+                    if t_end is not None and time.monotonic() >= t_end:
+                        self.stop.set()
+                _close_quietly(source)
+                return  # end of the recording
+            except SensorError as err:
+                _close_quietly(source)
+                self._sensor_failed(err, attempt)
+                attempt += 1
+            except BaseException:
+                _close_quietly(source)
+                raise
+
+    def _sensor_failed(self, err: SensorError, attempt: int) -> None:
+        c = self.counters
+        c.sensor_failures += 1
+        wait = self.config.retry_backoff_s[min(attempt, len(self.config.retry_backoff_s) - 1)]
+        log.warning("sensor failure (%s); reopening in %.1f s", err, wait)
+        if self._writer is not None:
+            self._writer.write_health({"event": "sensor_failure", "error": str(err),
+                                       "retry_in_s": wait})
+        if self._usb_reset is not None:
+            try:
+                self._usb_reset()
+            except SensorError as reset_err:
+                log.warning("USB reset failed: %s", reset_err)
+        self.stop.wait(wait)
+        c.sensor_reopens += 1
+
+    def run(self) -> FlightSummary:
+        """Capture until the source ends, a limit is reached or :attr:`stop` is set."""
+        cfg = self.config
+        t0 = time.monotonic()
+        t_end = t0 + cfg.max_duration_s if cfg.max_duration_s else None
+        writer = FlightLogWriter(
+            cfg.log_prefix, self.camera, config=cfg.config_record, mount=cfg.mount,
+            options=cfg.log_options,
+        )
+        self._writer = writer
+        done = threading.Event()
+        results_thread: threading.Thread | None = None
+        telemetry_stats: dict[str, Any] = {}
+        try:
+            if self._mavlink:
+                tel = self._telemetry_factory(self._mavlink, on_message=self._on_mavlink)
+                tel.__enter__()
+                self._telemetry = tel
+            with DetectionWorker(self.camera, cfg.params) as worker:
+                self._worker = worker
+                results_thread = threading.Thread(
+                    target=self._results_loop, args=(done,), name="results", daemon=True
+                )
+                results_thread.start()
+                try:
+                    self._capture(t_end)
+                finally:
+                    for r in worker.drain(timeout=10.0):
+                        self._handle_result(r)
+                    done.set()
+                    results_thread.join(timeout=15.0)
+                    stats = worker.stats()
+            if self._telemetry is not None:
+                ts = self._telemetry.stats()
+                telemetry_stats = {"messages": dict(ts.messages), "bad_bytes": ts.bad_bytes,
+                                   "bad_packets": ts.bad_packets,
+                                   "rate_method": ts.rate_method,
+                                   "clock_source": self._telemetry.clock.source}
+            writer.write_holes(self.tracker.holes(), time.time_ns())
+        finally:
+            done.set()
+            if self._telemetry is not None:
+                self._telemetry.close()
+            writer.close()
+        return FlightSummary(
+            counters=self.counters,
+            log=writer.stats(),
+            holes=tuple(self.tracker.holes()),
+            detect_offered=stats.offered,
+            detect_skipped=stats.skipped,
+            duration_s=time.monotonic() - t0,
+            telemetry=telemetry_stats,
+        )

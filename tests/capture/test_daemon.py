@@ -1,0 +1,120 @@
+"""The capture daemon end to end with a scripted source and a simulated autopilot."""
+
+from __future__ import annotations
+
+import socket
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from capture._daemon import Flight, FlightConfig
+from capture._errors import SensorError
+from capture._frame import Frame
+from capture._mcapread import read_flight_log
+from capture._simautopilot import SimAutopilot, SimPath
+from detect import CameraIntrinsics
+
+CAM = CameraIntrinsics.xtion()
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+class ScriptedSource:
+    """Frames of a flat floor with one hole, at ``fps``; fails or stalls on request."""
+
+    camera = CAM
+
+    def __init__(self, n: int, fps: float = 30.0, fail_at: int | None = None,
+                 stall_at: int | None = None) -> None:
+        self.n, self.fps, self.fail_at, self.stall_at = n, fps, fail_at, stall_at
+        self.closed = False
+
+    def __enter__(self) -> ScriptedSource:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.closed = True
+
+    def __iter__(self) -> Iterator[Frame]:
+        depth = np.full((480, 640), 2500, np.uint16)
+        depth[180:300, 250:420] = 0
+        rgb = np.full((480, 640, 3), 80, np.uint8)
+        t0 = time.monotonic_ns()
+        for i in range(self.n):
+            if i == self.fail_at:
+                raise OSError("USB transfer failed")
+            if i == self.stall_at:
+                time.sleep(3600)
+            target = t0 + int(i * 1e9 / self.fps)
+            time.sleep(max(0.0, (target - time.monotonic_ns()) / 1e9))
+            yield Frame(i, rgb, depth, time.monotonic_ns(), i * 33_333_333)
+
+
+def hover_path() -> SimPath:
+    return SimPath(waypoints_enu=((0.0, 0.0, 2.5), (0.3, 0.0, 2.5), (0.3, 0.3, 2.5)),
+                   speed_m_s=0.2)
+
+
+def test_flight_logs_every_frame_poses_them_and_finds_the_hole(tmp_path: Path) -> None:
+    port = free_port()
+    with SimAutopilot(f"udpout:127.0.0.1:{port}", hover_path()):
+        cfg = FlightConfig(log_prefix=tmp_path / "flight", max_frames=90)
+        flight = Flight(cfg, lambda: ScriptedSource(200), CAM,
+                        mavlink=f"udpin:127.0.0.1:{port}")
+        summary = flight.run()
+    c = summary.counters
+    assert c.frames_captured == 90
+    assert summary.frames_logged == 90 and c.frames_log_dropped == 0
+    assert c.frames_detected >= 10
+    assert c.frames_unposed <= 5  # the first frames may precede clock sync
+    assert len(summary.holes) == 1 and summary.holes[0].sightings >= 10
+    records = list(read_flight_log(summary.log.files))
+    kinds = {type(r).__name__ for r in records}
+    assert {"LoggedFrame", "LoggedPose", "LoggedMavlink", "LoggedDetections",
+            "LoggedHoles", "LoggedHealth"} <= kinds
+    frames = [r for r in records if type(r).__name__ == "LoggedFrame"]
+    assert [f.frame.index for f in frames] == list(range(90))
+
+
+def test_mavlink_silent_frames_still_logged_unposed(tmp_path: Path) -> None:
+    cfg = FlightConfig(log_prefix=tmp_path / "flight", max_frames=30)
+    summary = Flight(cfg, lambda: ScriptedSource(30), CAM).run()
+    assert summary.frames_logged == 30
+    assert summary.counters.frames_unposed == 30
+    assert summary.holes == ()  # nothing can be geotagged without a pose
+    assert summary.counters.pose_refusals >= 1
+
+
+@pytest.mark.parametrize("fault", ["fail", "stall"])
+def test_sensor_fault_is_retried_with_reset(tmp_path: Path, fault: str) -> None:
+    opened: list[ScriptedSource] = []
+    resets = threading.Event()
+
+    def factory() -> ScriptedSource:
+        first = not opened
+        src = ScriptedSource(
+            40 if not first else 100,
+            fail_at=10 if first and fault == "fail" else None,
+            stall_at=10 if first and fault == "stall" else None,
+        )
+        opened.append(src)
+        return src
+
+    cfg = FlightConfig(log_prefix=tmp_path / "flight", frame_timeout_s=1.0,
+                       retry_backoff_s=(0.2,))
+    summary = Flight(cfg, factory, CAM, usb_reset=resets.set).run()
+    assert summary.counters.sensor_failures == 1
+    assert resets.is_set()
+    assert len(opened) == 2 and opened[0].closed
+    assert summary.frames_logged == 10 + 40
+    health = [r for r in read_flight_log(summary.log.files)
+              if type(r).__name__ == "LoggedHealth"]
+    assert any("sensor_failure" in str(h) for h in health)
