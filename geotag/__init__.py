@@ -1,5 +1,35 @@
 """Geotagging (pure): detections + camera + vehicle pose -> hole positions; merging sightings."""
 
+from geotag._camera import (
+    CameraMount,
+    GimbalAttitude,
+    dcm_from_euler,
+    dcm_from_quaternion,
+    rotation_ned_from_optical,
+)
+from geotag._merge import Hole, HoleTracker, MergeParams
+from geotag._project import (
+    ErrorModel,
+    HoleSighting,
+    geotag_detection,
+    geotag_frame,
+    project_to_pixel,
+)
 from geotag._types import VehiclePose
 
-__all__ = ["VehiclePose"]
+__all__ = [
+    "CameraMount",
+    "ErrorModel",
+    "GimbalAttitude",
+    "Hole",
+    "HoleSighting",
+    "HoleTracker",
+    "MergeParams",
+    "VehiclePose",
+    "dcm_from_euler",
+    "dcm_from_quaternion",
+    "geotag_detection",
+    "geotag_frame",
+    "project_to_pixel",
+    "rotation_ned_from_optical",
+]

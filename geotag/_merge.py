@@ -1,0 +1,257 @@
+"""Merge sightings of the same hole across frames into numbered holes.
+
+A UAV sees each hole in many frames. :class:`HoleTracker` turns the stream of
+:class:`HoleSighting` into :class:`Hole` records with ids a ground crew can use ("hole 3"):
+ids start at 1 in order of first sighting and never change or get reused.
+
+How sightings are matched (deterministic; no clocks, no randomness):
+
+* GPS error is most of a sighting's ``sigma_h_m`` but it is *shared* by sightings close in
+  time (a slowly wandering bias), so it cannot tell holes apart nor split one hole. Each
+  hole keeps a local position estimate that follows that bias (a 2-D random-walk Kalman
+  filter: process noise ``sigma_gps**2 / gps_decorrelation_s`` per second, capped at
+  ``2 * sigma_gps**2``; measurement noise = the sighting's non-GPS variance from attitude,
+  depth and timing).
+* A sighting may join a hole when its horizontal distance to that estimate is below
+  ``max(floor, n_sigma * sqrt(P + R))`` with ``floor = max(min_radius_m, size_fraction *
+  major axis)`` (a big hole's detected centre wanders with the view), and the two major
+  axes differ by less than ``max_size_ratio``.
+* Sightings of one frame are different holes: each hole takes at most one sighting per
+  frame, assigned greedily by normalised distance (ties: lower hole id, earlier sighting).
+  This is what keeps two real holes 1.2 m apart separate when the GPS error is metres.
+* A sighting that joins no hole starts a new one. A single false detection therefore
+  becomes a hole with ``sightings == 1``: consumers ask :meth:`HoleTracker.confirmed`.
+
+Reported position: inverse-variance weighted mean (weights ``1 / sigma_h_m**2``) of all
+sightings. Its sigma combines the non-GPS part (averages down as ``1/sqrt(n)``) with the
+GPS part, which only averages down over independent stretches of ``gps_decorrelation_s``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import pymap3d
+
+from geotag._project import HoleSighting
+from holescan.errors import InputError
+
+__all__ = ["Hole", "HoleTracker", "MergeParams"]
+
+_MIN_REL_SIGMA_M = 0.01
+
+
+@dataclass(frozen=True)
+class MergeParams:
+    """When two sightings are the same hole.
+
+    min_radius_m : sightings closer than this (after bias tracking) always may merge.
+    n_sigma : gate in standard deviations of the non-GPS error plus GPS drift.
+    size_fraction : the gate is at least this fraction of the hole's major axis.
+    max_size_ratio : sightings whose major axes differ by more than this factor are
+        different holes.
+    gps_decorrelation_s : time over which the GPS error becomes independent, seconds.
+    """
+
+    min_radius_m: float = 0.5
+    n_sigma: float = 3.0
+    size_fraction: float = 0.5
+    max_size_ratio: float = 3.0
+    gps_decorrelation_s: float = 300.0
+
+    def __post_init__(self) -> None:
+        if self.min_radius_m < 0 or self.n_sigma <= 0 or self.size_fraction < 0:
+            raise InputError("merge radii and n_sigma must be non-negative (n_sigma > 0)")
+        if self.max_size_ratio < 1 or self.gps_decorrelation_s <= 0:
+            raise InputError("max_size_ratio must be >= 1 and gps_decorrelation_s > 0")
+
+
+@dataclass(frozen=True)
+class Hole:
+    """One access hole, fused from all its sightings.
+
+    id : stable number from 1 in order of first sighting.
+    lat_deg, lon_deg : WGS84; alt_m : metres above mean sea level (fused).
+    sigma_h_m : 1-sigma horizontal uncertainty of the fused position, metres.
+    score : best detector score of any sighting.
+    sightings : number of sightings merged (require >= N to drop one-off false alarms).
+    t_first_boot_ns, t_last_boot_ns : autopilot boot time of the first and last sighting.
+    best_frame_index, best_box : frame and box of the best view (highest
+        ``score * (1 - off_centre / 2)``: confident and near the image centre).
+    major_m, minor_m : opening size seen in the best view, metres.
+    """
+
+    id: int
+    lat_deg: float
+    lon_deg: float
+    alt_m: float
+    sigma_h_m: float
+    score: float
+    sightings: int
+    t_first_boot_ns: int
+    t_last_boot_ns: int
+    best_frame_index: int | None
+    best_box: tuple[int, int, int, int]
+    major_m: float
+    minor_m: float
+
+
+class _Track:
+    """Mutable state of one hole (private to the tracker)."""
+
+    def __init__(self, hole_id: int, s: HoleSighting, ned: tuple[float, float, float]) -> None:
+        self.id = hole_id
+        self.count = 0
+        self.w_sum = 0.0
+        self.wn = self.we = self.wd = 0.0
+        self.inv_rel_var = 0.0
+        self.gps_sum = 0.0
+        self.t_first = s.t_boot_ns
+        self.t_last = s.t_boot_ns
+        self.kn, self.ke = ned[0], ned[1]
+        self.p = _rel_var(s)
+        self.best = s
+        self.best_quality = -math.inf
+        self.best_score = -math.inf
+        self._add(s, ned)
+
+    def _add(self, s: HoleSighting, ned: tuple[float, float, float]) -> None:
+        w = 1.0 / max(s.sigma_h_m, _MIN_REL_SIGMA_M) ** 2
+        self.count += 1
+        self.w_sum += w
+        self.wn += w * ned[0]
+        self.we += w * ned[1]
+        self.wd += w * ned[2]
+        self.inv_rel_var += 1.0 / _rel_var(s)
+        self.gps_sum += s.sigma_gps_m
+        self.t_first = min(self.t_first, s.t_boot_ns)
+        self.t_last = max(self.t_last, s.t_boot_ns)
+        self.best_score = max(self.best_score, s.score)
+        quality = s.score * (1.0 - 0.5 * s.off_centre)
+        if quality > self.best_quality:
+            self.best_quality = quality
+            self.best = s
+
+    def predicted_var(self, s: HoleSighting, params: MergeParams) -> float:
+        dt_s = abs(s.t_boot_ns - self.t_last) * 1e-9
+        gps_var = s.sigma_gps_m**2
+        drift = min(gps_var * dt_s / params.gps_decorrelation_s, 2.0 * gps_var)
+        return self.p + drift
+
+    def update(self, s: HoleSighting, ned: tuple[float, float, float], params: MergeParams) -> None:
+        p = self.predicted_var(s, params)
+        r = _rel_var(s)
+        k = p / (p + r)
+        self.kn += k * (ned[0] - self.kn)
+        self.ke += k * (ned[1] - self.ke)
+        self.p = (1.0 - k) * p
+        self._add(s, ned)
+
+
+def _rel_var(s: HoleSighting) -> float:
+    """Variance of the sighting's non-GPS error (attitude, depth, timing), m^2."""
+    return max(s.sigma_h_m**2 - s.sigma_gps_m**2, _MIN_REL_SIGMA_M**2)
+
+
+def _size_ok(a: float, b: float, max_ratio: float) -> bool:
+    if not (math.isfinite(a) and math.isfinite(b)) or a <= 0 or b <= 0:
+        return True
+    return max(a, b) / min(a, b) <= max_ratio
+
+
+class HoleTracker:
+    """Merges sightings into holes with stable ids (pure, deterministic).
+
+    Feed it every frame's sightings with :meth:`update`, in time order; sightings of one
+    call that share ``(t_boot_ns, frame_index)`` count as one frame.
+    """
+
+    def __init__(self, params: MergeParams | None = None) -> None:
+        self.params = params if params is not None else MergeParams()
+        self._tracks: list[_Track] = []
+        self._origin: tuple[float, float, float] | None = None
+
+    def _local(self, s: HoleSighting) -> tuple[float, float, float]:
+        if self._origin is None:
+            self._origin = (s.lat_deg, s.lon_deg, s.alt_m)
+        n, e, d = pymap3d.geodetic2ned(s.lat_deg, s.lon_deg, s.alt_m, *self._origin)
+        return (float(n), float(e), float(d))
+
+    def update(self, sightings: Sequence[HoleSighting]) -> list[Hole]:
+        """Merge new sightings; return the holes they created or changed, sorted by id."""
+        frames: dict[tuple[int, int | None], list[HoleSighting]] = {}
+        for s in sightings:
+            if not (math.isfinite(s.lat_deg) and math.isfinite(s.lon_deg)):
+                raise InputError(f"sighting has no finite position: {s!r}")
+            frames.setdefault((s.t_boot_ns, s.frame_index), []).append(s)
+        changed: set[int] = set()
+        for key in sorted(frames, key=lambda k: k[0]):
+            changed.update(self._update_frame(frames[key]))
+        return [self._hole(t) for t in self._tracks if t.id in changed]
+
+    def _update_frame(self, group: list[HoleSighting]) -> list[int]:
+        p = self.params
+        local = [self._local(s) for s in group]
+        pairs: list[tuple[float, int, int]] = []
+        for i, (s, ned) in enumerate(zip(group, local, strict=True)):
+            for ti, t in enumerate(self._tracks):
+                if not _size_ok(s.major_m, t.best.major_m, p.max_size_ratio):
+                    continue
+                major = max(s.major_m, t.best.major_m)
+                floor = max(p.min_radius_m, p.size_fraction * major if major > 0 else 0.0)
+                gate = max(floor, p.n_sigma * math.sqrt(t.predicted_var(s, p) + _rel_var(s)))
+                dist = math.hypot(ned[0] - t.kn, ned[1] - t.ke)
+                if dist < gate:
+                    pairs.append((dist / gate, ti, i))
+        pairs.sort()
+        used_tracks: set[int] = set()
+        assigned: dict[int, int] = {}
+        for _, ti, i in pairs:
+            if ti in used_tracks or i in assigned:
+                continue
+            used_tracks.add(ti)
+            assigned[i] = ti
+        changed = []
+        for i, (s, ned) in enumerate(zip(group, local, strict=True)):
+            if i in assigned:
+                track = self._tracks[assigned[i]]
+                track.update(s, ned, p)
+            else:
+                track = _Track(len(self._tracks) + 1, s, ned)
+                self._tracks.append(track)
+            changed.append(track.id)
+        return changed
+
+    def _hole(self, t: _Track) -> Hole:
+        assert self._origin is not None
+        n, e, d = t.wn / t.w_sum, t.we / t.w_sum, t.wd / t.w_sum
+        lat, lon, alt = pymap3d.ned2geodetic(n, e, d, *self._origin)
+        span_s = (t.t_last - t.t_first) * 1e-9
+        independent = min(float(t.count), 1.0 + span_s / self.params.gps_decorrelation_s)
+        gps = (t.gps_sum / t.count) / math.sqrt(independent)
+        rel = 1.0 / math.sqrt(t.inv_rel_var)
+        return Hole(
+            id=t.id,
+            lat_deg=float(lat),
+            lon_deg=float(lon),
+            alt_m=float(alt),
+            sigma_h_m=math.hypot(rel, gps),
+            score=t.best_score,
+            sightings=t.count,
+            t_first_boot_ns=t.t_first,
+            t_last_boot_ns=t.t_last,
+            best_frame_index=t.best.frame_index,
+            best_box=t.best.box,
+            major_m=t.best.major_m,
+            minor_m=t.best.minor_m,
+        )
+
+    def holes(self) -> list[Hole]:
+        """All holes so far, sorted by id."""
+        return [self._hole(t) for t in self._tracks]
+
+    def confirmed(self, min_sightings: int = 2) -> list[Hole]:
+        """Holes seen at least ``min_sightings`` times, sorted by id."""
+        return [self._hole(t) for t in self._tracks if t.count >= min_sightings]

@@ -1,0 +1,234 @@
+"""Merging sightings: a simulated flight over holes, with GPS, attitude and depth noise."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import replace
+
+import numpy as np
+import pymap3d
+import pytest
+
+from detect import CameraIntrinsics, Detection, FeatureScores
+from geotag import (
+    CameraMount,
+    HoleSighting,
+    HoleTracker,
+    MergeParams,
+    VehiclePose,
+    geotag_detection,
+    rotation_ned_from_optical,
+)
+from holescan.errors import InputError
+
+CAM = CameraIntrinsics.xtion()
+MOUNT = CameraMount()
+FEATURES = FeatureScores(0.9, 0.8, 0.7, 0.6, 0.5)
+LAT0, LON0, GROUND = -33.8688, 151.2093, 20.0  # ground MSL, metres
+
+
+def geo(north: float, east: float, up: float = 0.0) -> tuple[float, float, float]:
+    lat, lon, alt = pymap3d.ned2geodetic(north, east, -up, LAT0, LON0, GROUND)
+    return float(lat), float(lon), float(alt)
+
+
+def local(lat: float, lon: float) -> tuple[float, float]:
+    n, e, _ = pymap3d.geodetic2ned(lat, lon, GROUND, LAT0, LON0, GROUND)
+    return float(n), float(e)
+
+
+def fly(
+    holes_ne: Sequence[tuple[float, float]],
+    *,
+    frames: int = 50,
+    seed: int = 1,
+    eph_m: float = 2.0,
+    attitude_noise_deg: float = 1.0,
+    miss_rate: float = 0.0,
+    score: float = 0.7,
+    major_m: float = 0.7,
+    span_m: float = 1.6,
+) -> list[list[tuple[int, HoleSighting]]]:
+    """Fly ``span_m`` north over ``holes_ne`` at 3 m, yawing and rocking.
+
+    Returns each frame's sightings, each tagged with the index of the true hole it shows.
+    The noisy pose (GPS bias random walk of ``eph_m``, white attitude noise) is what the
+    geotagger sees; the detections come from projecting the true holes with the true pose.
+    """
+    rng = np.random.default_rng(seed)
+    bias = rng.normal(0.0, eph_m, 2)
+    out = []
+    for k in range(frames):
+        t_ns = 1_000_000_000 + k * 200_000_000  # 5 Hz
+        north = span_m * (k / frames - 0.5)
+        yaw = math.radians(-40.0 + 160.0 * k / frames)
+        roll = math.radians(6.0 * math.sin(0.5 * k))
+        pitch = math.radians(4.0 * math.cos(0.3 * k))
+        lat, lon, alt = geo(north, 0.2 * math.sin(0.2 * k), 3.0)
+        truth = VehiclePose(t_ns, lat, lon, alt, 3.0, roll, pitch, yaw, vn=3.0 / 10, eph_m=eph_m)
+        # GPS error wanders slowly (5 cm/s rms): a bias random walk plus 2 cm white noise.
+        bias += rng.normal(0.0, 0.05 * math.sqrt(0.2), 2)
+        n_err, e_err = bias + rng.normal(0.0, 0.02, 2)
+        nlat, nlon, nalt = geo(north + n_err, 0.2 * math.sin(0.2 * k) + e_err, 3.0)
+        att = rng.normal(0.0, math.radians(attitude_noise_deg), 3)
+        seen = replace(
+            truth,
+            lat_deg=nlat,
+            lon_deg=nlon,
+            alt_m=nalt,
+            roll=roll + att[0],
+            pitch=pitch + att[1],
+            yaw=yaw + att[2],
+        )
+        r_opt_ned = rotation_ned_from_optical(MOUNT, truth).T
+        frame = []
+        for j, (hn, he) in enumerate(holes_ne):
+            if rng.random() < miss_rate:
+                continue
+            n, e, d = pymap3d.geodetic2ned(*geo(hn, he), lat, lon, alt)
+            p = r_opt_ned @ np.array([n, e, d])
+            u = CAM.fx * p[0] / p[2] + CAM.cx
+            v = CAM.fy * p[1] / p[2] + CAM.cy
+            if not (20 <= u < CAM.width - 20 and 20 <= v < CAM.height - 20):
+                continue
+            x, y = round(u + 0.5 - 20), round(v + 0.5 - 20)
+            z = float(p[2]) + rng.normal(0.0, 1.425e-3 * p[2] ** 2)
+            size = major_m * rng.uniform(0.85, 1.15)
+            det = Detection((x, y, 40, 40), score, FEATURES, 0.9, size, 0.6 * size, z)
+            frame.append((j, geotag_detection(det, CAM, MOUNT, seen, frame_index=k)))
+        out.append(frame)
+    return out
+
+
+def only(frame: list[tuple[int, HoleSighting]]) -> list[HoleSighting]:
+    return [s for _, s in frame]
+
+
+def test_one_hole_seen_fifty_times_is_one_hole() -> None:
+    frames = fly([(0.0, 0.0)], frames=50)
+    sightings = [s for f in frames for s in only(f)]
+    assert len(sightings) == 50
+    tracker = HoleTracker()
+    for f in frames:
+        changed = tracker.update(only(f))
+        assert [h.id for h in changed] == [1]
+    (hole,) = tracker.holes()
+    assert hole.id == 1
+    assert hole.sightings == 50
+    assert hole.t_first_boot_ns == sightings[0].t_boot_ns
+    assert hole.t_last_boot_ns == sightings[-1].t_boot_ns
+    assert hole.score == 0.7
+    # Same score everywhere: the best view is the one nearest the image centre.
+    best = min(sightings, key=lambda s: s.off_centre)
+    assert (hole.best_frame_index, hole.best_box) == (best.frame_index, best.box)
+    # Error is the GPS bias (2 m): within 3 sigma, and sigma stays near the GPS part.
+    n, e = local(hole.lat_deg, hole.lon_deg)
+    assert math.hypot(n, e) < 3 * hole.sigma_h_m
+    assert 1.9 < hole.sigma_h_m < 2.1
+    assert hole.alt_m == pytest.approx(GROUND, abs=0.1)
+
+
+def check_ids(frames: list[list[tuple[int, HoleSighting]]], tracker: HoleTracker) -> dict[int, int]:
+    """Feed ``frames``; check every sighting of a true hole lands on the same id."""
+    owner: dict[int, int] = {}  # true hole -> id
+    for f in frames:
+        before = {h.id: h.sightings for h in tracker.holes()}
+        changed = tracker.update(only(f))
+        after = {h.id: h.sightings for h in tracker.holes()}
+        assert sorted(h.id for h in changed) == sorted(
+            i for i in after if after[i] != before.get(i, 0)
+        )
+        if len(f) == 1:  # one sighting: the id it went to is unambiguous
+            (j, _), (h,) = f[0], changed
+            assert owner.setdefault(j, h.id) == h.id
+    for j, hid in owner.items():
+        count = sum(1 for f in frames for jj, _ in f if jj == j)
+        assert next(h for h in tracker.holes() if h.id == hid).sightings == count
+    return owner
+
+
+@pytest.mark.parametrize("gap_m", [1.2, 1.5])
+def test_two_holes_close_together_stay_two_with_stable_ids(gap_m: float) -> None:
+    truths = [(0.0, -gap_m / 2), (0.3, gap_m / 2)]
+    frames = fly(truths, frames=60, seed=3, miss_rate=0.3)
+    tracker = HoleTracker()
+    owner = check_ids(frames, tracker)
+    holes = tracker.holes()
+    assert [h.id for h in holes] == [1, 2]
+    assert sorted(owner.values()) == [1, 2]
+    assert sum(h.sightings for h in holes) == sum(len(f) for f in frames)
+    # The fused pair keeps its true separation although each is metres off (GPS bias).
+    (n1, e1), (n2, e2) = (local(h.lat_deg, h.lon_deg) for h in holes)
+    assert math.hypot(n1 - n2, e1 - e2) == pytest.approx(math.hypot(0.3, gap_m), abs=0.1)
+
+
+def test_second_hole_first_seen_alone_gets_its_own_id() -> None:
+    truths = [(0.0, 0.0), (1.2, 0.4)]
+    frames = fly(truths, frames=40, seed=5, span_m=3.0)
+    # Hole 0 seen, then frames where only hole 1 is detected, then both.
+    frames = [
+        f if k < 25 else [(j, s) for j, s in f if j == 1 or k > 30] for k, f in enumerate(frames)
+    ]
+    assert any(len(f) == 1 and f[0][0] == 1 for f in frames)
+    tracker = HoleTracker()
+    owner = check_ids(frames, tracker)
+    assert owner == {0: 1, 1: 2}
+    assert [h.id for h in tracker.holes()] == [1, 2]
+
+
+def test_single_false_sighting_is_kept_but_not_confirmed() -> None:
+    frames = [only(f) for f in fly([(0.0, 0.0)], frames=20, seed=9)]
+    stray = replace(frames[7][0], lat_deg=geo(6.0, 4.0)[0], lon_deg=geo(6.0, 4.0)[1], score=0.9)
+    frames[7].append(stray)
+    tracker = HoleTracker()
+    for f in frames:
+        tracker.update(f)
+    assert [(h.id, h.sightings) for h in tracker.holes()] == [(1, 20), (2, 1)]
+    assert [h.id for h in tracker.confirmed(min_sightings=3)] == [1]
+
+
+def test_hole_size_sets_the_merge_radius() -> None:
+    base = fly([(0.0, 0.0)], frames=1, seed=2, eph_m=0.0, attitude_noise_deg=0.0)[0][0][1]
+
+    def at(north: float, major: float, frame: int) -> HoleSighting:
+        lat, lon, _ = geo(north, 0.0)
+        return replace(
+            base,
+            lat_deg=lat,
+            lon_deg=lon,
+            major_m=major,
+            frame_index=frame,
+            t_boot_ns=base.t_boot_ns + frame * 200_000_000,
+            sigma_gps_m=0.0,
+        )
+
+    small, big = HoleTracker(), HoleTracker()
+    for k, north in enumerate((0.0, 0.8, 0.0, 0.8)):
+        small.update([at(north, 0.4, k)])  # 0.8 m apart, 0.4 m wide: two holes
+        big.update([at(north, 2.0, k)])  # a 2 m opening: its centre wanders, one hole
+    assert [h.sightings for h in small.holes()] == [2, 2]
+    assert [h.sightings for h in big.holes()] == [4]
+    # Very different sizes at the same place are not the same opening.
+    odd = HoleTracker(MergeParams(max_size_ratio=2.0))
+    odd.update([at(0.0, 0.4, 0)])
+    odd.update([at(0.1, 1.5, 1)])
+    assert len(odd.holes()) == 2
+
+
+def test_deterministic_and_independent_of_batching() -> None:
+    frames = [only(f) for f in fly([(0.0, -0.6), (0.3, 0.6)], frames=40, seed=11, miss_rate=0.2)]
+    one, two, three = HoleTracker(), HoleTracker(), HoleTracker()
+    for f in frames:
+        one.update(f)
+        two.update(f)
+    three.update([s for f in frames for s in f])  # everything at once
+    assert one.holes() == two.holes() == three.holes()
+
+
+def test_bad_sighting_and_params_raise() -> None:
+    s = fly([(0.0, 0.0)], frames=1)[0][0][1]
+    with pytest.raises(InputError):
+        HoleTracker().update([replace(s, lat_deg=math.nan)])
+    with pytest.raises(InputError):
+        MergeParams(n_sigma=0.0)
