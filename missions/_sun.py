@@ -222,8 +222,8 @@ def sun_windows(
 ) -> tuple[SunWindow, ...]:
     """Intervals of the local solar ``day`` with ``min_elev_deg <= elevation <= max_elev_deg``.
 
-    A window that runs over local midnight is kept whole and belongs to the day that holds
-    its middle. Raises :class:`SunWindowError` (with the reason: polar day, polar night,
+    A window that runs over local midnight is kept whole and belongs to the evening it
+    starts in. Raises :class:`SunWindowError` (with the reason: polar day, polar night,
     band never reached) when there is none.
     """
     _check_place(lat_deg, lon_deg)
@@ -270,8 +270,14 @@ def sun_windows(
         )
         for w in windows
     ]
+    # A window belongs to the day holding its middle, with the day's edges moved one hour
+    # later: a window around local midnight (low sun all night near the polar circle) is
+    # centred within minutes of midnight and belongs to the evening it starts in.
+    shift = 3600 * _NS
     mine = tuple(
-        w for w in clipped if day_start <= (w.start_t_unix_ns + w.end_t_unix_ns) // 2 < day_end
+        w
+        for w in clipped
+        if day_start + shift <= (w.start_t_unix_ns + w.end_t_unix_ns) // 2 < day_end + shift
     )
     if not mine:
         raise SunWindowError(
