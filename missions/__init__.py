@@ -6,6 +6,8 @@
   KML, GeoJSON, GPX, generic over :class:`Waypoint` records (survey paths and found holes).
 * :func:`upload_mission` / :func:`download_mission` - MAVLink mission protocol client;
   :class:`MissionReceiver` / :class:`MissionServer` - the vehicle's side.
+* :class:`HoleMissionServer` - serves found holes live as a mission (component 191) and
+  announces them by STATUSTEXT.
 """
 
 from missions._files import (
@@ -32,6 +34,13 @@ from missions._files import (
     write_plan,
     write_waypoints,
     write_wpl,
+)
+from missions._holeserver import (
+    HoleMissionServer,
+    HoleWaypoint,
+    MissionServerError,
+    hole_statustext,
+    hole_waypoints,
 )
 from missions._protocol import (
     MAV_MISSION_ACCEPTED,
@@ -76,11 +85,14 @@ __all__ = [
     "Area",
     "Camera",
     "FlightCheck",
+    "HoleMissionServer",
+    "HoleWaypoint",
     "LocalFrame",
     "MissionError",
     "MissionReceiver",
     "MissionRejectedError",
     "MissionServer",
+    "MissionServerError",
     "MissionTimeoutError",
     "SunDay",
     "SunWindow",
@@ -92,6 +104,8 @@ __all__ = [
     "check_flight",
     "connect",
     "download_mission",
+    "hole_statustext",
+    "hole_waypoints",
     "local_solar_day",
     "mavlink_module",
     "plan_survey",
