@@ -1,0 +1,657 @@
+"""MAVLink telemetry link: rates, TIMESYNC, and MAVLink -> SI records (one adapter).
+
+:class:`Telemetry` opens a pymavlink connection (serial device, ``udpin:``/``udpout:``,
+``tcp:``), finds the autopilot by its heartbeat, takes the identity of a companion computer on
+that vehicle (the vehicle's system id, component 191 = MAV_COMP_ID_ONBOARD_COMPUTER), asks
+for the messages it needs with MAV_CMD_SET_MESSAGE_INTERVAL (falling back to
+REQUEST_DATA_STREAM when that is not acknowledged), and runs a receiver thread that
+
+* converts units once (``time_boot_ms`` -> ns, degE7 -> deg, mm -> m, cm/s -> m/s,
+  cdeg -> rad) into :class:`~capture._posebuffer.PositionSample`,
+  :class:`~capture._posebuffer.AttitudeSample` and :class:`~capture._posebuffer.GpsFix`
+  records that fill a :class:`~capture._posebuffer.PoseBuffer`;
+* keeps a :class:`~capture._clock.ClockSync` up to date (TIMESYNC round trips at
+  ``timesync_hz``, arrival times of stamped messages, SYSTEM_TIME for UTC);
+* counts (and logs) garbage bytes and packets that fail to parse; they are otherwise ignored;
+* hands every parsed message with its arrival time to ``on_message`` (e.g. a flight logger).
+
+pymavlink picks MAVLink 1 or 2 from the ``MAVLINK20`` environment variable when it is first
+imported; this module sets ``MAVLINK20=1`` (``os.environ.setdefault``) right before that import
+because MAVProxy's mission module and TIMESYNC need MAVLink 2. That is the only import-time
+side effect, and it is pymavlink's constraint, not a configuration channel of ours.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any, Literal
+
+os.environ.setdefault("MAVLINK20", "1")  # before the first pymavlink import (see docstring)
+
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import all as mavlink2
+
+from capture._clock import ClockSync, ClockUnavailable
+from capture._errors import CaptureError
+from capture._posebuffer import (
+    AttitudeSample,
+    GpsFix,
+    PoseBuffer,
+    PoseUnavailable,
+    PositionSample,
+    quat_from_euler,
+)
+from geotag import VehiclePose
+
+__all__ = [
+    "COMPANION_COMPONENT",
+    "DEFAULT_RATES_HZ",
+    "MessageCallback",
+    "RateMethod",
+    "Telemetry",
+    "TelemetryError",
+    "TelemetryStats",
+    "TelemetryTimeoutError",
+    "attitude_from_attitude",
+    "attitude_from_quaternion",
+    "gps_from_gps_raw_int",
+    "position_from_global_position_int",
+]
+
+_log = logging.getLogger(__name__)
+
+COMPANION_COMPONENT = mavlink2.MAV_COMP_ID_ONBOARD_COMPUTER  # 191
+
+DEFAULT_RATES_HZ: Mapping[str, float] = {
+    "GLOBAL_POSITION_INT": 10.0,
+    "ATTITUDE": 50.0,
+    "GPS_RAW_INT": 5.0,
+    "SYSTEM_TIME": 1.0,
+}
+
+# REQUEST_DATA_STREAM groups (ArduPilot's assignment) for the fallback.
+_DATA_STREAM: Mapping[str, int] = {
+    "GLOBAL_POSITION_INT": mavlink2.MAV_DATA_STREAM_POSITION,
+    "ATTITUDE": mavlink2.MAV_DATA_STREAM_EXTRA1,
+    "ATTITUDE_QUATERNION": mavlink2.MAV_DATA_STREAM_EXTRA1,
+    "GPS_RAW_INT": mavlink2.MAV_DATA_STREAM_EXTENDED_STATUS,
+    "SYSTEM_TIME": mavlink2.MAV_DATA_STREAM_EXTRA3,
+}
+
+RateMethod = Literal["message_interval", "data_stream", "mixed", "none"]
+MessageCallback = Callable[[Any, int], None]
+"""``on_message(msg, t_mono_ns)``: a parsed pymavlink message and its arrival time."""
+
+_NS_PER_MS = 1_000_000
+
+
+class TelemetryError(CaptureError):
+    """The MAVLink link could not be opened or used."""
+
+
+class TelemetryTimeoutError(TelemetryError, TimeoutError):
+    """Nothing (heartbeat, command acknowledgement) came in time."""
+
+
+# -- the adapter: MAVLink units -> SI, once --------------------------------------------------
+
+
+def position_from_global_position_int(msg: Any) -> PositionSample:
+    """GLOBAL_POSITION_INT (ms, degE7, mm, cm/s) -> :class:`PositionSample` (ns, deg, m, m/s)."""
+    return PositionSample(
+        t_boot_ns=int(msg.time_boot_ms) * _NS_PER_MS,
+        lat_deg=msg.lat * 1e-7,
+        lon_deg=msg.lon * 1e-7,
+        alt_m=msg.alt * 1e-3,
+        rel_alt_m=msg.relative_alt * 1e-3,
+        vn=msg.vx * 1e-2,
+        ve=msg.vy * 1e-2,
+        vd=msg.vz * 1e-2,
+    )
+
+
+def attitude_from_attitude(msg: Any) -> AttitudeSample:
+    """ATTITUDE (ms, rad, rad/s) -> :class:`AttitudeSample`."""
+    return AttitudeSample(
+        t_boot_ns=int(msg.time_boot_ms) * _NS_PER_MS,
+        quat_wxyz=quat_from_euler(msg.roll, msg.pitch, msg.yaw),
+        rate_frd=(float(msg.rollspeed), float(msg.pitchspeed), float(msg.yawspeed)),
+    )
+
+
+def attitude_from_quaternion(msg: Any) -> AttitudeSample:
+    """ATTITUDE_QUATERNION (ms, q1..q4 = w, x, y, z) -> :class:`AttitudeSample`."""
+    q = (float(msg.q1), float(msg.q2), float(msg.q3), float(msg.q4))
+    norm = math.sqrt(sum(v * v for v in q))
+    if not norm > 0.0:
+        raise ValueError("ATTITUDE_QUATERNION with a zero quaternion")
+    w, x, y, z = (v / norm for v in q)
+    return AttitudeSample(
+        t_boot_ns=int(msg.time_boot_ms) * _NS_PER_MS,
+        quat_wxyz=(w, x, y, z),
+        rate_frd=(float(msg.rollspeed), float(msg.pitchspeed), float(msg.yawspeed)),
+    )
+
+
+def gps_from_gps_raw_int(msg: Any, t_boot_ns: int) -> GpsFix:
+    """GPS_RAW_INT (degE7, mm, HDOP*100, h_acc mm) -> :class:`GpsFix`.
+
+    ``t_boot_ns`` is supplied by the caller: GPS_RAW_INT's ``time_usec`` may be Unix or boot
+    time depending on the autopilot.
+    """
+    h_acc = getattr(msg, "h_acc", 0)
+    v_acc = getattr(msg, "v_acc", 0)
+    return GpsFix(
+        t_boot_ns=t_boot_ns,
+        fix_type=int(msg.fix_type),
+        satellites=-1 if msg.satellites_visible == 255 else int(msg.satellites_visible),
+        hdop=math.nan if msg.eph == 65535 else msg.eph / 100.0,
+        h_acc_m=h_acc * 1e-3 if h_acc else math.nan,
+        v_acc_m=v_acc * 1e-3 if v_acc else math.nan,
+        lat_deg=msg.lat * 1e-7,
+        lon_deg=msg.lon * 1e-7,
+        alt_m=msg.alt * 1e-3,
+    )
+
+
+# -- the link --------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class TelemetryStats:
+    """Counters of a :class:`Telemetry` link.
+
+    messages : parsed messages from the autopilot, by type.
+    bad_bytes : garbage bytes skipped while looking for a MAVLink frame start.
+    bad_packets : framed packets that failed (bad CRC, bad length/flags).
+    unknown_packets : well-framed packets of a message id our dialect does not know (their
+        CRC cannot be checked); passed to ``on_message`` but otherwise ignored.
+    lost_packets : sequence-number gaps seen by pymavlink (all sources).
+    callback_errors : exceptions raised by ``on_message`` (logged, swallowed).
+    rate_method : how message rates were obtained.
+    timesync_sent, timesync_received : TIMESYNC requests sent / matching replies.
+    """
+
+    messages: Mapping[str, int]
+    bad_bytes: int
+    bad_packets: int
+    unknown_packets: int
+    lost_packets: int
+    callback_errors: int
+    rate_method: RateMethod
+    timesync_sent: int
+    timesync_received: int
+
+
+class Telemetry:
+    """A MAVLink link to the autopilot with a receiver thread; use as a context manager.
+
+    Parameters
+    ----------
+    connection : pymavlink connection string: a serial device (``/dev/ttyAMA0``),
+        ``udpin:HOST:PORT``, ``udpout:HOST:PORT``, ``tcp:HOST:PORT``.
+    baud : serial baud rate (ignored for network links).
+    target_system, target_component : the autopilot; None = take them from the first
+        autopilot heartbeat.
+    rates_hz : message name -> wanted rate, Hz (request ATTITUDE or ATTITUDE_QUATERNION).
+    timesync_hz : TIMESYNC requests per second (0 disables; the clock then falls back to
+        message arrival times).
+    heartbeat_timeout_s : how long :meth:`__enter__` waits for the autopilot.
+    command_timeout_s, command_retries : per COMMAND_LONG attempt / attempts.
+    on_message : called from the receiver thread for every parsed message; keep it quick.
+    poses, clock : bring your own (e.g. tuned) buffer / clock; defaults are created.
+    """
+
+    def __init__(
+        self,
+        connection: str,
+        *,
+        baud: int = 921_600,
+        target_system: int | None = None,
+        target_component: int | None = None,
+        rates_hz: Mapping[str, float] = DEFAULT_RATES_HZ,
+        timesync_hz: float = 4.0,
+        heartbeat_timeout_s: float = 10.0,
+        command_timeout_s: float = 0.5,
+        command_retries: int = 3,
+        on_message: MessageCallback | None = None,
+        poses: PoseBuffer | None = None,
+        clock: ClockSync | None = None,
+    ) -> None:
+        for name in rates_hz:
+            if not hasattr(mavlink2, f"MAVLINK_MSG_ID_{name}"):
+                raise ValueError(f"unknown MAVLink message {name!r} in rates_hz")
+        self.connection = connection
+        self.poses = poses if poses is not None else PoseBuffer()
+        self.clock = clock if clock is not None else ClockSync()
+        self._baud = baud
+        self._want_sysid = target_system
+        self._want_compid = target_component
+        self._rates = dict(rates_hz)
+        self._timesync_period_ns = round(1e9 / timesync_hz) if timesync_hz > 0 else 0
+        self._hb_timeout_s = heartbeat_timeout_s
+        self._cmd_timeout_s = command_timeout_s
+        self._cmd_retries = command_retries
+        self._on_message = on_message
+
+        self._conn: Any = None
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._send_lock = threading.Lock()
+        self._cond = threading.Condition()  # guards _acks, _target; signals new samples
+        self._target: tuple[int, int] | None = None
+        self._acks: dict[int, int] = {}  # command -> MAV_RESULT of the latest ack
+        self._outstanding: dict[int, int] = {}  # TIMESYNC ts1 -> t0 (same value)
+        self._counts: dict[str, int] = {}
+        self._arrivals: dict[str, deque[int]] = {}
+        self._bad_bytes = 0
+        self._bad_packets = 0
+        self._unknown_packets = 0
+        self._callback_errors = 0
+        self._timesync_sent = 0
+        self._timesync_received = 0
+        self._last_bad_log_ns = 0
+        self._last_boot_ns: int | None = None
+        self._last_rx_mono_ns: int | None = None
+        self.rate_method: RateMethod = "none"
+
+    # -- lifecycle -------------------------------------------------------------------------
+
+    def __enter__(self) -> Telemetry:
+        try:
+            self._conn = mavutil.mavlink_connection(
+                self.connection,
+                baud=self._baud,
+                source_system=self._want_sysid if self._want_sysid is not None else 255,
+                source_component=COMPANION_COMPONENT,
+                robust_parsing=True,
+                autoreconnect=True,
+            )
+        except Exception as err:  # pymavlink raises OSError, SerialException, ValueError...
+            raise TelemetryError(f"cannot open MAVLink link {self.connection!r}: {err}") from err
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name="telemetry-rx", daemon=True)
+        self._thread.start()
+        try:
+            sysid, compid = self.wait_target(self._hb_timeout_s)
+            _log.info("autopilot %d/%d on %s", sysid, compid, self.connection)
+            if self._rates:
+                self.request_rates(self._rates)
+        except BaseException:
+            self.close()
+            raise
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Stop the receiver thread and close the link (idempotent)."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+        if self._conn is not None:
+            self._conn.close()
+            self._conn = None
+
+    # -- public queries --------------------------------------------------------------------
+
+    @property
+    def target(self) -> tuple[int, int] | None:
+        """(system id, component id) of the autopilot, once its heartbeat was seen."""
+        return self._target
+
+    def wait_target(self, timeout_s: float) -> tuple[int, int]:
+        """Block until the autopilot's heartbeat was seen; raise :class:`TelemetryTimeoutError`."""
+        deadline = time.monotonic() + timeout_s
+        with self._cond:
+            while self._target is None:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    raise TelemetryTimeoutError(
+                        f"no autopilot heartbeat on {self.connection!r} within {timeout_s:g} s"
+                    )
+                self._cond.wait(remaining)
+            return self._target
+
+    def pose_at(self, t_boot_ns: int) -> VehiclePose:
+        """Pose at autopilot boot time ``t_boot_ns``; raises :class:`PoseUnavailable`."""
+        return self.poses.pose_at(t_boot_ns)
+
+    def pose_at_mono(self, t_mono_ns: int, *, wait_s: float = 0.0) -> VehiclePose:
+        """Pose at companion monotonic time ``t_mono_ns`` (e.g. a frame's ``t_mono_ns``).
+
+        With ``wait_s > 0``, first wait up to that long for samples after the time, so the
+        pose is interpolated instead of extrapolated. Raises :class:`PoseUnavailable` (also
+        when the clocks are not synchronised yet).
+        """
+        try:
+            t_boot_ns = self.clock.mono_to_boot_ns(t_mono_ns)
+        except ClockUnavailable as err:
+            raise PoseUnavailable(str(err)) from err
+        if wait_s > 0:
+            deadline = time.monotonic() + wait_s
+            with self._cond:
+                while True:
+                    newest = self.poses.newest_t_boot_ns
+                    remaining = deadline - time.monotonic()
+                    if (newest is not None and newest >= t_boot_ns) or remaining <= 0:
+                        break
+                    self._cond.wait(remaining)
+        return self.poses.pose_at(t_boot_ns)
+
+    def latest_gps(self) -> GpsFix | None:
+        return self.poses.latest_gps()
+
+    def message_rates_hz(self, window_s: float = 3.0) -> dict[str, float]:
+        """Measured arrival rate of each message type from the autopilot over the last
+        ``window_s`` seconds, Hz (types with fewer than 2 arrivals are left out)."""
+        now = time.monotonic_ns()
+        start = now - round(window_s * 1e9)
+        rates: dict[str, float] = {}
+        with self._cond:
+            series = {k: list(v) for k, v in self._arrivals.items()}
+        for name, times in series.items():
+            recent = [t for t in times if t >= start]
+            if len(recent) >= 2 and recent[-1] > recent[0]:
+                rates[name] = (len(recent) - 1) * 1e9 / (recent[-1] - recent[0])
+        return rates
+
+    def last_message_age_s(self) -> float:
+        """Seconds since anything arrived from the autopilot (inf before the first)."""
+        last = self._last_rx_mono_ns
+        return math.inf if last is None else (time.monotonic_ns() - last) / 1e9
+
+    def stats(self) -> TelemetryStats:
+        with self._cond:
+            counts = dict(self._counts)
+        return TelemetryStats(
+            messages=counts,
+            bad_bytes=self._bad_bytes,
+            bad_packets=self._bad_packets,
+            unknown_packets=self._unknown_packets,
+            lost_packets=int(getattr(self._conn, "mav_loss", 0)) if self._conn else 0,
+            callback_errors=self._callback_errors,
+            rate_method=self.rate_method,
+            timesync_sent=self._timesync_sent,
+            timesync_received=self._timesync_received,
+        )
+
+    # -- commands --------------------------------------------------------------------------
+
+    def command_long(self, command: int, *params: float) -> int:
+        """Send COMMAND_LONG to the autopilot and return the MAV_RESULT of its COMMAND_ACK.
+
+        Retries ``command_retries`` times (confirmation counts up); raises
+        :class:`TelemetryTimeoutError` when no ACK comes. Not callable from ``on_message``.
+        """
+        sysid, compid = self._require_target()
+        p = [float(v) for v in params] + [0.0] * (7 - len(params))
+        for attempt in range(self._cmd_retries):
+            with self._cond:
+                self._acks.pop(command, None)
+            with self._send_lock:
+                self._conn.mav.command_long_send(sysid, compid, command, attempt, *p)
+            deadline = time.monotonic() + self._cmd_timeout_s
+            with self._cond:
+                while True:
+                    result = self._acks.get(command)
+                    if result is not None and result != mavlink2.MAV_RESULT_IN_PROGRESS:
+                        return result
+                    remaining = deadline - time.monotonic()
+                    if remaining <= 0:
+                        break
+                    self._cond.wait(remaining)
+        raise TelemetryTimeoutError(
+            f"no COMMAND_ACK for command {command} after {self._cmd_retries} attempts"
+        )
+
+    def request_rates(self, rates_hz: Mapping[str, float]) -> RateMethod:
+        """Ask for each message at its rate (Hz; <= 0 stops it).
+
+        MAV_CMD_SET_MESSAGE_INTERVAL per message; messages it does not get ACCEPTED for are
+        requested with REQUEST_DATA_STREAM (ArduPilot stream groups, integer Hz). If the
+        first command is not acknowledged at all, the rest go straight to the fallback.
+        """
+        refused: dict[str, float] = {}
+        acked_any = False
+        for name, hz in rates_hz.items():
+            msg_id = getattr(mavlink2, f"MAVLINK_MSG_ID_{name}")
+            interval_us = round(1e6 / hz) if hz > 0 else -1
+            if refused and not acked_any:
+                refused[name] = hz
+                continue
+            try:
+                result = self.command_long(
+                    mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, interval_us
+                )
+            except TelemetryTimeoutError:
+                _log.info("SET_MESSAGE_INTERVAL not acknowledged for %s", name)
+                refused[name] = hz
+                continue
+            acked_any = True
+            if result != mavlink2.MAV_RESULT_ACCEPTED:
+                _log.info("SET_MESSAGE_INTERVAL for %s refused (MAV_RESULT %d)", name, result)
+                refused[name] = hz
+        if refused:
+            self._request_data_streams(refused)
+        if not refused:
+            method: RateMethod = "message_interval"
+        elif len(refused) == len(rates_hz):
+            method = "data_stream"
+        else:
+            method = "mixed"
+        self.rate_method = method
+        _log.info("message rates requested by %s: %s", method, dict(rates_hz))
+        return method
+
+    def _request_data_streams(self, rates_hz: Mapping[str, float]) -> None:
+        sysid, compid = self._require_target()
+        streams: dict[int, int] = {}
+        for name, hz in rates_hz.items():
+            stream = _DATA_STREAM.get(name)
+            if stream is None:
+                _log.warning("no REQUEST_DATA_STREAM group known for %s: not requested", name)
+                continue
+            streams[stream] = max(streams.get(stream, 0), math.ceil(hz) if hz > 0 else 0)
+        for _ in range(2):  # no acknowledgement exists: send twice against loss
+            for stream, hz in streams.items():
+                with self._send_lock:
+                    self._conn.mav.request_data_stream_send(sysid, compid, stream, hz, int(hz > 0))
+
+    def _require_target(self) -> tuple[int, int]:
+        if self._conn is None or self._target is None:
+            raise TelemetryError("telemetry link is not open (use it as a context manager)")
+        return self._target
+
+    # -- receiver thread -------------------------------------------------------------------
+
+    def _run(self) -> None:
+        conn = self._conn
+        next_hb = 0
+        next_ts = 0
+        while not self._stop.is_set():
+            now = time.monotonic_ns()
+            if now >= next_hb:
+                self._send_heartbeat()
+                next_hb = now + 1_000_000_000
+            if self._timesync_period_ns and self._target is not None and now >= next_ts:
+                self._send_timesync()
+                next_ts = now + self._timesync_period_ns
+            try:
+                msg = conn.recv_msg()
+            except Exception as err:  # socket/serial trouble: log, back off, keep going
+                _log.warning("MAVLink receive failed on %s: %s", self.connection, err)
+                self._stop.wait(0.1)
+                continue
+            if msg is None:
+                wait_ns = min(next_hb, next_ts if self._timesync_period_ns else next_hb) - now
+                conn.select(max(0.0, min(wait_ns / 1e9, 0.02)))
+                continue
+            t_mono_ns = time.monotonic_ns()
+            try:
+                self._handle(msg, t_mono_ns)
+            except Exception:  # one bad message must not kill the link
+                _log.exception("failed to handle %s", msg.get_type())
+
+    def _send_heartbeat(self) -> None:
+        with self._send_lock:
+            self._conn.mav.heartbeat_send(
+                mavlink2.MAV_TYPE_ONBOARD_CONTROLLER,
+                mavlink2.MAV_AUTOPILOT_INVALID,
+                0,
+                0,
+                mavlink2.MAV_STATE_ACTIVE,
+            )
+
+    def _send_timesync(self) -> None:
+        with self._send_lock:
+            t0 = time.monotonic_ns()
+            self._conn.mav.timesync_send(0, t0)
+        for ts1 in [k for k in self._outstanding if t0 - k > 2_000_000_000]:
+            del self._outstanding[ts1]  # unanswered for 2 s: lost
+        self._outstanding[t0] = t0
+        self._timesync_sent += 1
+
+    def _handle(self, msg: Any, t_mono_ns: int) -> None:
+        mtype = msg.get_type()
+        if mtype == "BAD_DATA":
+            self._count_bad(msg, t_mono_ns)
+            return
+        if self._on_message is not None:
+            try:
+                self._on_message(msg, t_mono_ns)
+            except Exception:
+                self._callback_errors += 1
+                _log.exception("on_message callback failed for %s", mtype)
+        if mtype.startswith("UNKNOWN_"):
+            self._unknown_packets += 1
+            if self._unknown_packets == 1:
+                _log.warning("ignoring %s: a message id our dialect does not know", mtype)
+            return
+        src = (msg.get_srcSystem(), msg.get_srcComponent())
+        if self._target is None:
+            self._maybe_adopt_target(msg, src)
+            return
+        if src != self._target:
+            return
+        self._last_rx_mono_ns = t_mono_ns
+        with self._cond:
+            self._counts[mtype] = self._counts.get(mtype, 0) + 1
+            self._arrivals.setdefault(mtype, deque(maxlen=512)).append(t_mono_ns)
+        handler = self._HANDLERS.get(mtype)
+        if handler is not None:
+            handler(self, msg, t_mono_ns)
+
+    def _maybe_adopt_target(self, msg: Any, src: tuple[int, int]) -> None:
+        if msg.get_type() != "HEARTBEAT" or msg.autopilot == mavlink2.MAV_AUTOPILOT_INVALID:
+            return
+        if self._want_sysid is not None and src[0] != self._want_sysid:
+            return
+        if self._want_compid is not None and src[1] != self._want_compid:
+            return
+        with self._send_lock:
+            self._conn.target_system, self._conn.target_component = src
+            self._conn.mav.srcSystem = src[0]  # a companion takes its vehicle's system id
+            self._conn.mav.srcComponent = COMPANION_COMPONENT
+        with self._cond:
+            self._target = src
+            self._cond.notify_all()
+
+    def _count_bad(self, msg: Any, t_mono_ns: int) -> None:
+        n = len(msg.data)
+        if msg.reason == "Bad prefix":
+            self._bad_bytes += n
+        else:
+            self._bad_packets += 1
+        if t_mono_ns - self._last_bad_log_ns > 10_000_000_000:
+            self._last_bad_log_ns = t_mono_ns
+            _log.warning(
+                "ignoring unparseable MAVLink data on %s (%s, %d bytes); totals: %d garbage "
+                "bytes, %d bad packets",
+                self.connection,
+                msg.reason,
+                n,
+                self._bad_bytes,
+                self._bad_packets,
+            )
+
+    def _stamped(self, t_boot_ns: int, t_mono_ns: int) -> None:
+        last = self._last_boot_ns
+        if last is not None and t_boot_ns < last - 2_000_000_000:
+            _log.warning(
+                "autopilot boot time went back %.1f s: reboot, resetting clock sync",
+                (last - t_boot_ns) / 1e9,
+            )
+            self.clock.reset()
+        if last is None or t_boot_ns > last or t_boot_ns < last - 2_000_000_000:
+            self._last_boot_ns = t_boot_ns
+        self.clock.add_arrival(t_mono_ns, t_boot_ns)
+
+    def _on_position(self, msg: Any, t_mono_ns: int) -> None:
+        sample = position_from_global_position_int(msg)
+        self._stamped(sample.t_boot_ns, t_mono_ns)
+        self.poses.add_position(sample)
+        with self._cond:
+            self._cond.notify_all()
+
+    def _on_attitude(self, msg: Any, t_mono_ns: int) -> None:
+        if msg.get_type() == "ATTITUDE":
+            sample = attitude_from_attitude(msg)
+        else:
+            sample = attitude_from_quaternion(msg)
+        self._stamped(sample.t_boot_ns, t_mono_ns)
+        self.poses.add_attitude(sample)
+        with self._cond:
+            self._cond.notify_all()
+
+    def _on_gps(self, msg: Any, t_mono_ns: int) -> None:
+        try:
+            t_boot_ns = self.clock.mono_to_boot_ns(t_mono_ns)
+        except ClockUnavailable:
+            t_boot_ns = self._last_boot_ns or 0
+        self.poses.add_gps(gps_from_gps_raw_int(msg, t_boot_ns))
+
+    def _on_system_time(self, msg: Any, t_mono_ns: int) -> None:
+        t_boot_ns = int(msg.time_boot_ms) * _NS_PER_MS
+        self._stamped(t_boot_ns, t_mono_ns)
+        self.clock.add_system_time(t_boot_ns, int(msg.time_unix_usec) * 1000)
+
+    def _on_timesync(self, msg: Any, t_mono_ns: int) -> None:
+        if msg.tc1 == 0:  # the autopilot asks us: answer with our clock
+            with self._send_lock:
+                self._conn.mav.timesync_send(time.monotonic_ns(), msg.ts1)
+            return
+        t0 = self._outstanding.pop(int(msg.ts1), None)
+        if t0 is None:  # someone else's exchange (e.g. a GCS on the same router)
+            return
+        self._timesync_received += 1
+        self.clock.add_timesync(t0, t_mono_ns, int(msg.tc1))
+
+    def _on_command_ack(self, msg: Any, t_mono_ns: int) -> None:
+        del t_mono_ns
+        target = (getattr(msg, "target_system", 0), getattr(msg, "target_component", 0))
+        ours = (self._conn.mav.srcSystem, COMPANION_COMPONENT)
+        if target != (0, 0) and target != ours:  # an answer to someone else's command
+            return
+        with self._cond:
+            self._acks[int(msg.command)] = int(msg.result)
+            self._cond.notify_all()
+
+    _HANDLERS: Mapping[str, Callable[[Telemetry, Any, int], None]] = {
+        "GLOBAL_POSITION_INT": _on_position,
+        "ATTITUDE": _on_attitude,
+        "ATTITUDE_QUATERNION": _on_attitude,
+        "GPS_RAW_INT": _on_gps,
+        "SYSTEM_TIME": _on_system_time,
+        "TIMESYNC": _on_timesync,
+        "COMMAND_ACK": _on_command_ack,
+    }

@@ -1,0 +1,546 @@
+"""A simulated autopilot: a pymavlink peer that flies a path and streams telemetry.
+
+No autopilot simulator installs on this machine (no ArduPilot/PX4 SITL), so tests and demos
+use :class:`SimAutopilot`: system 1, component 1, flying a closed loop of local ENU waypoints
+around a home position at a cruise speed. It behaves like an autopilot on the wire:
+
+* HEARTBEAT at 1 Hz (a quadrotor running ArduPilot, armed, in AUTO);
+* GLOBAL_POSITION_INT, ATTITUDE, ATTITUDE_QUATERNION, GPS_RAW_INT, SYSTEM_TIME only when
+  asked, at the asked rate: MAV_CMD_SET_MESSAGE_INTERVAL (ACKed; ``message_interval=False``
+  makes it answer UNSUPPORTED like an old firmware), REQUEST_DATA_STREAM (ArduPilot's
+  stream groups), MAV_CMD_REQUEST_MESSAGE; any other command is ACKed UNSUPPORTED;
+* TIMESYNC requests answered with its boot clock in ns;
+* the mission protocol (upload, download, clear) through an embedded
+  :class:`missions._protocol.MissionReceiver` (:attr:`SimAutopilot.mission`). The uploaded
+  mission is stored, not flown: build a :class:`SimPath` from it to fly it.
+
+Its boot clock is the host's monotonic clock shifted by a realistic offset (it booted
+``uptime_at_start_s`` before the simulator started), running ``drift_ppm`` fast, read with
+``jitter_ns`` of Gaussian noise. Motion: a periodic cubic spline through the waypoints (times
+from distance / speed); yaw along the track; roll and pitch tilt the thrust against the
+acceleration, plus a small oscillation. Messages carry the exact state at their
+``time_boot_ms``; :meth:`SimAutopilot.truth_pose` and :meth:`SimAutopilot.boot_ns_at_mono`
+give that truth to tests.
+
+MAVLink 2: this module sets ``MAVLINK20=1`` (``os.environ.setdefault``) before importing
+pymavlink (pymavlink reads it once at import; a library constraint).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import random
+import threading
+import time
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from types import TracebackType
+from typing import Any, Protocol
+
+import numpy as np
+import pymap3d
+from scipy.interpolate import CubicSpline
+from scipy.spatial.transform import Rotation
+
+from geotag import VehiclePose
+from missions._protocol import MissionReceiver
+
+os.environ.setdefault("MAVLINK20", "1")  # before the first pymavlink import (see docstring)
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import all as mavlink2
+
+__all__ = ["SimAutopilot", "SimPath"]
+
+_log = logging.getLogger(__name__)
+
+_G = 9.80665
+_NS = 1_000_000_000
+_BACKLOG_NS = 500_000_000  # messages due longer ago than this are dropped, not sent late
+
+_STREAMED = (
+    "HEARTBEAT",
+    "GLOBAL_POSITION_INT",
+    "ATTITUDE",
+    "ATTITUDE_QUATERNION",
+    "GPS_RAW_INT",
+    "SYSTEM_TIME",
+)
+# ArduPilot's REQUEST_DATA_STREAM groups, restricted to what we stream.
+_STREAM_GROUPS: Mapping[int, tuple[str, ...]] = {
+    mavlink2.MAV_DATA_STREAM_EXTENDED_STATUS: ("GPS_RAW_INT",),
+    mavlink2.MAV_DATA_STREAM_POSITION: ("GLOBAL_POSITION_INT",),
+    mavlink2.MAV_DATA_STREAM_EXTRA1: ("ATTITUDE",),
+    mavlink2.MAV_DATA_STREAM_EXTRA3: ("SYSTEM_TIME",),
+}
+
+
+@dataclass(frozen=True)
+class SimPath:
+    """Where the simulated vehicle flies.
+
+    home_lat_deg, home_lon_deg : WGS84 home; home_alt_m : home altitude above MSL, m.
+    waypoints_enu : (east, north, up) metres from home, flown as a closed loop (>= 3 points).
+    speed_m_s : cruise speed, m/s.
+    wobble_rad : amplitude of the roll/pitch oscillation (wind, control loop), rad.
+    """
+
+    home_lat_deg: float = 43.6532
+    home_lon_deg: float = -79.3832
+    home_alt_m: float = 120.0
+    waypoints_enu: tuple[tuple[float, float, float], ...] = (
+        (0.0, 0.0, 10.0),
+        (40.0, 0.0, 10.0),
+        (40.0, 20.0, 12.0),
+        (0.0, 20.0, 12.0),
+    )
+    speed_m_s: float = 5.0
+    wobble_rad: float = math.radians(1.5)
+
+    @classmethod
+    def from_waypoints(
+        cls,
+        home_lat_deg: float,
+        home_lon_deg: float,
+        home_alt_m: float,
+        waypoints: Iterable[_GeoPoint],
+        **kw: Any,
+    ) -> SimPath:
+        """A path through mission waypoints (e.g. :class:`missions.Waypoint`), as a loop.
+
+        Altitudes are above home for MAV_FRAME_GLOBAL_RELATIVE_ALT (3, and its _INT twin 6),
+        above MSL for MAV_FRAME_GLOBAL (0, 5); items without a position are skipped, and
+        so are repeats of the previous point. ``kw``: the other :class:`SimPath` fields.
+        """
+        enu: list[tuple[float, float, float]] = []
+        for wp in waypoints:
+            frame = getattr(wp, "frame", 3)
+            if frame not in (0, 3, 5, 6):
+                continue
+            alt_msl = wp.alt_m + (home_alt_m if frame in (3, 6) else 0.0)
+            e, n, u = pymap3d.geodetic2enu(
+                wp.lat_deg, wp.lon_deg, alt_msl, home_lat_deg, home_lon_deg, home_alt_m
+            )
+            point = (float(e), float(n), float(u))
+            if not enu or math.dist(point, enu[-1]) > 1e-3:
+                enu.append(point)
+        if len(enu) > 1 and math.dist(enu[0], enu[-1]) <= 1e-3:
+            enu.pop()  # the loop closes by itself
+        return cls(home_lat_deg, home_lon_deg, home_alt_m, tuple(enu), **kw)
+
+
+class _GeoPoint(Protocol):
+    @property
+    def lat_deg(self) -> float: ...
+    @property
+    def lon_deg(self) -> float: ...
+    @property
+    def alt_m(self) -> float: ...
+
+
+class _Trajectory:
+    """The path as periodic splines of time; state and attitude at any time (s)."""
+
+    def __init__(self, path: SimPath) -> None:
+        pts = np.asarray(path.waypoints_enu, dtype=float)
+        if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 3:
+            raise ValueError("waypoints_enu needs at least 3 (east, north, up) points")
+        if not path.speed_m_s > 0:
+            raise ValueError("speed_m_s must be > 0")
+        loop = np.vstack([pts, pts[:1]])
+        legs = np.linalg.norm(np.diff(loop, axis=0), axis=1)
+        if np.any(legs < 1e-6):
+            raise ValueError("consecutive waypoints must differ")
+        knots = np.concatenate([[0.0], np.cumsum(legs)]) / path.speed_m_s
+        self.period_s = float(knots[-1])
+        self._spline = CubicSpline(knots, loop, bc_type="periodic", axis=0)
+        self._wobble = path.wobble_rad
+        grid = np.linspace(0.0, self.period_s, 2000)
+        speed = np.linalg.norm(self._spline(grid, 1)[:, :2], axis=1)
+        if speed.min() < 0.3 * path.speed_m_s:
+            raise ValueError(
+                "the path turns too tightly for its speed (the vehicle would stop and yaw "
+                "would be undefined): spread the waypoints or add intermediate ones"
+            )
+
+    def kinematics(self, tau: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """ENU position (m), velocity (m/s) and acceleration (m/s^2) at time ``tau`` (s)."""
+        t = tau % self.period_s
+        return self._spline(t), self._spline(t, 1), self._spline(t, 2)
+
+    def rotation(self, tau: float) -> Rotation:
+        """Body (FRD) -> NED rotation at ``tau``."""
+        _, v, a = self.kinematics(tau)
+        yaw = math.atan2(v[0], v[1])
+        thrust = np.array([a[1], a[0], -a[2] - _G])  # NED: acceleration minus gravity
+        z_b = -thrust / np.linalg.norm(thrust)
+        x_c = np.array([math.cos(yaw), math.sin(yaw), 0.0])
+        y_b = np.cross(z_b, x_c)
+        y_b /= np.linalg.norm(y_b)
+        x_b = np.cross(y_b, z_b)
+        base = Rotation.from_matrix(np.column_stack([x_b, y_b, z_b]))
+        y, p, r = base.as_euler("ZYX")
+        w = self._wobble
+        r += w * math.sin(2 * math.pi * 0.9 * tau)
+        p += w * math.sin(2 * math.pi * 1.3 * tau + 1.0)
+        y += 0.3 * w * math.sin(2 * math.pi * 0.4 * tau + 2.0)
+        return Rotation.from_euler("ZYX", [y, p, r])
+
+    def body_rates(self, tau: float, h: float = 1e-3) -> np.ndarray:
+        """Angular velocity in the body frame (roll, pitch, yaw rate), rad/s."""
+        step = self.rotation(tau - h).inv() * self.rotation(tau + h)
+        return np.asarray(step.as_rotvec() / (2 * h))
+
+
+@dataclass(frozen=True)
+class _State:
+    t_boot_ns: int
+    lat_deg: float
+    lon_deg: float
+    alt_m: float
+    rel_alt_m: float
+    vel_ned: tuple[float, float, float]
+    rot: Rotation
+    rates: tuple[float, float, float]
+
+
+class SimAutopilot:
+    """A simulated autopilot on a pymavlink connection; a context manager running a thread.
+
+    Parameters
+    ----------
+    connection : pymavlink connection string (e.g. ``udpout:127.0.0.1:14560`` towards
+        MAVProxy's ``--master=udpin:...``, or ``udpin:`` to be found by a peer).
+    path : where it flies.
+    sysid, compid : its MAVLink identity.
+    uptime_at_start_s : its boot clock reads this when the simulator starts, s.
+    drift_ppm : its boot clock runs this much fast (negative: slow), parts per million.
+    jitter_ns : standard deviation of the noise on each boot-clock reading, ns.
+    message_interval : honour MAV_CMD_SET_MESSAGE_INTERVAL (False: ACK UNSUPPORTED).
+    eph_m : GPS horizontal accuracy reported (h_acc), m.
+    seed : for the clock jitter.
+    mission : the mission-protocol state machine (default: a fresh
+        :class:`~missions._protocol.MissionReceiver` for ``sysid``/``compid``).
+    """
+
+    def __init__(
+        self,
+        connection: str,
+        path: SimPath | None = None,
+        *,
+        sysid: int = 1,
+        compid: int = 1,
+        uptime_at_start_s: float = 37.25,
+        drift_ppm: float = 15.0,
+        jitter_ns: int = 20_000,
+        message_interval: bool = True,
+        eph_m: float = 1.2,
+        seed: int = 0,
+        mission: MissionReceiver | None = None,
+    ) -> None:
+        self.path = path if path is not None else SimPath()
+        self._traj = _Trajectory(self.path)
+        self.connection = connection
+        self.sysid = sysid
+        self.compid = compid
+        self._drift = drift_ppm * 1e-6
+        self._jitter_ns = jitter_ns
+        self._message_interval = message_interval
+        self.eph_m = eph_m
+        self._rng = random.Random(seed)
+        self._mono0 = time.monotonic_ns()
+        self._boot0 = round(uptime_at_start_s * _NS)
+        self._unix_minus_boot = time.time_ns() - self.boot_ns_at_mono(time.monotonic_ns())
+        self._lock = threading.Lock()  # rates
+        self._send_lock = threading.Lock()  # the connection's writer
+        self._intervals_ns: dict[str, int] = {"HEARTBEAT": _NS}
+        self._next_due: dict[str, int] = {}
+        self.sent: dict[str, int] = {}
+        self.received: dict[str, int] = {}
+        self.silent = False
+        self.mission = (
+            mission
+            if mission is not None
+            else MissionReceiver(system_id=sysid, component_id=compid)
+        )
+        self._conn: Any = None
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    # -- truth ----------------------------------------------------------------------------
+
+    def boot_ns_at_mono(self, t_mono_ns: int) -> int:
+        """The autopilot's true boot-clock reading at host monotonic time ``t_mono_ns``."""
+        return self._boot0 + round((t_mono_ns - self._mono0) * (1.0 + self._drift))
+
+    def unix_ns_at_boot(self, t_boot_ns: int) -> int:
+        """The UTC time (ns since the epoch) the autopilot reports for boot time ``t_boot_ns``."""
+        return t_boot_ns + self._unix_minus_boot
+
+    def truth_pose(self, t_boot_ns: int) -> VehiclePose:
+        """The simulated vehicle's exact pose at its boot time ``t_boot_ns``."""
+        s = self._state(t_boot_ns)
+        yaw, pitch, roll = s.rot.as_euler("ZYX")
+        return VehiclePose(
+            t_boot_ns=t_boot_ns,
+            lat_deg=s.lat_deg,
+            lon_deg=s.lon_deg,
+            alt_m=s.alt_m,
+            rel_alt_m=s.rel_alt_m,
+            roll=float(roll),
+            pitch=float(pitch),
+            yaw=float(yaw),
+            vn=s.vel_ned[0],
+            ve=s.vel_ned[1],
+            vd=s.vel_ned[2],
+            eph_m=self.eph_m,
+        )
+
+    def truth_rotation(self, t_boot_ns: int) -> Rotation:
+        """Body (FRD) -> NED rotation at boot time ``t_boot_ns`` (for angle comparisons)."""
+        return self._traj.rotation(self._tau(t_boot_ns))
+
+    def rates_hz(self) -> dict[str, float]:
+        """Message name -> the rate the simulator currently streams it at, Hz."""
+        with self._lock:
+            return {k: _NS / v for k, v in self._intervals_ns.items()}
+
+    def _tau(self, t_boot_ns: int) -> float:
+        return (t_boot_ns - self._boot0) / _NS
+
+    def _state(self, t_boot_ns: int) -> _State:
+        tau = self._tau(t_boot_ns)
+        p, v, _ = self._traj.kinematics(tau)
+        home = self.path
+        lat, lon, alt = pymap3d.enu2geodetic(
+            p[0], p[1], p[2], home.home_lat_deg, home.home_lon_deg, home.home_alt_m
+        )
+        rates = self._traj.body_rates(tau)
+        return _State(
+            t_boot_ns=t_boot_ns,
+            lat_deg=float(lat),
+            lon_deg=float(lon),
+            alt_m=float(alt),
+            rel_alt_m=float(alt) - home.home_alt_m,
+            vel_ned=(float(v[1]), float(v[0]), float(-v[2])),
+            rot=self._traj.rotation(tau),
+            rates=(float(rates[0]), float(rates[1]), float(rates[2])),
+        )
+
+    # -- lifecycle ------------------------------------------------------------------------
+
+    def __enter__(self) -> SimAutopilot:
+        self._conn = mavutil.mavlink_connection(
+            self.connection, source_system=self.sysid, source_component=self.compid
+        )
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name="sim-autopilot", daemon=True)
+        self._thread.start()
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+        if self._conn is not None:
+            self._conn.close()
+            self._conn = None
+
+    def inject_garbage(self, data: bytes) -> None:
+        """Write raw bytes into the link (to test a receiver's robustness)."""
+        with self._send_lock:
+            self._conn.write(data)
+
+    def set_rate(self, name: str, hz: float) -> None:
+        """Stream ``name`` at ``hz`` (<= 0 stops it), as if a GCS had asked."""
+        if name not in _STREAMED:
+            raise ValueError(f"the simulator does not stream {name!r}; it streams {_STREAMED}")
+        with self._lock:
+            if hz > 0:
+                self._intervals_ns[name] = round(_NS / hz)
+            else:
+                self._intervals_ns.pop(name, None)
+                self._next_due.pop(name, None)
+
+    # -- thread ---------------------------------------------------------------------------
+
+    def _run(self) -> None:
+        conn = self._conn
+        while not self._stop.is_set():
+            now = time.monotonic_ns()
+            batch: list[tuple[int, str]] = []  # (sample time, message) due now
+            with self._lock:
+                for name, interval in self._intervals_ns.items():
+                    due = self._next_due.get(name, now)
+                    if due < now - _BACKLOG_NS:  # hopelessly behind (host stalled): skip
+                        due = now
+                    while due <= now:
+                        batch.append((due, name))
+                        due += interval
+                    self._next_due[name] = due
+                next_wake = min(self._next_due.values(), default=now + 20_000_000)
+            for t_sample, name in sorted(batch):
+                if not self.silent:
+                    try:
+                        self._send(name, t_sample)
+                    except Exception:
+                        _log.exception("simulator failed to send %s", name)
+            while True:
+                msg = conn.recv_msg()
+                if msg is None:
+                    break
+                try:
+                    self._handle(msg)
+                except Exception:
+                    _log.exception("simulator failed to handle %s", msg.get_type())
+            self._send_all(self.mission.poll(time.monotonic_ns()))
+            wait_s = (next_wake - time.monotonic_ns()) / 1e9
+            if wait_s > 0:
+                conn.select(min(wait_s, 0.02))
+
+    def _read_boot_ns(self, t_mono_ns: int | None = None) -> int:
+        """The boot clock read (with jitter) at ``t_mono_ns`` (default: now)."""
+        noise = self._rng.gauss(0.0, self._jitter_ns) if self._jitter_ns else 0.0
+        t = time.monotonic_ns() if t_mono_ns is None else t_mono_ns
+        return self.boot_ns_at_mono(t) + round(noise)
+
+    def _send(self, name: str, t_sample_mono_ns: int | None = None) -> None:
+        """Send ``name`` carrying the state sampled at ``t_sample_mono_ns`` (default: now).
+
+        Like an autopilot, a message sent late (the host was busy) still carries the state
+        and stamp of the moment it was due; only its delivery is late.
+        """
+        with self._send_lock:
+            self._send_locked(name, t_sample_mono_ns)
+
+    def _send_locked(self, name: str, t_sample_mono_ns: int | None) -> None:
+        mav = self._conn.mav
+        t_boot_now_ns = self._read_boot_ns(t_sample_mono_ns)
+        t_boot_ms = t_boot_now_ns // 1_000_000
+        if name == "HEARTBEAT":
+            mav.heartbeat_send(
+                mavlink2.MAV_TYPE_QUADROTOR,
+                mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                mavlink2.MAV_MODE_FLAG_SAFETY_ARMED | mavlink2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                3,  # ArduCopter AUTO
+                mavlink2.MAV_STATE_ACTIVE,
+            )
+        elif name == "SYSTEM_TIME":
+            # both clocks read at the same instant, each truncated to its field's unit
+            mav.system_time_send(self.unix_ns_at_boot(t_boot_now_ns) // 1000, t_boot_ms)
+        else:
+            s = self._state(t_boot_ms * 1_000_000)
+            if name == "GLOBAL_POSITION_INT":
+                yaw_deg = math.degrees(s.rot.as_euler("ZYX")[0]) % 360.0
+                mav.global_position_int_send(
+                    t_boot_ms,
+                    round(s.lat_deg * 1e7),
+                    round(s.lon_deg * 1e7),
+                    round(s.alt_m * 1000),
+                    round(s.rel_alt_m * 1000),
+                    round(s.vel_ned[0] * 100),
+                    round(s.vel_ned[1] * 100),
+                    round(s.vel_ned[2] * 100),
+                    round(yaw_deg * 100) % 36000,
+                )
+            elif name == "ATTITUDE":
+                yaw, pitch, roll = s.rot.as_euler("ZYX")
+                mav.attitude_send(t_boot_ms, roll, pitch, yaw, *s.rates)
+            elif name == "ATTITUDE_QUATERNION":
+                x, y, z, w = s.rot.as_quat()
+                mav.attitude_quaternion_send(t_boot_ms, w, x, y, z, *s.rates)
+            elif name == "GPS_RAW_INT":
+                vn, ve, _ = s.vel_ned
+                cog = math.degrees(math.atan2(ve, vn)) % 360.0
+                mav.gps_raw_int_send(
+                    t_boot_ms * 1000,
+                    mavlink2.GPS_FIX_TYPE_3D_FIX,
+                    round(s.lat_deg * 1e7),
+                    round(s.lon_deg * 1e7),
+                    round(s.alt_m * 1000),
+                    80,  # HDOP 0.8
+                    120,
+                    round(math.hypot(vn, ve) * 100),
+                    round(cog * 100) % 36000,
+                    14,
+                    h_acc=round(self.eph_m * 1000),
+                    v_acc=round(1.5 * self.eph_m * 1000),
+                    vel_acc=300,
+                )
+        self.sent[name] = self.sent.get(name, 0) + 1
+
+    def _handle(self, msg: Any) -> None:
+        mtype = msg.get_type()
+        self.received[mtype] = self.received.get(mtype, 0) + 1
+        if mtype == "TIMESYNC" and msg.tc1 == 0:
+            if not self.silent:
+                with self._send_lock:
+                    self._conn.mav.timesync_send(self._read_boot_ns(), msg.ts1)
+        elif mtype.startswith("MISSION_"):
+            self._send_all(self.mission.handle(msg, time.monotonic_ns()))
+        elif mtype == "COMMAND_LONG" and self._for_me(msg):
+            self._command(msg)
+        elif mtype == "REQUEST_DATA_STREAM" and self._for_me(msg):
+            groups = (
+                list(_STREAM_GROUPS)
+                if msg.req_stream_id == mavlink2.MAV_DATA_STREAM_ALL
+                else [msg.req_stream_id]
+            )
+            for group in groups:
+                for name in _STREAM_GROUPS.get(group, ()):
+                    self.set_rate(name, msg.req_message_rate if msg.start_stop else 0)
+
+    def _send_all(self, msgs: list[Any]) -> None:
+        if self.silent or not msgs:
+            return
+        with self._send_lock:
+            for out in msgs:
+                self._conn.mav.send(out)
+
+    def _for_me(self, msg: Any) -> bool:
+        return msg.target_system in (0, self.sysid) and msg.target_component in (0, self.compid)
+
+    def _command(self, msg: Any) -> None:
+        result = mavlink2.MAV_RESULT_UNSUPPORTED
+        name = _message_name(msg.param1)
+        if msg.command == mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL and self._message_interval:
+            if name in _STREAMED:
+                interval_us = msg.param2
+                if interval_us < 0:
+                    self.set_rate(name, 0)
+                elif interval_us == 0:  # default rate: only the heartbeat streams by default
+                    self.set_rate(name, 1.0 if name == "HEARTBEAT" else 0)
+                else:
+                    self.set_rate(name, 1e6 / interval_us)
+                result = mavlink2.MAV_RESULT_ACCEPTED
+            else:
+                result = mavlink2.MAV_RESULT_DENIED
+        elif msg.command == mavlink2.MAV_CMD_REQUEST_MESSAGE:
+            if name in _STREAMED:
+                self._send(name)
+                result = mavlink2.MAV_RESULT_ACCEPTED
+            else:
+                result = mavlink2.MAV_RESULT_DENIED
+        if not self.silent:
+            with self._send_lock:
+                self._conn.mav.command_ack_send(
+                    msg.command,
+                    result,
+                    target_system=msg.get_srcSystem(),
+                    target_component=msg.get_srcComponent(),
+                )
+
+
+def _message_name(msg_id: float) -> str:
+    cls = mavlink2.mavlink_map.get(int(msg_id))
+    return str(cls.msgname) if cls is not None else ""
