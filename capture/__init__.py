@@ -1,7 +1,15 @@
 """The flight side: frame sources, telemetry, the MCAP flight log and the capture daemon."""
 
+from capture._clock import ClockEstimate, ClockSync, ClockUnavailable
 from capture._errors import SensorError
 from capture._frame import Frame, FrameSource
+from capture._mavlink import (
+    DEFAULT_RATES_HZ,
+    Telemetry,
+    TelemetryError,
+    TelemetryStats,
+    TelemetryTimeoutError,
+)
 from capture._mcaplog import FlightLogError, FlightLogWriter, LogOptions, WriterStats
 from capture._mcapread import (
     LoggedCalibration,
@@ -19,13 +27,21 @@ from capture._mcapread import (
 from capture._mcaptools import LogInfo, RecoveryReport, TopicInfo, log_info, recover_log
 from capture._oni import OniInfo, OniStreamInfo, OniWriter, export_oni, scan_oni, write_oni
 from capture._openni import OniSource, OpenNI2Device, camera_from_fov
+from capture._posebuffer import AttitudeSample, GpsFix, PoseBuffer, PoseUnavailable, PositionSample
+from capture._simautopilot import SimAutopilot, SimPath
 from capture._usb import UsbDeviceInfo, find_xtion, reset_xtion
 
 __all__ = [
+    "DEFAULT_RATES_HZ",
+    "AttitudeSample",
+    "ClockEstimate",
+    "ClockSync",
+    "ClockUnavailable",
     "FlightLogError",
     "FlightLogWriter",
     "Frame",
     "FrameSource",
+    "GpsFix",
     "LogInfo",
     "LogOptions",
     "LogRecord",
@@ -42,8 +58,17 @@ __all__ = [
     "OniStreamInfo",
     "OniWriter",
     "OpenNI2Device",
+    "PoseBuffer",
+    "PoseUnavailable",
+    "PositionSample",
     "RecoveryReport",
     "SensorError",
+    "SimAutopilot",
+    "SimPath",
+    "Telemetry",
+    "TelemetryError",
+    "TelemetryStats",
+    "TelemetryTimeoutError",
     "TopicInfo",
     "TruncatedLogError",
     "UsbDeviceInfo",
