@@ -633,6 +633,7 @@ class MissionServer:
         conn = self._conn
         period = self.heartbeat_period_s
         next_beat = 0.0
+        known: set[object] = set()
         try:
             while not self._stop.is_set():
                 now = time.monotonic()
@@ -644,8 +645,10 @@ class MissionServer:
                 before = self.receiver.uploads_accepted
                 if msg is not None and msg.get_type() != "BAD_DATA":
                     self.received.append(msg.get_type())
-                    if msg.get_type() == "HEARTBEAT" and next_beat - now < 0.75 * period:
-                        next_beat = 0.0  # answer a new peer's heartbeat at once
+                    clients = set(getattr(conn, "clients", ()))  # udpin: peer addresses
+                    if msg.get_type() == "HEARTBEAT" and not clients <= known:
+                        known |= clients
+                        next_beat = 0.0  # a new peer: answer its heartbeat at once
                     self._send(self.receiver.handle(msg, now_ns))
                 self._send(self.receiver.poll(now_ns))
                 if self.receiver.uploads_accepted != before:
