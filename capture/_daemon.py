@@ -56,6 +56,8 @@ class FlightConfig:
     retry_backoff_s : waits between sensor reopen attempts (the last one repeats).
     announce_min_sightings : a hole is served/announced once seen in this many frames.
     pose_wait_s : how long the results thread waits for telemetry after a frame's time.
+    startup_sync_s : at start, wait up to this long for the clock sync and a first pose
+        (the sensor opens only then; a silent autopilot just delays the start).
     max_frames, max_duration_s : stop after this many frames / seconds (None: until the
         source ends or a stop is requested).
     """
@@ -71,6 +73,7 @@ class FlightConfig:
     pose_wait_s: float = 0.15
     max_frames: int | None = None
     max_duration_s: float | None = None
+    startup_sync_s: float = 3.0
     config_record: dict[str, Any] = field(default_factory=dict)
 
 
@@ -399,6 +402,14 @@ class Flight:
         self.stop.wait(wait)
         c.sensor_reopens += 1
 
+    def _wait_for_sync(self, timeout_s: float) -> None:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline and not self.stop.is_set():
+            if self.pose(time.monotonic_ns()) is not None:
+                return
+            time.sleep(0.05)
+        log.warning("no synchronised pose after %.1f s; capturing anyway", timeout_s)
+
     def run(self) -> FlightSummary:
         """Capture until the source ends, a limit is reached or :attr:`stop` is set."""
         cfg = self.config
@@ -417,6 +428,7 @@ class Flight:
                 tel = self._telemetry_factory(self._mavlink, on_message=self._on_mavlink)
                 tel.__enter__()
                 self._telemetry = tel
+                self._wait_for_sync(cfg.startup_sync_s)
             with DetectionWorker(self.camera, cfg.params) as worker:
                 self._worker = worker
                 results_thread = threading.Thread(
