@@ -403,29 +403,33 @@ def _sweep(
     ``reach`` is ``poly`` grown by the turn margin: line ends stay inside it.
     """
     import shapely
-    from shapely.geometry import LineString, box
 
     rot = shapely.transform(poly, lambda xy: _rotate(xy, heading_deg))
     reach = shapely.transform(reach, lambda xy: _rotate(xy, heading_deg))
     minx, miny, maxx, maxy = rot.bounds
     span = maxy - miny
     n = 1 if span <= width_m else math.ceil((span - width_m) / spacing_m - 1e-9) + 1
-    v0 = (miny + maxy) / 2.0 - (n - 1) * spacing_m / 2.0
+    v = (miny + maxy) / 2.0 + (np.arange(n) - (n - 1) / 2.0) * spacing_m
+    # The part of the area each line's footprint strip sweeps (vectorised GEOS calls).
+    strips = shapely.box(minx - 1.0, v - width_m / 2.0, maxx + 1.0, v + width_m / 2.0)
+    parts = shapely.intersection(rot, strips)
+    keep = ~shapely.is_empty(parts)
+    v, bounds = v[keep], shapely.bounds(parts[keep])
+    a, b = bounds[:, 0], bounds[:, 2]
+    probes = shapely.linestrings(
+        np.stack(
+            [np.column_stack([a - margin_m - 1.0, v]), np.column_stack([b + margin_m + 1.0, v])],
+            axis=1,
+        )
+    )
     lines = []
-    for k in range(n):
-        v = v0 + k * spacing_m
-        strip = box(minx - 1.0, v - width_m / 2.0, maxx + 1.0, v + width_m / 2.0)
-        part = rot.intersection(strip)
-        if part.is_empty:
-            continue
-        a, _, b, _ = part.bounds
-        probe = LineString([(a - margin_m - 1.0, v), (b + margin_m + 1.0, v)])
-        spans = _intervals(reach.intersection(probe))
-        starts = [max(s, a - margin_m) for s, e in spans if e >= a - margin_m]
-        ends = [min(e, b + margin_m) for s, e in spans if s <= b + margin_m]
-        u0 = min(starts) if starts else a
-        u1 = max(ends) if ends else b
-        lines.append((v, u0, max(u1, u0)))
+    for vk, ak, bk, inside in zip(v, a, b, shapely.intersection(reach, probes), strict=True):
+        spans = _intervals(inside)
+        starts = [max(s, ak - margin_m) for s, e in spans if e >= ak - margin_m]
+        ends = [min(e, bk + margin_m) for s, e in spans if s <= bk + margin_m]
+        u0 = min(starts) if starts else float(ak)
+        u1 = max(ends) if ends else float(bk)
+        lines.append((float(vk), float(u0), float(max(u1, u0))))
     return lines
 
 

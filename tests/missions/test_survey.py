@@ -271,3 +271,13 @@ def test_cli_bad_input_one_line_nonzero(tmp_path: Path, capsys: pytest.CaptureFi
         assert text in lines[0]
         assert lines[0].startswith("holescan plan: error:")
     assert not (tmp_path / "x.plan").exists()
+
+
+def test_cli_warns_when_the_flight_does_not_fit_a_window(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], caplog: pytest.LogCaptureFixture
+) -> None:
+    big = ";".join(f"{a},{b}" for a, b in _area(47.0, 8.0, _rotated_rect(150, 100, 0)).outer)
+    rc, out, _ = _cli(capsys, big, "--date", "2024-06-21", "--out", str(tmp_path / "big.plan"))
+    assert rc == 0  # the plan is still written: split it or fly it over several windows
+    assert "estimated flight" in out
+    assert "longer than every window" in caplog.text
