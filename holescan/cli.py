@@ -22,6 +22,7 @@ _COMMAND_MODULES = (
     "holescan._cmd_log",
     "holescan._cmd_export_oni",
     "holescan._cmd_plan",
+    "holescan._cmd_holes",
 )
 
 EXIT_INPUT = 2

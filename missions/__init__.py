@@ -6,6 +6,7 @@
   KML, GeoJSON, GPX, generic over :class:`Waypoint` records (survey paths and found holes).
 * :func:`upload_mission` / :func:`download_mission` - MAVLink mission protocol client;
   :class:`MissionReceiver` / :class:`MissionServer` - the vehicle's side.
+* :func:`write_hole_file` - found holes as GPX, KML/KMZ (thumbnails), GeoJSON, .plan, WPL.
 * :class:`HoleMissionServer` - serves found holes live as a mission (component 191) and
   announces them by STATUSTEXT.
 """
@@ -34,6 +35,17 @@ from missions._files import (
     write_plan,
     write_waypoints,
     write_wpl,
+)
+from missions._holefiles import (
+    HOLE_FORMATS,
+    HOLE_SUFFIXES,
+    HoleFormat,
+    hole_description,
+    hole_mission,
+    hole_points,
+    hole_properties,
+    rank_holes,
+    write_hole_file,
 )
 from missions._holeserver import (
     HoleMissionServer,
@@ -71,6 +83,8 @@ from missions._sun import (
 from missions._survey import XTION, Camera, LocalFrame, SurveyParams, SurveyPlan, plan_survey
 
 __all__ = [
+    "HOLE_FORMATS",
+    "HOLE_SUFFIXES",
     "MAV_CMD_DO_CHANGE_SPEED",
     "MAV_CMD_NAV_LAND",
     "MAV_CMD_NAV_RETURN_TO_LAUNCH",
@@ -85,6 +99,7 @@ __all__ = [
     "Area",
     "Camera",
     "FlightCheck",
+    "HoleFormat",
     "HoleMissionServer",
     "HoleWaypoint",
     "LocalFrame",
@@ -104,11 +119,16 @@ __all__ = [
     "check_flight",
     "connect",
     "download_mission",
+    "hole_description",
+    "hole_mission",
+    "hole_points",
+    "hole_properties",
     "hole_statustext",
     "hole_waypoints",
     "local_solar_day",
     "mavlink_module",
     "plan_survey",
+    "rank_holes",
     "read_area",
     "read_geojson",
     "read_gpx",
@@ -123,6 +143,7 @@ __all__ = [
     "upload_mission",
     "write_geojson",
     "write_gpx",
+    "write_hole_file",
     "write_kml",
     "write_plan",
     "write_waypoints",

@@ -55,6 +55,7 @@ MAV_CMD_NAV_TAKEOFF = 22
 MAV_CMD_DO_CHANGE_SPEED = 178
 
 _KML_NS = "http://www.opengis.net/kml/2.2"
+_PLAN_DATA_KEY = "holescan"
 _LATLON_DECIMALS = 8
 
 
@@ -241,7 +242,7 @@ def read_wpl(path: str | Path) -> tuple[Waypoint, list[Waypoint]]:
 # ----------------------------------------------------------------------------- QGC .plan
 
 
-def _plan_item(w: Waypoint, jump_id: int) -> dict[str, Any]:
+def _plan_item(w: Waypoint, jump_id: int, item_data: bool = False) -> dict[str, Any]:
     params: list[float | None] = [None if math.isnan(p) else p for p in w.params]
     if w.has_position:
         params += [_round_ll(w.lat_deg), _round_ll(w.lon_deg), w.alt_m]
@@ -259,6 +260,12 @@ def _plan_item(w: Waypoint, jump_id: int) -> dict[str, Any]:
         item.update({"AMSLAltAboveTerrain": None, "Altitude": w.alt_m, "AltitudeMode": 1})
     elif w.frame == MAV_FRAME_GLOBAL:
         item.update({"AMSLAltAboveTerrain": None, "Altitude": w.alt_m, "AltitudeMode": 2})
+    if item_data:
+        item[_PLAN_DATA_KEY] = {
+            "name": w.name,
+            "description": w.description,
+            "properties": _json_safe(dict(w.properties)),
+        }
     return item
 
 
@@ -272,6 +279,7 @@ def write_plan(
     firmware_type: int = 3,
     vehicle_type: int = 2,
     fence: Sequence[tuple[float, float]] = (),
+    item_data: bool = False,
 ) -> Path:
     """Write a QGroundControl ``.plan`` (JSON, fileType "Plan", mission version 2).
 
@@ -283,6 +291,9 @@ def write_plan(
     firmware_type : MAV_AUTOPILOT (3 = ArduPilot, 12 = PX4).
     vehicle_type : MAV_TYPE (2 = quadrotor).
     fence : optional inclusion geofence ring of (lat, lon).
+    item_data : also store each item's name, description and properties in the item, under
+        the key ``"holescan"`` (QGC ignores keys it does not know; :func:`read_plan` reads
+        them back).
     """
     path = Path(path)
     home = home if home is not None else _default_home(items)
@@ -299,7 +310,7 @@ def write_plan(
             "firmwareType": firmware_type,
             "globalPlanAltitudeMode": 1,
             "hoverSpeed": hover_speed_m_s,
-            "items": [_plan_item(w, i) for i, w in enumerate(items, start=1)],
+            "items": [_plan_item(w, i, item_data) for i, w in enumerate(items, start=1)],
             "plannedHomePosition": [
                 _round_ll(home.lat_deg),
                 _round_ll(home.lon_deg),
@@ -335,11 +346,15 @@ def read_plan(path: str | Path) -> tuple[Waypoint, list[Waypoint]]:
             if item.get("type") != "SimpleItem":
                 raise InputError(f"{path}: item {n} is a {item.get('type')}; only SimpleItem")
             p = [float("nan") if v is None else float(v) for v in item["params"]]
+            data = item.get(_PLAN_DATA_KEY) or {}
             items.append(
                 Waypoint(
                     p[4],
                     p[5],
                     p[6],
+                    name=str(data.get("name", "")),
+                    description=str(data.get("description", "")),
+                    properties=dict(data.get("properties") or {}),
                     command=int(item["command"]),
                     frame=int(item["frame"]),
                     params=(p[0], p[1], p[2], p[3]),
@@ -370,14 +385,20 @@ def _feature_properties(w: Waypoint, seq: int) -> dict[str, Any]:
 
 
 def write_geojson(
-    path: str | Path, items: Sequence[Waypoint], *, path_name: str | None = None
+    path: str | Path,
+    items: Sequence[Waypoint],
+    *,
+    path_name: str | None = None,
+    altitude: bool = True,
 ) -> Path:
     """Write a GeoJSON FeatureCollection: one Point per positioned item (+ the path line).
 
     Coordinates are ``[lon, lat, alt]`` (RFC 7946 order). Each point's properties hold
     name, description, seq (its index in ``items``), command, frame, alt_m and the
     waypoint's own ``properties``. With ``path_name``, a LineString through the points in
-    order is added first (for a map of the flight path).
+    order is added first (for a map of the flight path). ``altitude=False`` writes
+    ``[lon, lat]`` only (RFC 7946's third value is height above the WGS84 ellipsoid, which
+    a mean-sea-level altitude is not); ``alt_m`` stays in the properties.
     """
     path = Path(path)
     features: list[dict[str, Any]] = []
@@ -401,7 +422,8 @@ def write_geojson(
                 "type": "Feature",
                 "geometry": {
                     "type": "Point",
-                    "coordinates": [_round_ll(w.lon_deg), _round_ll(w.lat_deg), w.alt_m],
+                    "coordinates": [_round_ll(w.lon_deg), _round_ll(w.lat_deg)]
+                    + ([w.alt_m] if altitude else []),
                 },
                 "properties": _feature_properties(w, i),
             }

@@ -1,0 +1,531 @@
+"""The holes of a logged flight, for the ground crew: read once, export to their files.
+
+:func:`read_flight_holes` reads one flight log (or its rotated files) front to back, once,
+and keeps:
+
+* the **final hole list**: the last ``/holes`` record (the daemon logs the whole list after
+  every change and once more at the end), as :class:`geotag.Hole` records;
+* each hole's **best view** (:attr:`geotag.Hole.best_frame_index` and ``best_box``) as a
+  thumbnail: colour | colourised depth around the box, box drawn, JPEG. The frame comes
+  before the records that name it, so the reader keeps recent frames until their
+  ``/detections`` record (the detection worker answers frames in order, so older frames
+  waiting are ones it skipped), crops every detection box, and after each ``/holes`` record
+  forgets the crops no hole can pick any more (frames up to the newest sighting that are
+  no hole's best view);
+* the vehicle's **home** (the last MAVLink HOME_POSITION logged, else the first logged
+  position with its altitude less ``rel_alt_m``: where logging started) and the offset from
+  the autopilot's boot clock to Unix time (from frames stamped on both clocks, else poses).
+
+A file cut off by a crash is read up to its last complete chunk (a warning says so).
+:func:`export_flight_holes` then writes GPX/KML/KMZ/GeoJSON/.plan/WPL files with
+:func:`missions.write_hole_file`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import os
+import re
+from collections import OrderedDict
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+from capture import (
+    FlightLogError,
+    LoggedDetections,
+    LoggedFrame,
+    LoggedHoles,
+    LoggedMavlink,
+    LoggedPose,
+    TruncatedLogError,
+    read_flight_log,
+)
+from geotag import Hole
+from holescan.errors import InputError
+from holescan.overlay import depth_colour
+from missions._holefiles import (
+    HOLE_FORMATS,
+    HOLE_SUFFIXES,
+    HoleFormat,
+    rank_holes,
+    write_hole_file,
+)
+
+__all__ = [
+    "ExportReport",
+    "FlightHoles",
+    "HoleThumbnail",
+    "export_flight_holes",
+    "flight_log_files",
+    "read_flight_holes",
+    "render_thumbnail",
+]
+
+_log = logging.getLogger(__name__)
+
+_PART = re.compile(r"^(?P<prefix>.*)_(?P<index>\d{4})\.mcap$")
+_MSGID_HOME_POSITION = 242
+_BOX_COLOUR = (255, 40, 40)
+_Box = tuple[int, int, int, int]
+
+
+@dataclasses.dataclass(frozen=True)
+class HoleThumbnail:
+    """A hole's best view: colour | colourised depth around its box, side by side.
+
+    jpeg : JPEG bytes. width, height : size of the picture, pixels.
+    frame_index : :attr:`capture.Frame.index` of the view; box : (x, y, w, h) pixels in it.
+    t_unix_ns : capture time of the frame, Unix clock.
+    """
+
+    jpeg: bytes
+    width: int
+    height: int
+    frame_index: int
+    box: _Box
+    t_unix_ns: int
+
+
+@dataclasses.dataclass(frozen=True)
+class FlightHoles:
+    """What a flight log says about its holes.
+
+    paths : the files read, in order. truncated : messages for the files cut off early.
+    holes : every hole of the last ``/holes`` record, sorted by id (unfiltered).
+    holes_t_unix_ns : when that record was logged (Unix clock); holes_records : how many
+        ``/holes`` records the log has.
+    home : (lat_deg, lon_deg, alt_m MSL) of the vehicle's home, or None; home_source says
+        where it came from (``HOME_POSITION``, ``first logged position``).
+    boot_to_unix_ns : add to an autopilot boot time to get Unix time, ns (None: unknown).
+    thumbnails : hole id -> best view (holes whose best frame is not in the log have none).
+    frames_read : RGB-D frames decoded (0 when thumbnails were not asked for).
+    """
+
+    paths: tuple[Path, ...]
+    truncated: tuple[str, ...]
+    holes: tuple[Hole, ...]
+    holes_t_unix_ns: int
+    holes_records: int
+    home: tuple[float, float, float] | None
+    home_source: str
+    boot_to_unix_ns: int | None
+    thumbnails: Mapping[int, HoleThumbnail]
+    frames_read: int
+
+
+# ------------------------------------------------------------------------ file names
+
+
+def flight_log_files(
+    paths: str | os.PathLike[str] | Iterable[str | os.PathLike[str]],
+) -> tuple[Path, ...]:
+    """The files of one flight, in order.
+
+    Several paths are taken as given. One path ``PREFIX_0000.mcap`` (or any part) brings
+    the parts that follow it (``PREFIX_0001.mcap``, ... until one is missing); a path
+    ``PREFIX`` or ``PREFIX.mcap`` that does not exist stands for ``PREFIX_0000.mcap`` and
+    its followers. Missing files are left for the reader to report.
+    """
+    if not isinstance(paths, str | os.PathLike):
+        given = [Path(p) for p in paths]
+        if len(given) != 1:
+            if not given:
+                raise FlightLogError("no flight log files given")
+            return tuple(given)
+        paths = given[0]
+    p = Path(paths)
+    if not p.exists():
+        stem = p.with_suffix("") if p.suffix == ".mcap" else p
+        first = stem.with_name(f"{stem.name}_0000.mcap")
+        if not first.exists():
+            return (p,)
+        p = first
+    match = _PART.match(p.name)
+    if match is None:
+        return (p,)
+    out = [p]
+    index = int(match["index"]) + 1
+    while True:
+        nxt = p.with_name(f"{match['prefix']}_{index:04d}.mcap")
+        if not nxt.exists():
+            return tuple(out)
+        out.append(nxt)
+        index += 1
+
+
+def log_stem(path: Path) -> Path:
+    """``/data/flight`` for ``/data/flight_0003.mcap`` or ``/data/flight.mcap``."""
+    match = _PART.match(path.name)
+    if match is not None:
+        return path.with_name(match["prefix"])
+    return path.with_suffix("") if path.suffix == ".mcap" else path
+
+
+# ------------------------------------------------------------------------ thumbnails
+
+
+@dataclasses.dataclass(frozen=True)
+class _View:
+    """Crop of one detection's surroundings, kept until it is rendered or forgotten."""
+
+    rgb: npt.NDArray[np.uint8]
+    depth: npt.NDArray[np.uint16]
+    box_in_crop: _Box
+    frame_index: int
+    box: _Box
+    t_unix_ns: int
+    t_boot_ns: int | None
+
+
+def _crop(rec: LoggedFrame, box: _Box) -> _View | None:
+    rgb, depth = rec.frame.rgb, rec.frame.depth
+    height, width = depth.shape
+    x, y, w, h = (int(v) for v in box)
+    margin = max(24, max(w, h) // 2)
+    x0, y0 = max(0, x - margin), max(0, y - margin)
+    x1, y1 = min(width, x + w + margin), min(height, y + h + margin)
+    if x1 <= x0 or y1 <= y0 or w <= 0 or h <= 0:
+        _log.warning("box %s lies outside frame %d (%dx%d)", box, rec.frame.index, width, height)
+        return None
+    return _View(
+        rgb=rgb[y0:y1, x0:x1].copy(),
+        depth=depth[y0:y1, x0:x1].copy(),
+        box_in_crop=(x - x0, y - y0, w, h),
+        frame_index=rec.frame.index,
+        box=(x, y, w, h),
+        t_unix_ns=rec.t_unix_ns,
+        t_boot_ns=rec.t_boot_ns,
+    )
+
+
+def render_thumbnail(
+    rgb: npt.NDArray[np.uint8],
+    depth: npt.NDArray[np.uint16],
+    box: _Box,
+    *,
+    height_px: int = 160,
+    quality: int = 85,
+) -> tuple[bytes, int, int]:
+    """Colour | colourised depth (:func:`holescan.overlay.depth_colour`), box drawn, JPEG.
+
+    Parameters
+    ----------
+    rgb : (H, W, 3) uint8 ndarray, RGB. depth : (H, W) uint16 ndarray, mm, 0 = no reading.
+    box : (x, y, w, h) pixels to outline.
+    height_px : height of the picture (each panel is scaled by the same factor, at most 4x).
+    quality : JPEG quality 1..100.
+
+    Returns
+    -------
+    (jpeg bytes, width, height)
+    """
+    if rgb.shape[:2] != depth.shape or rgb.ndim != 3:
+        raise InputError(f"rgb {rgb.shape} and depth {depth.shape} must be (H, W, 3) and (H, W)")
+    x, y, w, h = box
+    panels = []
+    for base in (np.ascontiguousarray(rgb), depth_colour(depth)):
+        pic = base.copy()
+        cv2.rectangle(pic, (x, y), (x + w - 1, y + h - 1), _BOX_COLOUR, 2)
+        panels.append(pic)
+    gap = np.full((depth.shape[0], 4, 3), 255, np.uint8)
+    pic = np.hstack([panels[0], gap, panels[1]])
+    scale = min(height_px / pic.shape[0], 4.0)
+    size = (max(1, round(pic.shape[1] * scale)), max(1, round(pic.shape[0] * scale)))
+    interp = cv2.INTER_AREA if scale < 1 else cv2.INTER_LINEAR
+    small = cv2.resize(pic, size, interpolation=interp)
+    ok, buf = cv2.imencode(
+        ".jpg", cv2.cvtColor(small, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, quality]
+    )
+    if not ok:
+        raise InputError("JPEG encoding of a thumbnail failed")
+    return buf.tobytes(), size[0], size[1]
+
+
+class _BestViews:
+    """Single-pass bookkeeping of the frames and crops a hole's best view may come from."""
+
+    def __init__(self, max_pending_frames: int) -> None:
+        self.max_pending = max_pending_frames
+        self.pending: OrderedDict[int, LoggedFrame] = OrderedDict()
+        self.views: dict[tuple[int, _Box], _View] = {}
+
+    def _view(self, index: int, box: _Box) -> _View | None:
+        key = (index, box)
+        if key not in self.views and index in self.pending:
+            view = _crop(self.pending[index], box)
+            if view is not None:
+                self.views[key] = view
+        return self.views.get(key)
+
+    def on_frame(self, rec: LoggedFrame) -> None:
+        self.pending[rec.frame.index] = rec
+        while len(self.pending) > self.max_pending:
+            self.pending.popitem(last=False)
+
+    def on_detections(self, rec: LoggedDetections) -> None:
+        for det in rec.detections:
+            self._view(rec.frame_index, tuple(int(v) for v in det.box))  # type: ignore[arg-type]
+        for index in [i for i in self.pending if i < rec.frame_index]:
+            del self.pending[index]  # skipped by the detection worker: no sighting ever
+
+    def on_holes(self, holes: Sequence[Hole]) -> None:
+        wanted = {
+            (h.best_frame_index, tuple(h.best_box)) for h in holes if h.best_frame_index is not None
+        }
+        for index, box in wanted:
+            self._view(index, box)  # type: ignore[arg-type]
+        frontier = max((h.t_last_boot_ns for h in holes), default=None)
+        for key, view in list(self.views.items()):
+            newer = (
+                view.t_boot_ns is not None and frontier is not None and view.t_boot_ns > frontier
+            )
+            if key not in wanted and not newer:
+                del self.views[key]
+
+    def thumbnails(self, holes: Sequence[Hole], height_px: int) -> dict[int, HoleThumbnail]:
+        out = {}
+        for h in holes:
+            if h.best_frame_index is None:
+                continue
+            box = tuple(int(v) for v in h.best_box)
+            view = self._view(h.best_frame_index, box)  # type: ignore[arg-type]
+            if view is None:
+                _log.warning(
+                    "hole %d: its best view (frame %d) is not in the log: no thumbnail",
+                    h.id,
+                    h.best_frame_index,
+                )
+                continue
+            jpeg, w, ht = render_thumbnail(
+                view.rgb, view.depth, view.box_in_crop, height_px=height_px
+            )
+            out[h.id] = HoleThumbnail(jpeg, w, ht, view.frame_index, view.box, view.t_unix_ns)
+        return out
+
+
+# ---------------------------------------------------------------------------- reading
+
+
+def _home_position(packet: bytes) -> tuple[float, float, float] | None:
+    from pymavlink.dialects.v20 import common as mavlink2
+
+    mav = mavlink2.MAVLink(None)
+    mav.robust_parsing = True
+    try:
+        msgs = mav.parse_buffer(packet) or []
+    except mavlink2.MAVError:
+        return None
+    for msg in msgs:
+        if msg.get_type() == "HOME_POSITION":
+            return (msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3)
+    return None
+
+
+def read_flight_holes(
+    paths: str | os.PathLike[str] | Iterable[str | os.PathLike[str]],
+    *,
+    thumbnails: bool = True,
+    thumb_height_px: int = 160,
+    max_pending_frames: int = 90,
+) -> FlightHoles:
+    """Read a flight log once: final holes, best-view thumbnails, home, boot -> Unix offset.
+
+    Parameters
+    ----------
+    paths : a log file, its rotated parts in order, or one part / prefix (see
+        :func:`flight_log_files`).
+    thumbnails : decode frames and make thumbnails (False reads much faster).
+    thumb_height_px : thumbnail height, pixels.
+    max_pending_frames : frames kept while waiting for their detections (memory: 1.5 MB
+        each at 640x480; 90 = 3 s at 30 fps).
+
+    Raises
+    ------
+    FlightLogError : a file is missing or not a flight log, or the log has no ``/holes``
+        record.
+    """
+    if max_pending_frames < 1 or thumb_height_px < 8:
+        raise InputError("max_pending_frames must be >= 1 and thumb_height_px >= 8")
+    files = flight_log_files(paths)
+    kinds: set[type[Any]] = {LoggedHoles, LoggedPose, LoggedMavlink}
+    if thumbnails:
+        kinds |= {LoggedFrame, LoggedDetections}
+    views = _BestViews(max_pending_frames)
+    last: LoggedHoles | None = None
+    holes: tuple[Hole, ...] = ()
+    n_records = frames = 0
+    home: tuple[float, float, float] | None = None
+    first_pos: tuple[float, float, float] | None = None
+    offset_frames: int | None = None
+    offset_poses: int | None = None
+    truncated = []
+    for path in files:
+        try:
+            for rec in read_flight_log(path, kinds=kinds, strict=True):
+                if isinstance(rec, LoggedFrame):
+                    frames += 1
+                    views.on_frame(rec)
+                    if rec.t_boot_ns is not None:
+                        offset_frames = rec.t_unix_ns - rec.t_boot_ns
+                    if first_pos is None and rec.pose is not None:
+                        p = rec.pose
+                        first_pos = (p.lat_deg, p.lon_deg, p.alt_m - p.rel_alt_m)
+                elif isinstance(rec, LoggedDetections):
+                    views.on_detections(rec)
+                elif isinstance(rec, LoggedHoles):
+                    holes, last = rec.as_holes(), rec
+                    n_records += 1
+                    views.on_holes(holes)
+                elif isinstance(rec, LoggedPose):
+                    offset_poses = rec.t_unix_ns - rec.pose.t_boot_ns
+                    if first_pos is None:
+                        p = rec.pose
+                        first_pos = (p.lat_deg, p.lon_deg, p.alt_m - p.rel_alt_m)
+                elif isinstance(rec, LoggedMavlink) and rec.msgid == _MSGID_HOME_POSITION:
+                    home = _home_position(rec.packet) or home
+        except TruncatedLogError as err:
+            _log.warning("%s", err)
+            truncated.append(str(err))
+    if last is None:
+        names = ", ".join(str(p) for p in files)
+        cut = " (the log was cut off before one was written)" if truncated else ""
+        raise FlightLogError(f"{names}: no /holes record{cut}: nothing to export")
+    if home is not None:
+        source = "HOME_POSITION"
+    elif first_pos is not None:
+        home, source = first_pos, "first logged position"
+    else:
+        source = "unknown"
+    return FlightHoles(
+        paths=files,
+        truncated=tuple(truncated),
+        holes=tuple(sorted(holes, key=lambda h: h.id)),
+        holes_t_unix_ns=last.t_unix_ns,
+        holes_records=n_records,
+        home=home,
+        home_source=source,
+        boot_to_unix_ns=offset_frames if offset_frames is not None else offset_poses,
+        thumbnails=views.thumbnails(holes, thumb_height_px) if thumbnails else {},
+        frames_read=frames,
+    )
+
+
+# ---------------------------------------------------------------------------- export
+
+
+@dataclasses.dataclass(frozen=True)
+class ExportReport:
+    """What :func:`export_flight_holes` did.
+
+    flight : what was read. exported : the holes written (by confidence).
+    files : (format, path) of each file written.
+    """
+
+    flight: FlightHoles
+    exported: tuple[Hole, ...]
+    files: tuple[tuple[HoleFormat, Path], ...]
+
+    def lines(self) -> list[str]:
+        """A short human summary, one line per file."""
+        f = self.flight
+        head = (
+            f"{len(self.exported)} of {len(f.holes)} holes from {len(f.paths)} file(s), "
+            f"{len(f.thumbnails)} thumbnail(s), home: {f.home_source}"
+        )
+        if f.truncated:
+            head += f"; {len(f.truncated)} file(s) cut off, read up to their last chunk"
+        return [head, *(f"wrote {path} ({fmt})" for fmt, path in self.files)]
+
+
+def default_out_path(log: Path, fmt: HoleFormat) -> Path:
+    """``/data/flight_holes.gpx`` for ``/data/flight_0000.mcap`` and format ``gpx``."""
+    stem = log_stem(log)
+    return stem.with_name(f"{stem.name}_holes{HOLE_SUFFIXES[fmt]}")
+
+
+def _out_paths(
+    log: Path, formats: Sequence[HoleFormat], out: Path | None
+) -> list[tuple[HoleFormat, Path]]:
+    if out is None:
+        return [(fmt, default_out_path(log, fmt)) for fmt in formats]
+    if out.is_dir():
+        return [(fmt, out / default_out_path(log, fmt).name) for fmt in formats]
+    if len(formats) == 1:
+        return [(formats[0], out)]
+    return [(fmt, out.with_suffix(HOLE_SUFFIXES[fmt])) for fmt in formats]
+
+
+def export_flight_holes(
+    logs: str | os.PathLike[str] | Iterable[str | os.PathLike[str]],
+    formats: Iterable[HoleFormat],
+    *,
+    out: str | os.PathLike[str] | None = None,
+    min_sightings: int = 2,
+    rel_alt_m: float = 10.0,
+    clearance_m: float = 5.0,
+    thumb_height_px: int = 160,
+) -> ExportReport:
+    """Write the holes of a logged flight to ground-crew files.
+
+    Parameters
+    ----------
+    logs : the flight log (see :func:`flight_log_files`).
+    formats : any of ``gpx``, ``kml``, ``kmz``, ``geojson``, ``plan``, ``wpl``.
+    out : output file (one format), or a path whose suffix is replaced per format, or an
+        existing directory; default: ``<log prefix>_holes.<ext>`` next to the log.
+    min_sightings : export only holes seen in at least this many frames.
+    rel_alt_m, clearance_m : mission altitude for ``plan``/``wpl`` (see
+        :func:`missions.hole_mission`).
+    thumb_height_px : thumbnail height for ``kml``/``kmz``.
+
+    Raises
+    ------
+    InputError : unknown format, bad log, no holes record, or no hole seen often enough.
+    """
+    fmts: list[HoleFormat] = []
+    for fmt in formats:
+        if fmt not in HOLE_FORMATS:
+            raise InputError(f"unknown format {fmt!r}; use one of {', '.join(HOLE_FORMATS)}")
+        if fmt not in fmts:
+            fmts.append(fmt)
+    if not fmts:
+        raise InputError("no output format given")
+    if min_sightings < 1:
+        raise InputError(f"min_sightings must be >= 1, got {min_sightings}")
+    need_pictures = any(f in ("kml", "kmz") for f in fmts)
+    flight = read_flight_holes(logs, thumbnails=need_pictures, thumb_height_px=thumb_height_px)
+    if not flight.holes:
+        raise InputError(f"{flight.paths[0]}: the flight found no holes (its hole list is empty)")
+    keep = tuple(h for h in flight.holes if h.sightings >= min_sightings)
+    if not keep:
+        most = max(h.sightings for h in flight.holes)
+        raise InputError(
+            f"none of the {len(flight.holes)} holes was seen in >= {min_sightings} frames "
+            f"(at most {most}); lower --min-sightings to export them"
+        )
+    jpegs = {hid: t.jpeg for hid, t in flight.thumbnails.items()}
+    name = f"holescan holes: {log_stem(flight.paths[0]).name}"
+    written = []
+    for fmt, path in _out_paths(flight.paths[0], fmts, None if out is None else Path(out)):
+        try:
+            write_hole_file(
+                path,
+                keep,
+                fmt,
+                home=flight.home,
+                thumbnails=jpegs,
+                boot_to_unix_ns=flight.boot_to_unix_ns,
+                rel_alt_m=rel_alt_m,
+                clearance_m=clearance_m,
+                name=name,
+            )
+        except OSError as err:
+            raise InputError(f"cannot write {path}: {err.strerror or err}") from err
+        written.append((fmt, path))
+    return ExportReport(flight, tuple(rank_holes(keep)), tuple(written))
