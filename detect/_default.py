@@ -29,6 +29,7 @@ the *basins* of the depth image instead, found at every scale at once:
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -36,15 +37,19 @@ import numpy.typing as npt
 from skimage.morphology import reconstruction
 
 from detect._scores import contrast_score, darkness_score, ramp, width_score
-from detect._types import CameraIntrinsics, DetectParams, Detection, FeatureScores
+from detect._types import CameraIntrinsics, Detection, DetectParams, FeatureScores
 from detect._validate import check_frame
 
 # Region thresholds (metres below the spill level). SHALLOW is a few block-averaged noise
 # sigmas at 4 m (Xtion: 1.425e-6 Z^2 mm per pixel -> 23 mm, /4 after 4x4 averaging).
 SHALLOW_M = 0.05
 DEEP_M = 0.25
-# A basin more than this many times larger than its deep core is a depression holding a hole.
-BASIN_CORE_RATIO = 2.0
+# Radii (work pixels) at which necks between no-reading blobs are cut.
+NECK_RADII_PX = (0, 2, 4)
+# A candidate needs this fraction of its rim to be valid readings (not border, not no-reading).
+MIN_RIM_VALID = 0.6
+# A rim this close to the farthest reading is range fade, not the edge of a hole.
+RANGE_FADE_M = 0.1
 # A block counts as read when at least this fraction of its pixels have a reading.
 MIN_VALID_FRACTION = 0.25
 # Openings larger than this (major axis, m) are broad terrain, not holes: width score fades.
@@ -90,35 +95,84 @@ def basin_depth(
     return pit, invalid, z_far
 
 
-def _candidate_regions(
-    pit: npt.NDArray[np.float64], min_px: int
-) -> list[tuple[npt.NDArray[np.bool_], tuple[int, int, int, int]]]:
-    """Regions (mask cropped to its box, box x, y, w, h) of the basins holding a deep core."""
-    shallow = (pit > SHALLOW_M).astype(np.uint8)
-    deep = (pit > DEEP_M).astype(np.uint8)
-    n_a, lab_a, stats_a, _ = cv2.connectedComponentsWithStats(shallow, connectivity=8)
-    n_b, lab_b, stats_b, _ = cv2.connectedComponentsWithStats(deep, connectivity=8)
-    cores_per_basin: dict[int, list[int]] = {}
+Region = tuple[npt.NDArray[np.bool_], tuple[int, int, int, int]]
+# (mask, box, enclosed): enclosed = a pit of the basin analysis; else a no-reading blob.
+Candidate = tuple[npt.NDArray[np.bool_], tuple[int, int, int, int], bool]
+
+
+def _crop(lab: npt.NDArray[np.int32], stats: npt.NDArray[np.int32], i: int) -> Region:
+    x, y = int(stats[i, cv2.CC_STAT_LEFT]), int(stats[i, cv2.CC_STAT_TOP])
+    w, h = int(stats[i, cv2.CC_STAT_WIDTH]), int(stats[i, cv2.CC_STAT_HEIGHT])
+    return lab[y : y + h, x : x + w] == i, (x, y, w, h)
+
+
+def basin_regions(pit: npt.NDArray[np.float64], min_px: int) -> list[Candidate]:
+    """Regions around each deep core, cut from its basin at a depth that suits the core.
+
+    A core is a component of ``pit > DEEP_M``. Its region is the connected part of its basin
+    lying more than ``tau = clip(0.25 * D, SHALLOW_M, DEEP_M)`` below the spill level, D
+    being the core's depth (1 m for a core without readings). The shallow skirt of a broad
+    depression holding a hole is left out; the walls of a clean hole stay in.
+    """
+    n_b, lab_b, stats_b, _ = cv2.connectedComponentsWithStats(
+        (pit > DEEP_M).astype(np.uint8), connectivity=8
+    )
+    regions: list[Candidate] = []
+    seen: set[tuple[int, int, int, int]] = set()
     for b in range(1, n_b):
         if stats_b[b, cv2.CC_STAT_AREA] < min_px:
             continue
-        x, y = stats_b[b, cv2.CC_STAT_LEFT], stats_b[b, cv2.CC_STAT_TOP]
-        w, h = stats_b[b, cv2.CC_STAT_WIDTH], stats_b[b, cv2.CC_STAT_HEIGHT]
-        sub = lab_b[y : y + h, x : x + w] == b
-        parent = int(lab_a[y : y + h, x : x + w][sub][0])
-        cores_per_basin.setdefault(parent, []).append(b)
-    regions = []
-    for parent, cores in cores_per_basin.items():
-        basin_area = stats_a[parent, cv2.CC_STAT_AREA]
-        core_area = sum(int(stats_b[b, cv2.CC_STAT_AREA]) for b in cores)
-        if len(cores) == 1 and basin_area <= BASIN_CORE_RATIO * core_area:
-            picks = [(lab_a, stats_a, parent)]
+        core, (x, y, w, h) = _crop(lab_b, stats_b, b)
+        depths = pit[y : y + h, x : x + w][core]
+        finite = depths[np.isfinite(depths)]
+        d = float(np.percentile(finite, 90)) if finite.size > 0.5 * depths.size else 1.0
+        tau = min(DEEP_M, max(SHALLOW_M, 0.25 * d))
+        _, lab, stats, _ = cv2.connectedComponentsWithStats(
+            (pit > tau).astype(np.uint8), connectivity=8
+        )
+        labels = lab[y : y + h, x : x + w][core]
+        i = int(np.bincount(labels[labels > 0]).argmax())  # core pixels are all > tau
+        mask, box = _crop(lab, stats, i)
+        if box not in seen:
+            seen.add(box)
+            regions.append((mask, box, True))
+    return regions
+
+
+def no_reading_regions(
+    invalid: npt.NDArray[np.bool_], pit: npt.NDArray[np.float64], min_px: int
+) -> list[Candidate]:
+    """Blobs of no reading that the basin analysis cannot see as pits.
+
+    A hole whose floor gives no reading can touch another no-reading area (ground beyond
+    the sensor's range, a neighbouring hole) or the image border; then it spills and is no
+    pit. Opening the no-reading mask with disks of growing radius cuts such necks; each
+    blob that appears (grown back inside the mask) is a candidate. Whether it is a hole is
+    decided later from its rim (enough valid readings around it, well inside the range).
+    """
+    regions: list[Candidate] = []
+    spilled = invalid & ~np.isinf(pit)
+    if spilled.sum() < min_px:
+        return regions
+    inv_u8 = invalid.astype(np.uint8)
+    for r in NECK_RADII_PX:
+        if r:
+            k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+            opened = cv2.morphologyEx(inv_u8, cv2.MORPH_OPEN, k)
         else:
-            picks = [(lab_b, stats_b, b) for b in cores]
-        for lab, stats, i in picks:
-            x, y = int(stats[i, cv2.CC_STAT_LEFT]), int(stats[i, cv2.CC_STAT_TOP])
-            w, h = int(stats[i, cv2.CC_STAT_WIDTH]), int(stats[i, cv2.CC_STAT_HEIGHT])
-            regions.append((lab[y : y + h, x : x + w] == i, (x, y, w, h)))
+            opened = inv_u8
+        n, lab, stats, _ = cv2.connectedComponentsWithStats(opened, connectivity=8)
+        for i in range(1, n):
+            if stats[i, cv2.CC_STAT_AREA] < min_px:
+                continue
+            blob = (lab == i).astype(np.uint8)
+            if r:
+                blob = cv2.dilate(blob, k) & inv_u8
+            if not (blob.astype(bool) & spilled).any():
+                continue  # an enclosed pit: basin_regions has it
+            _, lab2, stats2, _ = cv2.connectedComponentsWithStats(blob, connectivity=8)
+            j = int(np.argmax(stats2[1:, cv2.CC_STAT_AREA])) + 1
+            regions.append((*_crop(lab2, stats2, j), False))
     return regions
 
 
@@ -185,6 +239,91 @@ def box_iou(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> float
     return inter / union if union > 0 else 0.0
 
 
+@dataclass(frozen=True)
+class _FrameData:
+    z: npt.NDArray[np.float32]
+    invalid: npt.NDArray[np.bool_]
+    y_img: npt.NDArray[np.float64]
+    cam: CameraIntrinsics
+    z_far: float
+    z_median: float
+    range_m: float
+    factor: int
+
+
+_RING_KERNEL = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * RING_PX + 1, 2 * RING_PX + 1))
+
+
+def _measure(region: Candidate, f: _FrameData, params: DetectParams) -> Detection | None:
+    """Measure one candidate region and score it; None when it cannot be a hole.
+
+    A no-reading blob (not enclosed) must show enough valid rim (not border, not more
+    no-reading) and a rim well short of the farthest reading (else it is range fade).
+    """
+    mask, (x, y, w, h), enclosed = region
+    hh, ww = f.z.shape
+    x0, y0 = max(0, x - RING_PX), max(0, y - RING_PX)
+    x1, y1 = min(ww, x + w + RING_PX), min(hh, y + h + RING_PX)
+    big = np.zeros((y1 - y0, x1 - x0), np.uint8)
+    big[y - y0 : y - y0 + h, x - x0 : x - x0 + w] = mask
+    inside = big.astype(bool)
+    ring_all = cv2.dilate(big, _RING_KERNEL).astype(bool) & ~inside
+    zc, inv_c = f.z[y0:y1, x0:x1], f.invalid[y0:y1, x0:x1]
+    ring = ring_all & ~inv_c
+    # The image border counts as rim we could not see.
+    open_px = int(mask[:, 0].sum() if x == 0 else 0) + int(mask[:, -1].sum() if x + w == ww else 0)
+    open_px += int(mask[0, :].sum() if y == 0 else 0) + int(mask[-1, :].sum() if y + h == hh else 0)
+    n_ring = int(ring.sum())
+    if n_ring < 3:
+        return None
+    if not enclosed and n_ring < MIN_RIM_VALID * (int(ring_all.sum()) + RING_PX * open_px):
+        return None
+    rv, ru = np.nonzero(ring)
+    iv, iu = np.nonzero(inside)
+    major, minor_pca, area, rim_z = opening_axes(
+        (iu + float(x0), iv + float(y0)),
+        (ru + float(x0), rv + float(y0), zc[ring].astype(np.float64)),
+        f.cam,
+    )
+    # Passable width: diameter of the largest disk inside the region (metres at the rim).
+    dist = cv2.distanceTransform(np.pad(big, 1), cv2.DIST_L2, 5)
+    inscribed = 2.0 * float(dist.max()) * rim_z / f.cam.fx
+    minor = min(minor_pca, inscribed)
+    floor_valid = inside & ~inv_c
+    no_read = float((inside & inv_c).sum()) / float(inside.sum())
+    seen = float(np.percentile(zc[floor_valid], 90) - rim_z) if floor_valid.any() else 0.0
+    beyond = no_read > 0.3
+    if not enclosed and rim_z > f.z_far - RANGE_FADE_M and rim_z > f.z_median + RANGE_FADE_M:
+        # Its rim is among the farthest readings of the frame: readings fading out at the
+        # sensor's range limit, no evidence of a hole.
+        return None
+    depth_rel = max(seen, f.range_m - rim_z) if beyond else seen
+    s = params.searcher
+    sd = ramp(depth_rel, s.depth_low_m, s.depth_high_m)
+    sw = width_score(major, minor, s.major_m, s.minor_m, s.min_fraction)
+    sw *= 1.0 - ramp(major, OVERSIZE_START_M, OVERSIZE_END_M)
+    fill = area / (major * minor_pca) if major * minor_pca > 0 else 0.0
+    sr = ramp(fill, 0.3, 0.7)
+    yc = f.y_img[y0:y1, x0:x1]
+    y_in, y_ring = float(yc[inside].mean()), float(yc[ring].mean())
+    sb = darkness_score(y_in, params.dark_threshold)
+    sc = contrast_score(y_in, y_ring, params.contrast_threshold)
+    score = math.sqrt(sd) * sw * (0.35 + 0.65 * sr) * (0.85 + 0.15 * max(sb, sc))
+    if score < params.min_score:
+        return None
+    k = f.factor
+    return Detection(
+        box=(x * k, y * k, w * k, h * k),
+        score=float(score),
+        features=FeatureScores(sd, sw, sr, sb, sc),
+        depth_rel_m=float(depth_rel),
+        major_m=major,
+        minor_m=minor,
+        rim_depth_m=rim_z,
+        beyond_range=beyond,
+    )
+
+
 def detect_default(
     rgb: npt.NDArray[np.uint8],
     depth: npt.NDArray[np.uint16],
@@ -219,55 +358,9 @@ def detect_default(
     # farthest depth in view, in work pixels.
     min_side_px = s.min_fraction * s.minor_m * cam.fx / max(z_far, 0.5)
     min_px = max(2, int(0.25 * min_side_px**2))
-    dets: list[Detection] = []
-    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * RING_PX + 1, 2 * RING_PX + 1))
-    for mask, (x, y, w, h) in _candidate_regions(pit, min_px):
-        x0, y0 = max(0, x - RING_PX), max(0, y - RING_PX)
-        x1, y1 = min(z.shape[1], x + w + RING_PX), min(z.shape[0], y + h + RING_PX)
-        big = np.zeros((y1 - y0, x1 - x0), np.uint8)
-        big[y - y0 : y - y0 + h, x - x0 : x - x0 + w] = mask
-        ring = cv2.dilate(big, kernel).astype(bool) & ~big.astype(bool)
-        zc, inv_c = z[y0:y1, x0:x1], invalid[y0:y1, x0:x1]
-        ring &= ~inv_c
-        if ring.sum() < 3:
-            continue
-        inside = big.astype(bool)
-        rv, ru = np.nonzero(ring)
-        iv, iu = np.nonzero(inside)
-        major, minor, area, rim_z = opening_axes(
-            (iu + float(x0), iv + float(y0)),
-            (ru + float(x0), rv + float(y0), zc[ring].astype(np.float64)),
-            cam,
-        )
-        floor_valid = inside & ~inv_c
-        no_read = float((inside & inv_c).sum()) / float(inside.sum())
-        seen = float(np.percentile(zc[floor_valid], 90) - rim_z) if floor_valid.any() else 0.0
-        beyond = no_read > 0.3
-        depth_rel = max(seen, range_m - rim_z) if beyond else seen
-        sd = ramp(depth_rel, s.depth_low_m, s.depth_high_m)
-        sw = width_score(major, minor, s.major_m, s.minor_m, s.min_fraction)
-        sw *= 1.0 - ramp(major, OVERSIZE_START_M, OVERSIZE_END_M)
-        fill = area / (major * minor) if major * minor > 0 else 0.0
-        sr = ramp(fill, 0.3, 0.7)
-        yc = y_img[y0:y1, x0:x1]
-        y_in, y_ring = float(yc[inside].mean()), float(yc[ring].mean())
-        sb = darkness_score(y_in, params.dark_threshold)
-        sc = contrast_score(y_in, y_ring, params.contrast_threshold)
-        score = math.sqrt(sd) * sw * (0.6 + 0.25 * sr + 0.15 * max(sb, sc))
-        if score < params.min_score:
-            continue
-        dets.append(
-            Detection(
-                box=(x * factor, y * factor, w * factor, h * factor),
-                score=float(score),
-                features=FeatureScores(sd, sw, sr, sb, sc),
-                depth_rel_m=float(depth_rel),
-                major_m=major,
-                minor_m=minor,
-                rim_depth_m=rim_z,
-                beyond_range=beyond,
-            )
-        )
+    regions = basin_regions(pit, min_px) + no_reading_regions(invalid, pit, min_px)
+    frame = _FrameData(z, invalid, y_img, cam, z_far, float(np.nanmedian(z)), range_m, factor)
+    dets = [d for r in regions if (d := _measure(r, frame, params)) is not None]
     return _nms(dets, params.nms_iou)
 
 

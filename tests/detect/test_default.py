@@ -61,9 +61,10 @@ def test_deep_hole_with_visible_floor() -> None:
     assert d.depth_rel_m == pytest.approx(1.0, abs=0.05)
     assert d.rim_depth_m == pytest.approx(2.8, abs=0.02)
     assert not d.beyond_range
-    # Axes of the ellipse with a 1.0 x 0.6 rectangle's moments: side * 4 / sqrt(12).
+    # Major: axis of the ellipse with a 1.0 x 0.6 rectangle's moments (side * 4 / sqrt(12));
+    # minor: the passable width, the diameter of the largest disk inside (0.6 m).
     assert d.major_m == pytest.approx(1.0 * 4 / np.sqrt(12), rel=0.06)
-    assert d.minor_m == pytest.approx(0.6 * 4 / np.sqrt(12), rel=0.08)
+    assert d.minor_m == pytest.approx(0.6, rel=0.08)
     assert d.features.width == 1.0
     assert d.features.depth == pytest.approx((1.0 - 0.2) / (1.951 - 0.2), abs=0.03)
 
@@ -98,9 +99,22 @@ def test_two_holes_found_separately_and_ranked_by_depth() -> None:
     assert iou(dets[1].box, boxes[0]) > 0.8
 
 
-def test_hole_cut_by_border_is_not_reported() -> None:
-    rgb, depth, _ = scene(holes=((20, 240, 1.0, 0.8, 5.0),))
-    assert all(d.box[0] > 0 for d in detect_holes(rgb, depth, CAM))
+def test_hole_cut_by_border_is_found_when_its_rim_is_mostly_seen() -> None:
+    # 80 % of the opening in view: no pit (it spills over the border) but a no-reading
+    # blob with a valid rim on three sides.
+    rgb, depth, boxes = scene(holes=((40, 240, 0.5, 0.8, 5.0),))
+    d = top(detect_holes(rgb, depth, CAM))
+    clipped = (0.0, boxes[0][1], boxes[0][0] + boxes[0][2], boxes[0][3])
+    assert iou(d.box, clipped) > 0.8
+
+
+def test_range_fade_is_not_a_hole() -> None:
+    # A floor tilting away until it passes the sensor's range: no reading at the far side.
+    rgb, depth, _ = scene(z0=3.0)
+    v = np.mgrid[0:480, 0:640][0]
+    far = 3.0 + (480 - v) * 0.004  # up to 4.9 m at the top of the image
+    depth = np.where(far < 4.0, np.round(far * 1000), 0).astype(np.uint16)
+    assert detect_holes(rgb, depth, CAM) == []
 
 
 def test_darkness_and_contrast_explain() -> None:
