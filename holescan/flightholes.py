@@ -218,7 +218,7 @@ def render_thumbnail(
     ----------
     rgb : (H, W, 3) uint8 ndarray, RGB. depth : (H, W) uint16 ndarray, mm, 0 = no reading.
     box : (x, y, w, h) pixels to outline.
-    height_px : height of the picture (each panel is scaled by the same factor, at most 4x).
+    height_px : height of the picture (small crops are enlarged at most 4x).
     quality : JPEG quality 1..100.
 
     Returns
@@ -227,24 +227,25 @@ def render_thumbnail(
     """
     if rgb.shape[:2] != depth.shape or rgb.ndim != 3:
         raise InputError(f"rgb {rgb.shape} and depth {depth.shape} must be (H, W, 3) and (H, W)")
-    x, y, w, h = box
+    height, width = depth.shape
+    scale = min(height_px / height, 4.0)
+    size = (max(1, round(width * scale)), max(1, round(height * scale)))
+    interp = cv2.INTER_AREA if scale < 1 else cv2.INTER_LINEAR
+    x, y, w, h = (v * scale for v in box)
+    corners = ((round(x), round(y)), (round(x + w) - 1, round(y + h) - 1))
     panels = []
     for base in (np.ascontiguousarray(rgb), depth_colour(depth)):
-        pic = base.copy()
-        cv2.rectangle(pic, (x, y), (x + w - 1, y + h - 1), _BOX_COLOUR, 2)
+        pic = cv2.resize(base, size, interpolation=interp)
+        cv2.rectangle(pic, *corners, _BOX_COLOUR, 2)
         panels.append(pic)
-    gap = np.full((depth.shape[0], 4, 3), 255, np.uint8)
-    pic = np.hstack([panels[0], gap, panels[1]])
-    scale = min(height_px / pic.shape[0], 4.0)
-    size = (max(1, round(pic.shape[1] * scale)), max(1, round(pic.shape[0] * scale)))
-    interp = cv2.INTER_AREA if scale < 1 else cv2.INTER_LINEAR
-    small = cv2.resize(pic, size, interpolation=interp)
+    gap = np.full((size[1], 4, 3), 255, np.uint8)
+    small = np.hstack([panels[0], gap, panels[1]])
     ok, buf = cv2.imencode(
         ".jpg", cv2.cvtColor(small, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, quality]
     )
     if not ok:
         raise InputError("JPEG encoding of a thumbnail failed")
-    return buf.tobytes(), size[0], size[1]
+    return buf.tobytes(), small.shape[1], small.shape[0]
 
 
 class _BestViews:

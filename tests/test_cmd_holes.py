@@ -185,7 +185,7 @@ def _check_thumbnail(jpeg: bytes, hole: Hole) -> None:
     margin = max(24, max(w, h) // 2)
     crop_w, crop_h = w + 2 * margin, h + 2 * margin  # boxes lie away from the frame edges
     scale = 160 / crop_h
-    assert pic.shape[1] == round((2 * crop_w + 4) * scale)
+    assert pic.shape[1] == 2 * round(crop_w * scale) + 4
     cx, cy = round(crop_w / 2 * scale), round(crop_h / 2 * scale)
     patch: npt.NDArray[np.float64] = pic[cy - 5 : cy + 5, cx - 5 : cx + 5].reshape(-1, 3).mean(0)
     assert hole.best_frame_index is not None
