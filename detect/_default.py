@@ -45,13 +45,15 @@ from detect._validate import check_frame
 SHALLOW_M = 0.05
 DEEP_M = 0.25
 # Radii (work pixels) at which necks between no-reading blobs are cut.
-NECK_RADII_PX = (0, 2, 4)
+NECK_RADII_PX = (0, 3, 6)
 # A candidate needs this fraction of its rim to be valid readings (not border, not no-reading).
 MIN_RIM_VALID = 0.6
-# A rim this close to the farthest reading is range fade, not the edge of a hole.
-RANGE_FADE_M = 0.1
+# Walls: grow regions by up to this many work pixels into readings this far below the
+# opening plane.
+GROW_PX = 4
+WALL_MARGIN_M = 0.06
 # A block counts as read when at least this fraction of its pixels have a reading.
-MIN_VALID_FRACTION = 0.25
+MIN_VALID_FRACTION = 0.05
 # Openings larger than this (major axis, m) are broad terrain, not holes: width score fades.
 OVERSIZE_START_M = 3.5
 OVERSIZE_END_M = 6.0
@@ -83,9 +85,9 @@ def basin_depth(
     Returns ``(pit, invalid, z_far)`` where ``z_far`` is the farthest reading in the image.
     """
     invalid = np.isnan(z)
-    z_far = float(np.nanmax(z))
+    z_far = float(np.nanpercentile(z, 99.5))  # robust to a few outliers
     height = -z.astype(np.float64)
-    floor = -(z_far + 1.0)
+    floor = -(float(np.nanmax(z)) + 1.0)
     height[invalid] = floor
     seed = height.copy()
     seed[1:-1, 1:-1] = height.max()
@@ -182,6 +184,23 @@ def _rays(
     return np.stack([(us - cam.cx) / cam.fx, (vs - cam.cy) / cam.fy, np.ones_like(us)], axis=1)
 
 
+def fit_plane(
+    points: npt.NDArray[np.float64],
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Least-squares plane ``(unit normal, centroid)`` of (N, 3) camera-frame points.
+
+    Falls back to a fronto-parallel plane when the points are too few, collinear, or the
+    plane would be seen edge-on (normal more than ~72 deg from the optical axis).
+    """
+    centre = points.mean(axis=0)
+    normal = np.array([0.0, 0.0, 1.0])
+    if len(points) >= 6:
+        _, sv, vt = np.linalg.svd(points - centre, full_matrices=False)
+        if sv[1] > 1e-6 and abs(vt[2][2]) > 0.3:
+            normal = vt[2] / np.linalg.norm(vt[2])
+    return normal, centre
+
+
 def opening_axes(
     region_uv: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]],
     rim_uvz: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]],
@@ -195,13 +214,7 @@ def opening_axes(
     footprint) give the axes of the ellipse with the same moments.
     """
     ru, rv, rz = rim_uvz
-    rim_pts = _rays(ru, rv, cam) * rz[:, None]
-    centre = rim_pts.mean(axis=0)
-    normal = np.array([0.0, 0.0, 1.0])
-    if len(rim_pts) >= 6:
-        _, sv, vt = np.linalg.svd(rim_pts - centre, full_matrices=False)
-        if sv[1] > 1e-6 and abs(vt[2][2]) > 0.3:  # a plane, facing the camera
-            normal = vt[2] / np.linalg.norm(vt[2])
+    normal, centre = fit_plane(_rays(ru, rv, cam) * rz[:, None])
     rays = _rays(region_uv[0], region_uv[1], cam)
     t = (centre @ normal) / (rays @ normal)
     pts = rays * t[:, None]
@@ -246,7 +259,6 @@ class _FrameData:
     y_img: npt.NDArray[np.float64]
     cam: CameraIntrinsics
     z_far: float
-    z_median: float
     range_m: float
     factor: int
 
@@ -254,34 +266,80 @@ class _FrameData:
 _RING_KERNEL = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * RING_PX + 1, 2 * RING_PX + 1))
 
 
+def _disk(r: int) -> npt.NDArray[np.uint8]:
+    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+
+
+def _grow_walls(
+    inside: npt.NDArray[np.bool_],
+    zc: npt.NDArray[np.float32],
+    valid: npt.NDArray[np.bool_],
+    uv0: tuple[int, int],
+    cam: CameraIntrinsics,
+) -> npt.NDArray[np.bool_]:
+    """Add the hole's walls: readings next to the region that lie below the opening plane.
+
+    The plane is fitted to the readings of a ring a few pixels out (the surrounding
+    terrain); pixels connected to the region and deeper than the plane by ``WALL_MARGIN_M``
+    are wall or floor. Up to ``GROW_PX`` pixels of growth, so a tilted view's visible far
+    wall joins the opening (its box is the rim's).
+    """
+    u8 = inside.astype(np.uint8)
+    outer = (cv2.dilate(u8, _disk(RING_PX + 3)) > 0) & ~(cv2.dilate(u8, _disk(RING_PX)) > 0)
+    outer &= valid
+    if outer.sum() < 6:
+        return inside
+    ov, ou = np.nonzero(outer)
+    normal, centre = fit_plane(_rays(ou + float(uv0[0]), ov + float(uv0[1]), cam)
+                               * zc[outer].astype(np.float64)[:, None])
+    vv, uu = np.mgrid[0 : zc.shape[0], 0 : zc.shape[1]]
+    rays = _rays(uu.ravel() + float(uv0[0]), vv.ravel() + float(uv0[1]), cam)
+    z_plane = ((centre @ normal) / (rays @ normal)).reshape(zc.shape)
+    below = valid & (zc > z_plane + WALL_MARGIN_M)
+    region = inside.copy()
+    k3 = np.ones((3, 3), np.uint8)
+    for _ in range(GROW_PX):
+        add = (cv2.dilate(region.astype(np.uint8), k3) > 0) & below & ~region
+        if not add.any():
+            break
+        region |= add
+    return region
+
+
 def _measure(region: Candidate, f: _FrameData, params: DetectParams) -> Detection | None:
     """Measure one candidate region and score it; None when it cannot be a hole.
 
     A no-reading blob (not enclosed) must show enough valid rim (not border, not more
-    no-reading) and a rim well short of the farthest reading (else it is range fade).
+    no-reading) around it.
     """
     mask, (x, y, w, h), enclosed = region
     hh, ww = f.z.shape
-    x0, y0 = max(0, x - RING_PX), max(0, y - RING_PX)
-    x1, y1 = min(ww, x + w + RING_PX), min(hh, y + h + RING_PX)
-    big = np.zeros((y1 - y0, x1 - x0), np.uint8)
-    big[y - y0 : y - y0 + h, x - x0 : x - x0 + w] = mask
-    inside = big.astype(bool)
-    ring_all = cv2.dilate(big, _RING_KERNEL).astype(bool) & ~inside
+    pad = RING_PX + GROW_PX + 4
+    x0, y0 = max(0, x - pad), max(0, y - pad)
+    x1, y1 = min(ww, x + w + pad), min(hh, y + h + pad)
     zc, inv_c = f.z[y0:y1, x0:x1], f.invalid[y0:y1, x0:x1]
+    inside = np.zeros((y1 - y0, x1 - x0), bool)
+    inside[y - y0 : y - y0 + h, x - x0 : x - x0 + w] = mask
+    inside = _grow_walls(inside, zc, ~inv_c, (x0, y0), f.cam)
+    big = inside.astype(np.uint8)
+    vs, us = np.nonzero(inside)
+    bx0, by0, bx1, by1 = int(us.min()), int(vs.min()), int(us.max()) + 1, int(vs.max()) + 1
+    ring_all = cv2.dilate(big, _RING_KERNEL).astype(bool) & ~inside
     ring = ring_all & ~inv_c
     # The image border counts as rim we could not see.
-    open_px = int(mask[:, 0].sum() if x == 0 else 0) + int(mask[:, -1].sum() if x + w == ww else 0)
-    open_px += int(mask[0, :].sum() if y == 0 else 0) + int(mask[-1, :].sum() if y + h == hh else 0)
+    gx0, gy0, gx1, gy1 = bx0 + x0, by0 + y0, bx1 + x0, by1 + y0
+    open_px = int(inside[:, 0].sum()) if gx0 == 0 else 0
+    open_px += int(inside[:, -1].sum()) if gx1 == ww else 0
+    open_px += int(inside[0, :].sum()) if gy0 == 0 else 0
+    open_px += int(inside[-1, :].sum()) if gy1 == hh else 0
     n_ring = int(ring.sum())
     if n_ring < 3:
         return None
     if not enclosed and n_ring < MIN_RIM_VALID * (int(ring_all.sum()) + RING_PX * open_px):
         return None
     rv, ru = np.nonzero(ring)
-    iv, iu = np.nonzero(inside)
     major, minor_pca, area, rim_z = opening_axes(
-        (iu + float(x0), iv + float(y0)),
+        (us + float(x0), vs + float(y0)),
         (ru + float(x0), rv + float(y0), zc[ring].astype(np.float64)),
         f.cam,
     )
@@ -292,28 +350,34 @@ def _measure(region: Candidate, f: _FrameData, params: DetectParams) -> Detectio
     floor_valid = inside & ~inv_c
     no_read = float((inside & inv_c).sum()) / float(inside.sum())
     seen = float(np.percentile(zc[floor_valid], 90) - rim_z) if floor_valid.any() else 0.0
-    beyond = no_read > 0.3
-    if not enclosed and rim_z > f.z_far - RANGE_FADE_M and rim_z > f.z_median + RANGE_FADE_M:
-        # Its rim is among the farthest readings of the frame: readings fading out at the
-        # sensor's range limit, no evidence of a hole.
-        return None
-    depth_rel = max(seen, f.range_m - rim_z) if beyond else seen
-    s = params.searcher
-    sd = ramp(depth_rel, s.depth_low_m, s.depth_high_m)
-    sw = width_score(major, minor, s.major_m, s.minor_m, s.min_fraction)
-    sw *= 1.0 - ramp(major, OVERSIZE_START_M, OVERSIZE_END_M)
-    fill = area / (major * minor_pca) if major * minor_pca > 0 else 0.0
-    sr = ramp(fill, 0.3, 0.7)
     yc = f.y_img[y0:y1, x0:x1]
     y_in, y_ring = float(yc[inside].mean()), float(yc[ring].mean())
     sb = darkness_score(y_in, params.dark_threshold)
     sc = contrast_score(y_in, y_ring, params.contrast_threshold)
+    s = params.searcher
+    beyond = no_read > 0.3
+    if beyond:
+        # The floor gave no reading. It lies at least as far as the sensor's range; and the
+        # nearer the rim is than the farthest reading of the frame, the surer it is that a
+        # floor near the rim would have been read. At the range limit itself, only the
+        # light can tell a hole (dark inside) from terrain fading out of range.
+        depth_rel = max(seen, f.range_m - rim_z)
+        within = ramp(f.z_far - rim_z, 0.1, 0.6)
+        sd = max(ramp(depth_rel, s.depth_low_m, s.depth_high_m),
+                 0.6 * within + 0.4 * max(sb, sc))
+    else:
+        depth_rel = seen
+        sd = ramp(depth_rel, s.depth_low_m, s.depth_high_m)
+    sw = width_score(major, minor, s.major_m, s.minor_m, s.min_fraction)
+    sw *= 1.0 - ramp(major, OVERSIZE_START_M, OVERSIZE_END_M)
+    fill = area / (major * minor_pca) if major * minor_pca > 0 else 0.0
+    sr = ramp(fill, 0.3, 0.7)
     score = math.sqrt(sd) * sw * (0.35 + 0.65 * sr) * (0.85 + 0.15 * max(sb, sc))
     if score < params.min_score:
         return None
     k = f.factor
     return Detection(
-        box=(x * k, y * k, w * k, h * k),
+        box=(gx0 * k, gy0 * k, (gx1 - gx0) * k, (gy1 - gy0) * k),
         score=float(score),
         features=FeatureScores(sd, sw, sr, sb, sc),
         depth_rel_m=float(depth_rel),
@@ -359,7 +423,7 @@ def detect_default(
     min_side_px = s.min_fraction * s.minor_m * cam.fx / max(z_far, 0.5)
     min_px = max(2, int(0.25 * min_side_px**2))
     regions = basin_regions(pit, min_px) + no_reading_regions(invalid, pit, min_px)
-    frame = _FrameData(z, invalid, y_img, cam, z_far, float(np.nanmedian(z)), range_m, factor)
+    frame = _FrameData(z, invalid, y_img, cam, z_far, range_m, factor)
     dets = [d for r in regions if (d := _measure(r, frame, params)) is not None]
     return _nms(dets, params.nms_iou)
 
