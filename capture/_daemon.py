@@ -21,6 +21,7 @@ still logged, marked unposed, and counted.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import queue
 import threading
@@ -33,12 +34,13 @@ from typing import Any
 from capture._clock import ClockUnavailable
 from capture._errors import SensorError
 from capture._frame import Frame, FrameSource
+from capture._holepipeline import HolePipeline
 from capture._mavlink import Telemetry
 from capture._mcaplog import FlightLogWriter, LogOptions, WriterStats
 from capture._posebuffer import PoseUnavailable
 from capture._worker import DetectionWorker, WorkerResult
 from detect import DEFAULT, CameraIntrinsics, DetectParams
-from geotag import CameraMount, Hole, HoleTracker, VehiclePose, geotag_frame
+from geotag import CameraMount, Hole, VehiclePose
 
 log = logging.getLogger(__name__)
 
@@ -190,7 +192,8 @@ class Flight:
         self._usb_reset = usb_reset
         self._on_holes = on_holes
         self.counters = FlightCounters()
-        self.tracker = HoleTracker()
+        self.hole_pipeline = HolePipeline(camera, config.mount)
+        self.tracker = self.hole_pipeline.tracker
         self.stop = threading.Event()
         self._writer: FlightLogWriter | None = None
         self._telemetry: Telemetry | None = None
@@ -252,23 +255,25 @@ class Flight:
             return
         c.detections += len(r.detections)
         self._writer.write_detections(r.frame_index, r.detections, self.unix_ns(r.t_mono_ns))
-        if not r.detections:
-            return
-        pose = self.pose(r.t_mono_ns, wait_s=self.config.pose_wait_s)
-        if pose is None:
+        step = self.hole_pipeline.add(
+            r.frame_index,
+            r.detections,
+            lambda: self.pose(r.t_mono_ns, wait_s=self.config.pose_wait_s),
+        )
+        if step.refused:
             c.pose_refusals += 1
             return
-        sightings = geotag_frame(
-            r.detections, self.camera, self.config.mount, pose, frame_index=r.frame_index
-        )
-        changed = self.tracker.update(sightings)
+        changed = step.changed
         if not changed:
             return
         holes = self.tracker.holes()
         self._writer.write_holes(holes, self.unix_ns(r.t_mono_ns))
         confirmed = [h for h in holes if h.sightings >= self.config.announce_min_sightings]
-        news = [h for h in changed if h.sightings >= self.config.announce_min_sightings
-                and self._worth_announcing(h)]
+        news = [
+            h
+            for h in changed
+            if h.sightings >= self.config.announce_min_sightings and self._worth_announcing(h)
+        ]
         for h in news:
             self._announced[h.id] = (h.lat_deg, h.lon_deg, h.score)
             c.announcements += 1
@@ -314,8 +319,10 @@ class Flight:
                 clock_source=tel.clock.source,
             )
             try:
-                out.update(clock_offset_ns=tel.clock.offset_ns,
-                           clock_uncertainty_ns=tel.clock.uncertainty_ns)
+                out.update(
+                    clock_offset_ns=tel.clock.offset_ns,
+                    clock_uncertainty_ns=tel.clock.uncertainty_ns,
+                )
             except ClockUnavailable:
                 pass
         return out
@@ -352,8 +359,9 @@ class Flight:
                 t_boot = self._telemetry.clock.mono_to_boot_ns(frame.t_mono_ns)
             except ClockUnavailable:
                 t_boot = None
-        if not self._writer.write_frame(frame, self.unix_ns(frame.t_mono_ns), pose=pose,
-                                        t_boot_ns=t_boot):
+        if not self._writer.write_frame(
+            frame, self.unix_ns(frame.t_mono_ns), pose=pose, t_boot_ns=t_boot
+        ):
             c.frames_log_dropped += 1
         self._worker.offer(frame)
 
@@ -372,7 +380,10 @@ class Flight:
                 for frame in frames_with_timeout(source, cfg.frame_timeout_s, self.stop):
                     attempt = 0
                     self._on_frame(frame)
-                    if cfg.max_frames is not None and self.counters.frames_captured >= cfg.max_frames:
+                    if (
+                        cfg.max_frames is not None
+                        and self.counters.frames_captured >= cfg.max_frames
+                    ):
                         self.stop.set()
                     if t_end is not None and time.monotonic() >= t_end:
                         self.stop.set()
@@ -392,8 +403,9 @@ class Flight:
         wait = self.config.retry_backoff_s[min(attempt, len(self.config.retry_backoff_s) - 1)]
         log.warning("sensor failure (%s); reopening in %.1f s", err, wait)
         if self._writer is not None:
-            self._writer.write_health({"event": "sensor_failure", "error": str(err),
-                                       "retry_in_s": wait})
+            self._writer.write_health(
+                {"event": "sensor_failure", "error": str(err), "retry_in_s": wait}
+            )
         if self._usb_reset is not None:
             try:
                 self._usb_reset()
@@ -416,7 +428,10 @@ class Flight:
         t0 = time.monotonic()
         t_end = t0 + cfg.max_duration_s if cfg.max_duration_s else None
         writer = FlightLogWriter(
-            cfg.log_prefix, self.camera, config=cfg.config_record, mount=cfg.mount,
+            cfg.log_prefix,
+            self.camera,
+            config=cfg.config_record,
+            mount=cfg.mount,
             options=cfg.log_options,
         )
         self._writer = writer
@@ -445,10 +460,13 @@ class Flight:
                     stats = worker.stats()
             if self._telemetry is not None:
                 ts = self._telemetry.stats()
-                telemetry_stats = {"messages": dict(ts.messages), "bad_bytes": ts.bad_bytes,
-                                   "bad_packets": ts.bad_packets,
-                                   "rate_method": ts.rate_method,
-                                   "clock_source": self._telemetry.clock.source}
+                telemetry_stats = {
+                    "messages": dict(ts.messages),
+                    "bad_bytes": ts.bad_bytes,
+                    "bad_packets": ts.bad_packets,
+                    "rate_method": ts.rate_method,
+                    "clock_source": self._telemetry.clock.source,
+                }
             writer.write_holes(self.tracker.holes(), time.time_ns())
         finally:
             done.set()

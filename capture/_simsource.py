@@ -20,9 +20,8 @@ import pymap3d
 
 from capture._frame import Frame
 from capture.sim._camera_model import CameraPose, Conditions, random_conditions
-from capture.sim._render import render
+from capture.sim._render import GtBox, render
 from capture.sim._world import RubbleWorld
-from capture.sim._render import GtBox
 from detect import CameraIntrinsics
 from geotag import CameraMount, VehiclePose
 from geotag._camera import dcm_from_euler, rotation_ned_from_optical
@@ -42,8 +41,9 @@ class WorldAnchor:
     alt_m: float
 
     def to_world(self, lat_deg: float, lon_deg: float, alt_m: float) -> np.ndarray:
-        e, n, u = pymap3d.geodetic2enu(lat_deg, lon_deg, alt_m, self.lat_deg, self.lon_deg,
-                                       self.alt_m)
+        e, n, u = pymap3d.geodetic2enu(
+            lat_deg, lon_deg, alt_m, self.lat_deg, self.lon_deg, self.alt_m
+        )
         return np.array([float(e), float(n), float(u)])
 
     def to_geodetic(self, x: float, y: float, z: float) -> tuple[float, float, float]:
@@ -51,9 +51,7 @@ class WorldAnchor:
         return float(lat), float(lon), float(alt)
 
 
-def camera_pose_in_world(
-    pose: VehiclePose, mount: CameraMount, anchor: WorldAnchor
-) -> CameraPose:
+def camera_pose_in_world(pose: VehiclePose, mount: CameraMount, anchor: WorldAnchor) -> CameraPose:
     """The camera's pose in the world frame for a vehicle pose (mount offset included)."""
     r_ned_opt = rotation_ned_from_optical(mount, pose)
     r_ned_body = dcm_from_euler(pose.roll, pose.pitch, pose.yaw)
@@ -108,8 +106,9 @@ class SimSource:
     def __exit__(self, *exc: object) -> None:
         self._closed = True
 
-    def render_at(self, t_mono_ns: int) -> tuple[np.ndarray, np.ndarray, VehiclePose,
-                                                   tuple[GtBox, ...]]:
+    def render_at(
+        self, t_mono_ns: int
+    ) -> tuple[np.ndarray, np.ndarray, VehiclePose, tuple[GtBox, ...]]:
         """Render the frame seen at monotonic time ``t_mono_ns`` (no pacing)."""
         pose = self._pose_at_mono(t_mono_ns)
         cam_pose = camera_pose_in_world(pose, self.mount, self.anchor)

@@ -24,7 +24,7 @@ import numpy as np
 
 from capture._errors import CaptureError
 from capture._frame import Frame
-from detect import CameraIntrinsics, DetectParams, Detection
+from detect import CameraIntrinsics, Detection, DetectParams
 
 log = logging.getLogger(__name__)
 
@@ -132,8 +132,17 @@ class DetectionWorker:
         self._results: mp.Queue[WorkerResult | None] = ctx.Queue()
         self._proc = ctx.Process(
             target=_worker_main,
-            args=(self._shm.name, self._ctrl, self._meta, self._wake, self._stop,
-                  self._ready, self._results, camera, params),
+            args=(
+                self._shm.name,
+                self._ctrl,
+                self._meta,
+                self._wake,
+                self._stop,
+                self._ready,
+                self._results,
+                camera,
+                params,
+            ),
             name="holescan-detect",
             daemon=True,
         )
@@ -171,7 +180,10 @@ class DetectionWorker:
         np.copyto(rgb, frame.rgb)
         np.copyto(depth, frame.depth)
         self._meta[slot * _META : slot * _META + 4] = [
-            frame.index, frame.t_mono_ns, frame.t_sensor_ns, self._seq
+            frame.index,
+            frame.t_mono_ns,
+            frame.t_sensor_ns,
+            self._seq,
         ]
         self._seq += 1
         with self._ctrl.get_lock():
@@ -195,8 +207,9 @@ class DetectionWorker:
 
     def stats(self) -> WorkerStats:
         with self._ctrl.get_lock():
-            return WorkerStats(int(self._ctrl[_OFFERED]), int(self._ctrl[_SKIPPED]),
-                               int(self._ctrl[_DONE]))
+            return WorkerStats(
+                int(self._ctrl[_OFFERED]), int(self._ctrl[_SKIPPED]), int(self._ctrl[_DONE])
+            )
 
     @property
     def alive(self) -> bool:

@@ -48,6 +48,8 @@ DEEP_M = 0.25
 NECK_RADII_PX = (0, 3, 6)
 # A candidate needs this fraction of its rim to be valid readings (not border, not no-reading).
 MIN_RIM_VALID = 0.6
+# Score = Sd^DEPTH_EXPONENT * Sw * shape * light (see the module docstring).
+DEPTH_EXPONENT = 0.5
 # Walls: grow regions by up to this many work pixels into readings this far below the
 # opening plane.
 GROW_PX = 4
@@ -290,8 +292,9 @@ def _grow_walls(
     if outer.sum() < 6:
         return inside
     ov, ou = np.nonzero(outer)
-    normal, centre = fit_plane(_rays(ou + float(uv0[0]), ov + float(uv0[1]), cam)
-                               * zc[outer].astype(np.float64)[:, None])
+    normal, centre = fit_plane(
+        _rays(ou + float(uv0[0]), ov + float(uv0[1]), cam) * zc[outer].astype(np.float64)[:, None]
+    )
     vv, uu = np.mgrid[0 : zc.shape[0], 0 : zc.shape[1]]
     rays = _rays(uu.ravel() + float(uv0[0]), vv.ravel() + float(uv0[1]), cam)
     z_plane = ((centre @ normal) / (rays @ normal)).reshape(zc.shape)
@@ -363,8 +366,7 @@ def _measure(region: Candidate, f: _FrameData, params: DetectParams) -> Detectio
         # light can tell a hole (dark inside) from terrain fading out of range.
         depth_rel = max(seen, f.range_m - rim_z)
         within = ramp(f.z_far - rim_z, 0.1, 0.6)
-        sd = max(ramp(depth_rel, s.depth_low_m, s.depth_high_m),
-                 0.6 * within + 0.4 * max(sb, sc))
+        sd = max(ramp(depth_rel, s.depth_low_m, s.depth_high_m), 0.6 * within + 0.4 * max(sb, sc))
     else:
         depth_rel = seen
         sd = ramp(depth_rel, s.depth_low_m, s.depth_high_m)
@@ -372,7 +374,7 @@ def _measure(region: Candidate, f: _FrameData, params: DetectParams) -> Detectio
     sw *= 1.0 - ramp(major, OVERSIZE_START_M, OVERSIZE_END_M)
     fill = area / (major * minor_pca) if major * minor_pca > 0 else 0.0
     sr = ramp(fill, 0.3, 0.7)
-    score = math.sqrt(sd) * sw * (0.35 + 0.65 * sr) * (0.85 + 0.15 * max(sb, sc))
+    score = sd**DEPTH_EXPONENT * sw * (0.35 + 0.65 * sr) * (0.85 + 0.15 * max(sb, sc))
     if score < params.min_score:
         return None
     k = f.factor
@@ -441,6 +443,7 @@ def basin_labels(
         return np.zeros(depth.shape, np.int32)
     pit, _, _ = basin_depth(z)
     _, lab = cv2.connectedComponents((pit > SHALLOW_M).astype(np.uint8), connectivity=8)
-    up = cv2.resize(lab.astype(np.int32), (depth.shape[1], depth.shape[0]),
-                    interpolation=cv2.INTER_NEAREST)
+    up = cv2.resize(
+        lab.astype(np.int32), (depth.shape[1], depth.shape[0]), interpolation=cv2.INTER_NEAREST
+    )
     return up.astype(np.int32)

@@ -6,7 +6,7 @@ import numpy as np
 import numpy.typing as npt
 
 from detect._default import detect_default
-from detect._types import DEFAULT, CameraIntrinsics, DetectParams, Detection, Mode
+from detect._types import DEFAULT, CameraIntrinsics, Detection, DetectParams, Mode
 
 
 def detect_holes(

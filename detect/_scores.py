@@ -30,8 +30,13 @@ def contrast_score(region_y: float, neighbour_y: float, threshold: float) -> flo
     return float(min(1.0, max(0.0, (neighbour_y - region_y) / (threshold + 0.091))))
 
 
-def width_score(major_m: float, minor_m: float, need_major_m: float, need_minor_m: float,
-                min_fraction: float = 0.5) -> float:
+def width_score(
+    major_m: float,
+    minor_m: float,
+    need_major_m: float,
+    need_minor_m: float,
+    min_fraction: float = 0.5,
+) -> float:
     """Sw: 1 when both axes reach the searcher's, 0 at ``min_fraction`` of either; linear."""
     a = ramp(major_m, min_fraction * need_major_m, need_major_m)
     b = ramp(minor_m, min_fraction * need_minor_m, need_minor_m)

@@ -175,8 +175,10 @@ class Detection:
     def explain(self) -> str:
         """One line a rescuer can read: why this is (or is not) a hole."""
         f = self.features
-        depth = f">{self.depth_rel_m:.1f} m (no floor reading)" if self.beyond_range else (
-            f"{self.depth_rel_m:.2f} m"
+        depth = (
+            f">{self.depth_rel_m:.1f} m (no floor reading)"
+            if self.beyond_range
+            else (f"{self.depth_rel_m:.2f} m")
         )
         return (
             f"score {self.score:.2f}: {self.major_m:.2f} x {self.minor_m:.2f} m opening, "

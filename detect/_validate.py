@@ -22,7 +22,9 @@ def check_frame(
     if rgb.dtype != np.uint8:
         raise InputError(f"rgb must be uint8, got {rgb.dtype}")
     if not isinstance(depth, np.ndarray) or depth.ndim != 2:
-        raise InputError(f"depth must be an (H, W) array, got shape {getattr(depth, 'shape', None)}")
+        raise InputError(
+            f"depth must be an (H, W) array, got shape {getattr(depth, 'shape', None)}"
+        )
     if depth.dtype != np.uint16:
         raise InputError(
             f"depth must be uint16 millimetres (0 = no reading), got {depth.dtype}; "

@@ -36,7 +36,9 @@ def run_synth(args: argparse.Namespace) -> int:
 def run_info(args: argparse.Namespace) -> int:
     ds = load_dataset(args.dataset)
     c = ds.camera
-    print(f"{ds.root}: {len(ds.images)} images {c.width}x{c.height} (fx {c.fx:.1f}), "
-          f"{ds.n_holes} access holes, {ds.n_crowd} partly in view (crowd), "
-          f"{sum(1 for im in ds.images if not im.boxes)} images without a hole")
+    print(
+        f"{ds.root}: {len(ds.images)} images {c.width}x{c.height} (fx {c.fx:.1f}), "
+        f"{ds.n_holes} access holes, {ds.n_crowd} partly in view (crowd), "
+        f"{sum(1 for im in ds.images if not im.boxes)} images without a hole"
+    )
     return 0

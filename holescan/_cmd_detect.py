@@ -14,10 +14,18 @@ from holescan.overlay import draw_detections
 
 def add_detector_options(p: argparse.ArgumentParser) -> None:
     """Options shared by every verb that runs the detector."""
-    p.add_argument("--mode", choices=("default", "paper"), default="default",
-                   help="holescan's detector (default) or the paper's method")
-    p.add_argument("--searcher", choices=sorted(SEARCHERS), default="human",
-                   help="who must fit through the hole (sets size and depth thresholds)")
+    p.add_argument(
+        "--mode",
+        choices=("default", "paper"),
+        default="default",
+        help="holescan's detector (default) or the paper's method",
+    )
+    p.add_argument(
+        "--searcher",
+        choices=sorted(SEARCHERS),
+        default="human",
+        help="who must fit through the hole (sets size and depth thresholds)",
+    )
 
 
 def params_from_args(args: argparse.Namespace, superpixels: int | None = None) -> DetectParams:

@@ -28,10 +28,16 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "authors' rule (intersection / larger box > 0.5), recall and precision at full recall.",
     )
     p.add_argument("dataset", type=Path, help="dataset folder (annotations.json, camera.json)")
-    p.add_argument("--superpixels", default="9",
-                   help="K for paper mode, or a list (9,11,13,15,18,20) for the Table I sweep")
-    p.add_argument("--compare", action="store_true",
-                   help="also run the other mode and the naive depth-threshold baseline")
+    p.add_argument(
+        "--superpixels",
+        default="9",
+        help="K for paper mode, or a list (9,11,13,15,18,20) for the Table I sweep",
+    )
+    p.add_argument(
+        "--compare",
+        action="store_true",
+        help="also run the other mode and the naive depth-threshold baseline",
+    )
     p.add_argument("--detections", type=Path, help="write COCO results JSON (the first run)")
     p.add_argument("--plot", type=Path, help="write a precision-recall PNG")
     add_detector_options(p)
@@ -59,8 +65,12 @@ def run(args: argparse.Namespace) -> int:
         paper = params_from_args(argparse.Namespace(mode="paper", searcher=args.searcher))
         runs += [(f"paper K={k}", replace(paper, superpixels=k)) for k in ks]
     if base.mode.value == "default" or args.compare:
-        runs.append(("default", params_from_args(
-            argparse.Namespace(mode="default", searcher=args.searcher))))
+        runs.append(
+            (
+                "default",
+                params_from_args(argparse.Namespace(mode="default", searcher=args.searcher)),
+            )
+        )
     if args.compare:
         if not any(name.startswith("paper") for name, _ in runs):
             paper = params_from_args(argparse.Namespace(mode="paper", searcher=args.searcher))
@@ -69,6 +79,7 @@ def run(args: argparse.Namespace) -> int:
     reports: list[EvalReport] = []
     n = len(dataset.images)
     for name, params in runs:
+
         def progress(i: int, total: int, name: str = name) -> None:
             print(f"\r{name}: {i}/{total} images", end="", file=sys.stderr, flush=True)
 

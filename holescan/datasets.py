@@ -108,11 +108,13 @@ def load_dataset(path: Path | str) -> Dataset:
         image_id = int(_field(im, "id", where))
         rgb_name = str(_field(im, "file_name", where))
         depth_name = str(_field(im, "depth_file_name", where))
-        if int(im.get("width", camera.width)) != camera.width or int(
-            im.get("height", camera.height)
-        ) != camera.height:
-            raise InputError(f"{where}: size differs from camera.json "
-                             f"({camera.width}x{camera.height})")
+        if (
+            int(im.get("width", camera.width)) != camera.width
+            or int(im.get("height", camera.height)) != camera.height
+        ):
+            raise InputError(
+                f"{where}: size differs from camera.json ({camera.width}x{camera.height})"
+            )
         boxes = anns.get(image_id, [])
         images.append(
             DatasetImage(
@@ -154,18 +156,30 @@ def write_dataset(root: Path | str, camera: CameraIntrinsics, samples: Iterable[
             raise InputError(f"{s.name}: depth {s.depth.shape} does not match the camera")
         write_rgb(root / "rgb" / f"{s.name}.png", s.rgb)
         write_depth(root / "depth" / f"{s.name}.png", s.depth)
-        images.append({
-            "id": image_id, "file_name": f"rgb/{s.name}.png",
-            "depth_file_name": f"depth/{s.name}.png",
-            "width": camera.width, "height": camera.height,
-        })
+        images.append(
+            {
+                "id": image_id,
+                "file_name": f"rgb/{s.name}.png",
+                "depth_file_name": f"depth/{s.name}.png",
+                "width": camera.width,
+                "height": camera.height,
+            }
+        )
         for box, crowd in zip(s.boxes, s.crowd, strict=True):
-            annotations.append({
-                "id": len(annotations) + 1, "image_id": image_id, "category_id": 1,
-                "bbox": [round(float(v), 2) for v in box],
-                "area": round(float(box[2]) * float(box[3]), 2), "iscrowd": int(bool(crowd)),
-            })
-    (root / "annotations.json").write_text(json.dumps(
-        {"images": images, "annotations": annotations, "categories": [CATEGORY]}, indent=1))
+            annotations.append(
+                {
+                    "id": len(annotations) + 1,
+                    "image_id": image_id,
+                    "category_id": 1,
+                    "bbox": [round(float(v), 2) for v in box],
+                    "area": round(float(box[2]) * float(box[3]), 2),
+                    "iscrowd": int(bool(crowd)),
+                }
+            )
+    (root / "annotations.json").write_text(
+        json.dumps(
+            {"images": images, "annotations": annotations, "categories": [CATEGORY]}, indent=1
+        )
+    )
     (root / "camera.json").write_text(json.dumps(camera.to_dict(), indent=1))
     return root

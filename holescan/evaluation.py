@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from detect import CameraIntrinsics, DetectParams, Detection, detect_baseline, detect_holes
+from detect import CameraIntrinsics, Detection, DetectParams, detect_baseline, detect_holes
 from detect._evaluate import GroundTruthBox, PRResult, ScoredBox, evaluate_detections
 from holescan.datasets import Dataset, load_dataset, load_image_pair
 from holescan.errors import InputError
@@ -90,8 +90,12 @@ def evaluate_dataset(path: Path, params: DetectParams | None, name: str) -> Eval
 def write_coco_results(path: Path, detections: Sequence[ScoredBox]) -> None:
     """COCO results list: ``[{image_id, category_id: 1, bbox: [x, y, w, h], score}]``."""
     rows = [
-        {"image_id": d.image_id, "category_id": 1, "bbox": [float(v) for v in d.box],
-         "score": round(float(d.score), 6)}
+        {
+            "image_id": d.image_id,
+            "category_id": 1,
+            "bbox": [float(v) for v in d.box],
+            "score": round(float(d.score), 6),
+        }
         for d in detections
     ]
     path.write_text(json.dumps(rows))
@@ -127,8 +131,12 @@ def plot_pr(path: Path, reports: Sequence[EvalReport], title: str) -> None:
             res: PRResult = getattr(r, rule)
             if res.recall_curve:
                 env = np.maximum.accumulate(np.array(res.precision)[::-1])[::-1]
-                ax.step([0.0, *res.recall_curve], [env[0], *env], where="post",
-                        label=f"{r.name} (AP {res.ap:.2f})")
+                ax.step(
+                    [0.0, *res.recall_curve],
+                    [env[0], *env],
+                    where="post",
+                    label=f"{r.name} (AP {res.ap:.2f})",
+                )
         ax.set_title("IoU > 0.5" if rule == "iou" else "authors' rule: overlap / larger box > 0.5")
         ax.set_xlabel("recall")
         ax.set_xlim(0, 1.02)

@@ -38,7 +38,9 @@ def read_depth(path: Path) -> npt.NDArray[np.uint16]:
     if img is None:
         raise InputError(f"{path}: not a readable image")
     if img.ndim != 2:
-        raise InputError(f"{path}: depth must be a single-channel image, got {img.shape[2]} channels")
+        raise InputError(
+            f"{path}: depth must be a single-channel image, got {img.shape[2]} channels"
+        )
     if img.dtype != np.uint16:
         raise InputError(
             f"{path}: depth must be a 16-bit PNG in millimetres, got {img.dtype} "
@@ -74,8 +76,13 @@ def read_camera(path: Path) -> CameraIntrinsics:
         raise InputError(f"{path}: camera file needs keys {', '.join(keys)}")
     try:
         return CameraIntrinsics(
-            int(raw["width"]), int(raw["height"]), float(raw["fx"]), float(raw["fy"]),
-            float(raw["cx"]), float(raw["cy"]), float(raw.get("depth_unit_m", 0.001)),
+            int(raw["width"]),
+            int(raw["height"]),
+            float(raw["fx"]),
+            float(raw["fy"]),
+            float(raw["cx"]),
+            float(raw["cy"]),
+            float(raw.get("depth_unit_m", 0.001)),
         )
     except (TypeError, ValueError) as err:
         raise InputError(f"{path}: bad camera values ({err})") from err

@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from detect import CameraIntrinsics, DetectParams, Detection, Mode
+from detect import CameraIntrinsics, Detection, DetectParams, Mode
 from holescan.images import write_rgb
 
 
@@ -57,10 +57,26 @@ def render_detections(
             colour = (255, 40, 40) if d.score >= 0.5 else (255, 200, 0)
             cv2.rectangle(base, (x, y), (x + w - 1, y + h - 1), colour, 2)
             label = f"#{i} {d.score:.2f} {d.major_m:.1f}x{d.minor_m:.1f}m"
-            cv2.putText(base, label, (x + 2, max(12, y - 4)), cv2.FONT_HERSHEY_SIMPLEX, 0.45,
-                        (0, 0, 0), 3, cv2.LINE_AA)
-            cv2.putText(base, label, (x + 2, max(12, y - 4)), cv2.FONT_HERSHEY_SIMPLEX, 0.45,
-                        colour, 1, cv2.LINE_AA)
+            cv2.putText(
+                base,
+                label,
+                (x + 2, max(12, y - 4)),
+                cv2.FONT_HERSHEY_SIMPLEX,
+                0.45,
+                (0, 0, 0),
+                3,
+                cv2.LINE_AA,
+            )
+            cv2.putText(
+                base,
+                label,
+                (x + 2, max(12, y - 4)),
+                cv2.FONT_HERSHEY_SIMPLEX,
+                0.45,
+                colour,
+                1,
+                cv2.LINE_AA,
+            )
         panels.append(base)
     return np.hstack(panels)
 

@@ -42,11 +42,18 @@ def sample_pose(world: RubbleWorld, rng: np.random.Generator) -> CameraPose:
     else:
         cx, cy = rng.uniform(2.0, sx - 2.0), rng.uniform(2.0, sy - 2.0)
     cx, cy = float(np.clip(cx, 2.0, sx - 2.0)), float(np.clip(cy, 2.0, sy - 2.0))
-    ground = float(np.median(world.height_at(
-        [[cx + dx, cy + dy] for dx in (-1.0, 0.0, 1.0) for dy in (-1.0, 0.0, 1.0)])))
+    ground = float(
+        np.median(
+            world.height_at(
+                [[cx + dx, cy + dy] for dx in (-1.0, 0.0, 1.0) for dy in (-1.0, 0.0, 1.0)]
+            )
+        )
+    )
     z = ground + float(rng.uniform(2.0, 3.5))
     return CameraPose.looking_down(
-        cx, cy, z,
+        cx,
+        cy,
+        z,
         yaw=float(rng.uniform(0, 2 * math.pi)),
         tilt=math.radians(float(rng.uniform(0.0, 15.0))),
         tilt_heading=float(rng.uniform(0, 2 * math.pi)),
@@ -68,8 +75,11 @@ def synth_samples(
         pose = sample_pose(world, rng)
         rgb, depth, boxes = render(world, pose, camera, rng, random_conditions(rng))
         yield Sample(
-            name=f"s{seed}_{i:05d}", rgb=rgb, depth=depth,
-            boxes=[b.box for b in boxes], crowd=[bool(b.iscrowd) for b in boxes],
+            name=f"s{seed}_{i:05d}",
+            rgb=rgb,
+            depth=depth,
+            boxes=[b.box for b in boxes],
+            crowd=[bool(b.iscrowd) for b in boxes],
         )
 
 

@@ -32,8 +32,9 @@ class ScriptedSource:
 
     camera = CAM
 
-    def __init__(self, n: int, fps: float = 30.0, fail_at: int | None = None,
-                 stall_at: int | None = None) -> None:
+    def __init__(
+        self, n: int, fps: float = 30.0, fail_at: int | None = None, stall_at: int | None = None
+    ) -> None:
         self.n, self.fps, self.fail_at, self.stall_at = n, fps, fail_at, stall_at
         self.closed = False
 
@@ -59,16 +60,14 @@ class ScriptedSource:
 
 
 def hover_path() -> SimPath:
-    return SimPath(waypoints_enu=((0.0, 0.0, 2.5), (0.3, 0.0, 2.5), (0.3, 0.3, 2.5)),
-                   speed_m_s=0.2)
+    return SimPath(waypoints_enu=((0.0, 0.0, 2.5), (0.3, 0.0, 2.5), (0.3, 0.3, 2.5)), speed_m_s=0.2)
 
 
 def test_flight_logs_every_frame_poses_them_and_finds_the_hole(tmp_path: Path) -> None:
     port = free_port()
     with SimAutopilot(f"udpout:127.0.0.1:{port}", hover_path()):
         cfg = FlightConfig(log_prefix=tmp_path / "flight", max_frames=90)
-        flight = Flight(cfg, lambda: ScriptedSource(200), CAM,
-                        mavlink=f"udpin:127.0.0.1:{port}")
+        flight = Flight(cfg, lambda: ScriptedSource(200), CAM, mavlink=f"udpin:127.0.0.1:{port}")
         summary = flight.run()
     c = summary.counters
     assert c.frames_captured == 90
@@ -80,8 +79,14 @@ def test_flight_logs_every_frame_poses_them_and_finds_the_hole(tmp_path: Path) -
     assert len(summary.holes) == 1 and summary.holes[0].sightings >= 10
     records = list(read_flight_log(summary.log.files))
     kinds = {type(r).__name__ for r in records}
-    assert {"LoggedFrame", "LoggedPose", "LoggedMavlink", "LoggedDetections",
-            "LoggedHoles", "LoggedHealth"} <= kinds
+    assert {
+        "LoggedFrame",
+        "LoggedPose",
+        "LoggedMavlink",
+        "LoggedDetections",
+        "LoggedHoles",
+        "LoggedHealth",
+    } <= kinds
     frames = [r for r in records if type(r).__name__ == "LoggedFrame"]
     assert [f.frame.index for f in frames] == list(range(90))
 
@@ -110,13 +115,11 @@ def test_sensor_fault_is_retried_with_reset(tmp_path: Path, fault: str) -> None:
         opened.append(src)
         return src
 
-    cfg = FlightConfig(log_prefix=tmp_path / "flight", frame_timeout_s=1.0,
-                       retry_backoff_s=(0.2,))
+    cfg = FlightConfig(log_prefix=tmp_path / "flight", frame_timeout_s=1.0, retry_backoff_s=(0.2,))
     summary = Flight(cfg, factory, CAM, usb_reset=resets.set).run()
     assert summary.counters.sensor_failures == 1
     assert resets.is_set()
     assert len(opened) == 2 and opened[0].closed
     assert summary.frames_logged == 10 + 40
-    health = [r for r in read_flight_log(summary.log.files)
-              if type(r).__name__ == "LoggedHealth"]
+    health = [r for r in read_flight_log(summary.log.files) if type(r).__name__ == "LoggedHealth"]
     assert any("sensor_failure" in str(h) for h in health)

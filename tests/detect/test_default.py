@@ -158,7 +158,9 @@ def test_opening_axes_on_a_tilted_plane() -> None:
     s = np.linspace(-0.5, 0.5, 60)
     a, b = np.meshgrid(s, s)
     pts = centre + a.reshape(-1, 1) * e1 + b.reshape(-1, 1) * e2
-    uv = np.stack([pts[:, 0] / pts[:, 2] * cam.fx + cam.cx, pts[:, 1] / pts[:, 2] * cam.fy + cam.cy])
+    uv = np.stack(
+        [pts[:, 0] / pts[:, 2] * cam.fx + cam.cx, pts[:, 1] / pts[:, 2] * cam.fy + cam.cy]
+    )
     mask = np.zeros((cam.height, cam.width), bool)
     mask[np.round(uv[1]).astype(int), np.round(uv[0]).astype(int)] = True
     big = np.linspace(-0.8, 0.8, 120)
@@ -167,8 +169,9 @@ def test_opening_axes_on_a_tilted_plane() -> None:
     rim = centre + a2[keep].reshape(-1, 1) * e1 + b2[keep].reshape(-1, 1) * e2
     ru, rv = rim[:, 0] / rim[:, 2] * cam.fx + cam.cx, rim[:, 1] / rim[:, 2] * cam.fy + cam.cy
     iv, iu = np.nonzero(mask)
-    major, minor, area, _ = opening_axes((iu.astype(float), iv.astype(float)),
-                                         (ru, rv, rim[:, 2]), cam)
+    major, minor, area, _ = opening_axes(
+        (iu.astype(float), iv.astype(float)), (ru, rv, rim[:, 2]), cam
+    )
     assert area == pytest.approx(1.0, rel=0.1)
     side = 4 / np.sqrt(12)
     assert major == pytest.approx(side, rel=0.1)
