@@ -8,6 +8,8 @@ accurate detector.
 from detect._baseline import detect_baseline
 from detect._default import box_iou
 from detect._detector import detect_holes
+from detect._ers import ers_superpixels
+from detect._paper import detect_paper
 from detect._scores import luminance, ramp
 from detect._types import (
     DEFAULT,
@@ -40,6 +42,8 @@ __all__ = [
     "box_iou",
     "detect_baseline",
     "detect_holes",
+    "detect_paper",
+    "ers_superpixels",
     "luminance",
     "ramp",
 ]

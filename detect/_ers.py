@@ -29,7 +29,13 @@ non-cycle edge whose gain drops to exactly 0 stays in the heap (the C++ discards
 which could stop the greedy short of ``K``); when every similarity underflows to 0 the
 weights are left unnormalised instead of dividing by 0. Union-find uses path halving
 with the C++'s union-by-size rule, and labels are numbered by ascending cluster root
-as ``DisjointSetToLabel`` does.
+as ``DisjointSetToLabel`` does. Weights are summed in the C++'s order and the heap
+breaks ties as its ``MaxHeapify``, so the labels are bit-identical to the C++ built with
+the ``0 ln 0`` fix (checked on random, step and depth images up to 640 x 480).
+
+Cost: about 1.2 million edges and 5 million lazy re-evaluations for a 640 x 480 image;
+2.4-3.5 s on the shared 2-core test machine (the C++ took 5-6 s there), nearly all of
+it in the heap, whose sifts are bound by memory latency.
 """
 
 from __future__ import annotations
