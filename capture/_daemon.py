@@ -318,13 +318,11 @@ class Flight:
                 mavlink_age_s=tel.last_message_age_s(),
                 clock_source=tel.clock.source,
             )
-            try:
+            with contextlib.suppress(ClockUnavailable):
                 out.update(
                     clock_offset_ns=tel.clock.offset_ns,
                     clock_uncertainty_ns=tel.clock.uncertainty_ns,
                 )
-            except ClockUnavailable:
-                pass
         return out
 
     def _results_loop(self, done: threading.Event) -> None:
