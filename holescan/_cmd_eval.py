@@ -27,7 +27,18 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         description="Runs the detector on every image and prints AP under IoU > 0.5 and the "
         "authors' rule (intersection / larger box > 0.5), recall and precision at full recall.",
     )
-    p.add_argument("dataset", type=Path, help="dataset folder (annotations.json, camera.json)")
+    p.add_argument(
+        "dataset", type=Path, nargs="?", help="dataset folder (annotations.json, camera.json)"
+    )
+    p.add_argument(
+        "--synthetic",
+        type=int,
+        metavar="N",
+        nargs="?",
+        const=60,
+        help="instead of DATASET: render N synthetic frames (default 60, seed 1) into "
+        "./holescan-synth-N and compare paper mode, default mode and the baseline",
+    )
     p.add_argument(
         "--superpixels",
         default="9",
@@ -55,6 +66,23 @@ def _parse_ks(text: str) -> list[int]:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.synthetic is not None:
+        if args.dataset is not None:
+            raise InputError("give either DATASET or --synthetic, not both")
+        from holescan.synth import synth_dataset
+
+        args.dataset = Path(f"holescan-synth-{args.synthetic}")
+        args.compare = True
+        if not (args.dataset / "annotations.json").is_file():
+            print(f"rendering {args.synthetic} synthetic frames into {args.dataset}/ ...")
+
+            def progress(i: int, n: int) -> None:
+                print(f"\rrendering {i}/{n}", end="", file=sys.stderr, flush=True)
+
+            synth_dataset(args.dataset, args.synthetic, seed=1, progress=progress)
+            print(file=sys.stderr)
+    if args.dataset is None:
+        raise InputError("give a DATASET folder or --synthetic")
     dataset = load_dataset(args.dataset)
     if not any(img.boxes for img in dataset.images):
         raise InputError(f"{args.dataset}: the dataset has no annotated hole; nothing to evaluate")
