@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -13,7 +14,6 @@ from holescan.errors import InputError
 from holescan.evaluation import (
     EvalReport,
     format_table,
-    make_detector,
     plot_pr,
     run_detector,
     write_coco_results,
@@ -51,6 +51,8 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     p.add_argument("--detections", type=Path, help="write COCO results JSON (the first run)")
     p.add_argument("--plot", type=Path, help="write a precision-recall PNG")
+    p.add_argument("--workers", type=int, default=os.cpu_count() or 1,
+                   help="detector processes (default: all cores)")
     add_detector_options(p)
     p.set_defaults(func=run)
 
@@ -111,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
         def progress(i: int, total: int, name: str = name) -> None:
             print(f"\r{name}: {i}/{total} images", end="", file=sys.stderr, flush=True)
 
-        reports.append(run_detector(dataset, make_detector(params), name, progress))  # type: ignore[arg-type]
+        reports.append(run_detector(dataset, params, name, progress, args.workers))  # type: ignore[arg-type]
         print(file=sys.stderr)
     n_gt = reports[0].iou.n_gt
     print(f"{args.dataset}: {n} images, {n_gt} access holes (crowd boxes ignored)")
