@@ -23,6 +23,7 @@ _COMMAND_MODULES = (
     "holescan._cmd_export_oni",
     "holescan._cmd_plan",
     "holescan._cmd_holes",
+    "holescan._cmd_fly",
 )
 
 EXIT_INPUT = 2

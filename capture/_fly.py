@@ -1,0 +1,183 @@
+"""Run one flight as configured: sensor, autopilot link, flight daemon, ground-station server.
+
+:func:`fly` composes a :class:`~capture._flyconfig.FlyConfig` into a
+:class:`~capture._daemon.Flight` (for ``sensor = "sim"`` with a simulated sortie,
+:class:`~capture._sortie.SimSortie`) and, when a ground station link is configured, a
+:class:`missions.HoleMissionServer` that serves the confirmed holes as a mission and
+announces each new or moved one by STATUSTEXT (through the daemon's ``on_holes``).
+:func:`format_report` is the operator's summary.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+import statistics
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import pymap3d
+
+from capture._daemon import Flight, FlightSummary
+from capture._flyconfig import FlyConfig, open_sensor
+from capture._frame import FrameSource
+from capture._mavlink import Telemetry
+from capture._sortie import SimSortie, TrueHole
+from geotag import Hole
+from missions import HoleMissionServer
+
+__all__ = ["FlyReport", "fly", "format_report"]
+
+_log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class FlyReport:
+    """What :func:`fly` did.
+
+    summary : the daemon's :class:`~capture._daemon.FlightSummary`. sensor : what was flown.
+    announced : STATUSTEXTs sent to the ground station, in order.
+    sim_late_frames, sim_render_ms_median : the simulated camera's lateness (frames due
+        more than one period ago when rendered) and render time (``sim`` only, else None).
+    truth : the simulated world's access holes (``sim`` only, else empty).
+    """
+
+    summary: FlightSummary
+    sensor: str
+    announced: tuple[str, ...] = ()
+    sim_late_frames: int | None = None
+    sim_render_ms_median: float | None = None
+    truth: tuple[TrueHole, ...] = ()
+
+
+def fly(cfg: FlyConfig, *, stop: threading.Event | None = None) -> FlyReport:
+    """Run one flight as configured; return when it ends (limit reached, source ended, stop).
+
+    ``stop`` (e.g. set by a SIGINT/SIGTERM handler) ends the flight cleanly: capture stops,
+    the detection worker is drained and the MCAP log is finished and closed.
+    """
+    announced: list[str] = []
+    fc = cfg.flight_config()
+    with contextlib.ExitStack() as stack:
+        server: HoleMissionServer | None = None
+        if cfg.gcs:
+            server = stack.enter_context(
+                HoleMissionServer(
+                    cfg.gcs,
+                    cfg.sysid,
+                    rel_alt_m=cfg.hole_rel_alt_m,
+                    clearance_m=cfg.hole_clearance_m,
+                )
+            )
+
+        def on_holes(confirmed: list[Hole], news: list[Hole]) -> None:
+            for h in news:
+                _log.info(
+                    "hole %d at %.7f, %.7f (score %.2f, %d sightings)",
+                    h.id,
+                    h.lat_deg,
+                    h.lon_deg,
+                    h.score,
+                    h.sightings,
+                )
+            if server is not None:
+                server.update_holes(confirmed)
+                announced.extend(server.announce(h) for h in news)
+
+        sortie: SimSortie | None = None
+        if cfg.sensor.kind == "sim":
+            sortie = stack.enter_context(SimSortie(cfg.sim, mount=fc.mount, mavlink=cfg.mavlink))
+            factory: Callable[[], FrameSource] = sortie.source
+            camera, reset, mavlink = sortie.camera, None, sortie.mavlink
+        else:
+            factory, camera, reset = open_sensor(cfg)
+            mavlink = cfg.mavlink
+        _log.info(
+            "flight log %s; sensor %s; MAVLink %s; ground station %s",
+            fc.log_prefix,
+            cfg.sensor,
+            mavlink or "none",
+            cfg.gcs or "none",
+        )
+        flight = Flight(
+            fc,
+            factory,
+            camera,
+            mavlink=mavlink,
+            telemetry_factory=lambda conn, **kw: Telemetry(conn, baud=cfg.baud, **kw),
+            usb_reset=reset,
+            on_holes=on_holes,
+        )
+        if stop is not None:
+            flight.stop = stop
+        summary = flight.run()
+    if sortie is None:
+        return FlyReport(summary, str(cfg.sensor), tuple(announced))
+    render_ms = [ms for src in sortie.sources for ms in src.render_ms]
+    return FlyReport(
+        summary,
+        str(cfg.sensor),
+        tuple(announced),
+        sim_late_frames=sum(src.late_frames for src in sortie.sources),
+        sim_render_ms_median=statistics.median(render_ms) if render_ms else None,
+        truth=sortie.truth,
+    )
+
+
+def _horizontal_m(lat1: float, lon1: float, lat2: float, lon2: float) -> float:
+    e, n, _ = pymap3d.geodetic2enu(lat1, lon1, 0.0, lat2, lon2, 0.0)
+    return math.hypot(float(e), float(n))
+
+
+def format_report(report: FlyReport, min_sightings: int = 3) -> str:
+    """A few lines for the operator: frames, log, detector, telemetry, holes."""
+    s = report.summary
+    c = s.counters
+    dur = max(s.duration_s, 1e-9)
+    size_mb = s.log.bytes_written / 1e6
+    lines = [
+        f"flight: {s.duration_s:.1f} s, sensor {report.sensor}",
+        f"frames: captured {c.frames_captured}, logged {s.frames_logged}, dropped from the log "
+        f"{c.frames_log_dropped}, unposed {c.frames_unposed}",
+        f"detector: {c.frames_detected} frames ({c.frames_detected / dur:.1f}/s, mean "
+        f"{c.detect_ms_total / max(c.frames_detected, 1):.1f} ms), {s.detect_skipped} of "
+        f"{s.detect_offered} skipped for newer frames, {c.detect_errors} errors, "
+        f"{c.detections} detections, {c.pose_refusals} not posed",
+        f"sensor: {c.sensor_failures} failures, {c.sensor_reopens} reopens",
+        f"log: {len(s.log.files)} file(s), {size_mb:.1f} MB, {s.log.frames_synced} frames synced"
+        + (f", error: {s.log.error}" if s.log.error else ""),
+    ]
+    if s.telemetry:
+        tel = s.telemetry
+        lines.append(
+            f"telemetry: {sum(tel.get('messages', {}).values())} messages, "
+            f"{tel.get('bad_bytes', 0)} garbage bytes, {tel.get('bad_packets', 0)} bad packets, "
+            f"rates by {tel.get('rate_method')}, clock by {tel.get('clock_source')}"
+        )
+    confirmed = [h for h in s.holes if h.sightings >= min_sightings]
+    lines.append(
+        f"holes: {len(confirmed)} confirmed (>= {min_sightings} sightings) of {len(s.holes)}; "
+        f"{c.announcements} announcements, {len(report.announced)} sent to the ground station"
+    )
+    for h in confirmed:
+        lines.append(
+            f"  hole {h.id}: {h.lat_deg:.7f}, {h.lon_deg:.7f} +-{h.sigma_h_m:.2f} m, score "
+            f"{h.score:.2f}, {h.sightings} sightings, {h.major_m:.2f} x {h.minor_m:.2f} m"
+        )
+    if report.sim_late_frames is not None:
+        ms = report.sim_render_ms_median
+        lines.append(
+            f"sim: render {ms:.1f} ms/frame median, {report.sim_late_frames} frames late"
+            if ms is not None
+            else "sim: no frame rendered"
+        )
+    for t in report.truth:
+        near = [
+            (_horizontal_m(h.lat_deg, h.lon_deg, t.lat_deg, t.lon_deg), h.id) for h in confirmed
+        ]
+        d, hid = min(near, default=(math.inf, 0))
+        found = f"hole {hid} at {d:.2f} m" if d <= 0.5 else "not reported"
+        lines.append(f"  true access hole {t.id} ({t.x_m:.1f}, {t.y_m:.1f} m): {found}")
+    return "\n".join(lines)

@@ -1,0 +1,486 @@
+"""``holescan fly`` settings: a TOML file (and command-line overrides) -> a :class:`FlyConfig`.
+
+The file (``deploy/fly.example.toml`` documents every key) has top-level keys for the
+sensor and the links, and one table per part::
+
+    sensor = "openni2"            # openni2 | oni:PATH | mcap:PATH | sim
+    mavlink = "/dev/ttyAMA0"      # pymavlink connection string of the autopilot
+    log_dir = "/var/lib/holescan/flights"
+    [capture]  frame timeout, retry back-off, start-up sync, USB reset ...
+    [detect]   detector mode, searcher ...
+    [mount]    camera angles and offset on the vehicle
+    [log]      MCAP compression, chunk and file sizes
+    [holes]    announcing and serving holes
+    [sim]      the simulated sortie (``sensor = "sim"``)
+
+Unknown keys and wrong types raise :class:`holescan.errors.InputError` naming the key (a
+typo in a flight configuration must not pass silently). :func:`open_sensor` turns the
+sensor setting into a source factory; :func:`capture._fly.fly` runs the flight.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime as dt
+import logging
+import math
+import time
+import tomllib
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+from capture._daemon import FlightConfig
+from capture._errors import SensorError
+from capture._frame import Frame, FrameSource
+from capture._mcaplog import LogOptions
+from capture._simsource import WorldAnchor
+from capture._sortie import DEFAULT_ANCHOR, SortieParams
+from detect import DEFAULT, PAPER, SEARCHERS, CameraIntrinsics, DetectParams
+from geotag import CameraMount
+from holescan.errors import InputError
+
+__all__ = [
+    "FlyConfig",
+    "PacedReplay",
+    "SensorSpec",
+    "load_fly_config",
+    "open_sensor",
+    "parse_fly_config",
+]
+
+_log = logging.getLogger(__name__)
+
+SensorKind = Literal["openni2", "oni", "mcap", "sim"]
+
+# key -> (type(s), default) per table; None default = optional.
+_NUM = (int, float)
+_TOP: dict[str, tuple[tuple[type, ...], Any]] = {
+    "sensor": ((str,), "openni2"),
+    "mavlink": ((str,), None),
+    "baud": ((int,), 921_600),
+    "log_dir": ((str,), None),
+    "gcs": ((str,), None),
+    "sysid": ((int,), 1),
+    "duration_s": (_NUM, None),
+    "max_frames": ((int,), None),
+}
+_TABLES: dict[str, dict[str, tuple[tuple[type, ...], Any]]] = {
+    "capture": {
+        "frame_timeout_s": (_NUM, 3.0),
+        "retry_backoff_s": ((list,), [0.5, 1.0, 2.0, 4.0, 8.0]),
+        "startup_sync_s": (_NUM, 3.0),
+        "pose_wait_s": (_NUM, 0.15),
+        "health_period_s": (_NUM, 1.0),
+        "usb_reset": ((bool,), True),
+        "openni_uri": ((str,), None),
+        "realtime": ((bool,), True),
+    },
+    "detect": {
+        "mode": ((str,), "default"),
+        "searcher": ((str,), "human"),
+        "superpixels": ((int,), 9),
+        "min_score": (_NUM, None),
+        "max_range_m": (_NUM, None),
+    },
+    "mount": {
+        "roll_deg": (_NUM, 0.0),
+        "pitch_deg": (_NUM, -90.0),
+        "yaw_deg": (_NUM, 0.0),
+        "offset_m": ((list,), [0.0, 0.0, 0.0]),
+    },
+    "log": {
+        "compression": ((str,), "zstd"),
+        "chunk_size": ((int,), 1 << 20),
+        "max_file_bytes": ((int,), 1 << 30),
+        "max_file_s": (_NUM, 60.0),
+        "sync_interval_s": (_NUM, 1.0),
+        "max_queued_frames": ((int,), 60),
+        "max_queued_messages": ((int,), 20_000),
+    },
+    "holes": {
+        "announce_min_sightings": ((int,), 3),
+        "rel_alt_m": (_NUM, 10.0),
+        "clearance_m": (_NUM, 5.0),
+    },
+    "sim": {
+        "world_seed": ((int,), 7),
+        "size_m": ((list,), [10.0, 10.0]),
+        "margin_m": (_NUM, 3.5),
+        "n_access_holes": ((int,), 3),
+        "distractors": ((bool,), True),
+        "lat_deg": (_NUM, DEFAULT_ANCHOR.lat_deg),
+        "lon_deg": (_NUM, DEFAULT_ANCHOR.lon_deg),
+        "alt_m": (_NUM, DEFAULT_ANCHOR.alt_m),
+        "altitude_m": (_NUM, 3.0),
+        "speed_m_s": (_NUM, None),
+        "heading_deg": (_NUM, None),
+        "wobble_deg": (_NUM, 1.5),
+        "clock_offset_s": (_NUM, 1234.5),
+        "drift_ppm": (_NUM, 15.0),
+        "eph_m": (_NUM, 1.2),
+        "fps": (_NUM, 30.0),
+        "noise_seed": ((int,), 0),
+    },
+}
+
+
+@dataclass(frozen=True)
+class SensorSpec:
+    """Where frames come from: ``openni2`` (the Xtion), ``oni:PATH``, ``mcap:PATH``, ``sim``."""
+
+    kind: SensorKind
+    path: Path | None = None
+
+    @classmethod
+    def parse(cls, text: str) -> SensorSpec:
+        kind, sep, rest = text.partition(":")
+        if kind in ("openni2", "sim") and not sep:
+            return cls(kind)  # type: ignore[arg-type]
+        if kind in ("oni", "mcap") and rest:
+            return cls(kind, Path(rest))  # type: ignore[arg-type]
+        raise InputError(f"sensor must be openni2, oni:PATH, mcap:PATH or sim; got {text!r}")
+
+    def __str__(self) -> str:
+        return self.kind if self.path is None else f"{self.kind}:{self.path}"
+
+
+@dataclass(frozen=True)
+class FlyConfig:
+    """Everything ``holescan fly`` needs.
+
+    sensor : where frames come from. mavlink : the autopilot link (None: fly without
+    telemetry, every frame unposed; for ``sim``: a ``udpin:`` address the simulated
+    autopilot talks to, None = a free loopback port). baud : serial rate.
+    log_dir : folder of the flight logs. gcs : pymavlink connection towards the ground
+    station for the hole mission server (None: no server). sysid : the vehicle's MAVLink
+    system id (the hole server speaks as its component 191).
+    duration_s, max_frames : stop after this long / this many frames (None: until stopped).
+    usb_reset : reset the Xtion on USB after a sensor failure (``openni2`` only).
+    openni_uri : OpenNI2 device URI (None: the first Xtion).
+    realtime : replay ``oni``/``mcap`` recordings at their recorded pace.
+    flight : the daemon's settings (its ``log_prefix`` is set per flight by
+    :meth:`flight_config`). hole_rel_alt_m, hole_clearance_m : served waypoints' altitude.
+    sim : the simulated sortie. record : the settings as flat ``table.key`` -> value
+    (logged as the flight's ``holescan.config`` metadata).
+    """
+
+    sensor: SensorSpec
+    log_dir: Path
+    mavlink: str | None = None
+    baud: int = 921_600
+    gcs: str | None = None
+    sysid: int = 1
+    duration_s: float | None = None
+    max_frames: int | None = None
+    usb_reset: bool = True
+    openni_uri: str | None = None
+    realtime: bool = True
+    flight: FlightConfig = field(default_factory=lambda: FlightConfig(log_prefix=Path("flight")))
+    hole_rel_alt_m: float = 10.0
+    hole_clearance_m: float = 5.0
+    sim: SortieParams = field(default_factory=SortieParams)
+    record: Mapping[str, Any] = field(default_factory=dict)
+
+    def flight_config(self, t_unix_ns: int | None = None) -> FlightConfig:
+        """The daemon's settings with a fresh log prefix ``LOG_DIR/flight-YYYYmmddTHHMMSSZ``.
+
+        Creates ``log_dir``; adds ``-2``, ``-3``... when a log of that name exists.
+        """
+        try:
+            self.log_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise InputError(f"cannot create the log folder {self.log_dir}: {err}") from err
+        t = dt.datetime.fromtimestamp((t_unix_ns or time.time_ns()) / 1e9, dt.UTC)
+        stem = f"flight-{t:%Y%m%dT%H%M%SZ}"
+        name, k = stem, 1
+        while any(self.log_dir.glob(f"{name}_*.mcap*")):
+            k += 1
+            name = f"{stem}-{k}"
+        return dataclasses.replace(
+            self.flight,
+            log_prefix=self.log_dir / name,
+            max_duration_s=self.duration_s,
+            max_frames=self.max_frames,
+            config_record=dict(self.record),
+        )
+
+
+def _check(
+    table: str, doc: Mapping[str, Any], spec: Mapping[str, tuple[tuple[type, ...], Any]], where: str
+) -> dict[str, Any]:
+    """Values of ``doc`` checked against ``spec`` with defaults filled in."""
+    out: dict[str, Any] = {}
+    prefix = f"{table}." if table else ""
+    for key, value in doc.items():
+        if key not in spec:
+            if not table and key in _TABLES:
+                continue
+            raise InputError(
+                f"{where}: unknown setting {prefix}{key} (known: {', '.join(sorted(spec))})"
+            )
+        types, _ = spec[key]
+        ok = isinstance(value, types) and not (bool not in types and isinstance(value, bool))
+        if not ok:
+            names = " or ".join(t.__name__ for t in types)
+            raise InputError(f"{where}: {prefix}{key} must be {names}, got {value!r}")
+        out[key] = value
+    for key, (_, default) in spec.items():
+        out.setdefault(key, default)
+    return out
+
+
+def _numbers(where: str, key: str, value: list[Any], n: int | None = None) -> tuple[float, ...]:
+    if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value) or (
+        n is not None and len(value) != n
+    ):
+        size = f"{n} " if n is not None else ""
+        raise InputError(f"{where}: {key} must be a list of {size}numbers, got {value!r}")
+    return tuple(float(v) for v in value)
+
+
+def _positive(where: str, key: str, value: float | None) -> None:
+    if value is not None and not (math.isfinite(value) and value > 0):
+        raise InputError(f"{where}: {key} must be a positive number, got {value!r}")
+
+
+def parse_fly_config(
+    doc: Mapping[str, Any],
+    overrides: Mapping[str, Any] | None = None,
+    *,
+    where: str = "fly configuration",
+) -> FlyConfig:
+    """Build a :class:`FlyConfig` from a parsed TOML document and top-level overrides.
+
+    ``overrides`` (e.g. from the command line: ``sensor``, ``mavlink``, ``log_dir``, ``gcs``,
+    ``duration_s``, ``max_frames``) replace the file's top-level values when not None.
+    """
+    top = _check("", doc, _TOP, where)
+    for key, value in (overrides or {}).items():
+        if key not in _TOP:
+            raise InputError(f"unknown override {key!r}")
+        if value is not None:
+            top[key] = value
+    tables: dict[str, dict[str, Any]] = {}
+    for name, spec in _TABLES.items():
+        sub = doc.get(name, {})
+        if not isinstance(sub, Mapping):
+            raise InputError(f"{where}: [{name}] must be a table")
+        tables[name] = _check(name, sub, spec, where)
+
+    if top["log_dir"] is None:
+        raise InputError(f"{where}: no log folder: give --log-dir DIR or log_dir in the file")
+    sensor = SensorSpec.parse(str(top["sensor"]))
+    _positive(where, "duration_s", top["duration_s"])
+    if top["max_frames"] is not None and top["max_frames"] < 1:
+        raise InputError(f"{where}: max_frames must be >= 1")
+    if not 1 <= top["sysid"] <= 255:
+        raise InputError(f"{where}: sysid must be 1..255, got {top['sysid']}")
+
+    cap = tables["capture"]
+    backoff = _numbers(where, "capture.retry_backoff_s", cap["retry_backoff_s"])
+    if not backoff or min(backoff) < 0:
+        raise InputError(f"{where}: capture.retry_backoff_s needs >= 1 non-negative waits")
+    for key in ("frame_timeout_s", "health_period_s"):
+        _positive(where, f"capture.{key}", float(cap[key]))
+
+    det = tables["detect"]
+    if det["mode"] not in ("default", "paper"):
+        raise InputError(f"{where}: detect.mode must be 'default' or 'paper', got {det['mode']!r}")
+    if det["searcher"] not in SEARCHERS:
+        raise InputError(f"{where}: detect.searcher must be one of {sorted(SEARCHERS)}")
+    params: DetectParams = (PAPER if det["mode"] == "paper" else DEFAULT).with_searcher(
+        det["searcher"]
+    )
+    changes: dict[str, Any] = {"superpixels": det["superpixels"]}
+    for key in ("min_score", "max_range_m"):
+        if det[key] is not None:
+            changes[key] = float(det[key])
+    params = dataclasses.replace(params, **changes)
+
+    mnt = tables["mount"]
+    offset = _numbers(where, "mount.offset_m", mnt["offset_m"], 3)
+    mount = CameraMount.from_euler_deg(
+        float(mnt["roll_deg"]),
+        float(mnt["pitch_deg"]),
+        float(mnt["yaw_deg"]),
+        (offset[0], offset[1], offset[2]),
+    )
+
+    lg = tables["log"]
+    options = LogOptions(
+        chunk_size=lg["chunk_size"],
+        compression=lg["compression"],
+        max_file_bytes=lg["max_file_bytes"],
+        max_file_s=float(lg["max_file_s"]),
+        sync_interval_s=float(lg["sync_interval_s"]),
+        max_queued_frames=lg["max_queued_frames"],
+        max_queued_messages=lg["max_queued_messages"],
+    )
+
+    holes = tables["holes"]
+    if holes["announce_min_sightings"] < 1:
+        raise InputError(f"{where}: holes.announce_min_sightings must be >= 1")
+
+    flight = FlightConfig(
+        log_prefix=Path("flight"),
+        params=params,
+        mount=mount,
+        log_options=options,
+        frame_timeout_s=float(cap["frame_timeout_s"]),
+        retry_backoff_s=backoff,
+        announce_min_sightings=holes["announce_min_sightings"],
+        health_period_s=float(cap["health_period_s"]),
+        pose_wait_s=float(cap["pose_wait_s"]),
+        startup_sync_s=float(cap["startup_sync_s"]),
+    )
+
+    s = tables["sim"]
+    size = _numbers(where, "sim.size_m", s["size_m"], 2)
+    sim = SortieParams(
+        world_seed=s["world_seed"],
+        size_m=(size[0], size[1]),
+        margin_m=float(s["margin_m"]),
+        n_access_holes=s["n_access_holes"],
+        distractors=s["distractors"],
+        anchor=WorldAnchor(float(s["lat_deg"]), float(s["lon_deg"]), float(s["alt_m"])),
+        altitude_m=float(s["altitude_m"]),
+        speed_m_s=None if s["speed_m_s"] is None else float(s["speed_m_s"]),
+        heading_deg=None if s["heading_deg"] is None else float(s["heading_deg"]),
+        wobble_deg=float(s["wobble_deg"]),
+        clock_offset_s=float(s["clock_offset_s"]),
+        drift_ppm=float(s["drift_ppm"]),
+        eph_m=float(s["eph_m"]),
+        fps=float(s["fps"]),
+        noise_seed=s["noise_seed"],
+    )
+
+    record: dict[str, Any] = {k: str(v) if isinstance(v, Path) else v for k, v in top.items()}
+    for name, values in tables.items():
+        record.update({f"{name}.{k}": v for k, v in values.items()})
+    return FlyConfig(
+        sensor=sensor,
+        log_dir=Path(top["log_dir"]),
+        mavlink=top["mavlink"],
+        baud=top["baud"],
+        gcs=top["gcs"],
+        sysid=top["sysid"],
+        duration_s=None if top["duration_s"] is None else float(top["duration_s"]),
+        max_frames=top["max_frames"],
+        usb_reset=cap["usb_reset"],
+        openni_uri=cap["openni_uri"],
+        realtime=cap["realtime"],
+        flight=flight,
+        hole_rel_alt_m=float(holes["rel_alt_m"]),
+        hole_clearance_m=float(holes["clearance_m"]),
+        sim=sim,
+        record=record,
+    )
+
+
+def load_fly_config(
+    path: str | Path | None = None, overrides: Mapping[str, Any] | None = None
+) -> FlyConfig:
+    """Read a TOML configuration file (None: defaults only) and apply ``overrides``."""
+    doc: dict[str, Any] = {}
+    where = "fly configuration"
+    if path is not None:
+        where = str(path)
+        try:
+            with open(path, "rb") as f:
+                doc = tomllib.load(f)
+        except FileNotFoundError as err:
+            raise InputError(f"configuration file not found: {path}") from err
+        except OSError as err:
+            raise InputError(f"cannot read {path}: {err.strerror}") from err
+        except tomllib.TOMLDecodeError as err:
+            raise InputError(f"{path}: not valid TOML ({err})") from err
+    return parse_fly_config(doc, overrides, where=where)
+
+
+# -- sensors ----------------------------------------------------------------------------------
+
+
+class PacedReplay:
+    """Replay a recording's frames at their recorded pace, stamped with the time they are due.
+
+    A :class:`capture.FrameSource` wrapping another (e.g. :class:`capture.McapSource`, which
+    reads as fast as it can and keeps the recording's old ``t_mono_ns``): frame ``i`` is
+    delivered ``t_mono_ns[i] - t_mono_ns[0]`` after the first and re-stamped with that
+    instant, as if the sensor delivered it now. Nothing is skipped.
+    """
+
+    def __init__(self, inner: FrameSource) -> None:
+        self.inner = inner
+        self.camera = inner.camera
+
+    def __enter__(self) -> PacedReplay:
+        self.inner.__enter__()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.inner.__exit__(*exc)
+
+    def __iter__(self) -> Iterator[Frame]:
+        origin: tuple[int, int] | None = None
+        for frame in self.inner:
+            if origin is None:
+                origin = (time.monotonic_ns(), frame.t_mono_ns)
+            due = origin[0] + frame.t_mono_ns - origin[1]
+            now = time.monotonic_ns()
+            if now < due:
+                time.sleep((due - now) / 1e9)
+            yield dataclasses.replace(frame, t_mono_ns=max(due, now))
+
+
+def _reset_xtions() -> None:
+    """USB-reset every Xtion attached (the daemon's answer to a stalled sensor)."""
+    from capture._usb import find_xtion, reset_xtion
+
+    devices = find_xtion()
+    if not devices:
+        raise SensorError("no Xtion on USB to reset")
+    for d in devices:
+        reset_xtion(d)
+
+
+def open_sensor(
+    cfg: FlyConfig,
+) -> tuple[Callable[[], FrameSource], CameraIntrinsics, Callable[[], None] | None]:
+    """Source factory, camera intrinsics and USB reset function for a non-simulated sensor.
+
+    Raises :class:`InputError` for a missing or unreadable recording (before the flight
+    starts); ``sim`` is composed by :func:`capture._fly.fly` instead.
+    """
+    spec = cfg.sensor
+    if spec.kind == "openni2":
+        from capture._openni import OpenNI2Device
+
+        uri = cfg.openni_uri
+        timeout = cfg.flight.frame_timeout_s
+        camera = OpenNI2Device(uri, timeout_s=timeout).camera
+        reset = _reset_xtions if cfg.usb_reset else None
+        return (lambda: OpenNI2Device(uri, timeout_s=timeout)), camera, reset
+    if spec.kind == "oni":
+        from capture._openni import OniSource
+
+        path = spec.path
+        assert path is not None
+        oni = OniSource(path)  # checks the file now
+        return (lambda: OniSource(path, realtime=cfg.realtime)), oni.camera, None
+    if spec.kind == "mcap":
+        from capture._mcapread import McapSource
+
+        assert spec.path is not None
+        if not spec.path.is_file():
+            raise InputError(f"flight log not found: {spec.path}")
+        mcap = McapSource(spec.path)
+        paths = spec.path
+
+        def replay() -> FrameSource:
+            src = McapSource(paths)
+            return PacedReplay(src) if cfg.realtime else src
+
+        return replay, mcap.camera, None
+    raise InputError(f"{spec} is not a recorded or live sensor (the simulator is composed by fly)")

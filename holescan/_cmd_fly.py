@@ -1,0 +1,90 @@
+"""``holescan fly``: capture, log, detect and geotag on the companion computer until stopped.
+
+SIGINT and SIGTERM (``systemctl stop``) end the flight cleanly: capture stops, the
+detection worker is drained, the MCAP log is finished and closed, and the summary printed.
+A second SIGINT interrupts at once.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import threading
+from pathlib import Path
+from types import FrameType
+
+log = logging.getLogger("holescan.fly")
+
+
+def _positive(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(f"expected seconds, got {text!r}") from err
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {text!r}")
+    return value
+
+
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = sub.add_parser(
+        "fly",
+        help="capture RGB-D + MAVLink to an MCAP log, detect and geotag holes, serve them",
+        description="The flight daemon: sensor -> MCAP log and -> detection worker -> geotags "
+        "-> holes served to the ground station. Command-line options override the config file "
+        "(deploy/fly.example.toml documents it). Stop with SIGINT or SIGTERM.",
+    )
+    p.add_argument(
+        "--sensor",
+        help="openni2 (the Xtion), oni:PATH, mcap:PATH (replays a flight log), or sim "
+        "(the simulated sortie with its own simulated autopilot); default openni2",
+    )
+    p.add_argument(
+        "--mavlink",
+        help="autopilot link: /dev/ttyAMA0, udpin:0.0.0.0:14550, tcp:HOST:PORT ... "
+        "(with --sensor sim: a udpin: address for the simulated autopilot)",
+    )
+    p.add_argument("--log-dir", type=Path, help="folder for the flight logs")
+    p.add_argument("--config", type=Path, help="TOML configuration file")
+    p.add_argument(
+        "--gcs",
+        help="serve found holes as a mission (component 191) and announce them by STATUSTEXT "
+        "on this link, e.g. udpout:192.168.1.10:14550",
+    )
+    p.add_argument("--duration", type=_positive, help="stop after this many seconds")
+    p.add_argument("--max-frames", type=int, help="stop after this many frames")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from capture._fly import fly, format_report
+    from capture._flyconfig import load_fly_config
+
+    cfg = load_fly_config(
+        args.config,
+        {
+            "sensor": args.sensor,
+            "mavlink": args.mavlink,
+            "log_dir": args.log_dir,
+            "gcs": args.gcs,
+            "duration_s": args.duration,
+            "max_frames": args.max_frames,
+        },
+    )
+    stop = threading.Event()
+
+    def on_signal(signum: int, _frame: FrameType | None) -> None:
+        log.info("%s: finishing the flight", signal.Signals(signum).name)
+        stop.set()
+        if signum == signal.SIGINT:  # a second Ctrl-C interrupts at once
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+
+    previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        report = fly(cfg, stop=stop)
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+    print(format_report(report, cfg.flight.announce_min_sightings))
+    return 0
