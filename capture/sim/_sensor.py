@@ -1,0 +1,201 @@
+"""What the Xtion makes of a perfect image: depth noise, quantisation, dropouts, colour noise.
+
+Random numbers come from a xorshift64* stream seeded per frame (fast and reproducible);
+normal deviates are read from an inverse-CDF table of 4096 equiprobable values.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+import numpy.typing as npt
+from numba import njit
+from scipy.special import ndtri
+
+from capture.sim._camera_model import XTION_NOISE_COEFF_PER_MM, Conditions
+
+__all__ = ["colour_image", "depth_image"]
+
+F32 = npt.NDArray[np.float32]
+F64 = npt.NDArray[np.float64]
+U8 = npt.NDArray[np.uint8]
+U16 = npt.NDArray[np.uint16]
+U64 = npt.NDArray[np.uint64]
+
+_TABLE_BITS = 12
+
+
+@functools.cache
+def _normal_table() -> F64:
+    n = 1 << _TABLE_BITS
+    return np.asarray(ndtri((np.arange(n) + 0.5) / n), dtype=np.float64)
+
+
+@functools.cache
+def _gamma_lut() -> U8:
+    x = np.arange(65536, dtype=np.float64) / 65535.0
+    return np.round(255.0 * x ** (1.0 / 2.2)).astype(np.uint8)
+
+
+@njit(cache=True, inline="always")
+def _next(state: U64) -> np.uint64:
+    x = state[0]
+    x ^= x >> np.uint64(12)
+    x ^= x << np.uint64(25)
+    x ^= x >> np.uint64(27)
+    state[0] = x
+    return x * np.uint64(0x2545F4914F6CDD1D)
+
+
+@njit(cache=True, inline="always")
+def _uniform(state: U64) -> float:
+    return float(_next(state) >> np.uint64(11)) * (1.0 / 9007199254740992.0)
+
+
+@njit(cache=True, inline="always")
+def _normal(state: U64, table: F64) -> float:
+    return table[int(_next(state) >> np.uint64(64 - _TABLE_BITS))]
+
+
+@njit(cache=True)
+def _depth(
+    depth_m: F32,
+    state: U64,
+    table: F64,
+    fx: float,
+    baseline_mm: float,
+    noise_scale: float,
+    step_px: float,
+    min_mm: float,
+    fade_mm: float,
+    max_mm: float,
+    p_drop: float,
+) -> U16:
+    height, width = depth_m.shape
+    out = np.zeros((height, width), dtype=np.uint16)
+    fb = fx * baseline_mm  # disparity (px) = fb / Z (mm)
+    for v in range(height):
+        # Projector shadow: the projector sits at +x, so a point is hidden from it when a
+        # pixel to its right maps to a smaller projector column u - fb / Z.
+        run_min = 1e30
+        for u in range(width - 1, -1, -1):
+            z = depth_m[v, u] * 1000.0
+            if z <= 0.0:
+                continue
+            if fb > 0.0:
+                up = u - fb / z
+                if up > run_min:
+                    continue
+                run_min = up
+            if z < min_mm or z > max_mm:
+                continue
+            if z > fade_mm and _uniform(state) < (z - fade_mm) / (max_mm - fade_mm):
+                continue
+            if p_drop > 0.0 and _uniform(state) < p_drop:
+                continue
+            sigma = noise_scale * XTION_NOISE_COEFF_PER_MM * z * z
+            if fb > 0.0 and step_px > 0.0:
+                # Quantisation adds q^2 / 12 of variance: take it out of the noise budget.
+                q = z * z * step_px / fb
+                var = sigma * sigma - q * q / 12.0
+                sigma = math.sqrt(var) if var > 0.0 else 0.0
+                z = z + sigma * _normal(state, table)
+                if z <= 0.0:
+                    continue
+                d = round(fb / z / step_px) * step_px
+                if d <= 0.0:
+                    continue
+                z = fb / d
+            else:
+                z = z + sigma * _normal(state, table)
+            if z < min_mm or z > max_mm:
+                continue
+            out[v, u] = np.uint16(min(round(z), 65535))
+    return out
+
+
+@njit(cache=True)
+def _colour(
+    rad: F32,
+    state: U64,
+    table: F64,
+    lut: U8,
+    gain_r: float,
+    gain_g: float,
+    gain_b: float,
+    vignetting: float,
+    read_noise: float,
+    shot_noise: float,
+    cx: float,
+    cy: float,
+) -> U8:
+    height, width = rad.shape[0], rad.shape[1]
+    out = np.empty((height, width, 3), dtype=np.uint8)
+    r_norm = 1.0 / (cx * cx + cy * cy)
+    read2 = read_noise * read_noise
+    shot2 = shot_noise * shot_noise
+    for v in range(height):
+        dv = (v - cy) * (v - cy)
+        for u in range(width):
+            vig = 1.0 - vignetting * ((u - cx) * (u - cx) + dv) * r_norm
+            for c in range(3):
+                gain = gain_r if c == 0 else (gain_g if c == 1 else gain_b)
+                s = rad[v, u, c] * gain * vig
+                if read2 > 0.0 or shot2 > 0.0:
+                    s += math.sqrt(read2 + shot2 * max(s, 0.0)) * _normal(state, table)
+                s = min(max(s, 0.0), 1.0)
+                out[v, u, c] = lut[int(s * 65535.0 + 0.5)]
+    return out
+
+
+def _state(rng: np.random.Generator) -> U64:
+    seed = int(rng.integers(1, 2**63 - 1))
+    return np.array([seed], dtype=np.uint64)
+
+
+def depth_image(
+    depth_m: F32, fx: float, conditions: Conditions, rng: np.random.Generator
+) -> U16:
+    """The Xtion's reading of an exact depth image.
+
+    depth_m : (H, W) float32, metres along the optical axis, 0 = nothing there.
+    Returns (H, W) uint16, millimetres, 0 = no reading.
+    """
+    c = conditions
+    return _depth(
+        np.ascontiguousarray(depth_m, dtype=np.float32),
+        _state(rng),
+        _normal_table(),
+        float(fx),
+        1000.0 * c.baseline_m,
+        c.depth_noise,
+        c.disparity_step_px,
+        1000.0 * c.min_range_m,
+        1000.0 * min(c.fade_range_m, c.max_range_m),
+        1000.0 * c.max_range_m,
+        c.dropout_fraction,
+    )
+
+
+def colour_image(
+    radiance: F32, cx: float, cy: float, conditions: Conditions, rng: np.random.Generator
+) -> U8:
+    """8-bit RGB from linear scene radiance (H, W, 3) float32: exposure, noise, gamma."""
+    c = conditions
+    wb = c.white_balance
+    return _colour(
+        np.ascontiguousarray(radiance, dtype=np.float32),
+        _state(rng),
+        _normal_table(),
+        _gamma_lut(),
+        c.exposure * wb[0],
+        c.exposure * wb[1],
+        c.exposure * wb[2],
+        c.vignetting,
+        c.read_noise,
+        c.shot_noise,
+        float(cx),
+        float(cy),
+    )
