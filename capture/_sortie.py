@@ -2,7 +2,7 @@
 
 Composition only (each part lives elsewhere):
 
-* the world: :func:`capture.sim._world.make_world`, anchored on the Earth by a
+* the world: :func:`capture.sim.make_world`, anchored on the Earth by a
   :class:`~capture._simsource.WorldAnchor` (its south-west corner, height 0);
 * the path: :func:`missions.plan_survey` over the world's rectangle at ``altitude_m``
   above the rubble, its corners rounded with arcs (a quadrotor turns; a spline through bare
@@ -39,9 +39,7 @@ from capture._oni import OniWriter
 from capture._openni import OniSource
 from capture._simautopilot import SimAutopilot, SimPath
 from capture._simsource import SimSource, WorldAnchor, camera_pose_in_world
-from capture.sim._camera_model import Conditions, random_conditions
-from capture.sim._render import render
-from capture.sim._world import RubbleWorld, make_world
+from capture.sim import Conditions, RubbleWorld, make_world, random_conditions, render
 from detect import CameraIntrinsics
 from geotag import CameraMount
 from holescan.errors import InputError
