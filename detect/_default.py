@@ -48,6 +48,9 @@ DEEP_M = 0.25
 NECK_RADII_PX = (0, 3, 6)
 # A candidate needs this fraction of its rim to be valid readings (not border, not no-reading).
 MIN_RIM_VALID = 0.6
+# Switches for the ablation study (benchmarks/ablation.py); all on in holescan.
+PASSABLE_WIDTH = True  # minor axis = min(ellipse axis, largest inscribed disk)
+RANGE_LIMIT_LIGHT = True  # no-reading regions at the range limit: darkness as depth evidence
 # Score = Sd^DEPTH_EXPONENT * Sw * shape * light (see the module docstring).
 DEPTH_EXPONENT = 0.5
 # Walls: grow regions by up to this many work pixels into readings this far below the
@@ -349,7 +352,7 @@ def _measure(region: Candidate, f: _FrameData, params: DetectParams) -> Detectio
     # Passable width: diameter of the largest disk inside the region (metres at the rim).
     dist = cv2.distanceTransform(np.pad(big, 1), cv2.DIST_L2, 5)
     inscribed = 2.0 * float(dist.max()) * rim_z / f.cam.fx
-    minor = min(minor_pca, inscribed)
+    minor = min(minor_pca, inscribed) if PASSABLE_WIDTH else minor_pca
     floor_valid = inside & ~inv_c
     no_read = float((inside & inv_c).sum()) / float(inside.sum())
     seen = float(np.percentile(zc[floor_valid], 90) - rim_z) if floor_valid.any() else 0.0
@@ -366,7 +369,8 @@ def _measure(region: Candidate, f: _FrameData, params: DetectParams) -> Detectio
         # light can tell a hole (dark inside) from terrain fading out of range.
         depth_rel = max(seen, f.range_m - rim_z)
         within = ramp(f.z_far - rim_z, 0.1, 0.6)
-        sd = max(ramp(depth_rel, s.depth_low_m, s.depth_high_m), 0.6 * within + 0.4 * max(sb, sc))
+        light = max(sb, sc) if RANGE_LIMIT_LIGHT else 0.0
+        sd = max(ramp(depth_rel, s.depth_low_m, s.depth_high_m), 0.6 * within + 0.4 * light)
     else:
         depth_rel = seen
         sd = ramp(depth_rel, s.depth_low_m, s.depth_high_m)
