@@ -26,6 +26,7 @@ import logging
 import math
 import multiprocessing as mp
 import socket
+import threading
 import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field, replace
@@ -36,7 +37,7 @@ import numpy as np
 
 from capture._frame import Frame
 from capture._oni import OniWriter
-from capture._openni import OniSource
+from capture._openni import OniSource, openni2_library
 from capture._simautopilot import SimAutopilot, SimPath
 from capture._simsource import SimSource, WorldAnchor, camera_pose_in_world
 from capture.sim import Conditions, RubbleWorld, make_world, random_conditions, render
@@ -256,15 +257,35 @@ def loop_length_m(path: SimPath) -> float:
     return float(np.linalg.norm(np.diff(np.vstack([pts, pts[:1]]), axis=0), axis=1).sum())
 
 
-def lap_frames(path: SimPath, fps: float) -> tuple[SimPath, int]:
-    """The path with its speed nudged so one lap lasts a whole number of frames, and that number.
+def lap_frames(path: SimPath, fps: float, period_multiple_s: float = 10.0) -> tuple[SimPath, int]:
+    """The path slowed so one lap lasts a whole number of frames, and that number.
 
-    (The autopilot times its loop by chord length / speed; a lap of exactly N frames lets a
-    pre-rendered lap be replayed lap after lap with every frame where the vehicle is.)
+    A pre-rendered lap can then be replayed lap after lap with every frame where the
+    vehicle is. The lap is stretched (never shortened: the planner's speed is the motion
+    blur bound) to a multiple of ``period_multiple_s``, the period of the simulated
+    airframe's wobble (0.9, 1.3 and 0.4 Hz repeat every 10 s), so the attitude repeats
+    too; this is checked on the simulator's truth, and :class:`InputError` raised if not.
     """
     length = loop_length_m(path)
-    n = max(1, round(length / path.speed_m_s * fps))
-    return replace(path, speed_m_s=length * fps / n), n
+    step = max(1, round(period_multiple_s * fps))
+    n = step * max(1, math.ceil(length / path.speed_m_s * fps / step - 1e-9))
+    lap = replace(path, speed_m_s=length * fps / n)
+    ap = SimAutopilot("udpout:127.0.0.1:9", lap)  # never entered: its truth only
+    lap_ns = round(n * 1e9 / fps)
+    for t_ns in (0, 1_234_567_891, lap_ns // 3):
+        a, b = ap.truth_pose(t_ns), ap.truth_pose(t_ns + lap_ns)
+        moved = max(abs(a.lat_deg - b.lat_deg), abs(a.lon_deg - b.lon_deg)) * 1.1e5
+        turned = max(
+            abs(a.roll - b.roll),
+            abs(a.pitch - b.pitch),
+            abs(math.remainder(a.yaw - b.yaw, math.tau)),
+        )
+        if moved > 1e-4 or turned > 1e-6:
+            raise InputError(
+                f"the simulated vehicle does not repeat its lap ({moved:.2g} m, {turned:.2g} "
+                "rad apart one lap later): a pre-rendered lap cannot be replayed"
+            )
+    return lap, n
 
 
 def _free_udp_port() -> int:
@@ -465,6 +486,10 @@ class LapReplay:
         self._ap = autopilot
         self.fps = fps
         self._origin = loop_origin_boot_ns
+        # Initialise OpenNI2 on this (long-lived) thread: the players are opened on the
+        # daemon's frame-pump thread, and a library initialised on a thread that has exited
+        # crashes in oniShutdown at interpreter exit (measured: segfault 1 of 1 without).
+        openni2_library()
         probe = OniSource(self.path)
         self.camera = probe.camera
         self.n_frames = probe.info.stream("depth").frames_found
@@ -476,18 +501,55 @@ class LapReplay:
         self.max_late_ms = 0.0
         self.startup_skipped = 0
         self.laps = 0
+        self.numbers: list[int] = []  # per delivered frame: its frame number since tau = 0
+        self._lock = threading.Lock()  # the player is read or closed, never both at once
+        self._player: OniSource | None = None
+        self._frames: Iterator[Frame] | None = None
+
+    def truth_boot_ns(self, index: int) -> int:
+        """The autopilot boot time whose true pose delivered frame ``index`` shows."""
+        return self._origin + round(self.numbers[index] * 1e9 / self.fps)
 
     def __enter__(self) -> LapReplay:
         self._closed = False
         return self
 
     def __exit__(self, *exc: object) -> None:
+        """Stop, and close the playback now (from any thread, never while a frame is read)."""
         self._closed = True
+        with self._lock:
+            self._close_player()
+
+    def _close_player(self) -> None:
+        if self._frames is not None:
+            close = getattr(self._frames, "close", None)
+            if close is not None:
+                close()  # ends OniSource's generator before its device closes
+            self._frames = None
+        if self._player is not None:
+            self._player.close()
+            self._player = None
 
     def due_mono_ns(self, number: int) -> int:
         """Monotonic time when the autopilot's clock reads ``loop_origin + number / fps``."""
         t_boot = self._origin + round(number * 1e9 / self.fps)
         return round((t_boot - self._b0) / self._rate)
+
+    def _next_frame(self, lap: int) -> tuple[int, Frame | None]:
+        """The next frame of the lap (opening the file as needed), under the lock."""
+        with self._lock:
+            if self._closed:
+                return lap, None
+            if self._frames is None:
+                self._player = OniSource(self.path)
+                self._player.open()
+                self._frames = iter(self._player)
+            frame = next(self._frames, None)
+            if frame is None:  # end of the lap
+                self._close_player()
+                self.laps += 1
+                return lap + 1, None
+            return lap, frame
 
     def __iter__(self) -> Iterator[Frame]:
         n = self.n_frames
@@ -495,31 +557,35 @@ class LapReplay:
         now_boot = self._ap.boot_ns_at_mono(time.monotonic_ns())
         lap, k0 = divmod(max(0, math.ceil((now_boot - self._origin) / period_ns)), n)
         index = 0
+        k = 0
         started = False
-        while not self._closed:
-            with OniSource(self.path) as src:
-                for k, frame in enumerate(src):
-                    if self._closed:
-                        return
-                    number = lap * n + k
-                    due = self.due_mono_ns(number)
-                    if not started:
-                        if k < k0 or due < time.monotonic_ns() - period_ns:
-                            self.startup_skipped += 1
-                            continue
-                        started = True
-                    now = time.monotonic_ns()
-                    if now < due:
-                        time.sleep((due - now) / 1e9)
-                    else:
-                        late_ms = (now - due) / 1e6
-                        self.max_late_ms = max(self.max_late_ms, late_ms)
-                        if late_ms * 1e6 > period_ns:
-                            self.late_frames += 1
-                    yield replace(
-                        frame, index=index, t_mono_ns=due, t_sensor_ns=round(number * period_ns)
-                    )
-                    index += 1
-            lap += 1
-            k0 = 0
-            self.laps += 1
+        try:
+            while not self._closed:
+                next_lap, frame = self._next_frame(lap)
+                if frame is None:
+                    lap, k, k0 = next_lap, 0, 0
+                    continue
+                number = lap * n + k
+                k += 1
+                due = self.due_mono_ns(number)
+                if not started:
+                    if k - 1 < k0 or due < time.monotonic_ns() - period_ns:
+                        self.startup_skipped += 1
+                        continue
+                    started = True
+                now = time.monotonic_ns()
+                if now < due:
+                    time.sleep((due - now) / 1e9)
+                else:
+                    late_ms = (now - due) / 1e6
+                    self.max_late_ms = max(self.max_late_ms, late_ms)
+                    if late_ms * 1e6 > period_ns:
+                        self.late_frames += 1
+                self.numbers.append(number)
+                yield replace(
+                    frame, index=index, t_mono_ns=due, t_sensor_ns=round(number * period_ns)
+                )
+                index += 1
+        finally:
+            with self._lock:
+                self._close_player()
