@@ -245,6 +245,12 @@ class Flight:
     # -- results ----------------------------------------------------------------------------
 
     def _handle_result(self, r: WorkerResult) -> None:
+        # The results thread and the final drain in run() both hand results here: one at a
+        # time, so the tracker sees (and the log records) the results in one order.
+        with self._lock:
+            self._handle_result_locked(r)
+
+    def _handle_result_locked(self, r: WorkerResult) -> None:
         assert self._writer is not None
         c = self.counters
         c.frames_detected += 1

@@ -24,6 +24,7 @@ _COMMAND_MODULES = (
     "holescan._cmd_plan",
     "holescan._cmd_holes",
     "holescan._cmd_fly",
+    "holescan._cmd_reprocess",
 )
 
 EXIT_INPUT = 2
