@@ -133,7 +133,9 @@ class Sampler(threading.Thread):
                         os.setpriority(os.PRIO_PROCESS, k, self.nice)
                     except OSError as err:
                         log.warning("cannot renice %d: %s", k, err)
-                self.child_cpu[k] = _cpu_s(k)
+                cpu = _cpu_s(k)
+                if math.isfinite(cpu):  # a child that has exited keeps its last reading
+                    self.child_cpu[k] = cpu
             child = sum(_rss_mb(k) for k in kids)
             self.samples.append((time.monotonic() - t0, _rss_mb(me), child))
 

@@ -322,10 +322,6 @@ class SimSortie:
     autopilot: SimAutopilot | None = None
 
     def __post_init__(self) -> None:
-        if self.world is None:
-            self.world = make_sortie_world(self.params)
-        if self.path is None:
-            self.plan, self.path = survey_path(self.world, self.params)
         if self.mavlink is None:
             self.mavlink = f"udpin:127.0.0.1:{_free_udp_port()}"
         if not self.mavlink.startswith("udpin:"):
@@ -333,6 +329,10 @@ class SimSortie:
                 f"the simulated autopilot needs a udpin:HOST:PORT link to talk to, "
                 f"got {self.mavlink!r}"
             )
+        if self.world is None:
+            self.world = make_sortie_world(self.params)
+        if self.path is None:
+            self.plan, self.path = survey_path(self.world, self.params)
 
     @property
     def truth(self) -> tuple[TrueHole, ...]:

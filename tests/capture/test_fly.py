@@ -148,6 +148,29 @@ def test_missing_config_file_is_an_input_error(tmp_path: Path) -> None:
     assert code == 2 and "configuration file not found" in err
 
 
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--sensor", "oni:{tmp}/none.oni"], "none.oni"),
+        (["--sensor", "mcap:{tmp}/none.mcap"], "flight log not found"),
+        (["--sensor", "sim", "--mavlink", "tcp:127.0.0.1:5760"], "needs a udpin:HOST:PORT"),
+        (["--sensor", "sim"], "no log folder"),
+    ],
+)
+def test_fly_refuses_bad_sensors_and_links_before_flying(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], args: list[str], message: str
+) -> None:
+    from holescan.cli import main
+
+    argv = ["fly", *(a.replace("{tmp}", str(tmp_path)) for a in args)]
+    if message != "no log folder":
+        argv += ["--log-dir", str(tmp_path / "logs")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("holescan fly: error: ") and message in err, err
+    assert not list(tmp_path.glob("logs/*.mcap"))
+
+
 # -- the systemd unit -------------------------------------------------------------------------
 
 
@@ -162,7 +185,8 @@ def test_systemd_unit() -> None:
     assert svc["KillSignal"] == "SIGINT"
     assert svc["KillMode"] == "mixed"  # SIGINT to holescan only, not to its worker process
     assert int(svc["TimeoutStopSec"]) >= 30  # drain (10 s) + results thread (15 s) + close
-    assert svc["RestartPreventExitStatus"] == "2"  # a configuration error does not loop
+    assert "RestartPreventExitStatus" not in svc  # exit 2 is also "autopilot not up yet"
+    assert unit["Unit"]["StartLimitIntervalSec"] == "0"  # so retry without a limit
     assert unit["Install"]["WantedBy"] == "multi-user.target"
     analyze = shutil.which("systemd-analyze")
     if analyze is None:
