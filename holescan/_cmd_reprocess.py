@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import logging
 import os
 import sys
 import time
@@ -130,6 +131,8 @@ def run(args: argparse.Namespace) -> int:
     )
     if args.formats:
         opts = dataclasses.replace(opts, formats=tuple(dict.fromkeys(args.formats)))
+    if not args.verbose:  # INFO lines would break the progress display
+        logging.getLogger().setLevel(logging.WARNING)
     bar = _Bar(sys.stderr)
     try:
         result = reprocess(args.logs, args.out, opts, progress=bar)

@@ -25,6 +25,7 @@ _COMMAND_MODULES = (
     "holescan._cmd_holes",
     "holescan._cmd_fly",
     "holescan._cmd_reprocess",
+    "holescan._cmd_demo",
 )
 
 EXIT_INPUT = 2

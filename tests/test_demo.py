@@ -1,0 +1,155 @@
+"""``holescan demo``: a short run of the whole system (simulated autopilot over loopback UDP,
+capture daemon, simulated Xtion, mission server and a ground-station peer), its printed
+score checked against the simulator's truth recomputed here from the world and the holes
+read back from the flight log, its files parsed back, its report rendered by Chromium."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import re
+import subprocess
+from pathlib import Path
+
+import cv2
+import gpxpy
+import pymap3d
+import pytest
+
+from capture import log_info
+from capture._sortie import make_sortie_world, true_holes
+from holescan import cli
+from holescan.demo import DEMO_SORTIE
+from holescan.flightholes import read_flight_holes
+
+CHROMIUM = Path("/usr/bin/chromium")
+SIZE = (6.0, 6.0)
+
+
+def distance_m(lat1: float, lon1: float, lat2: float, lon2: float) -> float:
+    e, n, _ = pymap3d.geodetic2enu(lat1, lon1, 0.0, lat2, lon2, 0.0)
+    return math.hypot(float(e), float(n))
+
+
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
+    out = tmp_path_factory.mktemp("demo") / "run"
+    argv = ["demo", "--out", str(out), "--duration", "15", "--size", str(SIZE[0]), str(SIZE[1])]
+    proc = subprocess.run(
+        ["python", "-m", "holescan.cli", *argv],
+        capture_output=True,
+        text=True,
+        timeout=240,
+        check=False,
+        cwd=Path(__file__).resolve().parents[1],
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert "flying 15 s" in proc.stderr  # the progress display
+    return out, proc.stdout
+
+
+def test_printed_score_is_the_truth(demo: tuple[Path, str]) -> None:
+    out, text = demo
+    sortie = dataclasses.replace(DEMO_SORTIE, size_m=SIZE)
+    truth = {t.id: t for t in true_holes(make_sortie_world(sortie), sortie.anchor)}
+    flight = read_flight_holes(sorted(out.glob("flight_*.mcap")), thumbnails=False)
+    confirmed = {h.id: h for h in flight.holes if h.sightings >= 3}
+    rows = re.findall(
+        r"true hole (\d+) at \(([\d.]+), ([\d.]+)\) m, [\d.]+ m wide: (\w+)(.*)", text
+    )
+    assert sorted(int(r[0]) for r in rows) == sorted(truth)  # every true access hole listed
+    found_ids = []
+    for tid, x, y, status, rest in rows:
+        t = truth[int(tid)]
+        assert (float(x), float(y)) == (round(t.x_m, 1), round(t.y_m, 1))
+        if status == "FOUND":
+            hid, cm = re.search(r"as hole (\d+), (\d+) cm off", rest).groups()  # type: ignore[union-attr]
+            h = confirmed[int(hid)]  # a confirmed hole of the logged flight
+            d = distance_m(h.lat_deg, h.lon_deg, t.lat_deg, t.lon_deg)
+            assert d <= 0.5 and abs(100 * d - int(cm)) <= 1, (d, cm)
+            found_ids.append(int(hid))
+        else:
+            assert status in ("MISSED", "not")
+            # nothing confirmed within the match distance of a missed true hole was left over
+            assert all(
+                distance_m(h.lat_deg, h.lon_deg, t.lat_deg, t.lon_deg) > 0.5 or h.id in found_ids
+                for h in confirmed.values()
+            )
+    false_ids = [int(i) for i in re.findall(r"hole (\d+): FALSE", text)]
+    assert sorted(found_ids + false_ids) == sorted(confirmed)  # each confirmed hole scored once
+    for hid in false_ids:
+        h = confirmed[hid]
+        near = min(distance_m(h.lat_deg, h.lon_deg, t.lat_deg, t.lon_deg) for t in truth.values())
+        assert near > 0.5 or any(  # or a closer hole took that true hole
+            distance_m(confirmed[f].lat_deg, confirmed[f].lon_deg, t.lat_deg, t.lon_deg) < near
+            for f in found_ids
+            for t in truth.values()
+        )
+    m = re.search(r"=> found (\d+) of (\d+) in view, missed (\d+), false (\d+)", text)
+    assert m is not None
+    found, in_view, missed, false = (int(v) for v in m.groups())
+    assert (found, missed, false) == (len(found_ids), in_view - found, len(false_ids))
+    assert found >= 1  # the demo's short run over the small field finds holes
+    doc = json.loads((out / "demo.json").read_text())
+    assert (doc["found"], doc["missed"], doc["false"]) == (found, missed, false)
+
+
+def test_flight_log_ground_station_and_files(demo: tuple[Path, str]) -> None:
+    out, text = demo
+    doc = json.loads((out / "demo.json").read_text())
+    logs = [Path(p) for p in doc["log_files"]]
+    info = log_info(logs)  # every CRC of the flight log
+    assert info.frames == doc["frames_captured"] > 100
+    assert "/mavlink/raw" in info.topics and "/holes" in info.topics
+    confirmed = doc["found"] + doc["false"]
+    # Each confirmed hole was announced to the ground station and served as a waypoint.
+    texts = doc["announcements"]
+    assert len({t.split()[1] for t in texts}) == confirmed
+    assert all(re.fullmatch(r"HOLE \d+ [\d.]+ -?[\d.]+ -?[\d.]+", t) for t in texts)
+    assert doc["mission_items"] == confirmed
+    assert f"downloaded a mission of {confirmed} hole waypoints" in text
+    files = doc["files"]
+    gpx = gpxpy.parse(Path(files["gpx"]).read_text())
+    assert len(gpx.waypoints) == confirmed
+    plan = json.loads(Path(files["plan"]).read_text())
+    assert len(plan["mission"]["items"]) == confirmed
+    assert len(json.loads(Path(files["geojson"]).read_text())["features"]) == confirmed
+    page = Path(files["report"]).read_text()
+    assert page.count("true hole") >= 4 and page.count("data:image/png;base64,") == 2 * confirmed
+    for path in files.values():
+        assert str(out) in path
+    assert f"holescan reprocess {logs[0]}" in text
+
+
+@pytest.mark.skipif(not CHROMIUM.exists(), reason="needs Debian chromium (/usr/bin/chromium)")
+def test_report_renders_in_headless_chromium(demo: tuple[Path, str], tmp_path: Path) -> None:
+    out, _ = demo
+    shot = tmp_path / "shot.png"
+    cmd = [
+        str(CHROMIUM),
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--no-first-run",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-sync",
+        f"--user-data-dir={tmp_path / 'profile'}",
+        f"--screenshot={shot}",
+        "--window-size=1280,1600",
+        (out / "flight_report.html").resolve().as_uri(),
+    ]
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=120, check=False)
+    assert res.returncode == 0, res.stderr[-2000:]
+    img = cv2.imread(str(shot), cv2.IMREAD_COLOR)
+    assert img is not None and img.shape[:2] == (1600, 1280)
+    assert float(img.std()) > 20.0  # a page was drawn, not a blank one
+
+
+def test_bad_arguments(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        cli.main(["demo", "--duration", "0"])
+    (tmp_path / "flight_0000.mcap").write_bytes(b"x")
+    assert cli.main(["demo", "--out", str(tmp_path), "--duration", "5"]) == 2
+    assert "already holds a demo flight" in capsys.readouterr().err
