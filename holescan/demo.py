@@ -554,9 +554,10 @@ def format_result(r: DemoResult) -> list[str]:
         t = row.truth
         where = f"true hole {t.id} at ({t.x_m:.1f}, {t.y_m:.1f}) m, {t.major_m:.2f} m wide"
         if row.status == "found":
+            score = next(h.score for h in r.confirmed if h.id == row.hole_id)
             lines.append(
-                f"  {where}: FOUND as hole {row.hole_id}, {100 * row.error_m:.0f} cm off, "
-                f"{row.sightings} sightings"
+                f"  {where}: FOUND as hole {row.hole_id} (score {score:.2f}), "
+                f"{100 * row.error_m:.0f} cm off, {row.sightings} sightings"
             )
         elif row.status == "missed":
             lines.append(f"  {where}: MISSED (whole in view in {row.frames_in_view} frames)")

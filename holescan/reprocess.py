@@ -221,7 +221,9 @@ class FlightResult:
     frames_unposed : of those with detections, frames no pose could be found for.
     holes : every hole (sorted by id); confirmed : seen in >= ``min_sightings`` frames.
     flight_holes : the log's own final hole list (what the flight found).
-    flight_matches : each confirmed flight hole and the reprocessed hole nearest to it.
+    flight_matches : each confirmed flight hole and the reprocessed hole nearest to it
+        (indices into the confirmed lists); flight_same_ids : how many of those pairs
+        carry the same id.
     truncated : files that were cut off (read up to their last complete chunk).
     interrupted : stopped early (Ctrl-C); the outputs hold what was done.
     detect_ms_mean : worker time per frame. elapsed_s, frames_per_s : wall clock.
@@ -240,6 +242,7 @@ class FlightResult:
     confirmed: tuple[Hole, ...]
     flight_holes: tuple[Hole, ...]
     flight_matches: tuple[HoleMatch, ...]
+    flight_same_ids: int
     truncated: tuple[str, ...]
     interrupted: bool
     detect_ms_mean: float
@@ -266,6 +269,7 @@ class FlightResult:
             "confirmed": len(self.confirmed),
             "flight_confirmed": len(self.flight_matches),
             "flight_reproduced": len(found),
+            "flight_same_ids": self.flight_same_ids,
             "flight_max_offset_m": max((m.distance_m for m in found), default=None),
             "truncated": list(self.truncated),
             "interrupted": self.interrupted,
@@ -286,7 +290,7 @@ class FlightResult:
             f"{self.elapsed_s:.1f} s ({self.frames_per_s:.1f} frames/s){cut}; "
             f"{len(self.confirmed)} holes seen >= 2 times ({len(self.holes)} in all)",
             f"  in-flight holes reproduced: {len(found)}/{len(self.flight_matches)}"
-            + (f" (farthest {worst:.2f} m)" if found else ""),
+            + (f" (same id {self.flight_same_ids}, farthest {worst:.2f} m)" if found else ""),
         ]
         out += [f"  wrote {path} ({kind})" for kind, path in self.files]
         out += [f"  wrote {p} (mcap)" for p in self.outputs]
@@ -1287,6 +1291,10 @@ def _flight_outputs(
         confirmed=confirmed,
         flight_holes=fl.flight_holes,
         flight_matches=tuple(matches),
+        flight_same_ids=sum(
+            m.found is not None and flight_confirmed[m.reference].id == confirmed[m.found].id
+            for m in matches
+        ),
         truncated=tuple(fl.truncated),
         interrupted=interrupted,
         detect_ms_mean=fl.detect_ms / max(fl.frames_detected, 1),

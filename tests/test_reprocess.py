@@ -134,10 +134,12 @@ def test_flight_frames_reproduce_the_flights_holes(
     assert f.flight_matches and all(
         m.found is not None and m.distance_m < 0.05 for m in f.flight_matches
     ), f.flight_matches
+    assert f.flight_same_ids <= len(f.flight_matches)
     if c.pose_refusals == 0 and c.frames_unposed < c.frames_captured:
         # Same detections, in the same order, posed from the same telemetry: the same holes
         # (unless the flight had to give up on a pose, which reprocessing then finds).
         same_holes(f.holes, summary.holes, tol_m=0.01)
+        assert f.flight_same_ids == len(f.flight_matches)
 
 
 def test_all_frames_in_parallel_and_in_process_agree(
