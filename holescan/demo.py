@@ -15,8 +15,9 @@ One call runs what a real sortie runs, with no hardware:
 It stops after one lap of the survey (or ``duration_s`` of capture), then scores the holes
 the flight confirmed against the simulator's truth: every true access hole the camera saw
 whole in at least ``min_frames_in_view`` frames is found (a confirmed hole within
-``match_m``) or missed; confirmed holes matching no true hole are false (the nearest
-distractor is named). It writes the hole files and the report beside the flight log.
+``match_m`` of its centre or inside its opening) or missed; confirmed holes matching no
+true hole are false (the nearest feature of the world is named). It writes the hole files
+and the report beside the flight log.
 """
 
 from __future__ import annotations
@@ -44,7 +45,7 @@ from capture._sortie import SimSortie, SortieParams, TrueHole, loop_length_m
 from capture.sim._world import RubbleWorld
 from geotag import Hole, VehiclePose
 from holescan.errors import InputError
-from holescan.reprocess import ReprocessOptions, match_points, write_hole_outputs
+from holescan.reprocess import ReprocessOptions, write_hole_outputs
 from missions import HoleMissionServer, connect, download_mission
 
 __all__ = [
@@ -73,7 +74,8 @@ class DemoOptions:
         the current directory). sortie : the simulated sortie.
     duration_s : seconds of capture (None: one lap of the survey).
     min_sightings : a hole is confirmed (announced, scored, written) when seen this often.
-    match_m : a confirmed hole this close to a true access hole found it, metres.
+    match_m : a confirmed hole this close to a true access hole's centre (or inside its
+        opening) found it, metres.
     min_frames_in_view : a true hole counts as seen by the camera when it was whole in at
         least this many frames.
     """
@@ -154,6 +156,7 @@ class DemoResult:
     interrupted: bool
     world_features: dict[str, int]
     min_sightings: int
+    match_m: float
 
     @property
     def found(self) -> int:
@@ -289,29 +292,44 @@ def score(
     in_view: Counter[int],
     opts: DemoOptions,
 ) -> tuple[tuple[TruthRow, ...], tuple[FalseHole, ...]]:
-    """Match confirmed holes to the true access holes (nearest pairs first, within
-    ``opts.match_m``); name the nearest world feature of each unmatched hole."""
-    matches = match_points(
-        [(t.lat_deg, t.lon_deg) for t in truth],
-        [(h.lat_deg, h.lon_deg) for h in confirmed],
-        opts.match_m,
-    )
-    rows = []
+    """Match confirmed holes to the true access holes, nearest pairs first, each used once.
+
+    A confirmed hole finds a true one when it lies within ``opts.match_m`` of its centre or
+    inside its opening (a big hole seen cut by the image border is placed off its centre,
+    yet a crew sent there stands at the hole). Unmatched confirmed holes are false; the
+    nearest feature of the world is named.
+    """
+    from shapely.geometry import Point, Polygon
+
+    xy = [_en(anchor, h.lat_deg, h.lon_deg) for h in confirmed]
+    pairs = []
+    for i, t in enumerate(truth):
+        opening = Polygon(world.holes[t.id].opening)
+        for j, (x, y) in enumerate(xy):
+            d = math.hypot(x - t.x_m, y - t.y_m)
+            if d <= opts.match_m or opening.contains(Point(x, y)):
+                pairs.append((d, i, j))
+    matched: dict[int, tuple[int, float]] = {}
     used: set[int] = set()
-    for t, m in zip(truth, matches, strict=True):
+    for d, i, j in sorted(pairs):
+        if i not in matched and j not in used:
+            matched[i] = (j, d)
+            used.add(j)
+    rows = []
+    for i, t in enumerate(truth):
         frames = in_view.get(t.id, 0)
-        if m.found is not None:
-            h = confirmed[m.found]
-            used.add(m.found)
-            rows.append(TruthRow(t, frames, "found", h.id, m.distance_m, h.sightings))
+        if i in matched:
+            j, d = matched[i]
+            h = confirmed[j]
+            rows.append(TruthRow(t, frames, "found", h.id, d, h.sightings))
         else:
             status = "missed" if frames >= opts.min_frames_in_view else "not in view"
             rows.append(TruthRow(t, frames, status, None, math.nan, 0))
     false = []
-    for i, h in enumerate(confirmed):
-        if i in used:
+    for j, h in enumerate(confirmed):
+        if j in used:
             continue
-        x, y = _en(anchor, h.lat_deg, h.lon_deg)
+        x, y = xy[j]
         best = ("nothing", math.inf)
         for feature in world.holes:
             d = math.hypot(feature.centre_xy[0] - x, feature.centre_xy[1] - y)
@@ -495,8 +513,8 @@ def run_demo(
         f"{opts.sortie.altitude_m:g} m, world seed {opts.sortie.world_seed}",
         "world": ", ".join(f"{n} {k}" for k, n in sorted(kinds.items())),
         "against the truth": f"found {sum(r.status == 'found' for r in rows)}, missed "
-        f"{sum(r.status == 'missed' for r in rows)}, false {len(false)} (a find within "
-        f"{opts.match_m:g} m)",
+        f"{sum(r.status == 'missed' for r in rows)}, false {len(false)} (a find: inside a "
+        f"true opening or within {opts.match_m:g} m of its centre)",
     }
     files = write_hole_outputs(
         out,
@@ -527,6 +545,7 @@ def run_demo(
         interrupted=interrupted,
         world_features=dict(kinds),
         min_sightings=opts.min_sightings,
+        match_m=opts.match_m,
     )
     path = out / "demo.json"
     path.write_text(json.dumps(result.numbers(), indent=1) + "\n")
@@ -547,8 +566,8 @@ def format_result(r: DemoResult) -> list[str]:
         f"{n_access} access holes and {distractors} distractors in the field",
         f"frames: {c.frames_captured} captured ({c.frames_captured / max(r.capture_s, 1e-9):.1f}"
         f"/s), {c.frames_detected} detected, {c.frames_unposed} not posed at capture",
-        f"holes against the simulator's truth (a confirmed hole, >= "
-        f"{r.min_sightings} sightings, within the match distance finds a true one):",
+        f"holes against the simulator's truth (a confirmed hole, >= {r.min_sightings} "
+        f"sightings, inside a true opening or within {r.match_m:g} m of its centre finds it):",
     ]
     for row in r.truth:
         t = row.truth

@@ -127,6 +127,7 @@ _FIRST_NEW_ID: Final = 0xFF00
 _MAV_AUTOPILOT_INVALID: Final = 8
 _MSGID_HOME_POSITION: Final = 242
 _NEW_CHUNK_BYTES: Final = 1 << 20
+_BATCH_MS: Final = 250.0
 _FLIGHT_HORIZON: Final = 60  # frames: a flight's detections are logged well within this
 _Box = tuple[int, int, int, int]
 
@@ -144,7 +145,8 @@ class ReprocessOptions:
         (``flight``: the frames its ``/detections`` records name, merged in their order;
         with the flight's parameters this reproduces the flight's holes, exactly when
         the flight could pose every frame it detected on).
-    batch_frames : frames per job sent to a worker.
+    batch_frames : at most this many frames per job sent to a worker (fewer when the
+        detector is slow, so that a job takes about 0.25 s).
     min_sightings : holes written to the hole files (and counted as confirmed).
     formats : hole files to write.
     rel_alt_m, clearance_m : mission altitude for ``plan``/``wpl`` files.
@@ -977,8 +979,16 @@ class _Flight:
         self._pose_queue.append((index, t_boot))
         self._pose_ready()
         self._batch.append(job)
-        if len(self._batch) >= self.opts.batch_frames:
+        if len(self._batch) >= self._batch_size():
             self._submit()
+
+    def _batch_size(self) -> int:
+        """Frames per job: ``batch_frames``, fewer when frames are slow (paper mode), so
+        that a job takes about :data:`_BATCH_MS` and a stop does not wait long for one."""
+        if self.frames_detected == 0:
+            return 1
+        per_frame_ms = self.detect_ms / self.frames_detected
+        return max(1, min(self.opts.batch_frames, int(_BATCH_MS / max(per_frame_ms, 1.0))))
 
     def _submit(self) -> None:
         if not self._batch:

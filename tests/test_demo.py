@@ -16,9 +16,11 @@ import cv2
 import gpxpy
 import pymap3d
 import pytest
+from shapely.geometry import Point, Polygon
 
 from capture import log_info
-from capture._sortie import make_sortie_world, true_holes
+from capture._sortie import TrueHole, make_sortie_world, true_holes
+from geotag import Hole
 from holescan import cli
 from holescan.demo import DEMO_SORTIE
 from holescan.flightholes import read_flight_holes
@@ -52,40 +54,41 @@ def demo(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
 def test_printed_score_is_the_truth(demo: tuple[Path, str]) -> None:
     out, text = demo
     sortie = dataclasses.replace(DEMO_SORTIE, size_m=SIZE)
-    truth = {t.id: t for t in true_holes(make_sortie_world(sortie), sortie.anchor)}
+    world = make_sortie_world(sortie)
+    a = sortie.anchor
+    truth = {t.id: t for t in true_holes(world, a)}
     flight = read_flight_holes(sorted(out.glob("flight_*.mcap")), thumbnails=False)
     confirmed = {h.id: h for h in flight.holes if h.sightings >= 3}
-    rows = re.findall(
-        r"true hole (\d+) at \(([\d.]+), ([\d.]+)\) m, [\d.]+ m wide: (\w+)(.*)", text
-    )
+
+    def centre_m(h: Hole, t: TrueHole) -> float:
+        return distance_m(h.lat_deg, h.lon_deg, t.lat_deg, t.lon_deg)
+
+    def finds(h: Hole, t: TrueHole) -> bool:  # within 0.5 m of the centre, or in the opening
+        x, y, _ = pymap3d.geodetic2enu(h.lat_deg, h.lon_deg, a.alt_m, a.lat_deg, a.lon_deg, a.alt_m)
+        inside = Polygon(world.holes[t.id].opening).contains(Point(float(x), float(y)))
+        return centre_m(h, t) <= 0.5 or inside
+
+    row = r"true hole (\d+) at \(([\d.]+), ([\d.]+)\) m, [\d.]+ m wide: (\w+)(.*)"
+    rows = re.findall(row, text)
     assert sorted(int(r[0]) for r in rows) == sorted(truth)  # every true access hole listed
     found_ids = []
     for tid, x, y, status, rest in rows:
         t = truth[int(tid)]
         assert (float(x), float(y)) == (round(t.x_m, 1), round(t.y_m, 1))
         if status == "FOUND":
-            hid, cm = re.search(r"as hole (\d+) \(score [\d.]+\), (\d+) cm off", rest).groups()  # type: ignore[union-attr]
-            h = confirmed[int(hid)]  # a confirmed hole of the logged flight
-            d = distance_m(h.lat_deg, h.lon_deg, t.lat_deg, t.lon_deg)
-            assert d <= 0.5 and abs(100 * d - int(cm)) <= 1, (d, cm)
-            found_ids.append(int(hid))
+            m = re.search(r"as hole (\d+) \(score [\d.]+\), (\d+) cm off", rest)
+            assert m is not None
+            h = confirmed[int(m[1])]  # a confirmed hole of the logged flight
+            assert finds(h, t) and abs(100 * centre_m(h, t) - int(m[2])) <= 1
+            found_ids.append(h.id)
         else:
             assert status in ("MISSED", "not")
-            # nothing confirmed within the match distance of a missed true hole was left over
-            assert all(
-                distance_m(h.lat_deg, h.lon_deg, t.lat_deg, t.lon_deg) > 0.5 or h.id in found_ids
-                for h in confirmed.values()
-            )
+    for tid, _, _, status, _ in rows:  # no confirmed hole left over could have found a missed one
+        if status != "FOUND":
+            t = truth[int(tid)]
+            assert not any(finds(h, t) for h in confirmed.values() if h.id not in found_ids)
     false_ids = [int(i) for i in re.findall(r"hole (\d+): FALSE", text)]
     assert sorted(found_ids + false_ids) == sorted(confirmed)  # each confirmed hole scored once
-    for hid in false_ids:
-        h = confirmed[hid]
-        near = min(distance_m(h.lat_deg, h.lon_deg, t.lat_deg, t.lon_deg) for t in truth.values())
-        assert near > 0.5 or any(  # or a closer hole took that true hole
-            distance_m(confirmed[f].lat_deg, confirmed[f].lon_deg, t.lat_deg, t.lon_deg) < near
-            for f in found_ids
-            for t in truth.values()
-        )
     m = re.search(r"=> found (\d+) of (\d+) in view, missed (\d+), false (\d+)", text)
     assert m is not None
     found, in_view, missed, false = (int(v) for v in m.groups())

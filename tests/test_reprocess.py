@@ -9,8 +9,12 @@ import itertools
 import json
 import math
 import shutil
+import signal
 import socket
+import subprocess
+import sys
 import threading
+import time
 from collections import defaultdict
 from pathlib import Path
 
@@ -329,3 +333,48 @@ def test_match_points() -> None:
     assert m[1].distance_m == pytest.approx(0.2, abs=1e-6)
     assert math.isnan(m[2].distance_m)
     assert match_points([], found, 1.0) == []
+
+
+def test_ctrl_c_stops_cleanly_and_keeps_what_is_done(
+    flight: tuple[list[Path], FlightSummary], tmp_path: Path
+) -> None:
+    files, summary = flight
+    out = tmp_path / "out"
+    argv = [
+        sys.executable,
+        "-m",
+        "holescan.cli",
+        "reprocess",
+        *map(str, files),
+        "--out",
+        str(out),
+        "--mode",
+        "paper",
+        "--workers",
+        "1",
+    ]  # paper mode: slow frames
+    proc = subprocess.Popen(
+        argv,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=Path(__file__).resolve().parents[1],
+    )
+    assert proc.stderr is not None
+    first = proc.stderr.readline()  # the first progress line: reading has started
+    assert "frames/s" in first, first
+    time.sleep(2.0)
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 130, stderr[-2000:]
+    assert "INTERRUPTED" in stdout and "Traceback" not in stderr
+    doc = json.loads((out / "summary.json").read_text())["flights"][0]
+    assert doc["interrupted"] and 0 < doc["frames_detected"] < summary.frames_logged
+    copies = [Path(p) for p in doc["outputs"]]
+    assert copies and all(not log_info(p).truncated for p in copies)
+    n = sum(
+        log_info(p).topics["/reprocess/detections"].count
+        for p in copies
+        if "/reprocess/detections" in log_info(p).topics
+    )
+    assert n == doc["frames_detected"]
