@@ -41,7 +41,7 @@ def _rotation_about(axis: FloatArray, angle: float) -> FloatArray:
     """Rodrigues: (3, 3) rotation by ``angle`` rad about the unit vector ``axis``."""
     k = axis / np.linalg.norm(axis)
     kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + math.sin(angle) * kx + (1.0 - math.cos(angle)) * (kx @ kx)
+    return np.asarray(np.eye(3) + math.sin(angle) * kx + (1.0 - math.cos(angle)) * (kx @ kx))
 
 
 @dataclass(frozen=True, eq=False)

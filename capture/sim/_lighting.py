@@ -13,7 +13,7 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit
 
-__all__ = ["SUN_RGB", "SKY_RGB", "radiance_map", "sky_visibility", "sun_visibility"]
+__all__ = ["SKY_RGB", "SUN_RGB", "radiance_map", "sky_visibility", "sun_visibility"]
 
 F32 = npt.NDArray[np.float32]
 
@@ -33,7 +33,7 @@ def _bilinear(h: F32, x: float, y: float) -> float:
     fy = y - j
     a = h[j, i] * (1.0 - fx) + h[j, i + 1] * fx
     b = h[j + 1, i] * (1.0 - fx) + h[j + 1, i + 1] * fx
-    return a * (1.0 - fy) + b * fy
+    return float(a * (1.0 - fy) + b * fy)
 
 
 @njit(cache=True)
@@ -171,8 +171,7 @@ def radiance_map(
     lambert = np.maximum(0.0, (-gx * s[0] - gy * s[1] + s[2]) / norm).astype(np.float32)
     direct = lambert * sun_visibility(height, cell_m, sun_azimuth, sun_elevation)
     ambient = sky_visibility(height, cell_m)
-    irr = (
-        sun_strength * direct[..., None] * np.asarray(SUN_RGB, dtype=np.float32)
-        + sky_strength * ambient[..., None] * np.asarray(SKY_RGB, dtype=np.float32)
-    )
+    irr = sun_strength * direct[..., None] * np.asarray(
+        SUN_RGB, dtype=np.float32
+    ) + sky_strength * ambient[..., None] * np.asarray(SKY_RGB, dtype=np.float32)
     return np.ascontiguousarray(albedo * irr, dtype=np.float32)

@@ -49,8 +49,8 @@ def footprint_rows(
             t = (z - position[2]) / dw[2] if abs(dw[2]) > 1e-12 else -1.0
             pts.append((position + dw * (t if 0.0 < t < far else far))[:2])
     hull = _convex_hull(np.asarray(pts))
-    j_lo = max(int(math.floor(hull[:, 1].min() / cell_m)) - 1, 0)
-    j_hi = min(int(math.ceil(hull[:, 1].max() / cell_m)) + 1, ny - 1)
+    j_lo = max(math.floor(hull[:, 1].min() / cell_m) - 1, 0)
+    j_hi = min(math.ceil(hull[:, 1].max() / cell_m) + 1, ny - 1)
     if j_hi <= j_lo:
         return 0, np.zeros(0, np.int64), np.zeros(0, np.int64)
     ys = (np.arange(j_lo, j_hi + 1) * cell_m)[:, None]  # cell-row boundaries
@@ -140,9 +140,11 @@ def _triangle(
     b1c = (u2 * v0 - u0 * v2) * inv
     tol = -1e-9
     for y in range(ya, yb + 1):
+        c0 = b0c + b0y * y
+        c1 = b1c + b1y * y
         for x in range(xa, xb + 1):
-            b0 = b0c + b0x * x + b0y * y
-            b1 = b1c + b1x * x + b1y * y
+            b0 = c0 + b0x * x
+            b1 = c1 + b1x * x
             b2 = 1.0 - b0 - b1
             if b0 < tol or b1 < tol or b2 < tol:
                 continue
@@ -152,11 +154,12 @@ def _triangle(
             z = 1.0 / iz
             if z < zbuf[y, x]:
                 zbuf[y, x] = z
-                c0 = b0 * w0 * z
-                c1 = b1 * w1 * z
-                c2 = b2 * w2 * z
+                # Perspective-correct interpolation of the vertices' radiance.
+                k0 = b0 * w0 * z
+                k1 = b1 * w1 * z
+                k2 = b2 * w2 * z
                 for c in range(3):
-                    rgb[y, x, c] = c0 * rad[j0, i0, c] + c1 * rad[j1, i1, c] + c2 * rad[j2, i2, c]
+                    rgb[y, x, c] = k0 * rad[j0, i0, c] + k1 * rad[j1, i1, c] + k2 * rad[j2, i2, c]
 
 
 @njit(cache=True)

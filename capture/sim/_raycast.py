@@ -10,7 +10,6 @@ stays above the block's maximum.
 
 from __future__ import annotations
 
-import math
 from typing import NamedTuple
 
 import numpy as np
@@ -125,7 +124,7 @@ def _cell_hit(
             hb = h00 + (h11 - h01) * ub + (h01 - h00) * vb
         f_b = oz + (t_in + s_b) * dz - hb
         if f_b <= 0.0:
-            return t_in + s_a + (s_b - s_a) * f_a / (f_a - f_b)
+            return float(t_in + s_a + (s_b - s_a) * f_a / (f_a - f_b))
         s_a = s_b
         f_a = f_b
     return -1.0

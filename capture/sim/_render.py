@@ -37,9 +37,7 @@ class GtBox:
     iscrowd: bool
 
 
-def render_exact(
-    world: RubbleWorld, pose: CameraPose, camera: CameraIntrinsics
-) -> tuple[F32, F32]:
+def render_exact(world: RubbleWorld, pose: CameraPose, camera: CameraIntrinsics) -> tuple[F32, F32]:
     """Noise-free view: exact axial depth and linear radiance at every pixel centre.
 
     Returns
@@ -65,9 +63,7 @@ def render_exact(
     )
 
 
-def raycast_view(
-    world: RubbleWorld, pose: CameraPose, camera: CameraIntrinsics
-) -> tuple[F32, F32]:
+def raycast_view(world: RubbleWorld, pose: CameraPose, camera: CameraIntrinsics) -> tuple[F32, F32]:
     """Like :func:`render_exact` but by tracing one ray per pixel (slower; a cross-check)."""
     u, v = np.meshgrid(np.arange(camera.width), np.arange(camera.height))
     dirs_c = np.stack(
@@ -180,4 +176,3 @@ def _opening_box(
     if x1 - x0 <= 0.0 or y1 - y0 <= 0.0:
         return None
     return (float(x0), float(y0), float(x1 - x0), float(y1 - y0)), cut
-

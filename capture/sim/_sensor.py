@@ -46,7 +46,7 @@ def _next(state: U64) -> np.uint64:
     x ^= x << np.uint64(25)
     x ^= x >> np.uint64(27)
     state[0] = x
-    return x * np.uint64(0x2545F4914F6CDD1D)
+    return np.uint64(x * np.uint64(0x2545F4914F6CDD1D))
 
 
 @njit(cache=True, inline="always")
@@ -56,7 +56,7 @@ def _uniform(state: U64) -> float:
 
 @njit(cache=True, inline="always")
 def _normal(state: U64, table: F64) -> float:
-    return table[int(_next(state) >> np.uint64(64 - _TABLE_BITS))]
+    return float(table[int(_next(state) >> np.uint64(64 - _TABLE_BITS))])
 
 
 @njit(cache=True)
@@ -76,6 +76,15 @@ def _depth(
     height, width = depth_m.shape
     out = np.zeros((height, width), dtype=np.uint16)
     fb = fx * baseline_mm  # disparity (px) = fb / Z (mm)
+    # Noise sigma = coeff Z^2 in all; quantisation (step q = Z^2 step_px / fb) contributes
+    # q^2 / 12 of the variance, also ~Z^4, so the added noise is a fixed fraction of it.
+    quantise = fb > 0.0 and step_px > 0.0
+    sig_coeff = noise_scale * XTION_NOISE_COEFF_PER_MM
+    fb_steps = 0.0
+    if quantise:
+        fb_steps = fb / step_px
+        var = sig_coeff * sig_coeff - (step_px / fb) ** 2 / 12.0
+        sig_coeff = math.sqrt(var) if var > 0.0 else 0.0
     for v in range(height):
         # Projector shadow: the projector sits at +x, so a point is hidden from it when a
         # pixel to its right maps to a smaller projector column u - fb / Z.
@@ -95,24 +104,17 @@ def _depth(
                 continue
             if p_drop > 0.0 and _uniform(state) < p_drop:
                 continue
-            sigma = noise_scale * XTION_NOISE_COEFF_PER_MM * z * z
-            if fb > 0.0 and step_px > 0.0:
-                # Quantisation adds q^2 / 12 of variance: take it out of the noise budget.
-                q = z * z * step_px / fb
-                var = sigma * sigma - q * q / 12.0
-                sigma = math.sqrt(var) if var > 0.0 else 0.0
-                z = z + sigma * _normal(state, table)
+            z = z + sig_coeff * z * z * _normal(state, table)
+            if quantise:
                 if z <= 0.0:
                     continue
-                d = round(fb / z / step_px) * step_px
-                if d <= 0.0:
+                n_steps = math.floor(fb_steps / z + 0.5)  # disparity in steps of step_px
+                if n_steps <= 0:
                     continue
-                z = fb / d
-            else:
-                z = z + sigma * _normal(state, table)
+                z = fb_steps / n_steps
             if z < min_mm or z > max_mm:
                 continue
-            out[v, u] = np.uint16(min(round(z), 65535))
+            out[v, u] = np.uint16(min(int(z + 0.5), 65535))
     return out
 
 
@@ -136,17 +138,21 @@ def _colour(
     r_norm = 1.0 / (cx * cx + cy * cy)
     read2 = read_noise * read_noise
     shot2 = shot_noise * shot_noise
+    noisy = read2 > 0.0 or shot2 > 0.0
     for v in range(height):
         dv = (v - cy) * (v - cy)
         for u in range(width):
             vig = 1.0 - vignetting * ((u - cx) * (u - cx) + dv) * r_norm
-            for c in range(3):
-                gain = gain_r if c == 0 else (gain_g if c == 1 else gain_b)
-                s = rad[v, u, c] * gain * vig
-                if read2 > 0.0 or shot2 > 0.0:
-                    s += math.sqrt(read2 + shot2 * max(s, 0.0)) * _normal(state, table)
-                s = min(max(s, 0.0), 1.0)
-                out[v, u, c] = lut[int(s * 65535.0 + 0.5)]
+            sr = rad[v, u, 0] * gain_r * vig
+            sg = rad[v, u, 1] * gain_g * vig
+            sb = rad[v, u, 2] * gain_b * vig
+            if noisy:
+                sr += math.sqrt(read2 + shot2 * max(sr, 0.0)) * _normal(state, table)
+                sg += math.sqrt(read2 + shot2 * max(sg, 0.0)) * _normal(state, table)
+                sb += math.sqrt(read2 + shot2 * max(sb, 0.0)) * _normal(state, table)
+            out[v, u, 0] = lut[int(min(max(sr, 0.0), 1.0) * 65535.0 + 0.5)]
+            out[v, u, 1] = lut[int(min(max(sg, 0.0), 1.0) * 65535.0 + 0.5)]
+            out[v, u, 2] = lut[int(min(max(sb, 0.0), 1.0) * 65535.0 + 0.5)]
     return out
 
 
@@ -155,9 +161,7 @@ def _state(rng: np.random.Generator) -> U64:
     return np.array([seed], dtype=np.uint64)
 
 
-def depth_image(
-    depth_m: F32, fx: float, conditions: Conditions, rng: np.random.Generator
-) -> U16:
+def depth_image(depth_m: F32, fx: float, conditions: Conditions, rng: np.random.Generator) -> U16:
     """The Xtion's reading of an exact depth image.
 
     depth_m : (H, W) float32, metres along the optical axis, 0 = nothing there.

@@ -88,10 +88,10 @@ def rasterise(
 ) -> tuple[slice, slice, Mask] | None:
     """Grid nodes inside ``poly``: (row slice, col slice, mask of that window) or None."""
     ij = poly / cell_m
-    c0 = max(int(math.floor(ij[:, 0].min())) - pad, 0)
-    c1 = min(int(math.ceil(ij[:, 0].max())) + pad + 1, shape[1])
-    r0 = max(int(math.floor(ij[:, 1].min())) - pad, 0)
-    r1 = min(int(math.ceil(ij[:, 1].max())) + pad + 1, shape[0])
+    c0 = max(math.floor(ij[:, 0].min()) - pad, 0)
+    c1 = min(math.ceil(ij[:, 0].max()) + pad + 1, shape[1])
+    r0 = max(math.floor(ij[:, 1].min()) - pad, 0)
+    r1 = min(math.ceil(ij[:, 1].max()) + pad + 1, shape[0])
     if c1 <= c0 or r1 <= r0:
         return None
     mask = np.zeros((r1 - r0, c1 - c0), dtype=np.uint8)

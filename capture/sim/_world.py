@@ -126,9 +126,7 @@ def relight(world: RubbleWorld, sun_azimuth: float, sun_elevation: float) -> Rub
 # ----------------------------------------------------------------------------- generation
 
 
-def _noise(
-    rng: np.random.Generator, shape: tuple[int, int], cell_m: float, scale_m: float
-) -> F32:
+def _noise(rng: np.random.Generator, shape: tuple[int, int], cell_m: float, scale_m: float) -> F32:
     """Smooth unit-variance-ish noise with features ~``scale_m`` across."""
     ny, nx = shape
     n_r = max(2, math.ceil(ny * cell_m / scale_m) + 2)
