@@ -670,7 +670,7 @@ def test_sigkilled_writer_loses_at_most_about_a_second(tmp_path: Path) -> None:
     reports += [tuple(int(v) for v in ln.split()) for ln in rest.splitlines() if ln.strip()]
     assert proc.returncode == -signal.SIGKILL
     enqueued = sum(ok for _, ok, _, _ in reports)
-    assert enqueued == len(reports) >= 60  # nothing dropped at 30 fps
+    assert enqueued == len(reports) >= 30  # nothing dropped (a loaded machine writes fewer)
     _, _, written, synced = reports[-1]
 
     (path,) = tmp_path.glob("killed_*.mcap")
