@@ -361,7 +361,7 @@ def make_world(
     sun_azimuth_deg, sun_elevation_deg : the low sun; random dawn (east) or dusk (west),
         3-15 deg high, when None.
 
-    Features that find no free room are skipped with a warning (``holes`` says what exists).
+    Features that find no free room are skipped (logged at debug level) (``holes`` says what exists).
     """
     sx, sy = float(size_m[0]), float(size_m[1])
     if not (2.0 <= sx <= 500.0 and 2.0 <= sy <= 500.0):
@@ -419,7 +419,7 @@ def make_world(
             except LookupError:
                 pass
         if made < n:
-            _log.warning("world %d: placed %d of %d %s features (no room)", seed, made, n, kind)
+            _log.debug("world %d: placed %d of %d %s features (no room)", seed, made, n, kind)
 
     texture = (
         1.0 + 0.10 * _noise(rng, shape, cell_m, 0.04) + 0.07 * _noise(rng, shape, cell_m, 0.15)
