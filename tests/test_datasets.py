@@ -76,3 +76,18 @@ def test_bad_datasets_are_clear_errors(tmp_path: Path) -> None:
     (tmp_path / "ds2" / "camera.json").write_text(json.dumps(small.to_dict()))
     with pytest.raises(InputError, match="camera"):
         load_dataset(tmp_path / "ds2")
+
+
+def test_eight_bit_depth_and_wrong_sized_images_are_refused(tmp_path: Path) -> None:
+    import cv2
+
+    write_dataset(tmp_path / "ds", CAM, _samples(2))
+    ds = load_dataset(tmp_path / "ds")
+    depth_png = ds.images[0].depth_path
+    cv2.imwrite(str(depth_png), np.full((480, 640), 200, np.uint8))  # a grey picture, not mm
+    with pytest.raises(InputError, match="16-bit"):
+        load_image_pair(ds, ds.images[0])
+    rgb_png = ds.images[1].rgb_path
+    cv2.imwrite(str(rgb_png), np.zeros((240, 320, 3), np.uint8))
+    with pytest.raises(InputError, match=r"camera\.json says 640x480"):
+        load_image_pair(ds, ds.images[1])
