@@ -35,7 +35,7 @@ from capture._clock import ClockUnavailable
 from capture._errors import SensorError
 from capture._frame import Frame, FrameSource
 from capture._holepipeline import HolePipeline
-from capture._mavlink import Telemetry
+from capture._mavlink import Telemetry, TelemetryTimeoutError
 from capture._mcaplog import FlightLogWriter, LogOptions, WriterStats
 from capture._posebuffer import PoseUnavailable
 from capture._worker import DetectionWorker, WorkerResult
@@ -418,6 +418,42 @@ class Flight:
         self.stop.wait(wait)
         c.sensor_reopens += 1
 
+    def _start_telemetry(self, sync_s: float) -> None:
+        """Connect to the autopilot; if it is silent, capture anyway and keep trying.
+
+        A link that cannot be opened at all (bad connection string) is an error; an
+        autopilot that does not answer yet only leaves frames unposed until it does.
+        """
+        assert self._mavlink is not None
+        try:
+            tel = self._telemetry_factory(self._mavlink, on_message=self._on_mavlink)
+            tel.__enter__()
+        except TelemetryTimeoutError as err:
+            log.warning("%s; capturing unposed frames and retrying the link", err)
+            if self._writer is not None:
+                self._writer.write_health({"event": "autopilot_silent", "error": str(err)})
+            threading.Thread(
+                target=self._retry_telemetry, name="telemetry-retry", daemon=True
+            ).start()
+            return
+        self._telemetry = tel
+        self._wait_for_sync(sync_s)
+
+    def _retry_telemetry(self) -> None:
+        assert self._mavlink is not None
+        while not self.stop.is_set():
+            try:
+                tel = self._telemetry_factory(self._mavlink, on_message=self._on_mavlink)
+                tel.__enter__()
+            except TelemetryTimeoutError:
+                continue  # each attempt already waited for a heartbeat
+            if self.stop.is_set():
+                tel.close()
+                return
+            self._telemetry = tel
+            log.info("autopilot link up: frames are posed from now on")
+            return
+
     def _wait_for_sync(self, timeout_s: float) -> None:
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline and not self.stop.is_set():
@@ -444,10 +480,7 @@ class Flight:
         telemetry_stats: dict[str, Any] = {}
         try:
             if self._mavlink:
-                tel = self._telemetry_factory(self._mavlink, on_message=self._on_mavlink)
-                tel.__enter__()
-                self._telemetry = tel
-                self._wait_for_sync(cfg.startup_sync_s)
+                self._start_telemetry(cfg.startup_sync_s)
             with DetectionWorker(self.camera, cfg.params) as worker:
                 self._worker = worker
                 results_thread = threading.Thread(
@@ -474,6 +507,7 @@ class Flight:
             writer.write_holes(self.tracker.holes(), time.time_ns())
         finally:
             done.set()
+            self.stop.set()  # also ends a telemetry retry still waiting for the autopilot
             if self._telemetry is not None:
                 self._telemetry.close()
             writer.close()

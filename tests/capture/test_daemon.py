@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 
 from capture._daemon import Flight, FlightConfig
-from capture._errors import SensorError
 from capture._frame import Frame
 from capture._mcapread import read_flight_log
 from capture._simautopilot import SimAutopilot, SimPath
@@ -123,3 +122,23 @@ def test_sensor_fault_is_retried_with_reset(tmp_path: Path, fault: str) -> None:
     assert summary.frames_logged == 10 + 40
     health = [r for r in read_flight_log(summary.log.files) if type(r).__name__ == "LoggedHealth"]
     assert any("sensor_failure" in str(h) for h in health)
+
+
+def test_silent_autopilot_at_start_still_logs_unposed_frames(tmp_path: Path) -> None:
+    from capture._mavlink import Telemetry
+
+    port = free_port()
+    cfg = FlightConfig(log_prefix=tmp_path / "flight", max_frames=45)
+
+    def quick(conn: str, **kw: object) -> Telemetry:
+        return Telemetry(conn, heartbeat_timeout_s=0.5, **kw)  # type: ignore[arg-type]
+
+    summary = Flight(
+        cfg,
+        lambda: ScriptedSource(45),
+        CAM,
+        mavlink=f"udpin:127.0.0.1:{port}",
+        telemetry_factory=quick,
+    ).run()
+    assert summary.frames_logged == 45
+    assert summary.counters.frames_unposed == 45
