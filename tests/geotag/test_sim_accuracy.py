@@ -70,6 +70,9 @@ def test_pipeline_geotag_error_and_every_hole_once(tmp_path: Path) -> None:
             log_prefix=tmp_path / "flight",
             max_duration_s=DURATION_S,
             announce_min_sightings=MIN_SIGHTINGS,
+            # A loaded CI machine can stall the renderer for seconds: no sensor reopen
+            # here (frame indices must stay those of the one simulated source).
+            frame_timeout_s=60.0,
         )
         flight = Flight(cfg, sortie.source, sortie.camera, mavlink=sortie.mavlink)
         sightings: list[HoleSighting] = []
