@@ -562,7 +562,8 @@ class _View:
     d_const: F64 | None
 
     def pix(self, pts: F64) -> tuple[F64, F64, F64]:  # pragma: no cover - abstract
-        raise NotImplementedError
+        """Pixel coordinates and depth of points; each view kind defines it."""
+        raise TypeError(f"{type(self).__name__} does not define pix()")
 
     def rects(self, pts: F64) -> tuple[I64, I64, I64, I64]:
         """Pixel rectangles [u0, u1) x [v0, v1) covering each point set (K, V, 3)."""

@@ -16,6 +16,7 @@ OpenNI2 is initialised once per process, lazily, on the first source opened.
 
 from __future__ import annotations
 
+import abc
 import ctypes
 import dataclasses
 import logging
@@ -180,7 +181,7 @@ class _Pairer:
         return pairs
 
 
-class _OpenNISource:
+class _OpenNISource(abc.ABC):
     """Depth + colour streams of one OpenNI2 device, read and paired into Frames."""
 
     camera: CameraIntrinsics
@@ -202,14 +203,17 @@ class _OpenNISource:
         self.frames_dropped = 0
 
     # -- subclass hooks
+    @abc.abstractmethod
     def _describe(self) -> str:
-        raise NotImplementedError
+        """What the source reads, for messages."""
 
+    @abc.abstractmethod
     def _open_device(self, lib: Any) -> Any:
-        raise NotImplementedError
+        """Open the OpenNI2 device (a file or a sensor)."""
 
+    @abc.abstractmethod
     def _configure(self, device: Any, depth: Any, color: Any) -> None:
-        raise NotImplementedError
+        """Set up the device and its depth and colour streams before they start."""
 
     # -- lifecycle
     def __enter__(self) -> _OpenNISource:
