@@ -12,20 +12,10 @@ from pathlib import Path
 from types import FrameType
 from typing import TYPE_CHECKING, TextIO
 
+from holescan._args import EXIT_INTERRUPTED, positive_float
+
 if TYPE_CHECKING:
     from holescan.demo import DemoProgress
-
-EXIT_INTERRUPTED = 130
-
-
-def _positive(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError as err:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from err
-    if not value > 0:
-        raise argparse.ArgumentTypeError(f"must be > 0, got {text!r}")
-    return value
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -48,12 +38,12 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     p.add_argument(
         "--duration",
-        type=_positive,
+        type=positive_float,
         help="seconds of capture (default: one lap of the survey, about 75 s)",
     )
     p.add_argument(
         "--size",
-        type=_positive,
+        type=positive_float,
         nargs=2,
         metavar=("EAST", "NORTH"),
         help="surveyed area, metres (default 10 10)",

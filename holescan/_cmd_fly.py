@@ -14,17 +14,9 @@ import threading
 from pathlib import Path
 from types import FrameType
 
+from holescan._args import positive_float
+
 log = logging.getLogger("holescan.fly")
-
-
-def _positive(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError as err:
-        raise argparse.ArgumentTypeError(f"expected seconds, got {text!r}") from err
-    if not value > 0:
-        raise argparse.ArgumentTypeError(f"must be > 0, got {text!r}")
-    return value
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -52,7 +44,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="serve found holes as a mission (component 191) and announce them by STATUSTEXT "
         "on this link, e.g. udpout:192.168.1.10:14550",
     )
-    p.add_argument("--duration", type=_positive, help="stop after this many seconds")
+    p.add_argument("--duration", type=positive_float, help="stop after this many seconds")
     p.add_argument("--max-frames", type=int, help="stop after this many frames")
     p.set_defaults(func=run)
 

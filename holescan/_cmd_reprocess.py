@@ -10,12 +10,11 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
+from holescan._args import EXIT_INTERRUPTED
 from missions._holefiles import HOLE_FORMATS
 
 if TYPE_CHECKING:
     from holescan.reprocess import Progress
-
-EXIT_INTERRUPTED = 130
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:

@@ -13,6 +13,7 @@ import sys
 from collections.abc import Sequence
 
 from holescan import __version__
+from holescan._args import EXIT_INPUT, EXIT_INTERRUPTED
 from holescan.errors import HolescanError
 
 _COMMAND_MODULES = (
@@ -27,9 +28,6 @@ _COMMAND_MODULES = (
     "holescan._cmd_reprocess",
     "holescan._cmd_demo",
 )
-
-EXIT_INPUT = 2
-EXIT_INTERRUPTED = 130
 
 
 def build_parser() -> argparse.ArgumentParser:
