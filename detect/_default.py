@@ -36,6 +36,7 @@ import numpy as np
 import numpy.typing as npt
 from skimage.morphology import reconstruction
 
+from detect._evaluate import overlap
 from detect._scores import contrast_score, darkness_score, ramp, width_score
 from detect._types import CameraIntrinsics, Detection, DetectParams, FeatureScores
 from detect._validate import check_frame
@@ -250,11 +251,7 @@ def _nms(dets: list[Detection], iou_max: float) -> list[Detection]:
 
 def box_iou(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> float:
     """Intersection over union of two (x, y, w, h) boxes."""
-    ix = max(0, min(a[0] + a[2], b[0] + b[2]) - max(a[0], b[0]))
-    iy = max(0, min(a[1] + a[3], b[1] + b[3]) - max(a[1], b[1]))
-    inter = ix * iy
-    union = a[2] * a[3] + b[2] * b[3] - inter
-    return inter / union if union > 0 else 0.0
+    return overlap(a, b, "iou")
 
 
 @dataclass(frozen=True)
