@@ -31,6 +31,8 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+import pymap3d
+
 from capture._clock import ClockUnavailable
 from capture._errors import SensorError
 from capture._frame import Frame, FrameSource
@@ -291,8 +293,6 @@ class Flight:
         last = self._announced.get(h.id)
         if last is None:
             return True
-        import pymap3d
-
         _, _, dist = pymap3d.geodetic2aer(h.lat_deg, h.lon_deg, 0.0, last[0], last[1], 0.0)
         return bool(dist > 0.5 or h.score > last[2] + 0.05)
 
