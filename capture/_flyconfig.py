@@ -13,7 +13,7 @@ sensor and the links, and one table per part::
     [holes]    announcing and serving holes
     [sim]      the simulated sortie (``sensor = "sim"``)
 
-Unknown keys and wrong types raise :class:`holescan.errors.InputError` naming the key (a
+Unknown keys and wrong types raise :class:`holescan_errors.InputError` naming the key (a
 typo in a flight configuration must not pass silently). :func:`open_sensor` turns the
 sensor setting into a source factory; :func:`capture._fly.fly` runs the flight.
 """
@@ -39,7 +39,7 @@ from capture._simsource import WorldAnchor
 from capture._sortie import DEFAULT_ANCHOR, SortieParams
 from detect import DEFAULT, PAPER, SEARCHERS, CameraIntrinsics, DetectParams
 from geotag import CameraMount
-from holescan.errors import InputError
+from holescan_errors import InputError
 
 __all__ = [
     "FlyConfig",

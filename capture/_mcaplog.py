@@ -19,6 +19,7 @@ import threading
 import time
 from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
+from importlib.metadata import version as _dist_version
 from pathlib import Path
 from typing import IO, Any, Final, Literal
 
@@ -30,12 +31,11 @@ from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 from mcap_protobuf.schema import build_file_descriptor_set
 
-import holescan
 from capture import _mcapschemas as sch
 from capture._frame import Frame
 from detect import CameraIntrinsics, Detection
 from geotag import CameraMount, VehiclePose
-from holescan.errors import InputError
+from holescan_errors import InputError
 
 __all__ = [
     "FlightLogError",
@@ -147,7 +147,7 @@ class _File:
             compression=_COMPRESSION[options.compression],
             enable_data_crcs=True,
         )
-        self.writer.start(library=f"holescan/{holescan.__version__} mcap-python/{mcap_version()}")
+        self.writer.start(library=f"holescan/{_dist_version('holescan')} mcap-python/{mcap_version()}")
         self.opened_mono_ns = time.monotonic_ns()
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}
@@ -225,7 +225,7 @@ class FlightLogWriter:
         self._mount_offset = tuple(float(v) for v in mount.offset_m)
         self._metadata = {
             "holescan": {
-                "version": holescan.__version__,
+                "version": _dist_version('holescan'),
                 "python": platform.python_version(),
                 "mcap": mcap_version(),
                 "host": platform.node(),

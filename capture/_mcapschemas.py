@@ -39,7 +39,7 @@ from google.protobuf.timestamp_pb2 import Timestamp
 
 from detect import CameraIntrinsics, Detection, FeatureScores
 from geotag import VehiclePose
-from holescan.errors import InputError
+from holescan_errors import InputError
 
 __all__ = [
     "BODY_FRAME",

@@ -9,6 +9,7 @@ import os
 import zlib
 from collections import defaultdict
 from collections.abc import Iterable, Mapping
+from importlib.metadata import version as _dist_version
 from pathlib import Path
 from typing import IO
 
@@ -26,7 +27,6 @@ from mcap.records import (
 from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 
-import holescan
 from capture import _mcapschemas as sch
 from capture._mcaplog import FlightLogError
 from capture._mcapread import ScanState, TruncatedLogError, _as_paths, scan_records
@@ -283,7 +283,7 @@ def recover_log(src: str | os.PathLike[str], dst: str | os.PathLike[str]) -> Rec
                 library = header.library if header is not None else ""
                 writer.start(
                     profile=header.profile if header is not None else "",
-                    library=f"{library} recovered-by holescan/{holescan.__version__}".strip(),
+                    library=f"{library} recovered-by holescan/{_dist_version('holescan')}".strip(),
                 )
             if isinstance(rec, Schema):
                 if rec.id not in schema_ids and rec.id not in pending_schemas:

@@ -35,7 +35,7 @@ import numpy as np
 
 from capture._frame import Frame
 from detect import CameraIntrinsics
-from holescan.errors import InputError
+from holescan_errors import InputError
 
 __all__ = [
     "OniInfo",

@@ -38,7 +38,7 @@ from capture._frame import Frame
 from capture._oni import OniInfo, scan_oni
 from capture._usb import XTION_VENDOR_ID, find_xtion
 from detect import CameraIntrinsics
-from holescan.errors import HolescanError, InputError
+from holescan_errors import HolescanError, InputError
 
 __all__ = ["OniSource", "OpenNI2Device", "camera_from_fov", "openni2_library"]
 

@@ -43,7 +43,7 @@ from capture._simsource import SimSource, WorldAnchor, camera_pose_in_world
 from capture.sim import Conditions, RubbleWorld, make_world, random_conditions, render
 from detect import CameraIntrinsics
 from geotag import CameraMount
-from holescan.errors import InputError
+from holescan_errors import InputError
 from missions import Area, SurveyParams, SurveyPlan, Waypoint, plan_survey
 
 __all__ = [

@@ -30,7 +30,7 @@ def detect_holes(
 
     Raises
     ------
-    holescan.errors.InputError
+    holescan_errors.InputError
         Wrong shapes or dtypes, sizes that do not match ``camera``, no depth at all.
     """
     if params.mode is Mode.PAPER:

@@ -47,7 +47,7 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
-from holescan.errors import HolescanError, InputError
+from holescan_errors import HolescanError, InputError
 
 __all__ = ["ers_superpixels"]
 

@@ -73,7 +73,7 @@ from scipy import ndimage
 from detect._ers import ers_superpixels
 from detect._scores import contrast_score, darkness_score, luminance, ramp, width_score
 from detect._types import PAPER, CameraIntrinsics, Detection, DetectParams, FeatureScores
-from holescan.errors import InputError
+from holescan_errors import InputError
 
 __all__ = ["detect_paper", "paper_superpixels", "score_regions"]
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass, field, replace
 
-from holescan.errors import InputError
+from holescan_errors import InputError
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,7 @@ import numpy as np
 import numpy.typing as npt
 
 from detect._types import CameraIntrinsics
-from holescan.errors import InputError
+from holescan_errors import InputError
 
 
 def check_frame(

@@ -22,7 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from geotag._types import VehiclePose
-from holescan.errors import InputError
+from holescan_errors import InputError
 
 __all__ = [
     "CameraMount",

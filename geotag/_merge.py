@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import pymap3d
 
 from geotag._project import HoleSighting
-from holescan.errors import InputError
+from holescan_errors import InputError
 
 __all__ = ["Hole", "HoleTracker", "MergeParams"]
 

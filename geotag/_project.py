@@ -24,7 +24,7 @@ import pymap3d
 from detect import CameraIntrinsics, Detection, FeatureScores
 from geotag._camera import CameraMount, FloatArray, dcm_from_euler, rotation_ned_from_optical
 from geotag._types import VehiclePose
-from holescan.errors import InputError
+from holescan_errors import InputError
 
 __all__ = [
     "ErrorModel",

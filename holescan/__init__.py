@@ -6,7 +6,7 @@ files. This package holds the project's exception root, dataset/evaluation I/O a
 thin command line (:mod:`holescan.cli`).
 """
 
-from holescan.errors import HolescanError, InputError
+from holescan_errors import HolescanError, InputError
 
 __version__ = "0.1.0"
 __all__ = ["HolescanError", "InputError", "__version__"]

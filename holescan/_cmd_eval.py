@@ -10,7 +10,6 @@ from pathlib import Path
 
 from holescan._cmd_detect import add_detector_options, params_from_args
 from holescan.datasets import load_dataset
-from holescan.errors import InputError
 from holescan.evaluation import (
     EvalReport,
     format_table,
@@ -18,6 +17,7 @@ from holescan.evaluation import (
     run_detector,
     write_coco_results,
 )
+from holescan_errors import InputError
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:

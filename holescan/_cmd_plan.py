@@ -8,7 +8,7 @@ import logging
 import time
 from pathlib import Path
 
-from holescan.errors import InputError
+from holescan_errors import InputError
 from missions import (
     SunWindowError,
     SurveyParams,

@@ -14,7 +14,7 @@ from collections.abc import Sequence
 
 from holescan import __version__
 from holescan._args import EXIT_INPUT, EXIT_INTERRUPTED
-from holescan.errors import HolescanError
+from holescan_errors import HolescanError
 
 _COMMAND_MODULES = (
     "holescan._cmd_detect",

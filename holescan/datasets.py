@@ -26,8 +26,8 @@ import numpy as np
 import numpy.typing as npt
 
 from detect import CameraIntrinsics
-from holescan.errors import InputError
 from holescan.images import read_camera, read_depth, read_rgb, write_depth, write_rgb
+from holescan_errors import InputError
 
 CATEGORY = {"id": 1, "name": "access_hole"}
 Box = tuple[float, float, float, float]

@@ -44,8 +44,8 @@ from capture._daemon import Flight, FlightConfig, FlightSummary
 from capture._sortie import SimSortie, SortieParams, TrueHole, loop_length_m
 from capture.sim._world import RubbleWorld
 from geotag import Hole, VehiclePose
-from holescan.errors import InputError
 from holescan.reprocess import ReprocessOptions, write_hole_outputs
+from holescan_errors import InputError
 from missions import HoleMissionServer, connect, download_mission
 
 __all__ = [

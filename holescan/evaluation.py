@@ -16,7 +16,7 @@ import numpy.typing as npt
 from detect import CameraIntrinsics, Detection, DetectParams, detect_baseline, detect_holes
 from detect._evaluate import GroundTruthBox, PRResult, ScoredBox, evaluate_detections
 from holescan.datasets import Dataset, DatasetImage, load_dataset, load_image_pair
-from holescan.errors import InputError
+from holescan_errors import InputError
 
 log = logging.getLogger(__name__)
 

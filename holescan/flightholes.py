@@ -47,8 +47,8 @@ from capture import (
     read_flight_log,
 )
 from geotag import Hole
-from holescan.errors import InputError
 from holescan.overlay import depth_colour
+from holescan_errors import InputError
 from missions._holefiles import (
     HOLE_FORMATS,
     HOLE_SUFFIXES,

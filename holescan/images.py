@@ -9,7 +9,7 @@ import numpy as np
 import numpy.typing as npt
 
 from detect import CameraIntrinsics
-from holescan.errors import InputError
+from holescan_errors import InputError
 
 
 def read_rgb(path: Path) -> npt.NDArray[np.uint8]:

@@ -27,8 +27,8 @@ from shapely.geometry import LineString
 
 from geotag import Hole, VehiclePose
 from holescan import __version__
-from holescan.errors import InputError
 from holescan.overlay import depth_colour
+from holescan_errors import InputError
 
 __all__ = [
     "SCORE_BANDS",

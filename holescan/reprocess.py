@@ -55,6 +55,7 @@ import time
 import zlib
 from collections import OrderedDict, deque
 from collections.abc import Callable, Iterable, Mapping, Sequence
+from importlib.metadata import version as _dist_version
 from pathlib import Path
 from typing import IO, Any, Final, Literal
 
@@ -85,7 +86,6 @@ from mcap.records import (
 from mcap.well_known import MessageEncoding, SchemaEncoding
 from mcap_protobuf.schema import build_file_descriptor_set
 
-import holescan
 from capture import _mcapschemas as sch
 from capture._holepipeline import HolePipeline
 from capture._mavlink import (
@@ -99,9 +99,9 @@ from capture._mcapread import LoggedHoles, ScanState, scan_records
 from capture._posebuffer import PoseBuffer, PoseUnavailable
 from detect import DEFAULT, CameraIntrinsics, Detection, DetectParams, detect_holes
 from geotag import CameraMount, Hole, VehiclePose
-from holescan.errors import InputError
 from holescan.flightholes import flight_log_files, log_stem, render_thumbnail
 from holescan.report import write_report
+from holescan_errors import InputError
 from missions._holefiles import HOLE_SUFFIXES, HoleFormat, write_hole_file
 
 __all__ = [
@@ -885,7 +885,7 @@ class _Flight:
     def _metadata_record(self) -> dict[str, str]:
         p = self.opts.params
         return {
-            "version": holescan.__version__,
+            "version": _dist_version('holescan'),
             "params": sch.to_json(p).decode(),
             "frames": self.opts.frames,
             "topic_prefix": self.opts.topic_prefix,
@@ -1383,7 +1383,7 @@ def reprocess(
     out_dir.mkdir(parents=True, exist_ok=True)
     summary = out_dir / "summary.json"
     doc = {
-        "holescan": holescan.__version__,
+        "holescan": _dist_version('holescan'),
         "pool_start_s": round(pool_start_s, 2),
         "flights": [r.summary() for r in results],
     }

@@ -21,7 +21,7 @@ from capture.sim._render import render
 from capture.sim._world import RubbleWorld, make_world
 from detect import CameraIntrinsics
 from holescan.datasets import Sample, write_dataset
-from holescan.errors import InputError
+from holescan_errors import InputError
 
 log = logging.getLogger(__name__)
 

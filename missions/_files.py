@@ -17,7 +17,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from holescan.errors import InputError
+from holescan_errors import InputError
 
 __all__ = [
     "MAV_CMD_DO_CHANGE_SPEED",

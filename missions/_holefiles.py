@@ -44,7 +44,7 @@ from pathlib import Path
 from typing import Any, Final, Literal, get_args
 
 from geotag import Hole
-from holescan.errors import InputError
+from holescan_errors import InputError
 from missions._files import (
     MAV_FRAME_GLOBAL,
     MAV_FRAME_GLOBAL_RELATIVE_ALT,

@@ -47,7 +47,7 @@ from types import TracebackType
 from typing import Any
 
 from geotag import Hole
-from holescan.errors import HolescanError, InputError
+from holescan_errors import HolescanError, InputError
 
 __all__ = [
     "HoleMissionServer",

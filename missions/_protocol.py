@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from types import ModuleType
 from typing import Any
 
-from holescan.errors import HolescanError, InputError
+from holescan_errors import HolescanError, InputError
 from missions._files import (
     MAV_CMD_NAV_WAYPOINT,
     MAV_FRAME_GLOBAL,

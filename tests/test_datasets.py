@@ -10,7 +10,7 @@ import pytest
 
 from detect import CameraIntrinsics
 from holescan.datasets import Sample, load_dataset, load_image_pair, write_dataset
-from holescan.errors import InputError
+from holescan_errors import InputError
 from holescan.synth import synth_dataset
 
 CAM = CameraIntrinsics.xtion()

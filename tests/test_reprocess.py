@@ -32,7 +32,7 @@ from capture.sim._world import make_world
 from detect import CameraIntrinsics
 from geotag import Hole
 from holescan import cli
-from holescan.errors import InputError
+from holescan_errors import InputError
 from holescan.reprocess import (
     Progress,
     ReprocessOptions,

@@ -14,7 +14,7 @@ import numpy as np
 import numpy.typing as npt
 
 from detect import CameraIntrinsics
-from holescan.errors import InputError
+from holescan_errors import InputError
 
 __all__ = [
     "XTION_BASELINE_M",

@@ -20,7 +20,7 @@ import numpy.typing as npt
 from capture.sim import _shapes as shp
 from capture.sim._lighting import radiance_map
 from capture.sim._raycast import MaxPyramid, build_pyramid
-from holescan.errors import InputError
+from holescan_errors import InputError
 
 __all__ = ["AccessHole", "HoleKind", "RubbleWorld", "make_world", "relight"]
 

@@ -27,7 +27,7 @@ from capture._mcapread import LoggedFrame, LoggedHealth, LoggedHoles, read_fligh
 from capture._mcaptools import log_info
 from capture._simautopilot import SimAutopilot, SimPath
 from detect import CameraIntrinsics
-from holescan.errors import InputError
+from holescan_errors import InputError
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil

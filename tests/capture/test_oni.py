@@ -15,7 +15,7 @@ import pytest
 
 from capture import Frame, OniWriter, scan_oni, write_oni
 from detect import CameraIntrinsics
-from holescan.errors import InputError
+from holescan_errors import InputError
 
 CAM = CameraIntrinsics(64, 48, 57.3, 58.1, 31.0, 24.5)
 REPO = Path(__file__).resolve().parents[2]

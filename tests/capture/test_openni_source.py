@@ -20,7 +20,7 @@ import pytest
 from capture import Frame, OniSource, write_oni
 from capture._openni import _Pairer, _Raw
 from detect import CameraIntrinsics
-from holescan.errors import InputError
+from holescan_errors import InputError
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -29,7 +29,7 @@ PLAYER = textwrap.dedent(
     import json, sys, time
     import numpy as np
     from capture import OniSource
-    from holescan.errors import InputError
+    from holescan_errors import InputError
 
     args = json.loads(sys.argv[1])
     summary = {"cycles": [], "error": None}

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from capture import OpenNI2Device, SensorError, UsbDeviceInfo, find_xtion, reset_xtion
-from holescan.errors import HolescanError
+from holescan_errors import HolescanError
 
 REPO = Path(__file__).resolve().parents[2]
 

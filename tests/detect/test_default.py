@@ -7,7 +7,7 @@ import pytest
 
 from detect import DEFAULT, DOG, CameraIntrinsics, Detection, detect_holes
 from detect._default import basin_depth, block_depth, opening_axes
-from holescan.errors import InputError
+from holescan_errors import InputError
 
 CAM = CameraIntrinsics.xtion()
 F = CAM.fx

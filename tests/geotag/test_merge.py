@@ -20,7 +20,7 @@ from geotag import (
     geotag_detection,
     rotation_ned_from_optical,
 )
-from holescan.errors import InputError
+from holescan_errors import InputError
 
 CAM = CameraIntrinsics.xtion()
 MOUNT = CameraMount()

@@ -20,7 +20,7 @@ from geotag import (
     geotag_frame,
     project_to_pixel,
 )
-from holescan.errors import InputError
+from holescan_errors import InputError
 
 CAM = CameraIntrinsics.xtion()
 FEATURES = FeatureScores(0.9, 0.8, 0.7, 0.6, 0.5)

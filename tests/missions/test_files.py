@@ -10,7 +10,7 @@ from pathlib import Path
 import gpxpy
 import pytest
 
-from holescan.errors import InputError
+from holescan_errors import InputError
 from missions import (
     MAV_CMD_DO_CHANGE_SPEED,
     MAV_CMD_NAV_RETURN_TO_LAUNCH,

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from geotag import Hole
-from holescan.errors import InputError
+from holescan_errors import InputError
 from missions import (
     HOLE_FORMATS,
     MAV_FRAME_GLOBAL,
