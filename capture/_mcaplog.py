@@ -147,7 +147,8 @@ class _File:
             compression=_COMPRESSION[options.compression],
             enable_data_crcs=True,
         )
-        self.writer.start(library=f"holescan/{_dist_version('holescan')} mcap-python/{mcap_version()}")
+        library = f"holescan/{_dist_version('holescan')} mcap-python/{mcap_version()}"
+        self.writer.start(library=library)
         self.opened_mono_ns = time.monotonic_ns()
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}

@@ -10,8 +10,8 @@ import pytest
 
 from detect import CameraIntrinsics
 from holescan.datasets import Sample, load_dataset, load_image_pair, write_dataset
-from holescan_errors import InputError
 from holescan.synth import synth_dataset
+from holescan_errors import InputError
 
 CAM = CameraIntrinsics.xtion()
 

@@ -32,7 +32,6 @@ from capture.sim._world import make_world
 from detect import CameraIntrinsics
 from geotag import Hole
 from holescan import cli
-from holescan_errors import InputError
 from holescan.reprocess import (
     Progress,
     ReprocessOptions,
@@ -40,6 +39,7 @@ from holescan.reprocess import (
     match_points,
     reprocess,
 )
+from holescan_errors import InputError
 
 CAM = CameraIntrinsics.xtion()
 ANCHOR = WorldAnchor(43.6532, -79.3832, 120.0)

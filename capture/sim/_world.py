@@ -361,7 +361,8 @@ def make_world(
     sun_azimuth_deg, sun_elevation_deg : the low sun; random dawn (east) or dusk (west),
         3-15 deg high, when None.
 
-    Features that find no free room are skipped (logged at debug level) (``holes`` says what exists).
+    Features that find no free room are skipped (logged at debug level); ``holes`` says
+    what exists.
     """
     sx, sy = float(size_m[0]), float(size_m[1])
     if not (2.0 <= sx <= 500.0 and 2.0 <= sy <= 500.0):
