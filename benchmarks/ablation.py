@@ -27,7 +27,7 @@ VARIANTS: dict[str, dict[str, Any]] = {
 
 
 def _init(overrides: dict[str, Any]) -> None:
-    import detect._default as d
+    import detect._default as d  # the ablation switches are private on purpose
 
     for k, v in overrides.items():
         setattr(d, k, v)
@@ -35,7 +35,7 @@ def _init(overrides: dict[str, Any]) -> None:
 
 def _one(job: tuple[Path, int]) -> tuple[int, list[tuple[int, tuple[float, ...], float]]]:
     from detect import DEFAULT, detect_holes
-    from holescan.datasets import load_dataset, load_image_pair
+    from ground import load_dataset, load_image_pair
 
     root, i = job
     ds = load_dataset(root)
@@ -50,9 +50,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("datasets", nargs="+", type=Path)
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args(argv)
-    from detect._evaluate import ScoredBox, evaluate_detections
-    from holescan.datasets import load_dataset
-    from holescan.evaluation import ground_truth
+    from detect import ScoredBox, evaluate_detections
+    from ground import ground_truth, load_dataset
 
     sets = [(p, load_dataset(p)) for p in args.datasets]
     head = " | ".join(f"{p.name} AP IoU / authors / recall" for p, _ in sets)

@@ -37,11 +37,11 @@ def main(argv: list[str] | None = None) -> int:
     from dataclasses import replace
 
     from detect import DEFAULT, PAPER, detect_baseline, detect_holes
-    from holescan.datasets import load_dataset, load_image_pair
+    from ground import load_dataset, load_image_pair
 
     root = args.dataset
     if root is None:
-        from holescan.synth import synth_dataset
+        from sim import synth_dataset
 
         root = Path(tempfile.mkdtemp(prefix="holescan-bench-"))
         print(f"rendering {args.frames} synthetic frames into {root} ...", flush=True)

@@ -8,7 +8,7 @@ Run (from the repository root; ~4 GB for the pre-rendered lap, ~2 GB of log per 
 
 What runs, all of it on this machine:
 
-1. the simulated sortie (:mod:`capture._sortie`): a 17 x 17 m rubble world with access holes
+1. the simulated sortie (:mod:`sim._sortie`): a 17 x 17 m rubble world with access holes
    and distractors, a lawnmower survey over its central 10 x 10 m at 3 m, flown as a loop
    by the simulated autopilot (MAVLink over loopback UDP; boot clock 1234.5 s off, 15 ppm
    drift; thrust tilt and wobble);
@@ -17,7 +17,7 @@ What runs, all of it on this machine:
    detection. So one lap of the loop (a whole number of frames, its attitude wobble
    periodic too) is rendered first, in 2 processes, into an ``.oni`` file (timed and
    reported, not part of the flight), and the flight plays it through OpenNI2
-   (:class:`capture._sortie.LapReplay`), lap after lap, each frame at the instant the
+   (:class:`sim._sortie.LapReplay`), lap after lap, each frame at the instant the
    autopilot is where it was rendered from. The sensor's cost is then what reading an
    ``.oni`` costs, not the renderer's; late frames are counted, never skipped;
 3. the flight: :class:`capture._daemon.Flight`: capture -> MCAP log writer thread (zstd)
@@ -48,23 +48,21 @@ from typing import Any
 import numpy as np
 import pymap3d
 
-from capture._daemon import Flight, FlightConfig
-from capture._mcaplog import LogOptions
-from capture._mcaptools import log_info
-from capture._simsource import camera_pose_in_world
-from capture._sortie import (
+from capture import Flight, FlightConfig, LogOptions, log_info
+from detect import Detection
+from geotag import HoleSighting, geotag_detection
+from sim import (
     LapReplay,
     SimSortie,
     SortieParams,
     TrueHole,
+    camera_pose_in_world,
+    hole_boxes,
     lap_frames,
     make_sortie_world,
     prerender_lap,
     survey_path,
 )
-from capture.sim import hole_boxes
-from detect import Detection
-from geotag import HoleSighting, geotag_detection
 
 log = logging.getLogger("bench_flight")
 
@@ -173,7 +171,7 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(
         level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s"
     )
-    logging.getLogger("capture.sim").setLevel(logging.ERROR)
+    logging.getLogger("sim").setLevel(logging.ERROR)
 
     work = args.workdir or Path(tempfile.mkdtemp(prefix="holescan-bench-"))
     work.mkdir(parents=True, exist_ok=True)

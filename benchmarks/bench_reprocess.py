@@ -9,7 +9,7 @@ Run (from the repository root)::
 
 What runs: (1) without a log given, ``holescan demo`` flies ``--duration`` seconds of the
 simulated sortie into a temporary folder (timed separately, not part of the figure);
-(2) :func:`holescan.reprocess.reprocess` over the log ``--repeat`` times with ``--workers``
+(2) :func:`ground._reprocess.reprocess` over the log ``--repeat`` times with ``--workers``
 detection processes (default: one per core; the pool's start-up is reported apart);
 (3) the figures: frames/s of each run (frames detected and merged / wall time from the first
 byte read to the last file written, MCAP copy and hole files included), the workers' mean
@@ -46,8 +46,8 @@ def main() -> int:
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
 
     from detect import DEFAULT, PAPER
-    from holescan.demo import DemoOptions, run_demo
-    from holescan.reprocess import ReprocessOptions, reprocess
+    from ground import ReprocessOptions, reprocess
+    from sim import DemoOptions, run_demo
 
     work = Path(tempfile.mkdtemp(prefix="bench-reprocess-"))
     logs = list(args.logs)

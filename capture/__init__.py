@@ -1,14 +1,32 @@
 """The flight side: frame sources, telemetry, the MCAP flight log and the capture daemon."""
 
 from capture._clock import ClockEstimate, ClockSync, ClockUnavailable
-from capture._errors import SensorError
+from capture._daemon import Flight, FlightConfig, FlightCounters, FlightSummary
+from capture._errors import CaptureError, SensorError
+from capture._fly import FlyReport, fly, format_report
+from capture._flyconfig import (
+    FlyConfig,
+    PacedReplay,
+    SensorSetup,
+    SensorSpec,
+    check_table,
+    load_fly_config,
+    numbers,
+    open_sensor,
+    parse_fly_config,
+)
 from capture._frame import Frame, FrameSource
+from capture._holepipeline import HolePipeline
 from capture._mavlink import (
     DEFAULT_RATES_HZ,
     Telemetry,
     TelemetryError,
     TelemetryStats,
     TelemetryTimeoutError,
+    attitude_from_attitude,
+    attitude_from_quaternion,
+    gps_from_gps_raw_int,
+    position_from_global_position_int,
 )
 from capture._mcaplog import FlightLogError, FlightLogWriter, LogOptions, WriterStats
 from capture._mcapread import (
@@ -21,27 +39,36 @@ from capture._mcapread import (
     LoggedPose,
     LogRecord,
     McapSource,
+    ScanState,
     TruncatedLogError,
     read_flight_log,
+    scan_records,
 )
 from capture._mcaptools import LogInfo, RecoveryReport, TopicInfo, log_info, recover_log
 from capture._oni import OniInfo, OniStreamInfo, OniWriter, export_oni, scan_oni, write_oni
-from capture._openni import OniSource, OpenNI2Device, camera_from_fov
+from capture._openni import OniSource, OpenNI2Device, camera_from_fov, openni2_library
 from capture._posebuffer import AttitudeSample, GpsFix, PoseBuffer, PoseUnavailable, PositionSample
-from capture._simautopilot import SimAutopilot, SimPath
 from capture._usb import UsbDeviceInfo, find_xtion, reset_xtion
 
 __all__ = [
     "DEFAULT_RATES_HZ",
     "AttitudeSample",
+    "CaptureError",
     "ClockEstimate",
     "ClockSync",
     "ClockUnavailable",
+    "Flight",
+    "FlightConfig",
+    "FlightCounters",
     "FlightLogError",
     "FlightLogWriter",
+    "FlightSummary",
+    "FlyConfig",
+    "FlyReport",
     "Frame",
     "FrameSource",
     "GpsFix",
+    "HolePipeline",
     "LogInfo",
     "LogOptions",
     "LogRecord",
@@ -58,13 +85,15 @@ __all__ = [
     "OniStreamInfo",
     "OniWriter",
     "OpenNI2Device",
+    "PacedReplay",
     "PoseBuffer",
     "PoseUnavailable",
     "PositionSample",
     "RecoveryReport",
+    "ScanState",
     "SensorError",
-    "SimAutopilot",
-    "SimPath",
+    "SensorSetup",
+    "SensorSpec",
     "Telemetry",
     "TelemetryError",
     "TelemetryStats",
@@ -73,13 +102,26 @@ __all__ = [
     "TruncatedLogError",
     "UsbDeviceInfo",
     "WriterStats",
+    "attitude_from_attitude",
+    "attitude_from_quaternion",
     "camera_from_fov",
+    "check_table",
     "export_oni",
     "find_xtion",
+    "fly",
+    "format_report",
+    "gps_from_gps_raw_int",
+    "load_fly_config",
     "log_info",
+    "numbers",
+    "open_sensor",
+    "openni2_library",
+    "parse_fly_config",
+    "position_from_global_position_int",
     "read_flight_log",
     "recover_log",
     "reset_xtion",
     "scan_oni",
+    "scan_records",
     "write_oni",
 ]

@@ -1,8 +1,9 @@
 """Run one flight as configured: sensor, autopilot link, flight daemon, ground-station server.
 
-:func:`fly` composes a :class:`~capture._flyconfig.FlyConfig` into a
-:class:`~capture._daemon.Flight` (for ``sensor = "sim"`` with a simulated sortie,
-:class:`~capture._sortie.SimSortie`) and, when a ground station link is configured, a
+:func:`fly` composes a :class:`~capture._flyconfig.FlyConfig` and the
+:class:`~capture._flyconfig.SensorSetup` it is given (the Xtion, a recording, or the
+simulator's, from :func:`sim.fly_sim`) into a :class:`~capture._daemon.Flight` and, when a
+ground station link is configured, a
 :class:`missions.HoleMissionServer` that serves the confirmed holes as a mission and
 announces each new or moved one by STATUSTEXT (through the daemon's ``on_holes``).
 :func:`format_report` is the operator's summary.
@@ -12,19 +13,12 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import math
-import statistics
 import threading
-from collections.abc import Callable
 from dataclasses import dataclass
 
-import pymap3d
-
 from capture._daemon import Flight, FlightSummary
-from capture._flyconfig import FlyConfig, open_sensor
-from capture._frame import FrameSource
+from capture._flyconfig import FlyConfig, SensorSetup, open_sensor
 from capture._mavlink import Telemetry
-from capture._sortie import SimSortie, TrueHole
 from geotag import Hole
 from missions import HoleMissionServer
 
@@ -39,21 +33,20 @@ class FlyReport:
 
     summary : the daemon's :class:`~capture._daemon.FlightSummary`. sensor : what was flown.
     announced : STATUSTEXTs sent to the ground station, in order.
-    sim_late_frames, sim_render_ms_median : the simulated camera's lateness (frames due
-        more than one period ago when rendered) and render time (``sim`` only, else None).
-    truth : the simulated world's access holes (``sim`` only, else empty).
     """
 
     summary: FlightSummary
     sensor: str
     announced: tuple[str, ...] = ()
-    sim_late_frames: int | None = None
-    sim_render_ms_median: float | None = None
-    truth: tuple[TrueHole, ...] = ()
 
 
-def fly(cfg: FlyConfig, *, stop: threading.Event | None = None) -> FlyReport:
+def fly(
+    cfg: FlyConfig, setup: SensorSetup | None = None, *, stop: threading.Event | None = None
+) -> FlyReport:
     """Run one flight as configured; return when it ends (limit reached, source ended, stop).
+
+    ``setup`` gives the frame source and autopilot link (None: :func:`open_sensor` of the
+    configuration: the Xtion or a recording).
 
     ``stop`` (e.g. set by a SIGINT/SIGTERM handler) ends the flight cleanly: capture stops,
     the detection worker is drained and the MCAP log is finished and closed.
@@ -86,14 +79,9 @@ def fly(cfg: FlyConfig, *, stop: threading.Event | None = None) -> FlyReport:
                 server.update_holes(confirmed)
                 announced.extend(server.announce(h) for h in news)
 
-        sortie: SimSortie | None = None
-        if cfg.sensor.kind == "sim":
-            sortie = stack.enter_context(SimSortie(cfg.sim, mount=fc.mount, mavlink=cfg.mavlink))
-            factory: Callable[[], FrameSource] = sortie.source
-            camera, reset, mavlink = sortie.camera, None, sortie.mavlink
-        else:
-            factory, camera, reset = open_sensor(cfg)
-            mavlink = cfg.mavlink
+        if setup is None:
+            setup = open_sensor(cfg)
+        mavlink = setup.mavlink
         _log.info(
             "flight log %s; sensor %s; MAVLink %s; ground station %s",
             fc.log_prefix,
@@ -103,32 +91,17 @@ def fly(cfg: FlyConfig, *, stop: threading.Event | None = None) -> FlyReport:
         )
         flight = Flight(
             fc,
-            factory,
-            camera,
+            setup.factory,
+            setup.camera,
             mavlink=mavlink,
             telemetry_factory=lambda conn, **kw: Telemetry(conn, baud=cfg.baud, **kw),
-            usb_reset=reset,
+            usb_reset=setup.usb_reset,
             on_holes=on_holes,
         )
         if stop is not None:
             flight.stop = stop
         summary = flight.run()
-    if sortie is None:
-        return FlyReport(summary, str(cfg.sensor), tuple(announced))
-    render_ms = [ms for src in sortie.sources for ms in src.render_ms]
-    return FlyReport(
-        summary,
-        str(cfg.sensor),
-        tuple(announced),
-        sim_late_frames=sum(src.late_frames for src in sortie.sources),
-        sim_render_ms_median=statistics.median(render_ms) if render_ms else None,
-        truth=sortie.truth,
-    )
-
-
-def _horizontal_m(lat1: float, lon1: float, lat2: float, lon2: float) -> float:
-    e, n, _ = pymap3d.geodetic2enu(lat1, lon1, 0.0, lat2, lon2, 0.0)
-    return math.hypot(float(e), float(n))
+    return FlyReport(summary, str(cfg.sensor), tuple(announced))
 
 
 def format_report(report: FlyReport, min_sightings: int = 3) -> str:
@@ -166,18 +139,4 @@ def format_report(report: FlyReport, min_sightings: int = 3) -> str:
             f"  hole {h.id}: {h.lat_deg:.7f}, {h.lon_deg:.7f} +-{h.sigma_h_m:.2f} m, score "
             f"{h.score:.2f}, {h.sightings} sightings, {h.major_m:.2f} x {h.minor_m:.2f} m"
         )
-    if report.sim_late_frames is not None:
-        ms = report.sim_render_ms_median
-        lines.append(
-            f"sim: render {ms:.1f} ms/frame median, {report.sim_late_frames} frames late"
-            if ms is not None
-            else "sim: no frame rendered"
-        )
-    for t in report.truth:
-        near = [
-            (_horizontal_m(h.lat_deg, h.lon_deg, t.lat_deg, t.lon_deg), h.id) for h in confirmed
-        ]
-        d, hid = min(near, default=(math.inf, 0))
-        found = f"hole {hid} at {d:.2f} m" if d <= 0.5 else "not reported"
-        lines.append(f"  true access hole {t.id} ({t.x_m:.1f}, {t.y_m:.1f} m): {found}")
     return "\n".join(lines)

@@ -11,7 +11,7 @@ sensor and the links, and one table per part::
     [mount]    camera angles and offset on the vehicle
     [log]      MCAP compression, chunk and file sizes
     [holes]    announcing and serving holes
-    [sim]      the simulated sortie (``sensor = "sim"``)
+    [sim]      the simulated sortie (``sensor = "sim"``), checked by :mod:`sim`
 
 Unknown keys and wrong types raise :class:`holescan_errors.InputError` naming the key (a
 typo in a flight configuration must not pass silently). :func:`open_sensor` turns the
@@ -35,8 +35,6 @@ from capture._daemon import FlightConfig
 from capture._errors import SensorError
 from capture._frame import Frame, FrameSource
 from capture._mcaplog import LogOptions
-from capture._simsource import WorldAnchor
-from capture._sortie import DEFAULT_ANCHOR, SortieParams
 from detect import DEFAULT, PAPER, SEARCHERS, CameraIntrinsics, DetectParams
 from geotag import CameraMount
 from holescan_errors import InputError
@@ -44,8 +42,11 @@ from holescan_errors import InputError
 __all__ = [
     "FlyConfig",
     "PacedReplay",
+    "SensorSetup",
     "SensorSpec",
+    "check_table",
     "load_fly_config",
+    "numbers",
     "open_sensor",
     "parse_fly_config",
 ]
@@ -104,25 +105,6 @@ _TABLES: dict[str, dict[str, tuple[tuple[type, ...], Any]]] = {
         "rel_alt_m": (_NUM, 10.0),
         "clearance_m": (_NUM, 5.0),
     },
-    "sim": {
-        "world_seed": ((int,), 7),
-        "size_m": ((list,), [10.0, 10.0]),
-        "margin_m": (_NUM, 3.5),
-        "n_access_holes": ((int,), 3),
-        "distractors": ((bool,), True),
-        "lat_deg": (_NUM, DEFAULT_ANCHOR.lat_deg),
-        "lon_deg": (_NUM, DEFAULT_ANCHOR.lon_deg),
-        "alt_m": (_NUM, DEFAULT_ANCHOR.alt_m),
-        "altitude_m": (_NUM, 3.0),
-        "speed_m_s": (_NUM, None),
-        "heading_deg": (_NUM, None),
-        "wobble_deg": (_NUM, 1.5),
-        "clock_offset_s": (_NUM, 1234.5),
-        "drift_ppm": (_NUM, 15.0),
-        "eph_m": (_NUM, 1.2),
-        "fps": (_NUM, 30.0),
-        "noise_seed": ((int,), 0),
-    },
 }
 
 
@@ -162,7 +144,8 @@ class FlyConfig:
     realtime : replay ``oni``/``mcap`` recordings at their recorded pace.
     flight : the daemon's settings (its ``log_prefix`` is set per flight by
     :meth:`flight_config`). hole_rel_alt_m, hole_clearance_m : served waypoints' altitude.
-    sim : the simulated sortie. record : the settings as flat ``table.key`` -> value
+    sim_table : the ``[sim]`` table as written (checked by :mod:`sim`). record : the settings
+    as flat ``table.key`` -> value
     (logged as the flight's ``holescan.config`` metadata).
     """
 
@@ -180,7 +163,7 @@ class FlyConfig:
     flight: FlightConfig = field(default_factory=lambda: FlightConfig(log_prefix=Path("flight")))
     hole_rel_alt_m: float = 10.0
     hole_clearance_m: float = 5.0
-    sim: SortieParams = field(default_factory=SortieParams)
+    sim_table: Mapping[str, Any] = field(default_factory=dict)
     record: Mapping[str, Any] = field(default_factory=dict)
 
     def flight_config(self, t_unix_ns: int | None = None) -> FlightConfig:
@@ -207,15 +190,20 @@ class FlyConfig:
         )
 
 
-def _check(
-    table: str, doc: Mapping[str, Any], spec: Mapping[str, tuple[tuple[type, ...], Any]], where: str
-) -> dict[str, Any]:
-    """Values of ``doc`` checked against ``spec`` with defaults filled in."""
+TableSpec = Mapping[str, tuple[tuple[type, ...], Any]]
+"""key -> (accepted types, default) of one TOML table; a None default means optional."""
+
+
+def check_table(table: str, doc: Mapping[str, Any], spec: TableSpec, where: str) -> dict[str, Any]:
+    """Values of ``doc`` checked against ``spec`` with defaults filled in.
+
+    Raises :class:`InputError` naming ``table.key`` for an unknown key or a wrong type.
+    """
     out: dict[str, Any] = {}
     prefix = f"{table}." if table else ""
     for key, value in doc.items():
         if key not in spec:
-            if not table and key in _TABLES:
+            if not table and (key in _TABLES or key == "sim"):
                 continue
             raise InputError(
                 f"{where}: unknown setting {prefix}{key} (known: {', '.join(sorted(spec))})"
@@ -231,7 +219,8 @@ def _check(
     return out
 
 
-def _numbers(where: str, key: str, value: list[Any], n: int | None = None) -> tuple[float, ...]:
+def numbers(where: str, key: str, value: list[Any], n: int | None = None) -> tuple[float, ...]:
+    """A TOML list of numbers (``n`` of them when given) as floats, or :class:`InputError`."""
     if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value) or (
         n is not None and len(value) != n
     ):
@@ -256,7 +245,7 @@ def parse_fly_config(
     ``overrides`` (e.g. from the command line: ``sensor``, ``mavlink``, ``log_dir``, ``gcs``,
     ``duration_s``, ``max_frames``) replace the file's top-level values when not None.
     """
-    top = _check("", doc, _TOP, where)
+    top = check_table("", doc, _TOP, where)
     for key, value in (overrides or {}).items():
         if key not in _TOP:
             raise InputError(f"unknown override {key!r}")
@@ -267,7 +256,7 @@ def parse_fly_config(
         sub = doc.get(name, {})
         if not isinstance(sub, Mapping):
             raise InputError(f"{where}: [{name}] must be a table")
-        tables[name] = _check(name, sub, spec, where)
+        tables[name] = check_table(name, sub, spec, where)
 
     if top["log_dir"] is None:
         raise InputError(f"{where}: no log folder: give --log-dir DIR or log_dir in the file")
@@ -279,7 +268,7 @@ def parse_fly_config(
         raise InputError(f"{where}: sysid must be 1..255, got {top['sysid']}")
 
     cap = tables["capture"]
-    backoff = _numbers(where, "capture.retry_backoff_s", cap["retry_backoff_s"])
+    backoff = numbers(where, "capture.retry_backoff_s", cap["retry_backoff_s"])
     if not backoff or min(backoff) < 0:
         raise InputError(f"{where}: capture.retry_backoff_s needs >= 1 non-negative waits")
     for key in ("frame_timeout_s", "health_period_s"):
@@ -300,7 +289,7 @@ def parse_fly_config(
     params = dataclasses.replace(params, **changes)
 
     mnt = tables["mount"]
-    offset = _numbers(where, "mount.offset_m", mnt["offset_m"], 3)
+    offset = numbers(where, "mount.offset_m", mnt["offset_m"], 3)
     mount = CameraMount.from_euler_deg(
         float(mnt["roll_deg"]),
         float(mnt["pitch_deg"]),
@@ -336,25 +325,9 @@ def parse_fly_config(
         startup_sync_s=float(cap["startup_sync_s"]),
     )
 
-    s = tables["sim"]
-    size = _numbers(where, "sim.size_m", s["size_m"], 2)
-    sim = SortieParams(
-        world_seed=s["world_seed"],
-        size_m=(size[0], size[1]),
-        margin_m=float(s["margin_m"]),
-        n_access_holes=s["n_access_holes"],
-        distractors=s["distractors"],
-        anchor=WorldAnchor(float(s["lat_deg"]), float(s["lon_deg"]), float(s["alt_m"])),
-        altitude_m=float(s["altitude_m"]),
-        speed_m_s=None if s["speed_m_s"] is None else float(s["speed_m_s"]),
-        heading_deg=None if s["heading_deg"] is None else float(s["heading_deg"]),
-        wobble_deg=float(s["wobble_deg"]),
-        clock_offset_s=float(s["clock_offset_s"]),
-        drift_ppm=float(s["drift_ppm"]),
-        eph_m=float(s["eph_m"]),
-        fps=float(s["fps"]),
-        noise_seed=s["noise_seed"],
-    )
+    sim_table = doc.get("sim", {})
+    if not isinstance(sim_table, Mapping):
+        raise InputError(f"{where}: [sim] must be a table")
 
     record: dict[str, Any] = {k: str(v) if isinstance(v, Path) else v for k, v in top.items()}
     for name, values in tables.items():
@@ -374,7 +347,7 @@ def parse_fly_config(
         flight=flight,
         hole_rel_alt_m=float(holes["rel_alt_m"]),
         hole_clearance_m=float(holes["clearance_m"]),
-        sim=sim,
+        sim_table=dict(sim_table),
         record=record,
     )
 
@@ -445,13 +418,27 @@ def _reset_xtions() -> None:
         reset_xtion(d)
 
 
-def open_sensor(
-    cfg: FlyConfig,
-) -> tuple[Callable[[], FrameSource], CameraIntrinsics, Callable[[], None] | None]:
-    """Source factory, camera intrinsics and USB reset function for a non-simulated sensor.
+@dataclass(frozen=True)
+class SensorSetup:
+    """What a flight flies with: where frames and telemetry come from.
+
+    factory : opens the frame source (called again after a sensor failure).
+    camera : its intrinsics. mavlink : the autopilot's pymavlink connection (None: fly
+    without telemetry). usb_reset : resets the sensor on USB after a failure (or None).
+    """
+
+    factory: Callable[[], FrameSource]
+    camera: CameraIntrinsics
+    mavlink: str | None = None
+    usb_reset: Callable[[], None] | None = None
+
+
+def open_sensor(cfg: FlyConfig) -> SensorSetup:
+    """The configured real or recorded sensor, with the configured autopilot link.
 
     Raises :class:`InputError` for a missing or unreadable recording (before the flight
-    starts); ``sim`` is composed by :func:`capture._fly.fly` instead.
+    starts); ``sim`` is set up by :func:`sim.fly_sim`, which hands its own
+    :class:`SensorSetup` to :func:`capture.fly`.
     """
     spec = cfg.sensor
     if spec.kind == "openni2":
@@ -461,14 +448,15 @@ def open_sensor(
         timeout = cfg.flight.frame_timeout_s
         camera = OpenNI2Device(uri, timeout_s=timeout).camera
         reset = _reset_xtions if cfg.usb_reset else None
-        return (lambda: OpenNI2Device(uri, timeout_s=timeout)), camera, reset
+        factory = lambda: OpenNI2Device(uri, timeout_s=timeout)  # noqa: E731
+        return SensorSetup(factory, camera, cfg.mavlink, reset)
     if spec.kind == "oni":
         from capture._openni import OniSource
 
         path = spec.path
         assert path is not None
         oni = OniSource(path)  # checks the file now
-        return (lambda: OniSource(path, realtime=cfg.realtime)), oni.camera, None
+        return SensorSetup(lambda: OniSource(path, realtime=cfg.realtime), oni.camera, cfg.mavlink)
     if spec.kind == "mcap":
         from capture._mcapread import McapSource
 
@@ -482,5 +470,5 @@ def open_sensor(
             src = McapSource(paths)
             return PacedReplay(src) if cfg.realtime else src
 
-        return replay, mcap.camera, None
-    raise InputError(f"{spec} is not a recorded or live sensor (the simulator is composed by fly)")
+        return SensorSetup(replay, mcap.camera, cfg.mavlink)
+    raise InputError(f"{spec} is not a recorded or live sensor: the simulator is set up by sim")

@@ -3,7 +3,7 @@
 The step every consumer of detections shares, so that a flight and its reprocessing
 compute holes the same way: the capture daemon (:class:`capture._daemon.Flight`) feeds it
 the detection worker's results with the pose interpolated from live telemetry, and
-:mod:`holescan.reprocess` feeds it detections of logged frames with the pose
+:mod:`ground._reprocess` feeds it detections of logged frames with the pose
 re-interpolated from the logged telemetry. Pure: no clocks, files or sockets (the pose is
 asked for through a callable, and only when the frame has detections, because in flight
 getting it may wait for telemetry).

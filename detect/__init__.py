@@ -6,10 +6,11 @@ accurate detector.
 """
 
 from detect._baseline import detect_baseline
-from detect._default import box_iou
+from detect._default import basin_labels, box_iou
 from detect._detector import detect_holes
 from detect._ers import ers_superpixels
-from detect._paper import detect_paper
+from detect._evaluate import GroundTruthBox, PRResult, ScoredBox, evaluate_detections
+from detect._paper import detect_paper, paper_superpixels
 from detect._scores import luminance, ramp
 from detect._types import (
     DEFAULT,
@@ -37,13 +38,19 @@ __all__ = [
     "DetectParams",
     "Detection",
     "FeatureScores",
+    "GroundTruthBox",
     "Mode",
+    "PRResult",
+    "ScoredBox",
     "Searcher",
+    "basin_labels",
     "box_iou",
     "detect_baseline",
     "detect_holes",
     "detect_paper",
     "ers_superpixels",
+    "evaluate_detections",
     "luminance",
+    "paper_superpixels",
     "ramp",
 ]

@@ -7,6 +7,7 @@ from geotag._camera import (
     dcm_from_quaternion,
     rotation_ned_from_optical,
 )
+from geotag._local import LocalFrame, local_en_m
 from geotag._merge import Hole, HoleTracker, MergeParams
 from geotag._project import (
     ErrorModel,
@@ -24,12 +25,14 @@ __all__ = [
     "Hole",
     "HoleSighting",
     "HoleTracker",
+    "LocalFrame",
     "MergeParams",
     "VehiclePose",
     "dcm_from_euler",
     "dcm_from_quaternion",
     "geotag_detection",
     "geotag_frame",
+    "local_en_m",
     "project_to_pixel",
     "rotation_ned_from_optical",
 ]

@@ -1,12 +1,13 @@
-"""holescan: access-hole detection from a UAV's RGB-D camera.
+"""holescan's command line: ``holescan <verb>`` parses, calls one library function, and maps
+the project's errors to exit codes (:mod:`holescan.cli`).
 
-The domain packages sit beside this one: :mod:`detect` and :mod:`geotag` are pure,
-:mod:`capture` is the flight side and :mod:`missions` talks MAVLink missions and plan
-files. This package holds the project's exception root, dataset/evaluation I/O and the
-thin command line (:mod:`holescan.cli`).
+The library sits in the packages beside this one, lowest first: :mod:`detect` and
+:mod:`geotag` (pure), :mod:`missions` (MAVLink missions and plan files), :mod:`capture` (the
+flight side), :mod:`ground` (post-flight and ground station), and :mod:`sim` (the simulated
+world, Xtion and autopilot, beside the flight side). Errors: :mod:`holescan_errors`.
 """
 
-from holescan_errors import HolescanError, InputError
+from importlib.metadata import version as _dist_version
 
-__version__ = "0.1.0"
-__all__ = ["HolescanError", "InputError", "__version__"]
+__version__ = _dist_version("holescan")
+__all__ = ["__version__"]

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from holescan.datasets import load_dataset
+from ground import load_dataset
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -23,7 +23,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
 
 def run_synth(args: argparse.Namespace) -> int:
-    from holescan.synth import synth_dataset
+    from sim import synth_dataset
 
     def progress(i: int, n: int) -> None:
         print(f"\rrendering {i}/{n}", end="", file=sys.stderr, flush=True)

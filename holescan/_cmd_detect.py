@@ -8,8 +8,7 @@ from dataclasses import asdict, replace
 from pathlib import Path
 
 from detect import DEFAULT, PAPER, SEARCHERS, CameraIntrinsics, DetectParams, detect_holes
-from holescan.images import read_camera, read_depth, read_rgb
-from holescan.overlay import draw_detections
+from ground import draw_detections, read_camera, read_depth, read_rgb
 
 
 def add_detector_options(p: argparse.ArgumentParser) -> None:

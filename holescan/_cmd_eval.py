@@ -8,15 +8,15 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from holescan._cmd_detect import add_detector_options, params_from_args
-from holescan.datasets import load_dataset
-from holescan.evaluation import (
+from ground import (
     EvalReport,
     format_table,
+    load_dataset,
     plot_pr,
     run_detector,
     write_coco_results,
 )
+from holescan._cmd_detect import add_detector_options, params_from_args
 from holescan_errors import InputError
 
 
@@ -71,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
     if args.synthetic is not None:
         if args.dataset is not None:
             raise InputError("give either DATASET or --synthetic, not both")
-        from holescan.synth import synth_dataset
+        from sim import synth_dataset
 
         args.dataset = Path(f"holescan-synth-{args.synthetic}")
         args.compare = True

@@ -50,8 +50,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from capture._fly import fly, format_report
-    from capture._flyconfig import load_fly_config
+    from capture import fly, format_report, load_fly_config
 
     cfg = load_fly_config(
         args.config,
@@ -73,10 +72,15 @@ def run(args: argparse.Namespace) -> int:
             signal.signal(signal.SIGINT, signal.default_int_handler)
 
     previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    min_sightings = cfg.flight.announce_min_sightings
     try:
-        report = fly(cfg, stop=stop)
+        if cfg.sensor.kind == "sim":  # the simulator is loaded only when asked for
+            from sim import fly_sim, format_sim_report
+
+            print(format_sim_report(fly_sim(cfg, stop=stop), min_sightings))
+        else:
+            print(format_report(fly(cfg, stop=stop), min_sightings))
     finally:
         for s, handler in previous.items():
             signal.signal(s, handler)
-    print(format_report(report, cfg.flight.announce_min_sightings))
     return 0

@@ -11,10 +11,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
 from holescan._args import EXIT_INTERRUPTED
-from missions._holefiles import HOLE_FORMATS
+from missions import HOLE_FORMATS
 
 if TYPE_CHECKING:
-    from holescan.reprocess import Progress
+    from ground import Progress
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -117,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
     import dataclasses
 
     from detect import DEFAULT, PAPER
-    from holescan.reprocess import ReprocessOptions, reprocess
+    from ground import ReprocessOptions, reprocess
 
     params = (PAPER if args.mode == "paper" else DEFAULT).with_searcher(args.searcher)
     if args.min_score is not None:

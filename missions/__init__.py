@@ -80,7 +80,7 @@ from missions._sun import (
     sun_windows,
     sunrise_sunset,
 )
-from missions._survey import XTION, Camera, LocalFrame, SurveyParams, SurveyPlan, plan_survey
+from missions._survey import XTION, Camera, SurveyParams, SurveyPlan, frame_around, plan_survey
 
 __all__ = [
     "HOLE_FORMATS",
@@ -102,7 +102,6 @@ __all__ = [
     "HoleFormat",
     "HoleMissionServer",
     "HoleWaypoint",
-    "LocalFrame",
     "MissionError",
     "MissionReceiver",
     "MissionRejectedError",
@@ -119,6 +118,7 @@ __all__ = [
     "check_flight",
     "connect",
     "download_mission",
+    "frame_around",
     "hole_description",
     "hole_mission",
     "hole_points",

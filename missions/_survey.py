@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
+from geotag import LocalFrame
 from holescan_errors import InputError
 from missions._files import (
     MAV_CMD_DO_CHANGE_SPEED,
@@ -179,50 +180,19 @@ class SurveyParams:
                 )
 
 
-class LocalFrame:
-    """East-north metres in the tangent plane at ``(lat0_deg, lon0_deg)`` (WGS84, pymap3d)."""
+def frame_around(area: Area) -> LocalFrame:
+    """A local frame at the centre of the area's vertices' hull (found in a first frame at its
+    first vertex; the hull's centroid is defined even for an invalid polygon)."""
+    from shapely.geometry import MultiPoint
 
-    def __init__(self, lat0_deg: float, lon0_deg: float) -> None:
-        self.lat0_deg = float(lat0_deg)
-        self.lon0_deg = float(lon0_deg)
-
-    def to_enu(
-        self, lat_deg: npt.ArrayLike, lon_deg: npt.ArrayLike
-    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-        """Geodetic degrees (on the ellipsoid) -> (east, north) metres."""
-        import pymap3d
-
-        lat = np.asarray(lat_deg, dtype=np.float64)
-        lon = np.asarray(lon_deg, dtype=np.float64)
-        e, n, _ = pymap3d.geodetic2enu(lat, lon, 0.0, self.lat0_deg, self.lon0_deg, 0.0)
-        return np.asarray(e, dtype=np.float64), np.asarray(n, dtype=np.float64)
-
-    def to_geodetic(
-        self, east_m: npt.ArrayLike, north_m: npt.ArrayLike
-    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-        """(east, north) metres in the plane -> geodetic degrees (lon in -180..180)."""
-        import pymap3d
-
-        e = np.asarray(east_m, dtype=np.float64)
-        n = np.asarray(north_m, dtype=np.float64)
-        lat, lon, _ = pymap3d.enu2geodetic(e, n, 0.0, self.lat0_deg, self.lon0_deg, 0.0)
-        lon = (np.asarray(lon, dtype=np.float64) + 180.0) % 360.0 - 180.0
-        return np.asarray(lat, dtype=np.float64), lon
-
-    @classmethod
-    def around(cls, area: Area) -> LocalFrame:
-        """A frame at the centre of the area's vertices' hull (found in a first frame at its
-        first vertex; the hull's centroid is defined even for an invalid polygon)."""
-        from shapely.geometry import MultiPoint
-
-        first = cls(*area.outer[0])
-        lat, lon = zip(*area.outer, strict=True)
-        e, n = first.to_enu(lat, lon)
-        c = MultiPoint(np.column_stack([e, n])).convex_hull.centroid
-        if c.is_empty:
-            return first
-        lat0, lon0 = first.to_geodetic(c.x, c.y)
-        return cls(float(lat0), float(lon0))
+    first = LocalFrame(*area.outer[0])
+    lat, lon = zip(*area.outer, strict=True)
+    e, n = first.to_en(lat, lon)
+    c = MultiPoint(np.column_stack([e, n])).convex_hull.centroid
+    if c.is_empty:
+        return first
+    lat0, lon0 = first.to_geodetic(c.x, c.y)
+    return LocalFrame(float(lat0), float(lon0))
 
 
 @dataclass(frozen=True)
@@ -310,7 +280,7 @@ def _polygon_enu(area: Area, frame: LocalFrame) -> Polygon:
 
     def ring(points: Sequence[tuple[float, float]]) -> npt.NDArray[np.float64]:
         lat, lon = zip(*points, strict=True)
-        e, n = frame.to_enu(lat, lon)
+        e, n = frame.to_en(lat, lon)
         return np.column_stack([e, n])
 
     return Polygon(ring(area.outer), [ring(h) for h in area.holes if len(h) >= 3])
@@ -496,7 +466,7 @@ def plan_survey(area: Area, params: SurveyParams | None = None) -> SurveyPlan:
     params = params if params is not None else SurveyParams()
     params.check()
     _check_area(area)
-    frame = LocalFrame.around(area)
+    frame = frame_around(area)
     poly = _polygon_enu(area, frame)
     _validate_polygon(poly, frame, params.max_extent_m)
 
@@ -524,7 +494,7 @@ def plan_survey(area: Area, params: SurveyParams | None = None) -> SurveyPlan:
 
     home_enu: tuple[float, float] | None = None
     if params.home is not None:
-        he, hn = frame.to_enu(params.home[0], params.home[1])
+        he, hn = frame.to_en(params.home[0], params.home[1])
         home_enu = (float(he), float(hn))
 
     headings = (

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from detect import CameraIntrinsics
+from ground._datasets import Sample, write_dataset
 from holescan.cli import main
-from holescan.datasets import Sample, write_dataset
 
 CAM = CameraIntrinsics.xtion()
 

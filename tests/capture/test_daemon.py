@@ -14,8 +14,8 @@ import pytest
 from capture._daemon import Flight, FlightConfig
 from capture._frame import Frame
 from capture._mcapread import read_flight_log
-from capture._simautopilot import SimAutopilot, SimPath
 from detect import CameraIntrinsics
+from sim._autopilot import SimAutopilot, SimPath
 
 CAM = CameraIntrinsics.xtion()
 

@@ -25,9 +25,9 @@ from capture._flyconfig import FlyConfig, SensorSpec, load_fly_config, parse_fly
 from capture._frame import Frame
 from capture._mcapread import LoggedFrame, LoggedHealth, LoggedHoles, read_flight_log
 from capture._mcaptools import log_info
-from capture._simautopilot import SimAutopilot, SimPath
 from detect import CameraIntrinsics
 from holescan_errors import InputError
+from sim._autopilot import SimAutopilot, SimPath
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil

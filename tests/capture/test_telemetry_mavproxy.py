@@ -25,8 +25,8 @@ import pytest
 from capture._clock import ClockSync
 from capture._mavlink import Telemetry, TelemetryTimeoutError
 from capture._posebuffer import PoseUnavailable
-from capture._simautopilot import SimAutopilot, SimPath
 from geotag import VehiclePose
+from sim._autopilot import SimAutopilot, SimPath
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import all as mavlink2

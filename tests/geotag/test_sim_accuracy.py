@@ -30,8 +30,8 @@ import pytest
 
 from capture._daemon import Flight, FlightConfig
 from capture._mcapread import LoggedDetections, read_flight_log
-from capture._sortie import SimSortie, SortieParams, TrueHole
 from geotag import HoleSighting, geotag_frame
+from sim._sortie import SimSortie, SortieParams, TrueHole
 
 PARAMS = SortieParams(
     size_m=(4.0, 4.0),

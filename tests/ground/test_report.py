@@ -16,7 +16,7 @@ import pymap3d
 import pytest
 
 from geotag import Hole, VehiclePose
-from holescan.report import SCORE_BANDS, render_report, score_band, thumbnails, write_report
+from ground._report import SCORE_BANDS, render_report, score_band, thumbnails, write_report
 from holescan_errors import InputError
 
 LAT0, LON0 = 47.3769, 8.5417

@@ -26,7 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from detect import CameraIntrinsics
-from holescan.images import read_camera, read_depth, read_rgb, write_depth, write_rgb
+from ground._images import read_camera, read_depth, read_rgb, write_depth, write_rgb
 from holescan_errors import InputError
 
 CATEGORY = {"id": 1, "name": "access_hole"}

@@ -1,7 +1,7 @@
 """Exact ray casting of the triangulated height field with a max-height pyramid.
 
 Each grid cell is split into two triangles along the diagonal from node ``(i, j)`` to
-``(i + 1, j + 1)`` (the surface :mod:`capture.sim._raster` draws); along a ray the height
+``(i + 1, j + 1)`` (the surface :mod:`sim._raster` draws); along a ray the height
 of a triangle is linear, so the first intersection in a cell is found in closed form. Empty
 space is skipped with a pyramid of maximum heights (level 0 = each cell's
 highest corner, level l = blocks of 2^l x 2^l cells): a ray leaves a block at once when it

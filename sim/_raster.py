@@ -1,7 +1,7 @@
 """Fast rendering of the height field by rasterising its triangles into a depth buffer.
 
 The surface is the triangulated height field (each grid cell split along the diagonal from
-node ``(i, j)`` to ``(i + 1, j + 1)``), the same surface :mod:`capture.sim._raycast` traces.
+node ``(i, j)`` to ``(i + 1, j + 1)``), the same surface :mod:`sim._raycast` traces.
 Every pixel centre gets the exact axial depth of the nearest triangle it lies in (1/z
 interpolated linearly in the image, which is exact for planar triangles) and the
 perspective-correct interpolation of the vertices' radiance. Only the cells inside the

@@ -27,11 +27,11 @@ What it writes into ``out`` for a flight ``NAME`` (its files ``NAME_0000.mcap``,
 * a copy of every log file under the same name, holding every original record byte for
   byte (chunks are copied, not recompressed) plus the new records on their own topics
   (``/reprocess/detections``, ``/reprocess/detections/annotations``, ``/reprocess/holes``,
-  ``/reprocess/holes/geojson``; see :data:`TOPICS`) and a ``holescan.reprocess`` metadata
+  ``/reprocess/holes/geojson``; see :data:`TOPICS`) and a ``ground._reprocess`` metadata
   record; new channels and schemas take ids from 65280 up so they never collide with the
   ones the source registers. The originals are never opened for writing;
 * ``NAME_holes.gpx|.kml|.geojson|.plan``: holes seen in at least ``min_sightings`` frames;
-* ``NAME_report.html``: the offline flight report (:func:`holescan.report.write_report`);
+* ``NAME_report.html``: the offline flight report (:func:`ground._report.write_report`);
 * ``NAME_reprocess.json``: the numbers of the run, and ``summary.json`` for all flights.
 
 Ctrl-C (``KeyboardInterrupt``) or ``stop.set()`` stops reading; the frames already
@@ -86,23 +86,26 @@ from mcap.records import (
 from mcap.well_known import MessageEncoding, SchemaEncoding
 from mcap_protobuf.schema import build_file_descriptor_set
 
-from capture import _mcapschemas as sch
-from capture._holepipeline import HolePipeline
-from capture._mavlink import (
+from capture import (
+    FlightLogError,
+    HolePipeline,
+    LoggedHoles,
+    PoseBuffer,
+    PoseUnavailable,
+    ScanState,
     attitude_from_attitude,
     attitude_from_quaternion,
     gps_from_gps_raw_int,
     position_from_global_position_int,
+    scan_records,
 )
-from capture._mcaplog import FlightLogError
-from capture._mcapread import LoggedHoles, ScanState, scan_records
-from capture._posebuffer import PoseBuffer, PoseUnavailable
+from capture import _mcapschemas as sch
 from detect import DEFAULT, CameraIntrinsics, Detection, DetectParams, detect_holes
 from geotag import CameraMount, Hole, VehiclePose
-from holescan.flightholes import flight_log_files, log_stem, render_thumbnail
-from holescan.report import write_report
+from ground._flightholes import flight_log_files, log_stem, render_thumbnail
+from ground._report import write_report
 from holescan_errors import InputError
-from missions._holefiles import HOLE_SUFFIXES, HoleFormat, write_hole_file
+from missions import HOLE_SUFFIXES, HoleFormat, write_hole_file
 
 __all__ = [
     "TOPICS",
@@ -706,10 +709,10 @@ class _McapCopy:
         self._flush_new_chunk()
         b = RecordBuilder()
         offset = self._out.tell()
-        Metadata("holescan.reprocess", self._metadata).write(b)
+        Metadata("ground._reprocess", self._metadata).write(b)
         self._out.write(_bytes(b))
         self._metadata_indexes.append(
-            MetadataIndex(offset, self._out.tell() - offset, "holescan.reprocess")
+            MetadataIndex(offset, self._out.tell() - offset, "ground._reprocess")
         )
         DataEnd(0).write(b)
         self._out.write(_bytes(b))

@@ -26,8 +26,8 @@ from pymavlink.dialects.v20 import common as mavlink2
 from capture import FlightLogWriter, Frame, LogOptions
 from detect import CameraIntrinsics, Detection, FeatureScores
 from geotag import Hole, VehiclePose
+from ground._flightholes import flight_log_files, read_flight_holes
 from holescan import cli
-from holescan.flightholes import flight_log_files, read_flight_holes
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavwp

@@ -45,7 +45,7 @@ from scipy.interpolate import CubicSpline
 from scipy.spatial.transform import Rotation
 
 from geotag import VehiclePose
-from missions._protocol import MissionReceiver
+from missions import MissionReceiver
 
 os.environ.setdefault("MAVLINK20", "1")  # before the first pymavlink import (see docstring)
 from pymavlink import mavutil

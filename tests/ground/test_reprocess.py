@@ -26,20 +26,20 @@ from mcap.reader import make_reader
 from capture import LogOptions, log_info
 from capture._daemon import Flight, FlightConfig, FlightSummary
 from capture._mcapread import scan_records
-from capture._simautopilot import SimAutopilot, SimPath
-from capture._simsource import SimSource, WorldAnchor
-from capture.sim._world import make_world
 from detect import CameraIntrinsics
 from geotag import Hole
-from holescan import cli
-from holescan.reprocess import (
+from ground._reprocess import (
     Progress,
     ReprocessOptions,
     group_flights,
     match_points,
     reprocess,
 )
+from holescan import cli
 from holescan_errors import InputError
+from sim._autopilot import SimAutopilot, SimPath
+from sim._source import SimSource, WorldAnchor
+from sim._world import make_world
 
 CAM = CameraIntrinsics.xtion()
 ANCHOR = WorldAnchor(43.6532, -79.3832, 120.0)
@@ -188,7 +188,7 @@ def test_copies_hold_every_original_record_and_read_back_indexed(
         records = new.get("/reprocess/detections", [])
         detected += [json.loads(d)["frame_index"] for _, _, d in records]
         info = log_info(out)  # every CRC, summary counts against the content
-        assert not info.truncated and info.metadata["holescan.reprocess"]["frames"] == "all"
+        assert not info.truncated and info.metadata["ground._reprocess"]["frames"] == "all"
         with open(out, "rb") as fh:  # mcap's indexed reader: summary, chunk indexes
             reader = make_reader(fh)
             counts: dict[str, int] = defaultdict(int)
@@ -312,7 +312,7 @@ def test_cli(
     assert "frames/s" in text.out and "summary:" in text.out
     doc = json.loads((out / "summary.json").read_text())["flights"][0]
     assert set(doc["files"]) == {"report", "summary"} | ({"gpx"} if doc["confirmed"] else set())
-    meta = log_info(out / files[0].name).metadata["holescan.reprocess"]
+    meta = log_info(out / files[0].name).metadata["ground._reprocess"]
     assert json.loads(meta["params"])["searcher"]["name"] == "dog"
     rc = cli.main(["reprocess", str(tmp_path / "nope.mcap"), "--out", str(out)])
     assert rc == 2 and "no such file" in capsys.readouterr().err

@@ -2,13 +2,13 @@
 
 Composition only (each part lives elsewhere):
 
-* the world: :func:`capture.sim.make_world`, anchored on the Earth by a
-  :class:`~capture._simsource.WorldAnchor` (its south-west corner, height 0);
+* the world: :func:`sim.make_world`, anchored on the Earth by a
+  :class:`~sim._source.WorldAnchor` (its south-west corner, height 0);
 * the path: :func:`missions.plan_survey` over the world's rectangle at ``altitude_m``
   above the rubble, its corners rounded with arcs (a quadrotor turns; a spline through bare
   corners would bulge) and flown as a closed loop by
-  :class:`~capture._simautopilot.SimAutopilot` (:meth:`SimPath.from_waypoints`);
-* the camera: :class:`~capture._simsource.SimSource`, rendering the world from the
+  :class:`~sim._autopilot.SimAutopilot` (:meth:`SimPath.from_waypoints`);
+* the camera: :class:`~sim._source.SimSource`, rendering the world from the
   autopilot's *true* pose at each frame time,
   ``autopilot.truth_pose(autopilot.boot_ns_at_mono(t))``;
 * the truth to score a flight against: the world's access holes as WGS84 points.
@@ -35,16 +35,16 @@ from types import TracebackType
 
 import numpy as np
 
-from capture._frame import Frame
-from capture._oni import OniWriter
-from capture._openni import OniSource, openni2_library
-from capture._simautopilot import SimAutopilot, SimPath
-from capture._simsource import SimSource, WorldAnchor, camera_pose_in_world
-from capture.sim import Conditions, RubbleWorld, make_world, random_conditions, render
+from capture import Frame, OniSource, OniWriter, openni2_library
 from detect import CameraIntrinsics
 from geotag import CameraMount
 from holescan_errors import InputError
 from missions import Area, SurveyParams, SurveyPlan, Waypoint, plan_survey
+from sim._autopilot import SimAutopilot, SimPath
+from sim._camera_model import Conditions, random_conditions
+from sim._render import render
+from sim._source import SimSource, WorldAnchor, camera_pose_in_world
+from sim._world import RubbleWorld, make_world
 
 __all__ = [
     "DEFAULT_ANCHOR",

@@ -13,9 +13,18 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from detect import CameraIntrinsics, Detection, DetectParams, detect_baseline, detect_holes
-from detect._evaluate import GroundTruthBox, PRResult, ScoredBox, evaluate_detections
-from holescan.datasets import Dataset, DatasetImage, load_dataset, load_image_pair
+from detect import (
+    CameraIntrinsics,
+    Detection,
+    DetectParams,
+    GroundTruthBox,
+    PRResult,
+    ScoredBox,
+    detect_baseline,
+    detect_holes,
+    evaluate_detections,
+)
+from ground._datasets import Dataset, DatasetImage, load_dataset, load_image_pair
 from holescan_errors import InputError
 
 log = logging.getLogger(__name__)

@@ -1,6 +1,6 @@
 """The simulated Xtion: the synthetic rubble world rendered from the vehicle's true pose.
 
-The world (:func:`capture.sim.make_world`) is a metric height field in a local ENU frame
+The world (:func:`sim.make_world`) is a metric height field in a local ENU frame
 whose origin (the field's south-west corner, height 0) sits at a WGS84 point. At each frame
 time the source asks a pose provider (the simulated autopilot's *truth*) where the vehicle
 is, turns it through the camera mount into a camera pose in the world and renders the
@@ -18,13 +18,12 @@ from dataclasses import dataclass
 import numpy as np
 import pymap3d
 
-from capture._frame import Frame
-from capture.sim._camera_model import CameraPose, Conditions, random_conditions
-from capture.sim._render import GtBox, render
-from capture.sim._world import RubbleWorld
+from capture import Frame
 from detect import CameraIntrinsics
-from geotag import CameraMount, VehiclePose
-from geotag._camera import dcm_from_euler, rotation_ned_from_optical
+from geotag import CameraMount, VehiclePose, dcm_from_euler, rotation_ned_from_optical
+from sim._camera_model import CameraPose, Conditions, random_conditions
+from sim._render import GtBox, render
+from sim._world import RubbleWorld
 
 # ENU <- NED (swap north/east, flip down).
 R_ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])

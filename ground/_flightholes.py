@@ -47,9 +47,9 @@ from capture import (
     read_flight_log,
 )
 from geotag import Hole
-from holescan.overlay import depth_colour
+from ground._overlay import depth_colour
 from holescan_errors import InputError
-from missions._holefiles import (
+from missions import (
     HOLE_FORMATS,
     HOLE_SUFFIXES,
     HoleFormat,
@@ -212,7 +212,7 @@ def render_thumbnail(
     height_px: int = 160,
     quality: int = 85,
 ) -> tuple[bytes, int, int]:
-    """Colour | colourised depth (:func:`holescan.overlay.depth_colour`), box drawn, JPEG.
+    """Colour | colourised depth (:func:`ground._overlay.depth_colour`), box drawn, JPEG.
 
     Parameters
     ----------

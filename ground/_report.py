@@ -17,6 +17,7 @@ import math
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from importlib.metadata import version as _dist_version
 from pathlib import Path
 
 import cv2
@@ -26,8 +27,7 @@ import pymap3d
 from shapely.geometry import LineString
 
 from geotag import Hole, VehiclePose
-from holescan import __version__
-from holescan.overlay import depth_colour
+from ground._overlay import depth_colour
 from holescan_errors import InputError
 
 __all__ = [
@@ -164,7 +164,8 @@ def render_report(
         f"<header><h1>{_e(title)}</h1>{_summary(holes, poses, frame)}"
         f"{_facts(facts or {})}</header>",
         *((map_html, holes_html) if holes else (holes_html, map_html)),
-        f"<footer>holescan {_e(__version__)} &middot; positions WGS84; map in a local "
+        f"<footer>holescan {_e(_dist_version('holescan'))} &middot; positions WGS84; map in a "
+        "local "
         f"east/north frame around {_e(frame.origin_name)} "
         f"({frame.lat0:.7f}, {frame.lon0:.7f}); a hole lies within its 1&sigma; circle "
         f"with 39 % probability, within {_R95:.2f}&sigma; with 95 %.</footer>",
@@ -693,7 +694,7 @@ def thumbnails(
     rgb : (H, W, 3) uint8; depth : (H, W) uint16 millimetres, 0 = no reading. The crop keeps
     a margin of 60 % of the box's larger side (at least 24 px) and is at most ``width`` px
     tall as well. Returns two (h, w, 3) uint8 RGB images; depth is coloured by
-    :func:`holescan.overlay.depth_colour` over the crop (near = bright).
+    :func:`ground._overlay.depth_colour` over the crop (near = bright).
     """
     if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.dtype != np.uint8:
         raise InputError(f"view colour must be (H, W, 3) uint8, got {rgb.shape} {rgb.dtype}")

@@ -1,6 +1,6 @@
 """The simulated camera: its pose in the world, the viewing conditions and projection.
 
-World frame (see :mod:`capture.sim._world`): metres, x east, y north, z up. Camera optical
+World frame (see :mod:`sim._world`): metres, x east, y north, z up. Camera optical
 frame: x right, y down, z forward (along the optical axis), as in
 :class:`detect.CameraIntrinsics`.
 """

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from detect import CameraIntrinsics
-from holescan.datasets import Sample, load_dataset, load_image_pair, write_dataset
-from holescan.synth import synth_dataset
+from ground._datasets import Sample, load_dataset, load_image_pair, write_dataset
 from holescan_errors import InputError
+from sim._synth import synth_dataset
 
 CAM = CameraIntrinsics.xtion()
 

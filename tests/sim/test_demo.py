@@ -19,11 +19,11 @@ import pytest
 from shapely.geometry import Point, Polygon
 
 from capture import log_info
-from capture._sortie import TrueHole, make_sortie_world, true_holes
 from geotag import Hole
+from ground._flightholes import read_flight_holes
 from holescan import cli
-from holescan.demo import DEMO_SORTIE
-from holescan.flightholes import read_flight_holes
+from sim._demo import DEMO_SORTIE
+from sim._sortie import TrueHole, make_sortie_world, true_holes
 
 CHROMIUM = Path("/usr/bin/chromium")
 SIZE = (6.0, 6.0)

@@ -16,12 +16,12 @@ from pathlib import Path
 
 import numpy as np
 
-from capture.sim._camera_model import CameraPose, random_conditions
-from capture.sim._render import render
-from capture.sim._world import RubbleWorld, make_world
 from detect import CameraIntrinsics
-from holescan.datasets import Sample, write_dataset
+from ground import Sample, write_dataset
 from holescan_errors import InputError
+from sim._camera_model import CameraPose, random_conditions
+from sim._render import render
+from sim._world import RubbleWorld, make_world
 
 log = logging.getLogger(__name__)
 

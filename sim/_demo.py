@@ -3,7 +3,7 @@
 One call runs what a real sortie runs, with no hardware:
 
 * a synthetic rubble field with access holes and distractors, and a survey planned over it
-  by :func:`missions.plan_survey` in the low dawn sun (:class:`capture._sortie.SimSortie`);
+  by :func:`missions.plan_survey` in the low dawn sun (:class:`sim._sortie.SimSortie`);
 * the simulated autopilot (:class:`capture.SimAutopilot`) flying that survey and speaking
   MAVLink over loopback UDP (telemetry, TIMESYNC, SYSTEM_TIME);
 * the capture daemon (:class:`capture._daemon.Flight`) with the simulated Xtion: MCAP flight
@@ -39,14 +39,13 @@ import numpy as np
 import numpy.typing as npt
 import pymap3d
 
-from capture import LoggedFrame, LoggedPose, read_flight_log
-from capture._daemon import Flight, FlightConfig, FlightSummary
-from capture._sortie import SimSortie, SortieParams, TrueHole, loop_length_m
-from capture.sim._world import RubbleWorld
+from capture import Flight, FlightConfig, FlightSummary, LoggedFrame, LoggedPose, read_flight_log
 from geotag import Hole, VehiclePose
-from holescan.reprocess import ReprocessOptions, write_hole_outputs
+from ground import ReprocessOptions, write_hole_outputs
 from holescan_errors import InputError
 from missions import HoleMissionServer, connect, download_mission
+from sim._sortie import SimSortie, SortieParams, TrueHole, loop_length_m
+from sim._world import RubbleWorld
 
 __all__ = [
     "DEMO_SORTIE",

@@ -1,0 +1,109 @@
+"""On the ground: what is done with a flight after it, or beside it at the ground station.
+
+* :func:`reprocess` - detect again over whole flight logs (also cut-off ones), poses from
+  the logged telemetry, holes merged as in flight; MCAP copies, hole files, report.
+* :func:`export_flight_holes` / :func:`read_flight_holes` - the holes of a flight log as
+  the ground crew's files (GPX, KML/KMZ with thumbnails, GeoJSON, QGC ``.plan``, WPL).
+* :func:`write_report` - a flight's self-contained HTML report.
+* :func:`load_dataset` / :func:`write_dataset` and :func:`evaluate_dataset` - annotated
+  RGB-D datasets (COCO layout) and the detector's AP on them.
+* :func:`read_rgb` / :func:`read_depth` / :func:`read_camera` and :func:`draw_detections` -
+  image files and overlays for ``holescan detect``.
+"""
+
+from ground._datasets import (
+    CATEGORY,
+    Dataset,
+    DatasetImage,
+    Sample,
+    load_dataset,
+    load_image_pair,
+    write_dataset,
+)
+from ground._evaluation import (
+    EvalReport,
+    detect_image,
+    evaluate_dataset,
+    format_table,
+    ground_truth,
+    plot_pr,
+    run_detector,
+    write_coco_results,
+)
+from ground._flightholes import (
+    ExportReport,
+    FlightHoles,
+    HoleThumbnail,
+    default_out_path,
+    export_flight_holes,
+    flight_log_files,
+    log_stem,
+    read_flight_holes,
+    render_thumbnail,
+)
+from ground._images import read_camera, read_depth, read_rgb, write_depth, write_rgb
+from ground._overlay import depth_colour, draw_detections, render_detections, segmentation
+from ground._report import SCORE_BANDS, ScoreBand, render_report, score_band, write_report
+from ground._reprocess import (
+    FlightResult,
+    HoleMatch,
+    Progress,
+    ReprocessOptions,
+    ReprocessResult,
+    group_flights,
+    match_points,
+    reprocess,
+    reprocess_flight,
+    write_hole_outputs,
+)
+
+__all__ = [
+    "CATEGORY",
+    "SCORE_BANDS",
+    "Dataset",
+    "DatasetImage",
+    "EvalReport",
+    "ExportReport",
+    "FlightHoles",
+    "FlightResult",
+    "HoleMatch",
+    "HoleThumbnail",
+    "Progress",
+    "ReprocessOptions",
+    "ReprocessResult",
+    "Sample",
+    "ScoreBand",
+    "default_out_path",
+    "depth_colour",
+    "detect_image",
+    "draw_detections",
+    "evaluate_dataset",
+    "export_flight_holes",
+    "flight_log_files",
+    "format_table",
+    "ground_truth",
+    "group_flights",
+    "load_dataset",
+    "load_image_pair",
+    "log_stem",
+    "match_points",
+    "plot_pr",
+    "read_camera",
+    "read_depth",
+    "read_flight_holes",
+    "read_rgb",
+    "render_detections",
+    "render_report",
+    "render_thumbnail",
+    "reprocess",
+    "reprocess_flight",
+    "run_detector",
+    "score_band",
+    "segmentation",
+    "write_coco_results",
+    "write_dataset",
+    "write_depth",
+    "write_hole_outputs",
+    "write_report",
+    "write_rgb",
+]

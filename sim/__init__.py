@@ -1,0 +1,96 @@
+"""The simulated world, Xtion and autopilot: everything the flight side can be tested against.
+
+Beside the flight side, never imported by it: it may import :mod:`capture`,
+:mod:`missions` and :mod:`ground`.
+
+* :func:`make_world` builds a seeded metric height field of rubble (slabs, debris, cracks,
+  human-size access holes and distractors) with its ground truth; :func:`render` draws one
+  registered RGB-D frame from any 6-DoF :class:`CameraPose` with the Xtion's artefacts and
+  returns the access holes' boxes (pure numpy/numba).
+* :class:`SimAutopilot` - a MAVLink autopilot over loopback flying a :class:`SimPath`.
+* :class:`SimSource` - the simulated Xtion as a :class:`capture.FrameSource`.
+* :class:`SimSortie` - world + autopilot + camera for one survey; :func:`fly_sim` flies it
+  through :func:`capture.fly` (``holescan fly --sensor sim``).
+* :func:`run_demo` - ``holescan demo``: a whole simulated sortie scored against the truth.
+* :func:`synth_dataset` - a synthetic annotated RGB-D dataset.
+"""
+
+from sim._autopilot import SimAutopilot, SimPath
+from sim._camera_model import CameraPose, Conditions, random_conditions
+from sim._demo import (
+    DEMO_SORTIE,
+    DemoOptions,
+    DemoProgress,
+    DemoResult,
+    FalseHole,
+    TruthRow,
+    format_result,
+    run_demo,
+)
+from sim._fly import SIM_TABLE, SimFlyReport, fly_sim, format_sim_report, sortie_params
+from sim._render import GtBox, hole_boxes, render, render_exact
+from sim._sortie import (
+    DEFAULT_ANCHOR,
+    LapReplay,
+    SimSortie,
+    SortieParams,
+    TrueHole,
+    lap_frames,
+    loop_length_m,
+    make_sortie_world,
+    prerender_lap,
+    survey_path,
+    true_holes,
+    world_area,
+)
+from sim._source import SimSource, WorldAnchor, camera_pose_in_world
+from sim._synth import sample_pose, synth_dataset, synth_samples
+from sim._world import AccessHole, HoleKind, RubbleWorld, make_world, relight
+
+__all__ = [
+    "DEFAULT_ANCHOR",
+    "DEMO_SORTIE",
+    "SIM_TABLE",
+    "AccessHole",
+    "CameraPose",
+    "Conditions",
+    "DemoOptions",
+    "DemoProgress",
+    "DemoResult",
+    "FalseHole",
+    "GtBox",
+    "HoleKind",
+    "LapReplay",
+    "RubbleWorld",
+    "SimAutopilot",
+    "SimFlyReport",
+    "SimPath",
+    "SimSortie",
+    "SimSource",
+    "SortieParams",
+    "TrueHole",
+    "TruthRow",
+    "WorldAnchor",
+    "camera_pose_in_world",
+    "fly_sim",
+    "format_result",
+    "format_sim_report",
+    "hole_boxes",
+    "lap_frames",
+    "loop_length_m",
+    "make_sortie_world",
+    "make_world",
+    "prerender_lap",
+    "random_conditions",
+    "relight",
+    "render",
+    "render_exact",
+    "run_demo",
+    "sample_pose",
+    "sortie_params",
+    "survey_path",
+    "synth_dataset",
+    "synth_samples",
+    "true_holes",
+    "world_area",
+]

@@ -1,0 +1,128 @@
+"""``holescan fly --sensor sim``: the one flight path, flown over the simulated sortie.
+
+The ``[sim]`` table of the fly configuration is checked here (the flight side keeps it as
+written and never imports the simulator); :func:`fly_sim` opens a
+:class:`~sim._sortie.SimSortie` (world, simulated autopilot, simulated Xtion) and hands its
+frame source and autopilot link to :func:`capture.fly`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import statistics
+import threading
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from capture import FlyConfig, FlyReport, SensorSetup, check_table, fly, format_report, numbers
+from geotag import local_en_m
+from sim._sortie import DEFAULT_ANCHOR, SimSortie, SortieParams, TrueHole
+from sim._source import WorldAnchor
+
+__all__ = ["SIM_TABLE", "SimFlyReport", "fly_sim", "format_sim_report", "sortie_params"]
+
+_NUM = (int, float)
+SIM_TABLE: Mapping[str, tuple[tuple[type, ...], Any]] = {
+    "world_seed": ((int,), 7),
+    "size_m": ((list,), [10.0, 10.0]),
+    "margin_m": (_NUM, 3.5),
+    "n_access_holes": ((int,), 3),
+    "distractors": ((bool,), True),
+    "lat_deg": (_NUM, DEFAULT_ANCHOR.lat_deg),
+    "lon_deg": (_NUM, DEFAULT_ANCHOR.lon_deg),
+    "alt_m": (_NUM, DEFAULT_ANCHOR.alt_m),
+    "altitude_m": (_NUM, 3.0),
+    "speed_m_s": (_NUM, None),
+    "heading_deg": (_NUM, None),
+    "wobble_deg": (_NUM, 1.5),
+    "clock_offset_s": (_NUM, 1234.5),
+    "drift_ppm": (_NUM, 15.0),
+    "eph_m": (_NUM, 1.2),
+    "fps": (_NUM, 30.0),
+    "noise_seed": ((int,), 0),
+}
+"""The ``[sim]`` table: key -> (types, default), as :func:`capture.check_table` takes it."""
+
+
+def sortie_params(
+    table: Mapping[str, Any], where: str = "fly configuration"
+) -> tuple[SortieParams, dict[str, Any]]:
+    """The sortie a ``[sim]`` table describes, and its settings as flat ``sim.key`` records."""
+    s = check_table("sim", table, SIM_TABLE, where)
+    size = numbers(where, "sim.size_m", s["size_m"], 2)
+    params = SortieParams(
+        world_seed=s["world_seed"],
+        size_m=(size[0], size[1]),
+        margin_m=float(s["margin_m"]),
+        n_access_holes=s["n_access_holes"],
+        distractors=s["distractors"],
+        anchor=WorldAnchor(float(s["lat_deg"]), float(s["lon_deg"]), float(s["alt_m"])),
+        altitude_m=float(s["altitude_m"]),
+        speed_m_s=None if s["speed_m_s"] is None else float(s["speed_m_s"]),
+        heading_deg=None if s["heading_deg"] is None else float(s["heading_deg"]),
+        wobble_deg=float(s["wobble_deg"]),
+        clock_offset_s=float(s["clock_offset_s"]),
+        drift_ppm=float(s["drift_ppm"]),
+        eph_m=float(s["eph_m"]),
+        fps=float(s["fps"]),
+        noise_seed=s["noise_seed"],
+    )
+    return params, {f"sim.{k}": v for k, v in s.items()}
+
+
+@dataclass(frozen=True)
+class SimFlyReport:
+    """A simulated flight: the flight's :class:`capture.FlyReport` and the simulator's side.
+
+    late_frames, render_ms_median : the simulated camera's lateness (frames due more than
+    one period ago when rendered) and render time (None when nothing was rendered).
+    truth : the simulated world's access holes.
+    """
+
+    flight: FlyReport
+    late_frames: int
+    render_ms_median: float | None
+    truth: tuple[TrueHole, ...]
+
+
+def fly_sim(cfg: FlyConfig, *, stop: threading.Event | None = None) -> SimFlyReport:
+    """Fly ``cfg`` over the simulated sortie its ``[sim]`` table describes.
+
+    ``cfg.mavlink`` is the ``udpin:`` address the simulated autopilot talks to (None: a free
+    loopback port). Everything else is :func:`capture.fly`'s.
+    """
+    params, record = sortie_params(cfg.sim_table)
+    cfg = dataclasses.replace(cfg, record={**cfg.record, **record})
+    with SimSortie(params, mount=cfg.flight.mount, mavlink=cfg.mavlink) as sortie:
+        setup = SensorSetup(sortie.source, sortie.camera, sortie.mavlink)
+        report = fly(cfg, setup, stop=stop)
+    render_ms = [ms for src in sortie.sources for ms in src.render_ms]
+    return SimFlyReport(
+        report,
+        late_frames=sum(src.late_frames for src in sortie.sources),
+        render_ms_median=statistics.median(render_ms) if render_ms else None,
+        truth=sortie.truth,
+    )
+
+
+def format_sim_report(report: SimFlyReport, min_sightings: int = 3) -> str:
+    """:func:`capture.format_report`, then the simulator's lateness and the truth found."""
+    lines = [format_report(report.flight, min_sightings)]
+    ms = report.render_ms_median
+    lines.append(
+        f"sim: render {ms:.1f} ms/frame median, {report.late_frames} frames late"
+        if ms is not None
+        else "sim: no frame rendered"
+    )
+    confirmed = [h for h in report.flight.summary.holes if h.sightings >= min_sightings]
+    for t in report.truth:
+        near = [
+            (math.hypot(*local_en_m(h.lat_deg, h.lon_deg, t.lat_deg, t.lon_deg)), h.id)
+            for h in confirmed
+        ]
+        d, hid = min(near, default=(math.inf, 0))
+        found = f"hole {hid} at {d:.2f} m" if d <= 0.5 else "not reported"
+        lines.append(f"  true access hole {t.id} ({t.x_m:.1f}, {t.y_m:.1f} m): {found}")
+    return "\n".join(lines)
