@@ -226,7 +226,7 @@ class FlightLogWriter:
         self._mount_offset = tuple(float(v) for v in mount.offset_m)
         self._metadata = {
             "holescan": {
-                "version": _dist_version('holescan'),
+                "version": _dist_version("holescan"),
                 "python": platform.python_version(),
                 "mcap": mcap_version(),
                 "host": platform.node(),

@@ -29,6 +29,7 @@ from holescan_errors import InputError
 
 log = logging.getLogger(__name__)
 
+
 def detect_image(
     params: DetectParams | None,
     rgb: npt.NDArray[np.uint8],

@@ -888,7 +888,7 @@ class _Flight:
     def _metadata_record(self) -> dict[str, str]:
         p = self.opts.params
         return {
-            "version": _dist_version('holescan'),
+            "version": _dist_version("holescan"),
             "params": sch.to_json(p).decode(),
             "frames": self.opts.frames,
             "topic_prefix": self.opts.topic_prefix,
@@ -1386,7 +1386,7 @@ def reprocess(
     out_dir.mkdir(parents=True, exist_ok=True)
     summary = out_dir / "summary.json"
     doc = {
-        "holescan": _dist_version('holescan'),
+        "holescan": _dist_version("holescan"),
         "pool_start_s": round(pool_start_s, 2),
         "flights": [r.summary() for r in results],
     }

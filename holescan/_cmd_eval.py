@@ -51,8 +51,12 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     p.add_argument("--detections", type=Path, help="write COCO results JSON (the first run)")
     p.add_argument("--plot", type=Path, help="write a precision-recall PNG")
-    p.add_argument("--workers", type=int, default=os.cpu_count() or 1,
-                   help="detector processes (default: all cores)")
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=os.cpu_count() or 1,
+        help="detector processes (default: all cores)",
+    )
     add_detector_options(p)
     p.set_defaults(func=run)
 
