@@ -15,28 +15,20 @@ REQUEST_DATA_STREAM when that is not acknowledged), and runs a receiver thread t
 * counts (and logs) garbage bytes and packets that fail to parse; they are otherwise ignored;
 * hands every parsed message with its arrival time to ``on_message`` (e.g. a flight logger).
 
-pymavlink picks MAVLink 1 or 2 from the ``MAVLINK20`` environment variable when it is first
-imported; this module sets ``MAVLINK20=1`` (``os.environ.setdefault``) right before that import
-because MAVProxy's mission module and TIMESYNC need MAVLink 2. That is the only import-time
-side effect, and it is pymavlink's constraint, not a configuration channel of ours.
+The link speaks MAVLink 2 through :func:`missions.open_link` (TIMESYNC and MAVProxy's
+mission module need it); message classes and enums come from :data:`missions.mavlink`.
 """
 
 from __future__ import annotations
 
 import logging
 import math
-import os
 import threading
 import time
 from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, Literal
-
-os.environ.setdefault("MAVLINK20", "1")  # before the first pymavlink import (see docstring)
-
-from pymavlink import mavutil
-from pymavlink.dialects.v20 import all as mavlink2
 
 from capture._clock import ClockSync, ClockUnavailable
 from capture._errors import CaptureError
@@ -49,6 +41,7 @@ from capture._posebuffer import (
     quat_from_euler,
 )
 from geotag import VehiclePose
+from missions import mavlink, open_link
 
 __all__ = [
     "COMPANION_COMPONENT",
@@ -67,7 +60,7 @@ __all__ = [
 
 _log = logging.getLogger(__name__)
 
-COMPANION_COMPONENT = mavlink2.MAV_COMP_ID_ONBOARD_COMPUTER  # 191
+COMPANION_COMPONENT = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER  # 191
 
 DEFAULT_RATES_HZ: Mapping[str, float] = {
     "GLOBAL_POSITION_INT": 10.0,
@@ -78,11 +71,11 @@ DEFAULT_RATES_HZ: Mapping[str, float] = {
 
 # REQUEST_DATA_STREAM groups (ArduPilot's assignment) for the fallback.
 _DATA_STREAM: Mapping[str, int] = {
-    "GLOBAL_POSITION_INT": mavlink2.MAV_DATA_STREAM_POSITION,
-    "ATTITUDE": mavlink2.MAV_DATA_STREAM_EXTRA1,
-    "ATTITUDE_QUATERNION": mavlink2.MAV_DATA_STREAM_EXTRA1,
-    "GPS_RAW_INT": mavlink2.MAV_DATA_STREAM_EXTENDED_STATUS,
-    "SYSTEM_TIME": mavlink2.MAV_DATA_STREAM_EXTRA3,
+    "GLOBAL_POSITION_INT": mavlink.MAV_DATA_STREAM_POSITION,
+    "ATTITUDE": mavlink.MAV_DATA_STREAM_EXTRA1,
+    "ATTITUDE_QUATERNION": mavlink.MAV_DATA_STREAM_EXTRA1,
+    "GPS_RAW_INT": mavlink.MAV_DATA_STREAM_EXTENDED_STATUS,
+    "SYSTEM_TIME": mavlink.MAV_DATA_STREAM_EXTRA3,
 }
 
 RateMethod = Literal["message_interval", "data_stream", "mixed", "none"]
@@ -226,7 +219,7 @@ class Telemetry:
         clock: ClockSync | None = None,
     ) -> None:
         for name in rates_hz:
-            if not hasattr(mavlink2, f"MAVLINK_MSG_ID_{name}"):
+            if not hasattr(mavlink, f"MAVLINK_MSG_ID_{name}"):
                 raise ValueError(f"unknown MAVLink message {name!r} in rates_hz")
         self.connection = connection
         self.poses = poses if poses is not None else PoseBuffer()
@@ -266,12 +259,11 @@ class Telemetry:
 
     def __enter__(self) -> Telemetry:
         try:
-            self._conn = mavutil.mavlink_connection(
+            self._conn = open_link(
                 self.connection,
                 baud=self._baud,
                 source_system=self._want_sysid if self._want_sysid is not None else 255,
                 source_component=COMPANION_COMPONENT,
-                robust_parsing=True,
                 autoreconnect=True,
             )
         except Exception as err:  # pymavlink raises OSError, SerialException, ValueError...
@@ -404,7 +396,7 @@ class Telemetry:
             with self._cond:
                 while True:
                     result = self._acks.get(command)
-                    if result is not None and result != mavlink2.MAV_RESULT_IN_PROGRESS:
+                    if result is not None and result != mavlink.MAV_RESULT_IN_PROGRESS:
                         return result
                     remaining = deadline - time.monotonic()
                     if remaining <= 0:
@@ -424,21 +416,21 @@ class Telemetry:
         refused: dict[str, float] = {}
         acked_any = False
         for name, hz in rates_hz.items():
-            msg_id = getattr(mavlink2, f"MAVLINK_MSG_ID_{name}")
+            msg_id = getattr(mavlink, f"MAVLINK_MSG_ID_{name}")
             interval_us = round(1e6 / hz) if hz > 0 else -1
             if refused and not acked_any:
                 refused[name] = hz
                 continue
             try:
                 result = self.command_long(
-                    mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, interval_us
+                    mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, interval_us
                 )
             except TelemetryTimeoutError:
                 _log.info("SET_MESSAGE_INTERVAL not acknowledged for %s", name)
                 refused[name] = hz
                 continue
             acked_any = True
-            if result != mavlink2.MAV_RESULT_ACCEPTED:
+            if result != mavlink.MAV_RESULT_ACCEPTED:
                 _log.info("SET_MESSAGE_INTERVAL for %s refused (MAV_RESULT %d)", name, result)
                 refused[name] = hz
         if refused:
@@ -505,11 +497,11 @@ class Telemetry:
     def _send_heartbeat(self) -> None:
         with self._send_lock:
             self._conn.mav.heartbeat_send(
-                mavlink2.MAV_TYPE_ONBOARD_CONTROLLER,
-                mavlink2.MAV_AUTOPILOT_INVALID,
+                mavlink.MAV_TYPE_ONBOARD_CONTROLLER,
+                mavlink.MAV_AUTOPILOT_INVALID,
                 0,
                 0,
-                mavlink2.MAV_STATE_ACTIVE,
+                mavlink.MAV_STATE_ACTIVE,
             )
 
     def _send_timesync(self) -> None:
@@ -552,7 +544,7 @@ class Telemetry:
             handler(self, msg, t_mono_ns)
 
     def _maybe_adopt_target(self, msg: Any, src: tuple[int, int]) -> None:
-        if msg.get_type() != "HEARTBEAT" or msg.autopilot == mavlink2.MAV_AUTOPILOT_INVALID:
+        if msg.get_type() != "HEARTBEAT" or msg.autopilot == mavlink.MAV_AUTOPILOT_INVALID:
             return
         if self._want_sysid is not None and src[0] != self._want_sysid:
             return

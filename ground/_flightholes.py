@@ -53,6 +53,8 @@ from missions import (
     HOLE_FORMATS,
     HOLE_SUFFIXES,
     HoleFormat,
+    mavlink,
+    parser,
     rank_holes,
     write_hole_file,
 )
@@ -314,13 +316,10 @@ class _BestViews:
 
 
 def _home_position(packet: bytes) -> tuple[float, float, float] | None:
-    from pymavlink.dialects.v20 import common as mavlink2
-
-    mav = mavlink2.MAVLink(None)
-    mav.robust_parsing = True
+    mav = parser()
     try:
         msgs = mav.parse_buffer(packet) or []
-    except mavlink2.MAVError:
+    except mavlink.MAVError:
         return None
     for msg in msgs:
         if msg.get_type() == "HOME_POSITION":

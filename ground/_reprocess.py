@@ -105,7 +105,7 @@ from geotag import CameraMount, Hole, VehiclePose
 from ground._flightholes import flight_log_files, log_stem, render_thumbnail
 from ground._report import write_report
 from holescan_errors import InputError
-from missions import HOLE_SUFFIXES, HoleFormat, write_hole_file
+from missions import HOLE_SUFFIXES, HoleFormat, mavlink, parser, write_hole_file
 
 __all__ = [
     "TOPICS",
@@ -426,12 +426,8 @@ class _TelemetryReplay:
     """Logged raw MAVLink -> :class:`PoseBuffer`, as :class:`capture.Telemetry` fills it."""
 
     def __init__(self) -> None:
-        os.environ.setdefault("MAVLINK20", "1")  # pymavlink's own constraint (see _mavlink)
-        from pymavlink.dialects.v20 import all as mavlink2
-
-        self._mav = mavlink2.MAVLink(None)
-        self._mav.robust_parsing = True
-        self._error = mavlink2.MAVError
+        self._mav = parser()
+        self._error = mavlink.MAVError
         self.poses = PoseBuffer(capacity=8192)
         self.target: tuple[int, int] | None = None
         self.home: tuple[float, float, float] | None = None

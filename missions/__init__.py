@@ -54,6 +54,7 @@ from missions._holeserver import (
     hole_statustext,
     hole_waypoints,
 )
+from missions._link import mavlink, mavutil, open_link, parser
 from missions._protocol import (
     MAV_MISSION_ACCEPTED,
     MissionError,
@@ -64,7 +65,6 @@ from missions._protocol import (
     UploadReport,
     connect,
     download_mission,
-    mavlink_module,
     upload_mission,
 )
 from missions._sun import (
@@ -126,7 +126,10 @@ __all__ = [
     "hole_statustext",
     "hole_waypoints",
     "local_solar_day",
-    "mavlink_module",
+    "mavlink",
+    "mavutil",
+    "open_link",
+    "parser",
     "plan_survey",
     "rank_holes",
     "read_area",

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from holescan_errors import InputError
+from missions._link import mavlink
 
 __all__ = [
     "MAV_CMD_DO_CHANGE_SPEED",
@@ -45,14 +46,15 @@ __all__ = [
     "write_wpl",
 ]
 
-MAV_FRAME_GLOBAL = 0
-MAV_FRAME_MISSION = 2
-MAV_FRAME_GLOBAL_RELATIVE_ALT = 3
-MAV_CMD_NAV_WAYPOINT = 16
-MAV_CMD_NAV_RETURN_TO_LAUNCH = 20
-MAV_CMD_NAV_LAND = 21
-MAV_CMD_NAV_TAKEOFF = 22
-MAV_CMD_DO_CHANGE_SPEED = 178
+# MAVLink values the files use, from pymavlink's dialect (re-exported for the writers' callers)
+MAV_FRAME_GLOBAL: int = mavlink.MAV_FRAME_GLOBAL
+MAV_FRAME_MISSION: int = mavlink.MAV_FRAME_MISSION
+MAV_FRAME_GLOBAL_RELATIVE_ALT: int = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT
+MAV_CMD_NAV_WAYPOINT: int = mavlink.MAV_CMD_NAV_WAYPOINT
+MAV_CMD_NAV_RETURN_TO_LAUNCH: int = mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH
+MAV_CMD_NAV_LAND: int = mavlink.MAV_CMD_NAV_LAND
+MAV_CMD_NAV_TAKEOFF: int = mavlink.MAV_CMD_NAV_TAKEOFF
+MAV_CMD_DO_CHANGE_SPEED: int = mavlink.MAV_CMD_DO_CHANGE_SPEED
 
 _KML_NS = "http://www.opengis.net/kml/2.2"
 _PLAN_DATA_KEY = "holescan"

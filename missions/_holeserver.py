@@ -26,19 +26,14 @@ The mission (decided after reading MAVProxy's ``wp save`` and the QGC WPL 110 fo
   component 0 belongs to the autopilot's own mission). Uploads are refused with
   MISSION_ACK DENIED; fence and rally lists are empty.
 
-pymavlink picks MAVLink 1 or 2 when it is first imported, from the ``MAVLINK20``
-environment variable; the server sets ``MAVLINK20=1`` (if unset) before it first imports
-pymavlink (when it starts, not when this module is imported),
-because MISSION_ITEM_INT's ``mission_type`` and MAVProxy's wp module need MAVLink 2. If
-pymavlink was already imported as MAVLink 1, the link's encoder is swapped for MAVLink 2.
+The link speaks MAVLink 2 (:func:`missions.open_link`): MISSION_ITEM_INT's
+``mission_type`` and MAVProxy's wp module need it.
 """
 
 from __future__ import annotations
 
-import importlib
 import logging
 import math
-import os
 import threading
 import time
 from collections.abc import Iterable
@@ -48,6 +43,7 @@ from typing import Any
 
 from geotag import Hole
 from holescan_errors import HolescanError, InputError
+from missions._link import mavlink, open_link
 
 __all__ = [
     "HoleMissionServer",
@@ -59,7 +55,7 @@ __all__ = [
 
 _log = logging.getLogger(__name__)
 
-MAV_COMP_ID_ONBOARD_COMPUTER = 191
+MAV_COMP_ID_ONBOARD_COMPUTER: int = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
 _FRAME_GLOBAL = 0
 _FRAME_GLOBAL_RELATIVE_ALT = 3
 _CMD_NAV_WAYPOINT = 16
@@ -68,9 +64,6 @@ _MISSION_ACCEPTED = 0
 _MISSION_INVALID_SEQUENCE = 13
 _MISSION_DENIED = 14
 _SEVERITY_NOTICE = 5
-_MAV_TYPE_ONBOARD_CONTROLLER = 18
-_MAV_AUTOPILOT_INVALID = 8
-_MAV_STATE_ACTIVE = 4
 _STATUSTEXT_MAX = 50
 _MISSION_MESSAGES = frozenset(
     {
@@ -234,20 +227,12 @@ class HoleMissionServer:
         """Open the link and start answering."""
         if self._thread is not None:
             raise MissionServerError("server already started")
-        os.environ.setdefault("MAVLINK20", "1")  # before pymavlink's first import (see above)
-        from pymavlink import mavutil
-
         try:
-            self._conn = mavutil.mavlink_connection(
+            self._conn = open_link(
                 self.connection_string, source_system=self.sysid, source_component=self.compid
             )
-        except (OSError, ValueError) as err:
+        except Exception as err:  # pymavlink raises OSError, ValueError, SerialException ...
             raise MissionServerError(f"cannot open {self.connection_string!r}: {err}") from err
-        if self._conn.WIRE_PROTOCOL_VERSION != "2.0":  # pymavlink was imported as MAVLink 1
-            v20 = importlib.import_module("pymavlink.dialects.v20.ardupilotmega")
-            self._conn.mav = v20.MAVLink(self._conn, srcSystem=self.sysid, srcComponent=self.compid)
-            self._conn.mav.robust_parsing = True
-            self._conn.WIRE_PROTOCOL_VERSION = "2.0"
         self._thread = threading.Thread(target=self._run, name="hole-mission-server", daemon=True)
         self._thread.start()
         _log.info(
@@ -314,11 +299,11 @@ class HoleMissionServer:
                 if now >= next_heartbeat:
                     self._send(
                         lambda mav: mav.heartbeat_send(
-                            _MAV_TYPE_ONBOARD_CONTROLLER,
-                            _MAV_AUTOPILOT_INVALID,
+                            mavlink.MAV_TYPE_ONBOARD_CONTROLLER,
+                            mavlink.MAV_AUTOPILOT_INVALID,
                             0,
                             0,
-                            _MAV_STATE_ACTIVE,
+                            mavlink.MAV_STATE_ACTIVE,
                         )
                     )
                     next_heartbeat = now + self.heartbeat_period_s

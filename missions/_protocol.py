@@ -15,13 +15,11 @@ always speak MAVLink 2 (MAVProxy needs it) whatever that choice was.
 
 from __future__ import annotations
 
-import importlib
 import logging
 import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from types import ModuleType
 from typing import Any
 
 from holescan_errors import HolescanError, InputError
@@ -31,6 +29,7 @@ from missions._files import (
     MAV_FRAME_MISSION,
     Waypoint,
 )
+from missions._link import mavlink, open_link
 
 __all__ = [
     "MAV_MISSION_ACCEPTED",
@@ -42,24 +41,12 @@ __all__ = [
     "UploadReport",
     "connect",
     "download_mission",
-    "mavlink_module",
     "upload_mission",
 ]
 
 log = logging.getLogger(__name__)
 
-MAV_MISSION_ACCEPTED = 0
-_MAV_MISSION_ERROR = 1
-_MAV_MISSION_UNSUPPORTED = 3
-_MAV_MISSION_NO_SPACE = 4
-_MAV_MISSION_INVALID_SEQUENCE = 13
-_MAV_MISSION_OPERATION_CANCELLED = 15
-_MAV_TYPE_QUADROTOR = 2
-_MAV_TYPE_GCS = 6
-_MAV_AUTOPILOT_ARDUPILOTMEGA = 3
-_MAV_AUTOPILOT_INVALID = 8
-_MAV_STATE_STANDBY = 3
-_MAV_STATE_ACTIVE = 4
+MAV_MISSION_ACCEPTED: int = mavlink.MAV_MISSION_ACCEPTED
 _NS = 1_000_000_000
 
 # Frames whose x/y are latitude/longitude.
@@ -82,13 +69,8 @@ class MissionRejectedError(MissionError):
         self.result = result
 
 
-def mavlink_module() -> ModuleType:
-    """The MAVLink 2 ``ardupilotmega`` dialect module of pymavlink (message classes, enums)."""
-    return importlib.import_module("pymavlink.dialects.v20.ardupilotmega")
-
-
 def _result_name(result: int) -> str:
-    entry = mavlink_module().enums["MAV_MISSION_RESULT"].get(result)
+    entry = mavlink.enums["MAV_MISSION_RESULT"].get(result)
     return entry.name if entry is not None else f"MAV_MISSION_RESULT {result}"
 
 
@@ -97,23 +79,15 @@ def connect(link: str, *, source_system: int = 255, source_component: int = 190)
 
     Raises :class:`MissionError` when the link cannot be opened.
     """
-    from pymavlink import mavutil
-
     try:
-        conn = mavutil.mavlink_connection(
+        return open_link(
             link,
             source_system=source_system,
             source_component=source_component,
             autoreconnect=False,
         )
-    except (OSError, ValueError) as err:
+    except Exception as err:  # pymavlink raises OSError, ValueError, SerialException ...
         raise MissionError(f"cannot open MAVLink link {link!r}: {err}") from err
-    if conn.WIRE_PROTOCOL_VERSION != "2.0":
-        mav = mavlink_module().MAVLink(conn, srcSystem=source_system, srcComponent=source_component)
-        mav.robust_parsing = True
-        conn.mav = mav
-        conn.WIRE_PROTOCOL_VERSION = "2.0"
-    return conn
 
 
 def _item_message(
@@ -124,7 +98,7 @@ def _item_message(
     use_int: bool,
     current: int = 0,
 ) -> Any:
-    m = mavlink_module()
+    m = mavlink  # the dialect's message classes
     p1, p2, p3, p4 = w.params
     if use_int:
         x = round(w.lat_deg * 1e7) if w.has_position else 0
@@ -187,12 +161,19 @@ def _recv(
 
 
 def _heartbeat(conn: Any, *, gcs: bool) -> None:
-    m = mavlink_module()
+    m = mavlink  # the dialect's message classes
     if gcs:
-        msg = m.MAVLink_heartbeat_message(_MAV_TYPE_GCS, _MAV_AUTOPILOT_INVALID, 0, 0, 0, 3)
+        msg = m.MAVLink_heartbeat_message(
+            mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3
+        )
     else:
         msg = m.MAVLink_heartbeat_message(
-            _MAV_TYPE_QUADROTOR, _MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, _MAV_STATE_STANDBY, 3
+            mavlink.MAV_TYPE_QUADROTOR,
+            mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
+            0,
+            0,
+            mavlink.MAV_STATE_STANDBY,
+            3,
         )
     conn.mav.send(msg)
 
@@ -205,7 +186,7 @@ def _wait_vehicle(conn: Any, link: str, target_system: int, timeout_s: float) ->
         beat_deadline = min(deadline, time.monotonic() + 1.0)
         while True:
             msg = _recv(conn, ["HEARTBEAT"], beat_deadline, target_system, conn.source_system)
-            if msg is None or msg.type != _MAV_TYPE_GCS:
+            if msg is None or msg.type != mavlink.MAV_TYPE_GCS:
                 break
         if msg is not None:
             return
@@ -266,7 +247,7 @@ def upload_mission(
         else link
     )
     name = link if isinstance(link, str) else "the link"
-    m = mavlink_module()
+    m = mavlink  # the dialect's message classes
     target = (target_system, target_component)
     t0 = time.monotonic()
     try:
@@ -348,7 +329,7 @@ def download_mission(
         else link
     )
     name = link if isinstance(link, str) else "the link"
-    m = mavlink_module()
+    m = mavlink  # the dialect's message classes
     try:
         _wait_vehicle(conn, name, target_system, heartbeat_timeout_s)
         request: Any = m.MAVLink_mission_request_list_message(target_system, target_component, 0)
@@ -456,13 +437,13 @@ class MissionReceiver:
 
     def _ack(self, peer: tuple[int, int], result: int) -> Any:
         self.last_result = result
-        return mavlink_module().MAVLink_mission_ack_message(peer[0], peer[1], result, 0)
+        return mavlink.MAVLink_mission_ack_message(peer[0], peer[1], result, 0)
 
     def _request(self, now_ns: int) -> Any:
         rx = self._rx
         assert rx is not None
         rx.last_request_ns = now_ns
-        m = mavlink_module()
+        m = mavlink
         seq = len(rx.items)
         if self.legacy:
             return m.MAVLink_mission_request_message(rx.peer[0], rx.peer[1], seq, 0)
@@ -475,11 +456,11 @@ class MissionReceiver:
             return []
         peer = (msg.get_srcSystem(), msg.get_srcComponent())
         if getattr(msg, "mission_type", 0) != 0:
-            return [self._ack(peer, _MAV_MISSION_UNSUPPORTED)]
+            return [self._ack(peer, mavlink.MAV_MISSION_UNSUPPORTED)]
         if kind == "MISSION_COUNT":
             if msg.count > self.capacity:
                 self._rx = None
-                return [self._ack(peer, _MAV_MISSION_NO_SPACE)]
+                return [self._ack(peer, mavlink.MAV_MISSION_NO_SPACE)]
             if msg.count == 0:
                 self._rx = None
                 self.mission = ()
@@ -490,12 +471,12 @@ class MissionReceiver:
         if kind in ("MISSION_ITEM_INT", "MISSION_ITEM"):
             return self._on_item(msg, peer, now_ns)
         if kind == "MISSION_REQUEST_LIST":
-            m = mavlink_module()
+            m = mavlink
             return [m.MAVLink_mission_count_message(peer[0], peer[1], len(self.mission), 0)]
         if kind in ("MISSION_REQUEST_INT", "MISSION_REQUEST"):
             seq = int(msg.seq)
             if not 0 <= seq < len(self.mission):
-                return [self._ack(peer, _MAV_MISSION_INVALID_SEQUENCE)]
+                return [self._ack(peer, mavlink.MAV_MISSION_INVALID_SEQUENCE)]
             return [
                 _item_message(
                     self.mission[seq],
@@ -525,7 +506,7 @@ class MissionReceiver:
             rx.items.append(_waypoint_from_message(msg))
         except InputError:
             self._rx = None
-            return [self._ack(peer, _MAV_MISSION_ERROR)]
+            return [self._ack(peer, mavlink.MAV_MISSION_ERROR)]
         rx.tries = 0
         if len(rx.items) < rx.count:
             return [self._request(now_ns)]
@@ -545,7 +526,7 @@ class MissionReceiver:
         rx.tries += 1
         if rx.tries > self.retries:
             self._rx = None
-            return [self._ack(rx.peer, _MAV_MISSION_OPERATION_CANCELLED)]
+            return [self._ack(rx.peer, mavlink.MAV_MISSION_OPERATION_CANCELLED)]
         return [self._request(now_ns)]
 
 

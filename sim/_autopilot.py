@@ -22,15 +22,13 @@ acceleration, plus a small oscillation. Messages carry the exact state at their
 ``time_boot_ms``; :meth:`SimAutopilot.truth_pose` and :meth:`SimAutopilot.boot_ns_at_mono`
 give that truth to tests.
 
-MAVLink 2: this module sets ``MAVLINK20=1`` (``os.environ.setdefault``) before importing
-pymavlink (pymavlink reads it once at import; a library constraint).
+MAVLink 2, through :func:`missions.open_link`.
 """
 
 from __future__ import annotations
 
 import logging
 import math
-import os
 import random
 import threading
 import time
@@ -45,11 +43,7 @@ from scipy.interpolate import CubicSpline
 from scipy.spatial.transform import Rotation
 
 from geotag import VehiclePose
-from missions import MissionReceiver
-
-os.environ.setdefault("MAVLINK20", "1")  # before the first pymavlink import (see docstring)
-from pymavlink import mavutil
-from pymavlink.dialects.v20 import all as mavlink2
+from missions import MissionReceiver, mavlink, open_link
 
 __all__ = ["SimAutopilot", "SimPath"]
 
@@ -69,10 +63,10 @@ _STREAMED = (
 )
 # ArduPilot's REQUEST_DATA_STREAM groups, restricted to what we stream.
 _STREAM_GROUPS: Mapping[int, tuple[str, ...]] = {
-    mavlink2.MAV_DATA_STREAM_EXTENDED_STATUS: ("GPS_RAW_INT",),
-    mavlink2.MAV_DATA_STREAM_POSITION: ("GLOBAL_POSITION_INT",),
-    mavlink2.MAV_DATA_STREAM_EXTRA1: ("ATTITUDE",),
-    mavlink2.MAV_DATA_STREAM_EXTRA3: ("SYSTEM_TIME",),
+    mavlink.MAV_DATA_STREAM_EXTENDED_STATUS: ("GPS_RAW_INT",),
+    mavlink.MAV_DATA_STREAM_POSITION: ("GLOBAL_POSITION_INT",),
+    mavlink.MAV_DATA_STREAM_EXTRA1: ("ATTITUDE",),
+    mavlink.MAV_DATA_STREAM_EXTRA3: ("SYSTEM_TIME",),
 }
 
 
@@ -331,7 +325,7 @@ class SimAutopilot:
     # -- lifecycle ------------------------------------------------------------------------
 
     def __enter__(self) -> SimAutopilot:
-        self._conn = mavutil.mavlink_connection(
+        self._conn = open_link(
             self.connection, source_system=self.sysid, source_component=self.compid
         )
         self._stop.clear()
@@ -429,11 +423,11 @@ class SimAutopilot:
         t_boot_ms = t_boot_now_ns // 1_000_000
         if name == "HEARTBEAT":
             mav.heartbeat_send(
-                mavlink2.MAV_TYPE_QUADROTOR,
-                mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA,
-                mavlink2.MAV_MODE_FLAG_SAFETY_ARMED | mavlink2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                mavlink.MAV_TYPE_QUADROTOR,
+                mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                mavlink.MAV_MODE_FLAG_SAFETY_ARMED | mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
                 3,  # ArduCopter AUTO
-                mavlink2.MAV_STATE_ACTIVE,
+                mavlink.MAV_STATE_ACTIVE,
             )
         elif name == "SYSTEM_TIME":
             # both clocks read at the same instant, each truncated to its field's unit
@@ -464,7 +458,7 @@ class SimAutopilot:
                 cog = math.degrees(math.atan2(ve, vn)) % 360.0
                 mav.gps_raw_int_send(
                     t_boot_ms * 1000,
-                    mavlink2.GPS_FIX_TYPE_3D_FIX,
+                    mavlink.GPS_FIX_TYPE_3D_FIX,
                     round(s.lat_deg * 1e7),
                     round(s.lon_deg * 1e7),
                     round(s.alt_m * 1000),
@@ -493,7 +487,7 @@ class SimAutopilot:
         elif mtype == "REQUEST_DATA_STREAM" and self._for_me(msg):
             groups = (
                 list(_STREAM_GROUPS)
-                if msg.req_stream_id == mavlink2.MAV_DATA_STREAM_ALL
+                if msg.req_stream_id == mavlink.MAV_DATA_STREAM_ALL
                 else [msg.req_stream_id]
             )
             for group in groups:
@@ -511,9 +505,9 @@ class SimAutopilot:
         return msg.target_system in (0, self.sysid) and msg.target_component in (0, self.compid)
 
     def _command(self, msg: Any) -> None:
-        result = mavlink2.MAV_RESULT_UNSUPPORTED
+        result = mavlink.MAV_RESULT_UNSUPPORTED
         name = _message_name(msg.param1)
-        if msg.command == mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL and self._message_interval:
+        if msg.command == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL and self._message_interval:
             if name in _STREAMED:
                 interval_us = msg.param2
                 if interval_us < 0:
@@ -522,15 +516,15 @@ class SimAutopilot:
                     self.set_rate(name, 1.0 if name == "HEARTBEAT" else 0)
                 else:
                     self.set_rate(name, 1e6 / interval_us)
-                result = mavlink2.MAV_RESULT_ACCEPTED
+                result = mavlink.MAV_RESULT_ACCEPTED
             else:
-                result = mavlink2.MAV_RESULT_DENIED
-        elif msg.command == mavlink2.MAV_CMD_REQUEST_MESSAGE:
+                result = mavlink.MAV_RESULT_DENIED
+        elif msg.command == mavlink.MAV_CMD_REQUEST_MESSAGE:
             if name in _STREAMED:
                 self._send(name)
-                result = mavlink2.MAV_RESULT_ACCEPTED
+                result = mavlink.MAV_RESULT_ACCEPTED
             else:
-                result = mavlink2.MAV_RESULT_DENIED
+                result = mavlink.MAV_RESULT_DENIED
         if not self.silent:
             with self._send_lock:
                 self._conn.mav.command_ack_send(
@@ -542,5 +536,5 @@ class SimAutopilot:
 
 
 def _message_name(msg_id: float) -> str:
-    cls = mavlink2.mavlink_map.get(int(msg_id))
+    cls = mavlink.mavlink_map.get(int(msg_id))
     return str(cls.msgname) if cls is not None else ""

@@ -26,7 +26,7 @@ from missions import (
     MissionTimeoutError,
     Waypoint,
     download_mission,
-    mavlink_module,
+    mavlink,
     plan_survey,
     read_wpl,
     upload_mission,
@@ -169,13 +169,13 @@ def test_vehicle_going_silent_mid_upload_times_out() -> None:
 
 def _decoded(msg: Any, src: tuple[int, int] = (255, 190)) -> Any:
     """Pack with a sender's ids and parse back, as the receiver would get it off the wire."""
-    m = mavlink_module()
+    m = mavlink
     buf = msg.pack(m.MAVLink(None, srcSystem=src[0], srcComponent=src[1]))
     return m.MAVLink(None).decode(bytearray(buf))
 
 
 def test_receiver_rerequests_then_gives_up() -> None:
-    m = mavlink_module()
+    m = mavlink
     rx = MissionReceiver(item_timeout_s=1.0, retries=2)
     out = rx.handle(_decoded(m.MAVLink_mission_count_message(1, 1, 3, 0)), now_ns=0)
     assert [(o.get_type(), o.seq, o.target_system) for o in out] == [

@@ -1,0 +1,45 @@
+"""The one door to pymavlink: MAVLink 2, one dialect (``ardupilotmega``), links opened alike.
+
+pymavlink picks MAVLink 1 or 2 from the ``MAVLINK20`` environment variable when
+``pymavlink.mavutil`` is first imported. This module sets it (if unset) right before that
+import, and every module of the project takes pymavlink from here, so it is set in one
+place. ``mavlink`` is the dialect module: message classes, ``MAVError`` and every enum
+value (``mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT`` ...), never typed by hand.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+os.environ.setdefault("MAVLINK20", "1")  # before the first import of mavutil (see above)
+
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+__all__ = ["mavlink", "mavutil", "open_link", "parser"]
+
+
+def open_link(connection: str, *, source_system: int, source_component: int, **kwargs: Any) -> Any:
+    """A pymavlink connection (``udpin:``/``udpout:``/``tcp:``/serial device) speaking
+    MAVLink 2 with robust parsing (garbage is skipped up to the next start byte).
+
+    ``kwargs`` go to :func:`pymavlink.mavutil.mavlink_connection` (``baud``,
+    ``autoreconnect`` ...). Raises what pymavlink raises (``OSError``, ``ValueError``,
+    ``serial.SerialException``): callers wrap it in their package's error.
+    """
+    conn = mavutil.mavlink_connection(
+        connection, source_system=source_system, source_component=source_component, **kwargs
+    )
+    if conn.WIRE_PROTOCOL_VERSION != "2.0":  # mavutil was imported before MAVLINK20 was set
+        conn.mav = mavlink.MAVLink(conn, srcSystem=source_system, srcComponent=source_component)
+        conn.WIRE_PROTOCOL_VERSION = "2.0"
+    conn.mav.robust_parsing = True
+    return conn
+
+
+def parser() -> Any:
+    """A MAVLink 2 parser of bytes (``parse_buffer``) with no link: log replay and files."""
+    mav = mavlink.MAVLink(None)
+    mav.robust_parsing = True
+    return mav
