@@ -39,14 +39,22 @@ from capture._mcapread import (
     LoggedPose,
     LogRecord,
     McapSource,
-    ScanState,
     TruncatedLogError,
     read_flight_log,
-    scan_records,
 )
+from capture._mcapscan import DamagedRegion, ScanState, scan_records
 from capture._mcaptools import LogInfo, RecoveryReport, TopicInfo, log_info, recover_log
 from capture._oni import OniInfo, OniStreamInfo, OniWriter, export_oni, scan_oni, write_oni
 from capture._openni import OniSource, OpenNI2Device, camera_from_fov, openni2_library
+from capture._outpath import (
+    OutputPathError,
+    atomic_output,
+    check_folder,
+    check_output,
+    commit_part,
+    output_via_part,
+    part_path,
+)
 from capture._posebuffer import AttitudeSample, GpsFix, PoseBuffer, PoseUnavailable, PositionSample
 from capture._usb import UsbDeviceInfo, find_xtion, reset_xtion
 
@@ -57,6 +65,7 @@ __all__ = [
     "ClockEstimate",
     "ClockSync",
     "ClockUnavailable",
+    "DamagedRegion",
     "Flight",
     "FlightConfig",
     "FlightCounters",
@@ -85,6 +94,7 @@ __all__ = [
     "OniStreamInfo",
     "OniWriter",
     "OpenNI2Device",
+    "OutputPathError",
     "PacedReplay",
     "PoseBuffer",
     "PoseUnavailable",
@@ -102,10 +112,14 @@ __all__ = [
     "TruncatedLogError",
     "UsbDeviceInfo",
     "WriterStats",
+    "atomic_output",
     "attitude_from_attitude",
     "attitude_from_quaternion",
     "camera_from_fov",
+    "check_folder",
+    "check_output",
     "check_table",
+    "commit_part",
     "export_oni",
     "find_xtion",
     "fly",
@@ -116,7 +130,9 @@ __all__ = [
     "numbers",
     "open_sensor",
     "openni2_library",
+    "output_via_part",
     "parse_fly_config",
+    "part_path",
     "position_from_global_position_int",
     "read_flight_log",
     "recover_log",

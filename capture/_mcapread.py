@@ -11,21 +11,18 @@ import base64
 import dataclasses
 import logging
 import os
-import struct
-from collections.abc import Collection, Generator, Iterable, Iterator
+from collections.abc import Collection, Iterable, Iterator
 from pathlib import Path
-from typing import IO, Any, cast
+from typing import Any
 
-import zstandard
 from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
-from mcap.exceptions import InvalidMagic, McapError
-from mcap.records import Channel, Chunk, McapRecord, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.records import Channel, Message, Metadata, Schema
 
 from capture import _mcapschemas as sch
 from capture._frame import Frame
 from capture._mcaplog import FlightLogError
+from capture._mcapscan import ScanState, scan_records
 from detect import CameraIntrinsics, Detection
 from geotag import Hole, VehiclePose
 
@@ -44,9 +41,6 @@ __all__ = [
 ]
 
 _log = logging.getLogger(__name__)
-
-#: Errors the mcap reader raises on a damaged or cut-off file (lz4 raises RuntimeError).
-_DAMAGE = (McapError, ValueError, struct.error, zstandard.ZstdError, RuntimeError, EOFError)
 
 
 class TruncatedLogError(FlightLogError):
@@ -141,92 +135,6 @@ LogRecord = (
 )
 
 
-# ------------------------------------------------------------------ front-to-back scan
-
-
-@dataclasses.dataclass
-class ScanState:
-    """What a front-to-back scan of one file found (filled while iterating)."""
-
-    path: Path
-    size: int = 0
-    complete: bool = False  # the footer and the closing magic were read
-    good_bytes: int = 0  # end of the last intact record
-    stop_reason: str | None = None
-    chunks: int = 0
-
-    def describe_stop(self) -> str:
-        return (
-            f"{self.path}: {self.stop_reason} at byte {self.good_bytes} of {self.size}; "
-            f"run `holescan log recover {self.path}`"
-        )
-
-
-def _open(path: str | os.PathLike[str]) -> tuple[IO[bytes], ScanState]:
-    p = Path(path)
-    try:
-        f = open(p, "rb")  # noqa: SIM115 (the caller closes it)
-    except FileNotFoundError as err:
-        raise FlightLogError(f"{p}: no such file") from err
-    except OSError as err:
-        raise FlightLogError(f"{p}: cannot read: {err.strerror}") from err
-    state = ScanState(p, size=os.fstat(f.fileno()).st_size)
-    if state.size == 0:
-        f.close()
-        raise FlightLogError(f"{p}: empty file, not an MCAP flight log")
-    return f, state
-
-
-def scan_records(path: str | os.PathLike[str], state: ScanState | None = None) -> Iterator[Any]:
-    """Yield every intact record of ``path`` in file order, chunks followed by their
-    content (Schema, Channel, Message records), validating chunk and data CRCs.
-
-    Stops quietly at the first damaged or missing byte, recording why in ``state``
-    (``state.complete`` stays False). Raises :class:`FlightLogError` when the file is
-    missing or not MCAP at all.
-    """
-    f, st = _open(path)
-    if state is not None:
-        state.path, state.size = st.path, st.size
-        st = state
-    with f:
-        reader = StreamReader(f, validate_crcs=True, emit_chunks=True)
-        records = cast(Generator[McapRecord, None, None], reader.records)
-        try:
-            while True:
-                try:
-                    record: McapRecord = next(records)
-                    content = (
-                        breakup_chunk(record, validate_crc=True)
-                        if isinstance(record, Chunk)
-                        else ()
-                    )
-                except StopIteration:
-                    st.complete = True
-                    st.good_bytes = f.tell()
-                    return
-                except InvalidMagic as err:
-                    if st.good_bytes == 0:
-                        raise FlightLogError(f"{st.path}: not an MCAP file (bad magic)") from err
-                    st.stop_reason = "no closing magic after the footer"
-                    return
-                except _DAMAGE as err:
-                    at_end = f.tell() >= st.size
-                    st.stop_reason = (
-                        "file ends inside a record"
-                        if at_end
-                        else f"damaged record ({type(err).__name__}: {err})"
-                    )
-                    return
-                st.good_bytes = f.tell()
-                if isinstance(record, Chunk):
-                    st.chunks += 1
-                yield record
-                yield from content
-        finally:
-            records.close()
-
-
 def _iter_messages(
     path: str | os.PathLike[str], state: ScanState, topics: Collection[str] | None
 ) -> Iterator[tuple[Channel, Schema | None, Message, dict[str, dict[str, str]]]]:
@@ -266,11 +174,18 @@ def _depth_unit(metadata: dict[str, dict[str, str]]) -> float:
 
 
 def _as_paths(paths: str | os.PathLike[str] | Iterable[str | os.PathLike[str]]) -> list[Path]:
+    """The files of one flight, each once (the same file given twice is an error)."""
     if isinstance(paths, str | os.PathLike):
         return [Path(paths)]
     out = [Path(p) for p in paths]
     if not out:
         raise FlightLogError("no flight log files given")
+    seen: dict[Path, Path] = {}
+    for p in out:
+        key = p.resolve()
+        if key in seen:
+            raise FlightLogError(f"{p} is given twice (as {seen[key]}): name each file once")
+        seen[key] = p
     return out
 
 
@@ -306,10 +221,10 @@ def read_flight_log(
                 yield rec
         if pending:
             _log.warning("%s: %d frames incomplete at the end", path, len(pending))
-        if not state.complete:
+        if not state.whole:
             if strict:
                 raise TruncatedLogError(state.describe_stop())
-            _log.warning("%s (read up to there)", state.describe_stop())
+            _log.warning("%s (read the rest)", state.describe_stop())
 
 
 def _check_schema(topic: str, schema: Schema | None, expected: str) -> None:

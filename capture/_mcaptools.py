@@ -29,7 +29,9 @@ from mcap.writer import Writer as McapWriter
 
 from capture import _mcapschemas as sch
 from capture._mcaplog import FlightLogError
-from capture._mcapread import ScanState, TruncatedLogError, _as_paths, scan_records
+from capture._mcapread import TruncatedLogError, _as_paths
+from capture._mcapscan import DamagedRegion, ScanState, scan_records
+from capture._outpath import OutputPathError, check_output, commit_part, part_path
 
 __all__ = ["LogInfo", "RecoveryReport", "TopicInfo", "log_info", "recover_log"]
 
@@ -176,7 +178,7 @@ def log_info(
                 footer = rec
         total_bytes += state.size
         chunks += state.chunks
-        if not state.complete:
+        if not state.whole:
             if not allow_truncated:
                 raise TruncatedLogError(state.describe_stop())
             truncated.append(state.describe_stop())
@@ -230,9 +232,17 @@ class RecoveryReport:
     bytes_total: int
     last_t_unix_ns: int
     stop_reason: str | None
+    damaged: tuple[DamagedRegion, ...] = ()
+    messages_lost: int = 0
 
     def line(self) -> str:
         how = "complete" if self.source_complete else f"cut off: {self.stop_reason}"
+        if self.damaged:
+            how += (
+                f"; {len(self.damaged)} damaged region(s) skipped, "
+                f"{self.messages_lost} messages lost: "
+                + "; ".join(d.describe() for d in self.damaged)
+            )
         return (
             f"{self.dst}: {self.messages} messages, {self.frames} frames recovered from "
             f"{self.src} ({how}; {self.bytes_used} of {self.bytes_total} bytes used)"
@@ -254,12 +264,10 @@ def recover_log(src: str | os.PathLike[str], dst: str | os.PathLike[str]) -> Rec
     and renamed when complete. Raises :class:`FlightLogError` when ``src`` is missing or
     not MCAP.
     """
-    src_p, dst_p = Path(src), Path(dst)
-    if dst_p.exists():
-        raise FlightLogError(f"{dst_p} exists: choose another output file")
+    src_p, dst_p = Path(src), check_output(dst, inputs=[src])
     state = ScanState(src_p)
     records = scan_records(src_p, state)
-    tmp = dst_p.with_name(f".{dst_p.name}.part")
+    tmp = part_path(dst_p)
     header: Header | None = None
     writer: McapWriter | None = None
     stream: IO[bytes] | None = None
@@ -276,7 +284,10 @@ def recover_log(src: str | os.PathLike[str], dst: str | os.PathLike[str]) -> Rec
                 continue
             if writer is None:
                 compression = rec.compression if isinstance(rec, Chunk) else "zstd"
-                stream = open(tmp, "wb")  # noqa: SIM115 (closed below)
+                try:
+                    stream = open(tmp, "wb")  # noqa: SIM115 (closed below)
+                except OSError as err:
+                    raise OutputPathError(f"cannot write {tmp}: {err.strerror}") from err
                 writer = McapWriter(
                     stream, compression=_compression(compression), enable_data_crcs=True
                 )
@@ -325,7 +336,12 @@ def recover_log(src: str | os.PathLike[str], dst: str | os.PathLike[str]) -> Rec
         stream.flush()
         os.fsync(stream.fileno())
         stream.close()
-        os.replace(tmp, dst_p)
+        commit_part(tmp, dst_p)
+    except OSError as err:
+        if stream is not None:
+            stream.close()
+        tmp.unlink(missing_ok=True)
+        raise OutputPathError(f"cannot write {dst_p}: {err.strerror or err}") from err
     except BaseException:
         if stream is not None:
             stream.close()
@@ -343,4 +359,6 @@ def recover_log(src: str | os.PathLike[str], dst: str | os.PathLike[str]) -> Rec
         bytes_total=state.size,
         last_t_unix_ns=last_t,
         stop_reason=state.stop_reason,
+        damaged=tuple(state.damaged),
+        messages_lost=state.messages_lost,
     )

@@ -14,26 +14,41 @@ per node with the same timestamp (microseconds) and frame id (from 1). A seek ta
 node and an END record close the file; the NODE_ADDED records are then patched with the
 frame count and timestamp range, as the library's recorder does.
 
-The writer writes to ``NAME.partial`` and renames it to ``NAME`` when closed, so a crash
-never leaves a half-written file under the final name.
+The writer writes to ``.NAME.part.oni`` and renames it to ``NAME`` when closed, so a crash
+never leaves a half-written file under the final name; it never replaces an existing file
+(``force`` allows it, except over a ``.mcap`` flight log or an input).
 """
 
 from __future__ import annotations
 
-import enum
 import logging
-import math
 import os
 import struct
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 from types import TracebackType
-from typing import BinaryIO, Final
+from typing import BinaryIO
 
 import numpy as np
 
 from capture._frame import Frame
+from capture._oniformat import (
+    _FILE_HEADER,
+    _FILE_MAGIC,
+    _FILE_VERSION,
+    _MAX_PAYLOAD,
+    _NODES,
+    _SEEK_ENTRY,
+    _U32_MAX,
+    _U64_MAX,
+    _node_added,
+    _node_properties,
+    _NodeSpec,
+    _Record,
+    _record,
+)
+from capture._oniscan import OniInfo, OniStreamInfo, scan_oni
+from capture._outpath import check_output, commit_part, part_path
 from detect import CameraIntrinsics
 from holescan_errors import InputError
 
@@ -47,132 +62,6 @@ __all__ = [
 ]
 
 _log = logging.getLogger(__name__)
-
-_FILE_MAGIC: Final = b"NI10"
-_FILE_VERSION: Final = (1, 0, 1, 0)
-_RECORD_MAGIC: Final = 0x0052494E  # "NIR\0"
-_FILE_HEADER = struct.Struct("<4sBBHIQI")  # magic, version (u8 u8 u16 u32), max ts, max node
-_RECORD_HEADER = struct.Struct("<IIIIIQ")  # magic, type, node, fields size, payload, undo pos
-_SEEK_ENTRY = struct.Struct("<QIQ")  # timestamp us, configuration id, record position
-_U32_MAX: Final = 0xFFFFFFFF
-_U64_MAX: Final = 0xFFFFFFFFFFFFFFFF
-_CODEC_NONE: Final = int.from_bytes(b"NONE", "little")
-_MAX_FIELDS_SIZE: Final = 1 << 20
-# The player's record buffer holds at most 1600 x 1200 x 3 bytes of payload.
-_MAX_PAYLOAD: Final = 1600 * 1200 * 3
-_MAX_DEPTH_MM: Final = 10000
-_CAMERA_PROPERTY: Final = "holescanCameraIntrinsics"  # fx, fy, cx, cy as 4 doubles (px)
-
-
-class _Record(enum.IntEnum):
-    NODE_ADDED_1_0_0_4 = 0x02
-    INT_PROPERTY = 0x03
-    REAL_PROPERTY = 0x04
-    STRING_PROPERTY = 0x05
-    GENERAL_PROPERTY = 0x06
-    NODE_REMOVED = 0x07
-    NODE_DATA_BEGIN = 0x08
-    NODE_STATE_READY = 0x09
-    NEW_DATA = 0x0A
-    END = 0x0B
-    NODE_ADDED_1_0_0_5 = 0x0C
-    NODE_ADDED = 0x0D
-    SEEK_TABLE = 0x0E
-
-
-_PROPERTY_RECORDS: Final = frozenset(
-    {_Record.INT_PROPERTY, _Record.REAL_PROPERTY, _Record.STRING_PROPERTY, _Record.GENERAL_PROPERTY}
-)
-_NODE_KINDS: Final = {1: "device", 2: "depth", 3: "image", 5: "ir"}
-_ONI_PIXEL_FORMAT_DEPTH_1_MM: Final = 100
-_ONI_PIXEL_FORMAT_RGB888: Final = 200
-
-
-@dataclass(frozen=True)
-class _NodeSpec:
-    node_id: int
-    name: str
-    node_type: int
-    oni_pixel_format: int
-    xn_pixel_format: int  # OpenNI 1: 1 = RGB24, 4 = grayscale 16 bit
-    xn_supported_formats: int  # bit field: bit 0 RGB24, bit 3 grayscale 16
-    bytes_per_pixel: int
-
-
-_DEPTH_NODE: Final = _NodeSpec(1, "Depth", 2, _ONI_PIXEL_FORMAT_DEPTH_1_MM, 4, 1 << 3, 2)
-_IMAGE_NODE: Final = _NodeSpec(2, "Image", 3, _ONI_PIXEL_FORMAT_RGB888, 1, 1 << 0, 3)
-_NODES: Final = (_DEPTH_NODE, _IMAGE_NODE)
-
-
-# --------------------------------------------------------------------------- encoding
-
-
-def _string_field(text: str) -> bytes:
-    raw = text.encode("ascii") + b"\0"
-    return struct.pack("<I", len(raw)) + raw
-
-
-def _record(
-    kind: _Record, node_id: int, fields: bytes = b"", *, payload_size: int = 0, undo: int = 0
-) -> bytes:
-    size = _RECORD_HEADER.size + len(fields)
-    return _RECORD_HEADER.pack(_RECORD_MAGIC, kind, node_id, size, payload_size, undo) + fields
-
-
-def _general_property(node_id: int, name: str, data: bytes) -> bytes:
-    fields = _string_field(name) + struct.pack("<I", len(data)) + data
-    return _record(_Record.GENERAL_PROPERTY, node_id, fields)
-
-
-def _int_property(node_id: int, name: str, value: int) -> bytes:
-    fields = _string_field(name) + struct.pack("<IQ", 8, value)
-    return _record(_Record.INT_PROPERTY, node_id, fields)
-
-
-def _node_added(
-    node: _NodeSpec, frames: int, min_ts_us: int, max_ts_us: int, seek_table_pos: int
-) -> bytes:
-    fields = _string_field(node.name) + struct.pack(
-        "<IIIQQQ", node.node_type, _CODEC_NONE, frames, min_ts_us, max_ts_us, seek_table_pos
-    )
-    return _record(_Record.NODE_ADDED, node.node_id, fields)
-
-
-def _node_properties(node: _NodeSpec, camera: CameraIntrinsics, fps: int) -> bytes:
-    """The stream properties the player needs, in the order the library's recorder writes them."""
-    w, h = camera.width, camera.height
-    mode = struct.pack("<III", w, h, fps)
-    hfov = 2.0 * math.atan(w / (2.0 * camera.fx))
-    vfov = 2.0 * math.atan(h / (2.0 * camera.fy))
-    nid = node.node_id
-    parts = [
-        _int_property(nid, "oniRequiredFrameSize", w * h * node.bytes_per_pixel),
-        _int_property(nid, "xnIsGenerating", 1),
-    ]
-    if node is _DEPTH_NODE:
-        parts.append(_int_property(nid, "xnDeviceMaxDepth", _MAX_DEPTH_MM))
-    parts += [
-        _int_property(nid, "xnSupportedMapOutputModesCount", 1),
-        _general_property(nid, "xnSupportedMapOutputModes", mode),
-        _general_property(nid, "xnMapOutputMode", mode),
-        _general_property(
-            nid, "xnSupportedPixelFormats", struct.pack("<I", node.xn_supported_formats)
-        ),
-        _int_property(nid, "xnPixelFormat", node.xn_pixel_format),
-        _int_property(nid, "oniPixelFormat", node.oni_pixel_format),
-        _general_property(nid, "xnFOV", struct.pack("<dd", hfov, vfov)),
-        _int_property(nid, "Cropping", 1),
-        # Without xnCropping the player silently drops every frame (FIELD-NOTES.md).
-        _general_property(nid, "xnCropping", struct.pack("<iHHHH", 0, 0, 0, 0, 0)),
-        _int_property(nid, "Mirror", 1),
-        _int_property(nid, "xnMirror", 0),
-        # Ignored by OpenNI; lets holescan restore the exact principal point.
-        _general_property(
-            nid, _CAMERA_PROPERTY, struct.pack("<dddd", camera.fx, camera.fy, camera.cx, camera.cy)
-        ),
-    ]
-    return b"".join(parts)
-
 
 # --------------------------------------------------------------------------- writer
 
@@ -190,12 +79,13 @@ class OniWriter:
 
     Use as a context manager; the file appears under ``path`` when the writer is closed,
     also when the ``with`` block ends with an exception (the frames written so far are
-    kept). Until then it is ``path + ".partial"``.
+    kept). Until then it is ``.STEM.part.oni`` beside it (:func:`capture.part_path`).
 
     Parameters
     ----------
     path : str or Path
-        Output file. ``path + ".partial"`` is written meanwhile and renamed on close.
+        Output file; must not exist (unless ``force``), never a ``.mcap`` or one of
+        ``inputs`` (:func:`capture.check_output`).
     camera : CameraIntrinsics
         Size and intrinsics of the frames. Stored as the streams' field of view (OpenNI
         keeps nothing else) plus a private property holding fx, fy, cx, cy exactly.
@@ -208,17 +98,26 @@ class OniWriter:
     and must not decrease. ``Frame.index`` is not stored; frame ids count from 1.
     """
 
-    def __init__(self, path: str | os.PathLike[str], camera: CameraIntrinsics, fps: int = 30):
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        camera: CameraIntrinsics,
+        fps: int = 30,
+        *,
+        inputs: Iterable[str | os.PathLike[str]] = (),
+        force: bool = False,
+    ):
         if not 0 < fps <= 1000:
             raise InputError(f"fps must be in 1..1000, got {fps}")
         if camera.width * camera.height * 3 > _MAX_PAYLOAD:
             raise InputError(
                 f"{camera.width}x{camera.height} is too large for OpenNI playback (max 1600x1200)"
             )
-        self.path = Path(path)
+        self.path = check_output(path, inputs=inputs, force=force)
+        self._force = force
         self.camera = camera
         self.fps = fps
-        self._partial = self.path.with_name(self.path.name + ".partial")
+        self._partial = part_path(self.path)
         self._nodes = [_NodeState(spec) for spec in _NODES]
         self._frames = 0
         self._min_ts_us = 0
@@ -399,7 +298,7 @@ class OniWriter:
             ) from err
         finally:
             f.close()
-        os.replace(self._partial, self.path)
+        commit_part(self._partial, self.path, force=self._force)
         _log.info("wrote %s: %d frames", self.path, self._frames)
 
 
@@ -408,12 +307,15 @@ def write_oni(
     frames: Iterable[Frame],
     camera: CameraIntrinsics,
     fps: int = 30,
+    *,
+    inputs: Iterable[str | os.PathLike[str]] = (),
+    force: bool = False,
 ) -> int:
     """Write ``frames`` to the ``.oni`` file ``path``; return how many were written.
 
     See :class:`OniWriter`. Raises :class:`InputError` on bad frames or no frames at all.
     """
-    with OniWriter(path, camera, fps) as writer:
+    with OniWriter(path, camera, fps, inputs=inputs, force=force) as writer:
         for frame in frames:
             writer.write(frame)
     return writer.frame_count
@@ -424,6 +326,7 @@ def export_oni(
     path: str | os.PathLike[str],
     *,
     fps: int = 30,
+    force: bool = False,
 ) -> int:
     """Write the frames of an MCAP flight log to an ``.oni`` file; return how many.
 
@@ -438,8 +341,11 @@ def export_oni(
     """
     from capture._mcapread import McapSource  # the MCAP stack, only when exporting
 
-    source = McapSource(logs)
-    return write_oni(path, _continuous_sensor_time(source), source.camera, fps)
+    inputs = [logs] if isinstance(logs, str | os.PathLike) else list(logs)
+    check_output(path, inputs=inputs, suffixes={".oni"}, force=force)
+    source = McapSource(inputs)
+    frames = _continuous_sensor_time(source)
+    return write_oni(path, frames, source.camera, fps, inputs=inputs, force=force)
 
 
 def _continuous_sensor_time(frames: Iterable[Frame]) -> Iterator[Frame]:
@@ -457,245 +363,3 @@ def _continuous_sensor_time(frames: Iterable[Frame]) -> Iterator[Frame]:
         out = replace(frame, t_sensor_ns=frame.t_sensor_ns + offset_ns) if offset_ns else frame
         yield out
         prev = out
-
-
-# --------------------------------------------------------------------------- scanner
-
-
-@dataclass(frozen=True)
-class OniStreamInfo:
-    """One stream (node) of an ``.oni`` file, as found by :func:`scan_oni`.
-
-    kind : "depth", "image" or "ir".
-    codec : four-character codec id ("NONE" uncompressed, "16zT" OpenNI depth, "JPEG").
-    frame_count : frames the node declares; ``frames_found`` were counted in the file.
-    min_timestamp_us, max_timestamp_us : range of the frames found (device clock, us).
-    hfov, vfov : field of view, radians (nan when the file does not say).
-    camera : exact intrinsics when holescan wrote the file, else None.
-    """
-
-    node_id: int
-    name: str
-    kind: str
-    codec: str
-    width: int
-    height: int
-    fps: int
-    oni_pixel_format: int
-    frame_count: int
-    frames_found: int
-    min_timestamp_us: int
-    max_timestamp_us: int
-    hfov: float
-    vfov: float
-    camera: CameraIntrinsics | None
-
-
-@dataclass(frozen=True)
-class OniInfo:
-    """What :func:`scan_oni` found in a complete, well-formed ``.oni`` file."""
-
-    path: Path
-    size_bytes: int
-    max_timestamp_us: int
-    streams: tuple[OniStreamInfo, ...]
-
-    def stream(self, kind: str) -> OniStreamInfo:
-        """The first stream of ``kind`` ("depth", "image", "ir")."""
-        for s in self.streams:
-            if s.kind == kind:
-                return s
-        raise InputError(f"{self.path}: no {kind} stream in the recording")
-
-
-@dataclass
-class _ScanNode:
-    name: str
-    kind: str
-    codec: str
-    frame_count: int
-    properties: dict[str, bytes] = field(default_factory=dict)
-    frames_found: int = 0
-    min_ts: int = _U64_MAX
-    max_ts: int = 0
-
-
-def _read_string(fields: bytes, at: int) -> tuple[str, int]:
-    (n,) = struct.unpack_from("<I", fields, at)
-    raw = fields[at + 4 : at + 4 + n]
-    if n == 0 or len(raw) != n:
-        raise ValueError("bad string field")
-    return raw.rstrip(b"\0").decode("ascii", "replace"), at + 4 + n
-
-
-def scan_oni(path: str | os.PathLike[str]) -> OniInfo:
-    """Walk every record of an ``.oni`` file without decoding pixels; check it is whole.
-
-    Fast (seeks over the payloads): a 1,000-frame VGA recording scans in milliseconds.
-
-    Raises
-    ------
-    InputError
-        Missing or unreadable file, not an ``.oni`` file, unsupported version, corrupt
-        record, a frame beyond the declared count, or a file cut short (no END record).
-    """
-    p = Path(path)
-    try:
-        f = open(p, "rb")  # noqa: SIM115
-    except FileNotFoundError as err:
-        raise InputError(f"{p}: no such .oni file") from err
-    except OSError as err:
-        raise InputError(f"{p}: cannot read: {err.strerror}") from err
-    with f:
-        size = os.fstat(f.fileno()).st_size
-        head = f.read(_FILE_HEADER.size)
-        if len(head) < _FILE_HEADER.size or head[:4] != _FILE_MAGIC:
-            raise InputError(f"{p}: not an OpenNI .oni recording (no NI10 header)")
-        _magic, major, minor, maint, build, max_ts, max_node = _FILE_HEADER.unpack(head)
-        if (major, minor, maint, build) != _FILE_VERSION:
-            raise InputError(
-                f"{p}: .oni version {major}.{minor}.{maint}.{build} is not supported (want 1.0.1.0)"
-            )
-        nodes: dict[int, _ScanNode] = {}
-        pos = _FILE_HEADER.size
-        while True:
-            rec = f.read(_RECORD_HEADER.size)
-            if len(rec) < _RECORD_HEADER.size:
-                raise InputError(
-                    f"{p}: truncated at byte {pos} of {size} (no END record; "
-                    f"{_frames_summary(nodes)}): the recording was not closed"
-                )
-            magic, rtype, node_id, fields_size, payload_size, _undo = _RECORD_HEADER.unpack(rec)
-            end = pos + fields_size + payload_size
-            if magic != _RECORD_MAGIC or not _RECORD_HEADER.size <= fields_size <= _MAX_FIELDS_SIZE:
-                raise InputError(f"{p}: corrupt record at byte {pos}")
-            if end > size:
-                raise InputError(
-                    f"{p}: truncated at byte {size}: record at byte {pos} needs {end} bytes "
-                    f"({_frames_summary(nodes)}): the recording was not closed"
-                )
-            fields = f.read(fields_size - _RECORD_HEADER.size)
-            try:
-                done = _scan_record(nodes, rtype, node_id, fields, payload_size, max_ts, max_node)
-            except (ValueError, struct.error) as err:
-                raise InputError(f"{p}: corrupt record at byte {pos}: {err}") from err
-            if done:
-                break
-            f.seek(end)
-            pos = end
-    streams = tuple(_stream_info(nid, n) for nid, n in sorted(nodes.items()) if n.kind != "device")
-    for s in streams:
-        if s.frames_found != s.frame_count:
-            raise InputError(
-                f"{p}: {s.name} declares {s.frame_count} frames but holds {s.frames_found}"
-            )
-    if not any(s.frames_found for s in streams):
-        raise InputError(f"{p}: the recording holds no frames")
-    return OniInfo(p, size, max_ts, streams)
-
-
-def _frames_summary(nodes: dict[int, _ScanNode]) -> str:
-    found = [f"{n.frames_found} {n.kind}" for n in nodes.values() if n.kind != "device"]
-    return ", ".join(found) + " frames before the cut" if found else "no frames"
-
-
-def _scan_record(
-    nodes: dict[int, _ScanNode],
-    rtype: int,
-    node_id: int,
-    fields: bytes,
-    payload_size: int,
-    max_ts: int,
-    max_node: int,
-) -> bool:
-    """Account for one record; return True at the END record. Raises ValueError if bad."""
-    if rtype == _Record.END:
-        return True
-    if rtype in (_Record.NODE_ADDED, _Record.NODE_ADDED_1_0_0_5):
-        if not 0 < node_id <= max_node:
-            raise ValueError(f"node id {node_id} outside 1..{max_node}")
-        name, at = _read_string(fields, 0)
-        node_type, codec, frames = struct.unpack_from("<III", fields, at)
-        nodes[node_id] = _ScanNode(
-            name=name,
-            kind=_NODE_KINDS.get(node_type, f"type{node_type}"),
-            codec=codec.to_bytes(4, "little").decode("ascii", "replace"),
-            frame_count=frames,
-        )
-        return False
-    if rtype == _Record.NODE_ADDED_1_0_0_4:
-        raise ValueError("OpenNI 1.0.0.4 recordings are not supported")
-    if rtype not in _Record._value2member_map_:
-        raise ValueError(f"unknown record type {rtype:#x}")
-    if node_id not in nodes:
-        raise ValueError(f"record type {rtype:#x} for unknown node {node_id}")
-    node = nodes[node_id]
-    if rtype in _PROPERTY_RECORDS:
-        name, at = _read_string(fields, 0)
-        (n,) = struct.unpack_from("<I", fields, at)
-        data = fields[at + 4 : at + 4 + n]
-        if len(data) != n:
-            raise ValueError(f"property {name!r} is cut short")
-        node.properties[name] = data
-    elif rtype == _Record.NEW_DATA:
-        ts, frame_id = struct.unpack_from("<QI", fields, 0)
-        if not 0 < frame_id <= node.frame_count:
-            raise ValueError(f"{node.name} frame id {frame_id} outside 1..{node.frame_count}")
-        if ts > max_ts:
-            raise ValueError(f"{node.name} timestamp {ts} us beyond the file's maximum {max_ts}")
-        if payload_size > _MAX_PAYLOAD:
-            raise ValueError(f"{node.name} frame of {payload_size} bytes is too large")
-        if node.codec == "NONE":
-            expected = _expected_frame_bytes(node)
-            if expected is not None and payload_size != expected:
-                raise ValueError(f"{node.name} frame has {payload_size} bytes, expected {expected}")
-        node.frames_found += 1
-        node.min_ts = min(node.min_ts, ts)
-        node.max_ts = max(node.max_ts, ts)
-    return False
-
-
-def _expected_frame_bytes(node: _ScanNode) -> int | None:
-    raw = node.properties.get("oniRequiredFrameSize")
-    if raw is None or len(raw) != 8:
-        return None
-    return int(struct.unpack("<Q", raw)[0])
-
-
-def _stream_info(node_id: int, n: _ScanNode) -> OniStreamInfo:
-    props = n.properties
-    width = height = fps = 0
-    if len(props.get("xnMapOutputMode", b"")) == 12:
-        width, height, fps = struct.unpack("<III", props["xnMapOutputMode"])
-    fmt = 0
-    if len(props.get("oniPixelFormat", b"")) == 8:
-        fmt = int(struct.unpack("<Q", props["oniPixelFormat"])[0])
-    hfov = vfov = math.nan
-    if len(props.get("xnFOV", b"")) == 16:
-        hfov, vfov = struct.unpack("<dd", props["xnFOV"])
-    camera = None
-    raw = props.get(_CAMERA_PROPERTY, b"")
-    if len(raw) == 32 and width > 0 and height > 0:
-        fx, fy, cx, cy = struct.unpack("<dddd", raw)
-        try:
-            camera = CameraIntrinsics(width, height, fx, fy, cx, cy)
-        except InputError:
-            camera = None
-    found = n.frames_found
-    return OniStreamInfo(
-        node_id=node_id,
-        name=n.name,
-        kind=n.kind,
-        codec=n.codec,
-        width=width,
-        height=height,
-        fps=fps,
-        oni_pixel_format=fmt,
-        frame_count=n.frame_count,
-        frames_found=found,
-        min_timestamp_us=n.min_ts if found else 0,
-        max_timestamp_us=n.max_ts,
-        hfov=hfov,
-        vfov=vfov,
-        camera=camera,
-    )

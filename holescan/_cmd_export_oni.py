@@ -16,12 +16,17 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     p.add_argument("out", type=Path, help="the .oni file to write")
     p.add_argument("--fps", type=int, default=30, help="nominal frame rate (default 30)")
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="replace an existing OUT.oni (never a .mcap or one of the logs)",
+    )
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from capture import export_oni
 
-    n = export_oni(args.logs, args.out, fps=args.fps)
+    n = export_oni(args.logs, args.out, fps=args.fps, force=args.force)
     print(f"{args.out}: {n} frames")
     return 0

@@ -45,6 +45,7 @@ from capture import (
 from capture._mcaplog import log_file_path
 from detect import CameraIntrinsics, Detection, FeatureScores
 from geotag import CameraMount, Hole, VehiclePose
+from holescan_errors import HolescanError
 
 REPO = Path(__file__).resolve().parents[2]
 SMALL = CameraIntrinsics(80, 60, 71.3, 71.3, 39.5, 29.5)
@@ -512,11 +513,11 @@ def test_recovering_a_complete_file_keeps_everything(
     assert report.bytes_used == report.bytes_total
     a, b = log_info(path), log_info(tmp_path / "same.mcap")
     assert {t: x.count for t, x in a.topics.items()} == {t: x.count for t, x in b.topics.items()}
-    with pytest.raises(FlightLogError, match="exists"):
+    with pytest.raises(HolescanError, match="exists"):
         recover_log(path, tmp_path / "same.mcap")
 
 
-def test_damaged_chunk_stops_reading_there(
+def test_damaged_chunk_costs_that_chunk_only(
     chunked_log: tuple[Path, list[Frame]], tmp_path: Path
 ) -> None:
     path, frames = chunked_log
@@ -525,13 +526,17 @@ def test_damaged_chunk_stops_reading_there(
     bad = tmp_path / "flipped.mcap"
     bad.write_bytes(bytes(data))
     got = [r.frame for r in read_flight_log(bad, kinds={LoggedFrame})]
-    assert 0 < len(got) < len(frames)
-    assert all(frames_equal(a, b) for a, b in zip(got, frames, strict=False))
-    with pytest.raises(TruncatedLogError, match="damaged record"):
+    assert len(frames) - 2 <= len(got) < len(frames)  # a 20 kB chunk holds 1-2 frames
+    assert got[-1].index == frames[-1].index  # reading went on after the damage
+    assert all(frames_equal(g, frames[g.index]) for g in got)
+    with pytest.raises(TruncatedLogError, match="chunk CRC mismatch.*messages lost"):
         log_info(bad)
     report = recover_log(bad, tmp_path / "fixed.mcap")
     assert report.frames == len(got)
-    assert "damaged" in (report.stop_reason or "")
+    assert report.source_complete
+    assert len(report.damaged) == 1
+    assert report.messages_lost == report.damaged[0].messages > 0
+    assert log_info(tmp_path / "fixed.mcap").frames == len(got)
 
 
 def test_summary_and_data_section_crcs_are_checked(

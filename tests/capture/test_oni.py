@@ -47,7 +47,7 @@ def test_write_then_scan_reports_streams_frames_and_camera(tmp_path: Path) -> No
     path = tmp_path / "a.oni"
     assert write_oni(path, frames, CAM, fps=15) == 7
     assert path.is_file()
-    assert not (tmp_path / "a.oni.partial").exists()
+    assert not (tmp_path / ".a.part.oni").exists()
     info = scan_oni(path)
     assert info.size_bytes == path.stat().st_size
     assert info.max_timestamp_us == frames[-1].t_sensor_ns // 1000
@@ -177,7 +177,7 @@ def test_writer_arguments_checked(tmp_path: Path) -> None:
         OniWriter(tmp_path / "f.oni", CAM, fps=0)
     with pytest.raises(InputError, match="too large"):
         OniWriter(tmp_path / "f.oni", CameraIntrinsics(2000, 1500, 1000, 1000, 1000, 750))
-    with pytest.raises(InputError, match="cannot write"):
+    with pytest.raises(InputError, match="missing-dir does not exist"):
         OniWriter(tmp_path / "missing-dir" / "f.oni", CAM)
     w = OniWriter(tmp_path / "g.oni", CAM)
     w.write(make_frames(1)[0])
@@ -276,7 +276,7 @@ def test_killed_writer_leaves_only_a_partial_file(tmp_path: Path) -> None:
     )
     assert proc.returncode == 0, proc.stderr
     assert not path.exists()
-    partial = tmp_path / "killed.oni.partial"
+    partial = tmp_path / ".killed.part.oni"
     assert partial.is_file()
     with pytest.raises(InputError, match="5 depth, 5 image frames before the cut"):
         scan_oni(partial)

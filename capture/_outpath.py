@@ -1,0 +1,197 @@
+"""Output files that never destroy data: one rule for every verb that writes.
+
+* an output is never one of the inputs, and never an existing ``.mcap`` (a flight log);
+* any other existing file is refused unless the caller says ``force``;
+* the folder must exist and be writable, the name must not be a folder;
+* the file is written as ``.STEM.part.EXT`` beside it and renamed when complete, so a crash or
+  an error leaves no half-written output under the real name.
+
+Problems are :class:`OutputPathError` (an :class:`holescan_errors.InputError`): the CLI
+prints them as one line and exits 2.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import os
+from collections.abc import Collection, Iterable, Iterator
+from pathlib import Path
+from typing import IO
+
+from capture._errors import CaptureError
+from holescan_errors import InputError
+
+__all__ = [
+    "OutputPathError",
+    "atomic_output",
+    "check_folder",
+    "check_output",
+    "commit_part",
+    "output_via_part",
+    "part_path",
+]
+
+PathLike = str | os.PathLike[str]
+
+
+class OutputPathError(CaptureError, InputError):
+    """An output path that must not or cannot be written."""
+
+
+def _same(a: Path, b: Path) -> bool:
+    try:
+        return a.exists() and b.exists() and os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def check_output(
+    path: PathLike,
+    *,
+    inputs: Iterable[PathLike] = (),
+    suffixes: Collection[str] | None = None,
+    force: bool = False,
+) -> Path:
+    """Check that ``path`` may be written; return it as a :class:`Path`.
+
+    Parameters
+    ----------
+    inputs : the files the command reads (an output is never one of them).
+    suffixes : allowed extensions, lower case with the dot (``{".png", ".jpg"}``).
+    force : allow replacing an existing file that is not an input and not a ``.mcap``.
+
+    Raises
+    ------
+    OutputPathError : with one line saying what to do.
+    """
+    p = Path(path)
+    if str(path) == "" or p.name in ("", ".", ".."):
+        raise OutputPathError(f"{str(path)!r} is not a file name")
+    if p.is_dir():
+        raise OutputPathError(f"{p} is a folder: give a file name")
+    for i in inputs:
+        q = Path(i)
+        if _same(p, q) or p.resolve() == q.resolve():
+            raise OutputPathError(f"{p} is also an input: choose another output file")
+    if suffixes is not None and p.suffix.lower() not in suffixes:
+        allowed = ", ".join(sorted(suffixes))
+        raise OutputPathError(f"{p}: unknown extension {p.suffix!r} (use one of {allowed})")
+    if p.exists() or p.is_symlink():
+        if p.suffix.lower() == ".mcap":
+            raise OutputPathError(f"{p} exists and is a flight log: it is never overwritten")
+        if not force:
+            raise OutputPathError(f"{p} exists: choose another output file (or --force)")
+    check_folder(p.parent)
+    return p
+
+
+def check_folder(folder: PathLike) -> Path:
+    """A folder outputs can be written into (exists, is a folder, writable)."""
+    d = Path(folder) if str(folder) else Path(".")
+    if not d.exists():
+        raise OutputPathError(f"folder {d} does not exist: create it first")
+    if not d.is_dir():
+        raise OutputPathError(f"{d} is not a folder")
+    if not os.access(d, os.W_OK | os.X_OK):
+        raise OutputPathError(f"cannot write in {d}: permission denied")
+    return d
+
+
+def part_path(path: PathLike) -> Path:
+    """The temporary name an output is written under: ``.STEM.part.EXT`` in its folder (the
+    extension kept for writers that choose the format by it)."""
+    p = Path(path)
+    return p.with_name(f".{p.stem}.part{p.suffix}")
+
+
+def _os_error(p: Path, err: OSError) -> OutputPathError:
+    why = {
+        errno.EROFS: "read-only file system",
+        errno.EACCES: "permission denied",
+        errno.ENOSPC: "no space left on device",
+        errno.ENOENT: "folder does not exist",
+        errno.EISDIR: "is a folder",
+    }.get(err.errno or 0, err.strerror or str(err))
+    return OutputPathError(f"cannot write {p}: {why}")
+
+
+def commit_part(tmp: PathLike, path: PathLike, *, force: bool = False) -> None:
+    """Rename a finished ``.part`` file to its real name (refusing, at the last moment, an
+    output that appeared meanwhile, unless ``force`` and not a ``.mcap``)."""
+    t, p = Path(tmp), Path(path)
+    try:
+        if force and p.suffix.lower() != ".mcap":
+            os.replace(t, p)
+        else:
+            os.link(t, p)  # fails if p exists: never replaces a file
+            t.unlink()
+    except FileExistsError as err:
+        t.unlink(missing_ok=True)
+        raise OutputPathError(f"{p} appeared while writing: kept it, output discarded") from err
+    except OSError as err:
+        if err.errno in (errno.EPERM, errno.EXDEV, errno.EOPNOTSUPP, errno.EMLINK):
+            if p.exists():  # file systems without hard links: check, then rename
+                t.unlink(missing_ok=True)
+                raise OutputPathError(f"{p} appeared while writing: output discarded") from err
+            os.replace(t, p)
+            return
+        t.unlink(missing_ok=True)
+        raise _os_error(p, err) from err
+
+
+@contextlib.contextmanager
+def atomic_output(
+    path: PathLike,
+    mode: str = "wb",
+    *,
+    inputs: Iterable[PathLike] = (),
+    suffixes: Collection[str] | None = None,
+    force: bool = False,
+) -> Iterator[IO[bytes] | IO[str]]:
+    """Open ``path`` for writing through ``.STEM.part.EXT``: checked first
+    (:func:`check_output`), flushed, fsynced and renamed on success, removed on any error.
+    """
+    p = check_output(path, inputs=inputs, suffixes=suffixes, force=force)
+    tmp = part_path(p)
+    try:
+        f = open(tmp, mode)  # noqa: SIM115 (closed below)
+    except OSError as err:
+        raise _os_error(p, err) from err
+    try:
+        with f:
+            yield f
+            f.flush()
+            os.fsync(f.fileno())
+    except OSError as err:
+        tmp.unlink(missing_ok=True)
+        raise _os_error(p, err) from err
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    commit_part(tmp, p, force=force)
+
+
+@contextlib.contextmanager
+def output_via_part(
+    path: PathLike,
+    *,
+    inputs: Iterable[PathLike] = (),
+    suffixes: Collection[str] | None = None,
+    force: bool = False,
+) -> Iterator[Path]:
+    """Like :func:`atomic_output` for writers that take a file name (cv2, matplotlib):
+    yields the ``.part`` path to write; renamed on success, removed on error."""
+    p = check_output(path, inputs=inputs, suffixes=suffixes, force=force)
+    tmp = part_path(p)
+    try:
+        yield tmp
+        if not tmp.exists():
+            raise OutputPathError(f"cannot write {p}: nothing was written")
+    except OSError as err:
+        tmp.unlink(missing_ok=True)
+        raise _os_error(p, err) from err
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    commit_part(tmp, p, force=force)
