@@ -58,6 +58,7 @@ _SMALL_RECORD_LIMIT = 64 << 20
 #: A chunk never decompresses to more than this (the writer's chunks are ~1 MiB).
 _CHUNK_LIMIT = 1 << 30
 _SCAN_BLOCK = 8 << 20
+_DATA_CRC = "data section CRC mismatch"
 _CHUNK_MIN = 8 + 8 + 8 + 4 + 4 + 8  # chunk fields with an empty compression name
 
 _READERS: dict[int, Any] = {
@@ -99,6 +100,11 @@ class DamagedRegion:
     messages: int | None = None
 
     def describe(self) -> str:
+        if self.reason == _DATA_CRC:
+            return (
+                f"data section CRC mismatch (bytes {self.offset}-{self.offset + self.length}): "
+                "a record outside the chunks is damaged; every chunk checked out"
+            )
         lost = "an unknown number of" if self.messages is None else str(self.messages)
         when = ""
         if self.t_start_ns is not None and self.t_end_ns is not None:
@@ -312,7 +318,7 @@ def _plausible_chunk_at(f: IO[bytes], at: int, size: int) -> bool:
     if len(tail) < clen + 8:
         return False
     (dlen,) = struct.unpack_from("<Q", tail, clen)
-    return 32 + clen + 8 + dlen == length
+    return bool(32 + clen + 8 + dlen == length)
 
 
 def _resync(f: IO[bytes], start: int, size: int, summary: _Summary | None) -> int | None:
@@ -428,7 +434,7 @@ def scan_records(path: str | os.PathLike[str], state: ScanState | None = None) -
                     crc,
                 )
             ):
-                st.damaged.append(DamagedRegion(8, pos - 8, "data section CRC mismatch", None))
+                st.damaged.append(DamagedRegion(8, pos - 8, _DATA_CRC, messages=0))
             if crc is not None:
                 crc = zlib.crc32(head + body, crc)
             st.record_start, st.good_bytes = pos, pos + 9 + length

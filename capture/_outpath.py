@@ -74,27 +74,33 @@ def check_output(
         q = Path(i)
         if _same(p, q) or p.resolve() == q.resolve():
             raise OutputPathError(f"{p} is also an input: choose another output file")
-    if suffixes is not None and p.suffix.lower() not in suffixes:
-        allowed = ", ".join(sorted(suffixes))
-        raise OutputPathError(f"{p}: unknown extension {p.suffix!r} (use one of {allowed})")
     if p.exists() or p.is_symlink():
         if p.suffix.lower() == ".mcap":
             raise OutputPathError(f"{p} exists and is a flight log: it is never overwritten")
         if not force:
             raise OutputPathError(f"{p} exists: choose another output file (or --force)")
-    check_folder(p.parent)
+    if suffixes is not None and p.suffix.lower() not in suffixes:
+        allowed = ", ".join(sorted(suffixes))
+        raise OutputPathError(f"{p}: unknown extension {p.suffix!r} (use one of {allowed})")
+    check_folder(p.parent, for_file=p)
     return p
 
 
-def check_folder(folder: PathLike) -> Path:
+def check_folder(folder: PathLike, *, for_file: PathLike | None = None) -> Path:
     """A folder outputs can be written into (exists, is a folder, writable)."""
     d = Path(folder) if str(folder) else Path(".")
+    what = f"cannot write {for_file}: " if for_file is not None else "cannot write in it: "
     if not d.exists():
-        raise OutputPathError(f"folder {d} does not exist: create it first")
+        raise OutputPathError(f"{what}folder {d} does not exist (create it first)")
     if not d.is_dir():
-        raise OutputPathError(f"{d} is not a folder")
+        raise OutputPathError(f"{what}{d} is not a folder")
     if not os.access(d, os.W_OK | os.X_OK):
-        raise OutputPathError(f"cannot write in {d}: permission denied")
+        raise OutputPathError(f"{what}no permission to write in {d}")
+    try:
+        if os.statvfs(d).f_flag & os.ST_RDONLY:
+            raise OutputPathError(f"{what}{d} is on a read-only file system")
+    except OSError:
+        pass
     return d
 
 

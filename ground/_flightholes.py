@@ -44,6 +44,9 @@ from capture import (
     LoggedMavlink,
     LoggedPose,
     TruncatedLogError,
+    check_output,
+    commit_part,
+    part_path,
     read_flight_log,
 )
 from geotag import Hole
@@ -470,6 +473,7 @@ def export_flight_holes(
     rel_alt_m: float = 10.0,
     clearance_m: float = 5.0,
     thumb_height_px: int = 160,
+    force: bool = False,
 ) -> ExportReport:
     """Write the holes of a logged flight to ground-crew files.
 
@@ -483,6 +487,8 @@ def export_flight_holes(
     rel_alt_m, clearance_m : mission altitude for ``plan``/``wpl`` (see
         :func:`missions.hole_mission`).
     thumb_height_px : thumbnail height for ``kml``/``kmz``.
+    force : replace existing output files (never a ``.mcap`` or one of the logs). Each file
+        is written as ``.NAME.part.EXT`` and renamed when complete.
 
     Raises
     ------
@@ -498,6 +504,10 @@ def export_flight_holes(
         raise InputError("no output format given")
     if min_sightings < 1:
         raise InputError(f"min_sightings must be >= 1, got {min_sightings}")
+    files = flight_log_files(logs)
+    targets = _out_paths(files[0], fmts, None if out is None else Path(out))
+    for _fmt, path in targets:  # before reading: a bad output costs no time
+        check_output(path, inputs=files, force=force)
     need_pictures = any(f in ("kml", "kmz") for f in fmts)
     flight = read_flight_holes(logs, thumbnails=need_pictures, thumb_height_px=thumb_height_px)
     if not flight.holes:
@@ -512,10 +522,11 @@ def export_flight_holes(
     jpegs = {hid: t.jpeg for hid, t in flight.thumbnails.items()}
     name = f"holescan holes: {log_stem(flight.paths[0]).name}"
     written = []
-    for fmt, path in _out_paths(flight.paths[0], fmts, None if out is None else Path(out)):
+    for fmt, path in targets:
+        tmp = part_path(check_output(path, inputs=files, force=force))
         try:
             write_hole_file(
-                path,
+                tmp,
                 keep,
                 fmt,
                 home=flight.home,
@@ -526,6 +537,11 @@ def export_flight_holes(
                 name=name,
             )
         except OSError as err:
+            tmp.unlink(missing_ok=True)
             raise InputError(f"cannot write {path}: {err.strerror or err}") from err
+        except BaseException:
+            tmp.unlink(missing_ok=True)
+            raise
+        commit_part(tmp, path, force=force)
         written.append((fmt, path))
     return ExportReport(flight, tuple(rank_holes(keep)), tuple(written))

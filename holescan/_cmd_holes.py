@@ -61,6 +61,11 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         default=5.0,
         help="plan/wpl waypoints at least this high above the hole when home is known (5)",
     )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="replace existing output files (never a .mcap or one of the logs)",
+    )
     p.set_defaults(func=run)
 
 
@@ -76,6 +81,7 @@ def run(args: argparse.Namespace) -> int:
         min_sightings=args.min_sightings,
         rel_alt_m=args.altitude,
         clearance_m=args.clearance,
+        force=args.force,
     )
     for line in report.lines():
         print(line)

@@ -529,7 +529,7 @@ def test_damaged_chunk_costs_that_chunk_only(
     assert len(frames) - 2 <= len(got) < len(frames)  # a 20 kB chunk holds 1-2 frames
     assert got[-1].index == frames[-1].index  # reading went on after the damage
     assert all(frames_equal(g, frames[g.index]) for g in got)
-    with pytest.raises(TruncatedLogError, match="chunk CRC mismatch.*messages lost"):
+    with pytest.raises(TruncatedLogError, match=r"chunk CRC mismatch.*messages lost"):
         log_info(bad)
     report = recover_log(bad, tmp_path / "fixed.mcap")
     assert report.frames == len(got)
