@@ -475,7 +475,13 @@ class Flight:
             options=cfg.log_options,
         )
         self._writer = writer
+        deadline: threading.Timer | None = None
+        if cfg.max_duration_s:  # also while the sensor is missing and being retried
+            deadline = threading.Timer(cfg.max_duration_s, self.stop.set)
+            deadline.daemon = True
+            deadline.start()
         done = threading.Event()
+        t_stop = time.monotonic()
         results_thread: threading.Thread | None = None
         telemetry_stats: dict[str, Any] = {}
         try:
@@ -490,11 +496,13 @@ class Flight:
                 try:
                     self._capture(t_end)
                 finally:
-                    for r in worker.drain(timeout=10.0):
+                    t_stop = time.monotonic()
+                    for r in worker.drain(timeout=2.0):
                         self._handle_result(r)
                     done.set()
-                    results_thread.join(timeout=15.0)
+                    results_thread.join(timeout=5.0)
                     stats = worker.stats()
+                    log.debug("capture ended; results drained in %.2f s", time.monotonic() - t_stop)
             if self._telemetry is not None:
                 ts = self._telemetry.stats()
                 telemetry_stats = {
@@ -506,11 +514,14 @@ class Flight:
                 }
             writer.write_holes(self.tracker.holes(), time.time_ns())
         finally:
+            if deadline is not None:
+                deadline.cancel()
             done.set()
             self.stop.set()  # also ends a telemetry retry still waiting for the autopilot
             if self._telemetry is not None:
                 self._telemetry.close()
             writer.close()
+            log.debug("flight closed %.2f s after capture ended", time.monotonic() - t_stop)
         return FlightSummary(
             counters=self.counters,
             log=writer.stats(),

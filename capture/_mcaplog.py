@@ -387,8 +387,11 @@ class FlightLogWriter:
         log_time = time.time_ns()
         is_frame = kind == "frame"
         with self._lock:
-            seq = self._seq[topic]
-            self._seq[topic] = seq + 1
+            # /health is also written by the writer thread itself (_periodic): its sequence
+            # numbers are given where the records are written, so they stay in order.
+            seq = -1 if topic == sch.TOPIC_HEALTH else self._seq[topic]
+            if topic != sch.TOPIC_HEALTH:
+                self._seq[topic] = seq + 1
             self._enqueued[topic] += 1
             ok = self._error is None and not self._closed
             if ok and is_frame and self._frames_queued >= self.options.max_queued_frames:
@@ -543,7 +546,10 @@ class FlightLogWriter:
         self._count(sch.TOPIC_HOLES)
         self._count(sch.TOPIC_HOLES_GEOJSON)
 
-    def _on_health(self, seq: int, log_time: int, record: dict[str, Any], t: int) -> None:
+    def _on_health(self, _seq: int, log_time: int, record: dict[str, Any], t: int) -> None:
+        with self._lock:
+            seq = self._seq[sch.TOPIC_HEALTH]
+            self._seq[sch.TOPIC_HEALTH] = seq + 1
         self._json(sch.TOPIC_HEALTH, record, seq, log_time, t)
         self._count(sch.TOPIC_HEALTH)
 

@@ -6,16 +6,27 @@ one the worker is reading, one published and not yet taken, one free for the nex
 a published frame that the worker had not taken yet is overwritten by a newer one and
 counted as skipped. The worker process maps the slots once and reads frames in place.
 Results come back on a queue as :class:`WorkerResult`.
+
+The worker is stopped by its parent only: it ignores SIGINT and SIGTERM (Ctrl-C and
+``systemctl stop`` reach the whole process group; the daemon then drains and stops it),
+and it dies with its parent: ``PR_SET_PDEATHSIG`` (SIGKILL) on Linux, and a check of the
+parent's pid every 0.1 s as a fallback, so a killed daemon leaves no orphan (the
+multiprocessing resource tracker exits once the worker has gone).
 """
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
 import logging
 import multiprocessing as mp
+import os
 import queue
+import signal
+import sys
 import time
 from dataclasses import dataclass
-from multiprocessing import shared_memory
+from multiprocessing import resource_tracker, shared_memory
 from multiprocessing.synchronize import Event as EventT
 from types import TracebackType
 from typing import Any
@@ -34,6 +45,8 @@ WORKER_NICE = 10
 # Control words in the shared int64 array.
 _BUSY, _LATEST, _OFFERED, _SKIPPED, _DONE = range(5)
 _META = 4  # per slot: frame index, t_mono_ns, t_sensor_ns, sequence
+_STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
+_PR_SET_PDEATHSIG = 1
 
 
 @dataclass(frozen=True)
@@ -67,7 +80,26 @@ def _slot_views(
     return out
 
 
+def _ignore_stop_signals() -> None:
+    """SIGINT/SIGTERM are for the parent, which stops the worker (blocked since the spawn)."""
+    for sig in _STOP_SIGNALS:
+        signal.signal(sig, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)
+
+
+def die_with_parent(parent_pid: int) -> None:
+    """Have the kernel SIGKILL this process when its parent dies (Linux ``prctl``); exit now
+    if the parent is already gone."""
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError, AttributeError):
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
+    if os.getppid() != parent_pid:
+        os._exit(1)
+
+
 def _worker_main(
+    parent_pid: int,
     shm_name: str,
     ctrl: Any,
     meta: Any,
@@ -78,7 +110,8 @@ def _worker_main(
     camera: CameraIntrinsics,
     params: DetectParams,
 ) -> None:
-    import os
+    _ignore_stop_signals()
+    die_with_parent(parent_pid)
 
     from detect import detect_holes
 
@@ -94,6 +127,9 @@ def _worker_main(
         ready.set()
         while not stop.is_set():
             if not wake.wait(0.1):
+                if os.getppid() != parent_pid:  # the daemon died (no prctl): exit too
+                    results.cancel_join_thread()
+                    return
                 continue
             with ctrl.get_lock():
                 slot = int(ctrl[_LATEST])
@@ -131,6 +167,11 @@ class DetectionWorker:
         self.camera = camera
         self.params = params
         ctx = mp.get_context("spawn")
+        old = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
+        try:  # the tracker of the shared memory, started here, ignores them too
+            resource_tracker.ensure_running()
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, old)
         size = camera.height * camera.width * 5
         self._shm = shared_memory.SharedMemory(create=True, size=size * N_SLOTS)
         self._views = _slot_views(self._shm.buf, camera.height, camera.width)
@@ -143,6 +184,7 @@ class DetectionWorker:
         self._proc = ctx.Process(
             target=_worker_main,
             args=(
+                os.getpid(),
                 self._shm.name,
                 self._ctrl,
                 self._meta,
@@ -165,7 +207,13 @@ class DetectionWorker:
 
     def start(self, timeout_s: float = 60.0) -> None:
         """Start the process and wait until it has imported the detector (startup only)."""
-        self._proc.start()
+        # The child inherits the blocked mask through the exec: a Ctrl-C during its
+        # start-up stays pending until it ignores the signal (no KeyboardInterrupt trace).
+        old = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
+        try:
+            self._proc.start()
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, old)
         self._started = True
         if not self._ready.wait(timeout_s):
             self.close()
@@ -216,10 +264,15 @@ class DetectionWorker:
         return out
 
     def stats(self) -> WorkerStats:
-        with self._ctrl.get_lock():
+        lock = self._ctrl.get_lock()
+        locked = lock.acquire(timeout=1.0)  # never hang on a lock a killed worker held
+        try:
             return WorkerStats(
                 int(self._ctrl[_OFFERED]), int(self._ctrl[_SKIPPED]), int(self._ctrl[_DONE])
             )
+        finally:
+            if locked:
+                lock.release()
 
     @property
     def alive(self) -> bool:
@@ -239,15 +292,17 @@ class DetectionWorker:
 
     def close(self) -> None:
         """Stop the worker process and free the shared memory."""
+        t0 = time.monotonic()
         if self._started:
             self._stop.set()
             self._wake.set()
-            self._proc.join(timeout=5.0)
-            if self._proc.is_alive():
-                log.warning("detection worker did not stop in 5 s; terminating it")
-                self._proc.terminate()
+            self._proc.join(timeout=1.0)
+            if self._proc.is_alive():  # inside a detection: its result is not wanted now
+                log.info("detection worker busy; killing it")
+                self._proc.kill()  # (it ignores SIGTERM)
                 self._proc.join(timeout=2.0)
             self._started = False
+            log.debug("detection worker stopped in %.2f s", time.monotonic() - t0)
         self._views = []
         try:
             self._shm.close()

@@ -1,0 +1,138 @@
+"""Stopping ``holescan fly`` the ways systemd, a terminal and a crash do: SIGTERM to the
+whole process group, Ctrl-C (SIGINT to the group), SIGKILL of the daemon; and the detection
+worker dying with its parent."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+from capture import log_info, read_flight_log
+from capture._mcapread import LoggedHealth
+from tests.capture.test_fly import SIM_TOML, holescan
+
+pytestmark = pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc")
+
+
+def group_members(pgid: int) -> list[int]:
+    """Pids of the live (not zombie) processes of process group ``pgid``."""
+    out = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            stat = (entry / "stat").read_text()
+        except OSError:
+            continue
+        fields = stat[stat.rindex(")") + 2 :].split()
+        if int(fields[2]) == pgid and fields[0] != "Z":
+            out.append(int(entry.name))
+    return out
+
+
+def wait_gone(pgid: int, timeout_s: float) -> float:
+    """Seconds until no process of the group is left (raises after ``timeout_s``)."""
+    t0 = time.monotonic()
+    while group_members(pgid):
+        if time.monotonic() - t0 > timeout_s:
+            left = group_members(pgid)
+            cmds = [Path(f"/proc/{p}/cmdline").read_bytes()[:120] for p in left]
+            pytest.fail(f"processes outlived the daemon by {timeout_s} s: {cmds}")
+        time.sleep(0.02)
+    return time.monotonic() - t0
+
+
+def start_sim_flight(tmp_path: Path, *pre: str, **kw: object) -> tuple[subprocess.Popen[str], Path]:
+    cfg = tmp_path / "fly.toml"
+    cfg.write_text(SIM_TOML)
+    logs = tmp_path / "logs"
+    proc = holescan(
+        *pre,
+        "fly", "--config", str(cfg), "--log-dir", str(logs), "--duration", "300",
+        start_new_session=True, **kw,
+    )  # fmt: skip
+    deadline = time.monotonic() + 90
+    while time.monotonic() < deadline and proc.poll() is None:  # frames flowing and logged
+        files = list(logs.glob("*.mcap"))
+        if files and files[0].stat().st_size > 1_500_000 and len(group_members(proc.pid)) >= 3:
+            return proc, logs
+        time.sleep(0.1)
+    proc.kill()
+    out, err = proc.communicate()
+    pytest.fail(f"the simulated flight did not start: {err[-3000:]}")
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_signal_to_the_whole_group_ends_the_flight_in_seconds(
+    tmp_path: Path, sig: signal.Signals
+) -> None:
+    """``systemctl stop`` (SIGTERM to the group) and Ctrl-C (SIGINT to the group)."""
+    proc, logs = start_sim_flight(tmp_path)
+    t0 = time.monotonic()
+    os.killpg(proc.pid, sig)
+    try:
+        out, err = proc.communicate(timeout=30)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        out, err = proc.communicate()
+        pytest.fail(f"{sig.name} to the group: still running after 30 s:\n{err[-3000:]}")
+    stop_s = time.monotonic() - t0
+    gone_s = wait_gone(proc.pid, 2.0)
+    print(f"\n{sig.name} to the group: flight ended in {stop_s:.2f} s, all gone +{gone_s:.2f} s")
+    assert proc.returncode == 0, err[-3000:]
+    assert stop_s < 5.0
+    assert f"{sig.name}: finishing the flight" in err
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err, err[-3000:]
+    files = sorted(logs.glob("*.mcap"))
+    info = log_info(files)  # opens without recovery: complete, every CRC checked
+    assert info.frames > 0
+    health = [r for r in read_flight_log(files, kinds={LoggedHealth}, strict=True)]
+    seqs = [r.sequence for r in health]
+    assert seqs == sorted(seqs) and len(set(seqs)) == len(seqs)
+
+
+def test_sigkill_of_the_daemon_leaves_no_process_behind(tmp_path: Path) -> None:
+    proc, logs = start_sim_flight(tmp_path)
+    members = group_members(proc.pid)
+    assert len(members) >= 3  # daemon, detection worker, resource tracker
+    proc.send_signal(signal.SIGKILL)
+    proc.communicate(timeout=10)
+    gone_s = wait_gone(proc.pid, 2.0)
+    print(f"\nSIGKILL: {len(members) - 1} child processes gone {gone_s:.2f} s after the daemon")
+    # The log is recoverable up to its last synced chunk.
+    info = log_info(sorted(logs.glob("*.mcap")), allow_truncated=True)
+    assert info.frames > 0
+
+
+def test_worker_exits_when_its_parent_dies_without_prctl(tmp_path: Path) -> None:
+    """The fallback: a worker whose parent died (no PDEATHSIG) notices within ~0.1 s."""
+    child = textwrap.dedent(
+        """
+        import os, sys, time
+        from capture._worker import DetectionWorker
+        from detect import DEFAULT, CameraIntrinsics
+        w = DetectionWorker(CameraIntrinsics.xtion(64, 48), DEFAULT)
+        w.start()
+        print(w._proc.pid, flush=True)
+        os._exit(0)  # the parent vanishes without stopping the worker
+        """
+    )
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[2]))
+    proc = subprocess.Popen(
+        [sys.executable, "-c", child], stdout=subprocess.PIPE, text=True, env=env,
+        start_new_session=True,
+    )  # fmt: skip
+    out, _ = proc.communicate(timeout=120)
+    worker_pid = int(out.split()[0])
+    wait_gone(proc.pid, 2.0)
+    assert (
+        not Path(f"/proc/{worker_pid}").exists()
+        or "Z" in Path(f"/proc/{worker_pid}/stat").read_text().split(")")[1][:3]
+    )
