@@ -65,7 +65,7 @@ def start_sim_flight(tmp_path: Path, *pre: str, **kw: object) -> tuple[subproces
             return proc, logs
         time.sleep(0.1)
     proc.kill()
-    out, err = proc.communicate()
+    _out, err = proc.communicate()
     pytest.fail(f"the simulated flight did not start: {err[-3000:]}")
 
 
@@ -78,10 +78,10 @@ def test_signal_to_the_whole_group_ends_the_flight_in_seconds(
     t0 = time.monotonic()
     os.killpg(proc.pid, sig)
     try:
-        out, err = proc.communicate(timeout=30)
+        _out, err = proc.communicate(timeout=30)
     except subprocess.TimeoutExpired:
         os.killpg(proc.pid, signal.SIGKILL)
-        out, err = proc.communicate()
+        _out, err = proc.communicate()
         pytest.fail(f"{sig.name} to the group: still running after 30 s:\n{err[-3000:]}")
     stop_s = time.monotonic() - t0
     gone_s = wait_gone(proc.pid, 2.0)
@@ -93,7 +93,7 @@ def test_signal_to_the_whole_group_ends_the_flight_in_seconds(
     files = sorted(logs.glob("*.mcap"))
     info = log_info(files)  # opens without recovery: complete, every CRC checked
     assert info.frames > 0
-    health = [r for r in read_flight_log(files, kinds={LoggedHealth}, strict=True)]
+    health = list(read_flight_log(files, kinds={LoggedHealth}, strict=True))
     seqs = [r.sequence for r in health]
     assert seqs == sorted(seqs) and len(set(seqs)) == len(seqs)
 
