@@ -28,18 +28,18 @@ import time
 from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any
 
 from capture._clock import ClockSync, ClockUnavailable
-from capture._errors import CaptureError
-from capture._posebuffer import (
-    AttitudeSample,
-    GpsFix,
-    PoseBuffer,
-    PoseUnavailable,
-    PositionSample,
-    quat_from_euler,
+from capture._mavadapt import (
+    attitude_from_attitude,
+    attitude_from_quaternion,
+    gps_from_gps_raw_int,
+    position_from_global_position_int,
 )
+from capture._mavrates import RateMethod, RateRequests, TelemetryError, TelemetryTimeoutError
+from capture._mavstream import MavlinkStream
+from capture._posebuffer import GpsFix, PoseBuffer, PoseUnavailable
 from geotag import VehiclePose
 from missions import mavlink, open_link
 
@@ -69,89 +69,14 @@ DEFAULT_RATES_HZ: Mapping[str, float] = {
     "SYSTEM_TIME": 1.0,
 }
 
-# REQUEST_DATA_STREAM groups (ArduPilot's assignment) for the fallback.
-_DATA_STREAM: Mapping[str, int] = {
-    "GLOBAL_POSITION_INT": mavlink.MAV_DATA_STREAM_POSITION,
-    "ATTITUDE": mavlink.MAV_DATA_STREAM_EXTRA1,
-    "ATTITUDE_QUATERNION": mavlink.MAV_DATA_STREAM_EXTRA1,
-    "GPS_RAW_INT": mavlink.MAV_DATA_STREAM_EXTENDED_STATUS,
-    "SYSTEM_TIME": mavlink.MAV_DATA_STREAM_EXTRA3,
-}
-
-RateMethod = Literal["message_interval", "data_stream", "mixed", "none"]
 MessageCallback = Callable[[Any, int], None]
 """``on_message(msg, t_mono_ns)``: a parsed pymavlink message and its arrival time."""
 
 _NS_PER_MS = 1_000_000
-
-
-class TelemetryError(CaptureError):
-    """The MAVLink link could not be opened or used."""
-
-
-class TelemetryTimeoutError(TelemetryError, TimeoutError):
-    """Nothing (heartbeat, command acknowledgement) came in time."""
-
-
-# -- the adapter: MAVLink units -> SI, once --------------------------------------------------
-
-
-def position_from_global_position_int(msg: Any) -> PositionSample:
-    """GLOBAL_POSITION_INT (ms, degE7, mm, cm/s) -> :class:`PositionSample` (ns, deg, m, m/s)."""
-    return PositionSample(
-        t_boot_ns=int(msg.time_boot_ms) * _NS_PER_MS,
-        lat_deg=msg.lat * 1e-7,
-        lon_deg=msg.lon * 1e-7,
-        alt_m=msg.alt * 1e-3,
-        rel_alt_m=msg.relative_alt * 1e-3,
-        vn=msg.vx * 1e-2,
-        ve=msg.vy * 1e-2,
-        vd=msg.vz * 1e-2,
-    )
-
-
-def attitude_from_attitude(msg: Any) -> AttitudeSample:
-    """ATTITUDE (ms, rad, rad/s) -> :class:`AttitudeSample`."""
-    return AttitudeSample(
-        t_boot_ns=int(msg.time_boot_ms) * _NS_PER_MS,
-        quat_wxyz=quat_from_euler(msg.roll, msg.pitch, msg.yaw),
-        rate_frd=(float(msg.rollspeed), float(msg.pitchspeed), float(msg.yawspeed)),
-    )
-
-
-def attitude_from_quaternion(msg: Any) -> AttitudeSample:
-    """ATTITUDE_QUATERNION (ms, q1..q4 = w, x, y, z) -> :class:`AttitudeSample`."""
-    q = (float(msg.q1), float(msg.q2), float(msg.q3), float(msg.q4))
-    norm = math.sqrt(sum(v * v for v in q))
-    if not norm > 0.0:
-        raise ValueError("ATTITUDE_QUATERNION with a zero quaternion")
-    w, x, y, z = (v / norm for v in q)
-    return AttitudeSample(
-        t_boot_ns=int(msg.time_boot_ms) * _NS_PER_MS,
-        quat_wxyz=(w, x, y, z),
-        rate_frd=(float(msg.rollspeed), float(msg.pitchspeed), float(msg.yawspeed)),
-    )
-
-
-def gps_from_gps_raw_int(msg: Any, t_boot_ns: int) -> GpsFix:
-    """GPS_RAW_INT (degE7, mm, HDOP*100, h_acc mm) -> :class:`GpsFix`.
-
-    ``t_boot_ns`` is supplied by the caller: GPS_RAW_INT's ``time_usec`` may be Unix or boot
-    time depending on the autopilot.
-    """
-    h_acc = getattr(msg, "h_acc", 0)
-    v_acc = getattr(msg, "v_acc", 0)
-    return GpsFix(
-        t_boot_ns=t_boot_ns,
-        fix_type=int(msg.fix_type),
-        satellites=-1 if msg.satellites_visible == 255 else int(msg.satellites_visible),
-        hdop=math.nan if msg.eph == 65535 else msg.eph / 100.0,
-        h_acc_m=h_acc * 1e-3 if h_acc else math.nan,
-        v_acc_m=v_acc * 1e-3 if v_acc else math.nan,
-        lat_deg=msg.lat * 1e-7,
-        lon_deg=msg.lon * 1e-7,
-        alt_m=msg.alt * 1e-3,
-    )
+#: Links read as raw bytes through :class:`MavlinkStream` (datagram links: each datagram
+#: framed on its own); other links (tlog replay ...) go through pymavlink's own parser.
+_STREAM_LINKS = {"mavserial": False, "mavtcp": False, "mavtcpin": False}
+_DATAGRAM_LINKS = {"mavudp": True, "mavmcast": True}
 
 
 # -- the link --------------------------------------------------------------------------------
@@ -183,7 +108,7 @@ class TelemetryStats:
     timesync_received: int
 
 
-class Telemetry:
+class Telemetry(RateRequests):
     """A MAVLink link to the autopilot with a receiver thread; use as a context manager.
 
     Parameters
@@ -246,6 +171,8 @@ class Telemetry:
         self._arrivals: dict[str, deque[int]] = {}
         self._bad_bytes = 0
         self._bad_packets = 0
+        self._stream: MavlinkStream | None = None
+        self.reboots = 0  # autopilot reboots seen (boot clock went back)
         self._unknown_packets = 0
         self._callback_errors = 0
         self._timesync_sent = 0
@@ -379,86 +306,6 @@ class Telemetry:
 
     # -- commands --------------------------------------------------------------------------
 
-    def command_long(self, command: int, *params: float) -> int:
-        """Send COMMAND_LONG to the autopilot and return the MAV_RESULT of its COMMAND_ACK.
-
-        Retries ``command_retries`` times (confirmation counts up); raises
-        :class:`TelemetryTimeoutError` when no ACK comes. Not callable from ``on_message``.
-        """
-        sysid, compid = self._require_target()
-        p = [float(v) for v in params] + [0.0] * (7 - len(params))
-        for attempt in range(self._cmd_retries):
-            with self._cond:
-                self._acks.pop(command, None)
-            with self._send_lock:
-                self._conn.mav.command_long_send(sysid, compid, command, attempt, *p)
-            deadline = time.monotonic() + self._cmd_timeout_s
-            with self._cond:
-                while True:
-                    result = self._acks.get(command)
-                    if result is not None and result != mavlink.MAV_RESULT_IN_PROGRESS:
-                        return result
-                    remaining = deadline - time.monotonic()
-                    if remaining <= 0:
-                        break
-                    self._cond.wait(remaining)
-        raise TelemetryTimeoutError(
-            f"no COMMAND_ACK for command {command} after {self._cmd_retries} attempts"
-        )
-
-    def request_rates(self, rates_hz: Mapping[str, float]) -> RateMethod:
-        """Ask for each message at its rate (Hz; <= 0 stops it).
-
-        MAV_CMD_SET_MESSAGE_INTERVAL per message; messages it does not get ACCEPTED for are
-        requested with REQUEST_DATA_STREAM (ArduPilot stream groups, integer Hz). If the
-        first command is not acknowledged at all, the rest go straight to the fallback.
-        """
-        refused: dict[str, float] = {}
-        acked_any = False
-        for name, hz in rates_hz.items():
-            msg_id = getattr(mavlink, f"MAVLINK_MSG_ID_{name}")
-            interval_us = round(1e6 / hz) if hz > 0 else -1
-            if refused and not acked_any:
-                refused[name] = hz
-                continue
-            try:
-                result = self.command_long(
-                    mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, interval_us
-                )
-            except TelemetryTimeoutError:
-                _log.info("SET_MESSAGE_INTERVAL not acknowledged for %s", name)
-                refused[name] = hz
-                continue
-            acked_any = True
-            if result != mavlink.MAV_RESULT_ACCEPTED:
-                _log.info("SET_MESSAGE_INTERVAL for %s refused (MAV_RESULT %d)", name, result)
-                refused[name] = hz
-        if refused:
-            self._request_data_streams(refused)
-        if not refused:
-            method: RateMethod = "message_interval"
-        elif len(refused) == len(rates_hz):
-            method = "data_stream"
-        else:
-            method = "mixed"
-        self.rate_method = method
-        _log.info("message rates requested by %s: %s", method, dict(rates_hz))
-        return method
-
-    def _request_data_streams(self, rates_hz: Mapping[str, float]) -> None:
-        sysid, compid = self._require_target()
-        streams: dict[int, int] = {}
-        for name, hz in rates_hz.items():
-            stream = _DATA_STREAM.get(name)
-            if stream is None:
-                _log.warning("no REQUEST_DATA_STREAM group known for %s: not requested", name)
-                continue
-            streams[stream] = max(streams.get(stream, 0), math.ceil(hz) if hz > 0 else 0)
-        for _ in range(2):  # no acknowledgement exists: send twice against loss
-            for stream, hz in streams.items():
-                with self._send_lock:
-                    self._conn.mav.request_data_stream_send(sysid, compid, stream, hz, int(hz > 0))
-
     def _require_target(self) -> tuple[int, int]:
         if self._conn is None or self._target is None:
             raise TelemetryError("telemetry link is not open (use it as a context manager)")
@@ -468,6 +315,11 @@ class Telemetry:
 
     def _run(self) -> None:
         conn = self._conn
+        kind = type(conn).__name__
+        stream: MavlinkStream | None = None
+        if kind in _STREAM_LINKS or kind in _DATAGRAM_LINKS:
+            stream = MavlinkStream(conn.mav, datagrams=kind in _DATAGRAM_LINKS)
+        self._stream = stream
         next_hb = 0
         next_ts = 0
         while not self._stop.is_set():
@@ -479,20 +331,37 @@ class Telemetry:
                 self._send_timesync()
                 next_ts = now + self._timesync_period_ns
             try:
-                msg = conn.recv_msg()
+                msgs = self._receive(conn, stream)
             except Exception as err:  # socket/serial trouble: log, back off, keep going
                 _log.warning("MAVLink receive failed on %s: %s", self.connection, err)
                 self._stop.wait(0.1)
                 continue
-            if msg is None:
+            if not msgs:
                 wait_ns = min(next_hb, next_ts if self._timesync_period_ns else next_hb) - now
                 conn.select(max(0.0, min(wait_ns / 1e9, 0.02)))
                 continue
             t_mono_ns = time.monotonic_ns()
-            try:
-                self._handle(msg, t_mono_ns)
-            except Exception:  # one bad message must not kill the link
-                _log.exception("failed to handle %s", msg.get_type())
+            for msg in msgs:
+                try:
+                    self._handle(msg, t_mono_ns)
+                except Exception:  # one bad message must not kill the link
+                    _log.exception("failed to handle %s", msg.get_type())
+
+    def _receive(self, conn: Any, stream: MavlinkStream | None) -> list[Any]:
+        """Messages now available: a datagram's or a read's worth."""
+        if stream is None:
+            msg = conn.recv_msg()
+            return [] if msg is None else [msg]
+        data = conn.recv(4096)
+        if not data:
+            return []
+        bad = (stream.bad_bytes, stream.bad_packets)
+        msgs = stream.feed(bytes(data))
+        if (stream.bad_bytes, stream.bad_packets) != bad:
+            self._note_bad(stream.bad_bytes - bad[0], stream.bad_packets - bad[1], stream)
+        for msg in msgs:
+            conn.post_message(msg)  # pymavlink's link state: sequence losses, last messages
+        return msgs
 
     def _send_heartbeat(self) -> None:
         with self._send_lock:
@@ -559,19 +428,26 @@ class Telemetry:
             self._cond.notify_all()
 
     def _count_bad(self, msg: Any, t_mono_ns: int) -> None:
-        n = len(msg.data)
+        """A BAD_DATA message of pymavlink's own parser (links read with recv_msg)."""
         if msg.reason == "Bad prefix":
-            self._bad_bytes += n
+            self._note_bad(len(msg.data), 0, msg.reason, t_mono_ns)
         else:
-            self._bad_packets += 1
-        if t_mono_ns - self._last_bad_log_ns > 10_000_000_000:
-            self._last_bad_log_ns = t_mono_ns
+            self._note_bad(0, 1, msg.reason, t_mono_ns)
+
+    def _note_bad(
+        self, n_bytes: int, n_packets: int, why: Any, t_mono_ns: int | None = None
+    ) -> None:
+        self._bad_bytes += n_bytes
+        self._bad_packets += n_packets
+        t = time.monotonic_ns() if t_mono_ns is None else t_mono_ns
+        if t - self._last_bad_log_ns > 10_000_000_000:
+            self._last_bad_log_ns = t
+            reason = why.last_error if isinstance(why, MavlinkStream) else why
             _log.warning(
-                "ignoring unparseable MAVLink data on %s (%s, %d bytes); totals: %d garbage "
+                "ignoring unparseable MAVLink data on %s (%s); totals: %d garbage "
                 "bytes, %d bad packets",
                 self.connection,
-                msg.reason,
-                n,
+                reason or "bytes before a start byte",
                 self._bad_bytes,
                 self._bad_packets,
             )
@@ -584,9 +460,20 @@ class Telemetry:
                 (last - t_boot_ns) / 1e9,
             )
             self.clock.reset()
+            self.reboots += 1
+            if self._rates:  # a rebooted autopilot forgot them; not from this thread (ACKs)
+                threading.Thread(
+                    target=self._rerequest_rates, name="telemetry-rates", daemon=True
+                ).start()
         if last is None or t_boot_ns > last or t_boot_ns < last - 2_000_000_000:
             self._last_boot_ns = t_boot_ns
         self.clock.add_arrival(t_mono_ns, t_boot_ns)
+
+    def _rerequest_rates(self) -> None:
+        try:
+            self.request_rates(self._rates)
+        except TelemetryError as err:
+            _log.warning("message rates not re-requested after the reboot: %s", err)
 
     def _on_position(self, msg: Any, t_mono_ns: int) -> None:
         sample = position_from_global_position_int(msg)

@@ -1,0 +1,76 @@
+"""The one MAVLink adapter: MAVLink units -> SI records, converted once (live link and log
+replay use the same functions)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from capture._posebuffer import AttitudeSample, GpsFix, PositionSample, quat_from_euler
+
+__all__ = [
+    "attitude_from_attitude",
+    "attitude_from_quaternion",
+    "gps_from_gps_raw_int",
+    "position_from_global_position_int",
+]
+
+_NS_PER_MS = 1_000_000
+
+
+def position_from_global_position_int(msg: Any) -> PositionSample:
+    """GLOBAL_POSITION_INT (ms, degE7, mm, cm/s) -> :class:`PositionSample` (ns, deg, m, m/s)."""
+    return PositionSample(
+        t_boot_ns=int(msg.time_boot_ms) * _NS_PER_MS,
+        lat_deg=msg.lat * 1e-7,
+        lon_deg=msg.lon * 1e-7,
+        alt_m=msg.alt * 1e-3,
+        rel_alt_m=msg.relative_alt * 1e-3,
+        vn=msg.vx * 1e-2,
+        ve=msg.vy * 1e-2,
+        vd=msg.vz * 1e-2,
+    )
+
+
+def attitude_from_attitude(msg: Any) -> AttitudeSample:
+    """ATTITUDE (ms, rad, rad/s) -> :class:`AttitudeSample`."""
+    return AttitudeSample(
+        t_boot_ns=int(msg.time_boot_ms) * _NS_PER_MS,
+        quat_wxyz=quat_from_euler(msg.roll, msg.pitch, msg.yaw),
+        rate_frd=(float(msg.rollspeed), float(msg.pitchspeed), float(msg.yawspeed)),
+    )
+
+
+def attitude_from_quaternion(msg: Any) -> AttitudeSample:
+    """ATTITUDE_QUATERNION (ms, q1..q4 = w, x, y, z) -> :class:`AttitudeSample`."""
+    q = (float(msg.q1), float(msg.q2), float(msg.q3), float(msg.q4))
+    norm = math.sqrt(sum(v * v for v in q))
+    if not norm > 0.0:
+        raise ValueError("ATTITUDE_QUATERNION with a zero quaternion")
+    w, x, y, z = (v / norm for v in q)
+    return AttitudeSample(
+        t_boot_ns=int(msg.time_boot_ms) * _NS_PER_MS,
+        quat_wxyz=(w, x, y, z),
+        rate_frd=(float(msg.rollspeed), float(msg.pitchspeed), float(msg.yawspeed)),
+    )
+
+
+def gps_from_gps_raw_int(msg: Any, t_boot_ns: int) -> GpsFix:
+    """GPS_RAW_INT (degE7, mm, HDOP*100, h_acc mm) -> :class:`GpsFix`.
+
+    ``t_boot_ns`` is supplied by the caller: GPS_RAW_INT's ``time_usec`` may be Unix or boot
+    time depending on the autopilot.
+    """
+    h_acc = getattr(msg, "h_acc", 0)
+    v_acc = getattr(msg, "v_acc", 0)
+    return GpsFix(
+        t_boot_ns=t_boot_ns,
+        fix_type=int(msg.fix_type),
+        satellites=-1 if msg.satellites_visible == 255 else int(msg.satellites_visible),
+        hdop=math.nan if msg.eph == 65535 else msg.eph / 100.0,
+        h_acc_m=h_acc * 1e-3 if h_acc else math.nan,
+        v_acc_m=v_acc * 1e-3 if v_acc else math.nan,
+        lat_deg=msg.lat * 1e-7,
+        lon_deg=msg.lon * 1e-7,
+        alt_m=msg.alt * 1e-3,
+    )

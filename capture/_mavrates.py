@@ -1,0 +1,132 @@
+"""Asking the autopilot for messages: COMMAND_LONG with acknowledgement, message intervals
+with the REQUEST_DATA_STREAM fallback (a part of :class:`capture._mavlink.Telemetry`)."""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from collections.abc import Mapping
+from typing import Any, Literal
+
+from capture._errors import CaptureError
+from missions import mavlink
+
+__all__ = ["RateMethod", "RateRequests", "TelemetryError", "TelemetryTimeoutError"]
+
+_log = logging.getLogger("capture._mavlink")
+
+RateMethod = Literal["message_interval", "data_stream", "mixed", "none"]
+
+# REQUEST_DATA_STREAM groups (ArduPilot's assignment) for the fallback.
+_DATA_STREAM: Mapping[str, int] = {
+    "GLOBAL_POSITION_INT": mavlink.MAV_DATA_STREAM_POSITION,
+    "ATTITUDE": mavlink.MAV_DATA_STREAM_EXTRA1,
+    "ATTITUDE_QUATERNION": mavlink.MAV_DATA_STREAM_EXTRA1,
+    "GPS_RAW_INT": mavlink.MAV_DATA_STREAM_EXTENDED_STATUS,
+    "SYSTEM_TIME": mavlink.MAV_DATA_STREAM_EXTRA3,
+}
+
+
+class TelemetryError(CaptureError):
+    """The MAVLink link could not be opened or used."""
+
+
+class TelemetryTimeoutError(TelemetryError, TimeoutError):
+    """Nothing (heartbeat, command acknowledgement) came in time."""
+
+
+class RateRequests:
+    """Commands and message rates; the receiver thread fills ``_acks`` from COMMAND_ACKs."""
+
+    _conn: Any
+    _cond: threading.Condition
+    _send_lock: threading.Lock
+    _acks: dict[int, int]
+    _cmd_retries: int
+    _cmd_timeout_s: float
+    rate_method: RateMethod
+
+    def _require_target(self) -> tuple[int, int]:
+        raise NotImplementedError
+
+    def command_long(self, command: int, *params: float) -> int:
+        """Send COMMAND_LONG to the autopilot and return the MAV_RESULT of its COMMAND_ACK.
+
+        Retries ``command_retries`` times (confirmation counts up); raises
+        :class:`TelemetryTimeoutError` when no ACK comes. Not callable from ``on_message``.
+        """
+        sysid, compid = self._require_target()
+        p = [float(v) for v in params] + [0.0] * (7 - len(params))
+        for attempt in range(self._cmd_retries):
+            with self._cond:
+                self._acks.pop(command, None)
+            with self._send_lock:
+                self._conn.mav.command_long_send(sysid, compid, command, attempt, *p)
+            deadline = time.monotonic() + self._cmd_timeout_s
+            with self._cond:
+                while True:
+                    result = self._acks.get(command)
+                    if result is not None and result != mavlink.MAV_RESULT_IN_PROGRESS:
+                        return result
+                    remaining = deadline - time.monotonic()
+                    if remaining <= 0:
+                        break
+                    self._cond.wait(remaining)
+        raise TelemetryTimeoutError(
+            f"no COMMAND_ACK for command {command} after {self._cmd_retries} attempts"
+        )
+
+    def request_rates(self, rates_hz: Mapping[str, float]) -> RateMethod:
+        """Ask for each message at its rate (Hz; <= 0 stops it).
+
+        MAV_CMD_SET_MESSAGE_INTERVAL per message; messages it does not get ACCEPTED for are
+        requested with REQUEST_DATA_STREAM (ArduPilot stream groups, integer Hz). If the
+        first command is not acknowledged at all, the rest go straight to the fallback.
+        """
+        refused: dict[str, float] = {}
+        acked_any = False
+        for name, hz in rates_hz.items():
+            msg_id = getattr(mavlink, f"MAVLINK_MSG_ID_{name}")
+            interval_us = round(1e6 / hz) if hz > 0 else -1
+            if refused and not acked_any:
+                refused[name] = hz
+                continue
+            try:
+                result = self.command_long(
+                    mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, interval_us
+                )
+            except TelemetryTimeoutError:
+                _log.info("SET_MESSAGE_INTERVAL not acknowledged for %s", name)
+                refused[name] = hz
+                continue
+            acked_any = True
+            if result != mavlink.MAV_RESULT_ACCEPTED:
+                _log.info("SET_MESSAGE_INTERVAL for %s refused (MAV_RESULT %d)", name, result)
+                refused[name] = hz
+        if refused:
+            self._request_data_streams(refused)
+        if not refused:
+            method: RateMethod = "message_interval"
+        elif len(refused) == len(rates_hz):
+            method = "data_stream"
+        else:
+            method = "mixed"
+        self.rate_method = method
+        _log.info("message rates requested by %s: %s", method, dict(rates_hz))
+        return method
+
+    def _request_data_streams(self, rates_hz: Mapping[str, float]) -> None:
+        sysid, compid = self._require_target()
+        streams: dict[int, int] = {}
+        for name, hz in rates_hz.items():
+            stream = _DATA_STREAM.get(name)
+            if stream is None:
+                _log.warning("no REQUEST_DATA_STREAM group known for %s: not requested", name)
+                continue
+            streams[stream] = max(streams.get(stream, 0), math.ceil(hz) if hz > 0 else 0)
+        for _ in range(2):  # no acknowledgement exists: send twice against loss
+            for stream, hz in streams.items():
+                with self._send_lock:
+                    self._conn.mav.request_data_stream_send(sysid, compid, stream, hz, int(hz > 0))
