@@ -7,6 +7,7 @@ import numpy.typing as npt
 
 from detect._default import detect_default
 from detect._types import DEFAULT, CameraIntrinsics, Detection, DetectParams, Mode
+from detect._validate import check_size
 
 
 def detect_holes(
@@ -33,6 +34,8 @@ def detect_holes(
     holescan_errors.InputError
         Wrong shapes or dtypes, sizes that do not match ``camera``, no depth at all.
     """
+    if isinstance(depth, np.ndarray) and depth.ndim == 2:  # (other shapes: the mode says)
+        check_size(depth.shape[0], depth.shape[1], paper=params.mode is Mode.PAPER)
     if params.mode is Mode.PAPER:
         # Imported here: paper mode compiles ERS with numba on first use.
         from detect._paper import detect_paper

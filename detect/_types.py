@@ -3,9 +3,17 @@
 from __future__ import annotations
 
 import enum
+import math
+import numbers
 from dataclasses import dataclass, field, replace
 
+import numpy as np
+
 from holescan_errors import InputError
+
+
+def _is_int(v: object) -> bool:
+    return isinstance(v, int | np.integer) and not isinstance(v, bool)
 
 
 @dataclass(frozen=True)
@@ -26,10 +34,27 @@ class CameraIntrinsics:
     depth_unit_m: float = 0.001
 
     def __post_init__(self) -> None:
-        if self.width <= 0 or self.height <= 0:
-            raise InputError(f"camera size must be positive, got {self.width}x{self.height}")
+        if (
+            not (_is_int(self.width) and _is_int(self.height))
+            or self.width <= 0
+            or self.height <= 0
+        ):
+            raise InputError(
+                f"camera size must be positive whole pixels, got {self.width}x{self.height}"
+            )
+        values = (self.fx, self.fy, self.cx, self.cy, self.depth_unit_m)
+        if not all(isinstance(v, numbers.Real) and math.isfinite(v) for v in values):
+            raise InputError(
+                f"camera fx, fy, cx, cy, depth_unit_m must be finite numbers, got "
+                f"{self.fx}, {self.fy}, {self.cx}, {self.cy}, {self.depth_unit_m}"
+            )
         if self.fx <= 0 or self.fy <= 0:
             raise InputError(f"camera focal lengths must be positive, got {self.fx}, {self.fy}")
+        if not 0 < self.depth_unit_m <= 1.0:
+            raise InputError(
+                f"camera depth_unit_m must be in (0, 1] metres per depth unit "
+                f"(0.001 = millimetres), got {self.depth_unit_m}"
+            )
 
     @classmethod
     def xtion(cls, width: int = 640, height: int = 480) -> CameraIntrinsics:

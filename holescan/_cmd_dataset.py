@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
+from capture import check_folder
 from ground import load_dataset
+from holescan._args import Progress
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -25,11 +26,13 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 def run_synth(args: argparse.Namespace) -> int:
     from sim import synth_dataset
 
-    def progress(i: int, n: int) -> None:
-        print(f"\rrendering {i}/{n}", end="", file=sys.stderr, flush=True)
-
-    out = synth_dataset(args.out, args.n, args.seed, progress)
-    print(file=sys.stderr)
+    existing = args.out.absolute()
+    while not existing.exists():  # the folders synth would create must be creatable
+        existing = existing.parent
+    check_folder(existing)
+    bar = Progress()
+    out = synth_dataset(args.out, args.n, args.seed, lambda i, n: bar(i, n, "rendering "))
+    bar.done()
     return run_info(argparse.Namespace(dataset=out))
 
 

@@ -7,6 +7,7 @@ import json
 from dataclasses import asdict, replace
 from pathlib import Path
 
+from capture import atomic_output, check_output, output_via_part
 from detect import DEFAULT, PAPER, SEARCHERS, CameraIntrinsics, DetectParams, detect_holes
 from ground import draw_detections, read_camera, read_depth, read_rgb
 
@@ -40,12 +41,23 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--camera", type=Path, help="camera.json (default: Xtion intrinsics)")
     p.add_argument("--superpixels", type=int, default=9, help="K for paper mode")
     p.add_argument("--json", type=Path, help="write the detections as JSON")
-    p.add_argument("--overlay", type=Path, help="write the image with boxes and segmentation")
+    p.add_argument(
+        "--overlay", type=Path, help="write the image with boxes and segmentation (.png, .jpg)"
+    )
+    p.add_argument("--overwrite", action="store_true", help="replace existing --json/--overlay")
     add_detector_options(p)
     p.set_defaults(func=run)
 
 
+_OVERLAY_SUFFIXES = {".png", ".jpg", ".jpeg"}
+
+
 def run(args: argparse.Namespace) -> int:
+    inputs = [p for p in (args.rgb, args.depth, args.camera) if p is not None]
+    if args.json:  # checked before detecting: a bad output costs nothing
+        check_output(args.json, inputs=inputs, suffixes={".json"}, force=args.overwrite)
+    if args.overlay:
+        check_output(args.overlay, inputs=inputs, suffixes=_OVERLAY_SUFFIXES, force=args.overwrite)
     rgb, depth = read_rgb(args.rgb), read_depth(args.depth)
     if args.camera:
         camera = read_camera(args.camera)
@@ -57,8 +69,12 @@ def run(args: argparse.Namespace) -> int:
     for i, d in enumerate(dets, 1):
         print(f"  {i}: box {d.box} {d.explain()}")
     if args.json:
-        args.json.write_text(json.dumps([asdict(d) for d in dets], indent=1))
+        with atomic_output(args.json, "w", inputs=inputs, force=args.overwrite) as f:
+            f.write(json.dumps([asdict(d) for d in dets], indent=1))  # type: ignore[arg-type]
     if args.overlay:
-        draw_detections(args.overlay, rgb, depth, camera, params, dets)
+        with output_via_part(
+            args.overlay, inputs=inputs, suffixes=_OVERLAY_SUFFIXES, force=args.overwrite
+        ) as tmp:
+            draw_detections(tmp, rgb, depth, camera, params, dets)
         print(f"overlay: {args.overlay}")
     return 0

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 from dataclasses import replace
 from pathlib import Path
 
+from capture import check_output, output_via_part
 from ground import (
     EvalReport,
     format_table,
@@ -16,6 +16,7 @@ from ground import (
     run_detector,
     write_coco_results,
 )
+from holescan._args import Progress
 from holescan._cmd_detect import add_detector_options, params_from_args
 from holescan_errors import InputError
 
@@ -50,7 +51,10 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="also run the other mode and the naive depth-threshold baseline",
     )
     p.add_argument("--detections", type=Path, help="write COCO results JSON (the first run)")
-    p.add_argument("--plot", type=Path, help="write a precision-recall PNG")
+    p.add_argument("--plot", type=Path, help="write a precision-recall plot (.png, .pdf, .svg)")
+    p.add_argument(
+        "--overwrite", action="store_true", help="replace existing --detections/--plot files"
+    )
     p.add_argument(
         "--workers",
         type=int,
@@ -71,7 +75,14 @@ def _parse_ks(text: str) -> list[int]:
     return ks
 
 
+_PLOT_SUFFIXES = {".png", ".pdf", ".svg"}
+
+
 def run(args: argparse.Namespace) -> int:
+    outputs = {"detections": ({".json"}, args.detections), "plot": (_PLOT_SUFFIXES, args.plot)}
+    for suffixes, path in outputs.values():  # before minutes of detection
+        if path is not None:
+            check_output(path, suffixes=suffixes, force=args.overwrite)
     if args.synthetic is not None:
         if args.dataset is not None:
             raise InputError("give either DATASET or --synthetic, not both")
@@ -81,12 +92,11 @@ def run(args: argparse.Namespace) -> int:
         args.compare = True
         if not (args.dataset / "annotations.json").is_file():
             print(f"rendering {args.synthetic} synthetic frames into {args.dataset}/ ...")
-
-            def progress(i: int, n: int) -> None:
-                print(f"\rrendering {i}/{n}", end="", file=sys.stderr, flush=True)
-
-            synth_dataset(args.dataset, args.synthetic, seed=1, progress=progress)
-            print(file=sys.stderr)
+            bar = Progress()
+            synth_dataset(
+                args.dataset, args.synthetic, seed=1, progress=lambda i, n: bar(i, n, "rendering ")
+            )
+            bar.done()
     if args.dataset is None:
         raise InputError("give a DATASET folder or --synthetic")
     dataset = load_dataset(args.dataset)
@@ -113,19 +123,23 @@ def run(args: argparse.Namespace) -> int:
     reports: list[EvalReport] = []
     n = len(dataset.images)
     for name, params in runs:
+        bar = Progress()
 
-        def progress(i: int, total: int, name: str = name) -> None:
-            print(f"\r{name}: {i}/{total} images", end="", file=sys.stderr, flush=True)
+        def progress(i: int, total: int, name: str = name, bar: Progress = bar) -> None:
+            bar(i, total, f"{name}: ")
 
         reports.append(run_detector(dataset, params, name, progress, args.workers))  # type: ignore[arg-type]
-        print(file=sys.stderr)
+        bar.done()
     n_gt = reports[0].iou.n_gt
     print(f"{args.dataset}: {n} images, {n_gt} access holes (crowd boxes ignored)")
     print(format_table(reports))
     if args.detections:
-        write_coco_results(args.detections, reports[0].detections)
+        suffixes = outputs["detections"][0]
+        with output_via_part(args.detections, suffixes=suffixes, force=args.overwrite) as tmp:
+            write_coco_results(tmp, reports[0].detections)
         print(f"detections ({reports[0].name}): {args.detections}")
     if args.plot:
-        plot_pr(args.plot, reports, f"{args.dataset.name}: {n} images, {n_gt} holes")
+        with output_via_part(args.plot, suffixes=_PLOT_SUFFIXES, force=args.overwrite) as tmp:
+            plot_pr(tmp, reports, f"{args.dataset.name}: {n} images, {n_gt} holes")
         print(f"precision-recall plot: {args.plot}")
     return 0

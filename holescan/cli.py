@@ -9,11 +9,15 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import sys
 from collections.abc import Sequence
 
+# OpenCV's own "[ WARN ]" lines would land on stderr next to ours (set before cv2 loads).
+os.environ.setdefault("OPENCV_LOG_LEVEL", "ERROR")
+
 from holescan import __version__
-from holescan._args import EXIT_INPUT, EXIT_INTERRUPTED
+from holescan._args import EXIT_INPUT, EXIT_INTERRUPTED, end_progress
 from holescan_errors import HolescanError
 
 _COMMAND_MODULES = (
@@ -50,11 +54,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except HolescanError as err:
-        print(f"holescan {args.verb}: error: {err}", file=sys.stderr)
+        end_progress()
+        print(f"holescan {args.verb}: error: {_one_line(str(err))}", file=sys.stderr)
+        return EXIT_INPUT
+    except OSError as err:  # a file or folder the library did not check: still one line
+        end_progress()
+        where = f": {err.filename}" if err.filename else ""
+        print(f"holescan {args.verb}: error: {err.strerror or err}{where}", file=sys.stderr)
         return EXIT_INPUT
     except KeyboardInterrupt:
+        end_progress()
         print(f"holescan {args.verb}: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+
+
+def _one_line(text: str) -> str:
+    return " ".join(text.split())
 
 
 if __name__ == "__main__":
