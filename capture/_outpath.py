@@ -94,13 +94,14 @@ def check_folder(folder: PathLike, *, for_file: PathLike | None = None) -> Path:
         raise OutputPathError(f"{what}folder {d} does not exist (create it first)")
     if not d.is_dir():
         raise OutputPathError(f"{what}{d} is not a folder")
+    try:
+        read_only = bool(os.statvfs(d).f_flag & os.ST_RDONLY)
+    except OSError:
+        read_only = False
+    if read_only:
+        raise OutputPathError(f"{what}{d} is on a read-only file system")
     if not os.access(d, os.W_OK | os.X_OK):
         raise OutputPathError(f"{what}no permission to write in {d}")
-    try:
-        if os.statvfs(d).f_flag & os.ST_RDONLY:
-            raise OutputPathError(f"{what}{d} is on a read-only file system")
-    except OSError:
-        pass
     return d
 
 

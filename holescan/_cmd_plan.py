@@ -8,6 +8,7 @@ import logging
 import time
 from pathlib import Path
 
+from capture import check_output, output_via_part
 from holescan_errors import InputError
 from missions import (
     SunWindowError,
@@ -28,7 +29,7 @@ def _latlon(text: str) -> tuple[float, float]:
         lat, lon = (float(v) for v in text.replace(";", ",").split(","))
     except ValueError as err:
         raise argparse.ArgumentTypeError(f"expected LAT,LON, got {text!r}") from err
-    return lat, lon
+    return lat, lon  # range: checked by SurveyParams (one error line, never wrapped)
 
 
 def _date(text: str) -> dt.date:
@@ -101,6 +102,10 @@ def _solar_date(t_unix_ns: int, lon_deg: float) -> dt.date:
 
 def run(args: argparse.Namespace) -> int:
     tz = _zone(args.tz)
+    outs = args.out or [Path("survey.plan")]
+    area_file = [args.area] if Path(args.area).is_file() else []
+    for out in outs:  # before planning; a plan file is replaced, a log or the area never
+        check_output(out, inputs=area_file, force=True)
     area = read_area(args.area)
     params = SurveyParams(
         altitude_m=args.altitude,
@@ -132,8 +137,9 @@ def run(args: argparse.Namespace) -> int:
         log.warning("sun: %s", fit.message)
 
     items = plan.mission_items()
-    for out in args.out or [Path("survey.plan")]:
-        write_waypoints(out, items, plan.home, name="holescan survey", area=area)
+    for out in outs:
+        with output_via_part(out, inputs=area_file, force=True) as tmp:
+            write_waypoints(tmp, items, plan.home, name="holescan survey", area=area)
         print(f"wrote {out}")
 
     if args.upload:

@@ -127,7 +127,15 @@ def _tzname(t: dt.datetime) -> str:
     return "UTC" if name in {"UTC", "UTC+00:00"} else name
 
 
-def _check_place(lat_deg: float, lon_deg: float) -> None:
+#: Days the sun code handles: it looks one day either side of the local day.
+_FIRST_DAY, _LAST_DAY = dt.date(1, 1, 2), dt.date(9999, 12, 30)
+
+
+def _check_place(lat_deg: float, lon_deg: float, day: dt.date | None = None) -> None:
+    if day is not None and not _FIRST_DAY <= day <= _LAST_DAY:
+        raise InputError(
+            f"date {day.isoformat()} is outside {_FIRST_DAY.isoformat()}..{_LAST_DAY.isoformat()}"
+        )
     if not (math.isfinite(lat_deg) and -90.0 <= lat_deg <= 90.0):
         raise InputError(f"latitude must be within -90..90 deg, got {lat_deg}")
     if not (math.isfinite(lon_deg) and -180.0 <= lon_deg <= 180.0):
@@ -190,7 +198,7 @@ def sunrise_sunset(lat_deg: float, lon_deg: float, day: dt.date) -> tuple[int, i
     solar calculator). Raises :class:`SunWindowError` with a clear message on polar
     day or night.
     """
-    _check_place(lat_deg, lon_deg)
+    _check_place(lat_deg, lon_deg, day)
     start, end = local_solar_day(lon_deg, day)
 
     def f(t: int) -> float:
@@ -226,7 +234,7 @@ def sun_windows(
     starts in. Raises :class:`SunWindowError` (with the reason: polar day, polar night,
     band never reached) when there is none.
     """
-    _check_place(lat_deg, lon_deg)
+    _check_place(lat_deg, lon_deg, day)
     if not min_elev_deg < max_elev_deg:
         raise InputError(
             f"sun band must have min < max elevation, got {min_elev_deg}..{max_elev_deg} deg"
@@ -321,6 +329,7 @@ def sun_day(
     refraction: bool = True,
 ) -> SunDay:
     """Sunrise, sunset and windows for printing; polar cases become a ``note``, not errors."""
+    _check_place(lat_deg, lon_deg, day)
     notes = []
     try:
         rise: int | None

@@ -34,6 +34,7 @@ import numpy.typing as npt
 
 from geotag import LocalFrame
 from holescan_errors import InputError
+from missions._checks import check_survey_numbers
 from missions._files import (
     MAV_CMD_DO_CHANGE_SPEED,
     MAV_CMD_NAV_RETURN_TO_LAUNCH,
@@ -127,6 +128,9 @@ class SurveyParams:
     home_amsl_m: float = 0.0
     max_extent_m: float = 2000.0
     camera: Camera = field(default=XTION)
+
+    def __post_init__(self) -> None:
+        check_survey_numbers(self)
 
     def altitude_band(self) -> tuple[float, float]:
         """Lowest and highest altitude that keep the rubble in the sensor's range, metres."""
