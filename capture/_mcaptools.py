@@ -276,7 +276,7 @@ def recover_log(src: str | os.PathLike[str], dst: str | os.PathLike[str]) -> Rec
     channels: dict[int, Channel] = {}
     pending_schemas: dict[int, Schema] = {}
     topics: dict[str, int] = defaultdict(int)
-    messages, last_t = 0, 0
+    messages, last_t, unschematic = 0, 0, 0
     try:
         for rec in records:
             if isinstance(rec, Header):
@@ -304,7 +304,9 @@ def recover_log(src: str | os.PathLike[str], dst: str | os.PathLike[str]) -> Rec
                     sid = 0
                     if rec.schema_id != 0:
                         if rec.schema_id not in schema_ids:
-                            s = pending_schemas.pop(rec.schema_id)
+                            s = pending_schemas.pop(rec.schema_id, None)
+                            if s is None:  # its schema was lost with damaged bytes
+                                continue  # (so are its messages: counted below)
                             schema_ids[rec.schema_id] = writer.register_schema(
                                 s.name, s.encoding, s.data
                             )
@@ -314,6 +316,9 @@ def recover_log(src: str | os.PathLike[str], dst: str | os.PathLike[str]) -> Rec
                     )
                     channels[rec.id] = rec
             elif isinstance(rec, Message):
+                if rec.channel_id not in channel_ids:
+                    unschematic += 1
+                    continue
                 writer.add_message(
                     channel_ids[rec.channel_id],
                     rec.log_time,
@@ -360,5 +365,5 @@ def recover_log(src: str | os.PathLike[str], dst: str | os.PathLike[str]) -> Rec
         last_t_unix_ns=last_t,
         stop_reason=state.stop_reason,
         damaged=tuple(state.damaged),
-        messages_lost=state.messages_lost,
+        messages_lost=state.messages_lost + unschematic,
     )
