@@ -38,7 +38,7 @@ from capture._errors import SensorError
 from capture._frame import Frame, FrameSource
 from capture._holepipeline import HolePipeline
 from capture._mavlink import Telemetry, TelemetryTimeoutError
-from capture._mcaplog import FlightLogWriter, LogOptions, WriterStats
+from capture._mcaplog import FlightLogError, FlightLogWriter, LogOptions, WriterStats
 from capture._posebuffer import PoseUnavailable
 from capture._worker import DetectionWorker, WorkerResult
 from detect import DEFAULT, CameraIntrinsics, DetectParams
@@ -520,7 +520,10 @@ class Flight:
             self.stop.set()  # also ends a telemetry retry still waiting for the autopilot
             if self._telemetry is not None:
                 self._telemetry.close()
-            writer.close()
+            try:
+                writer.close()
+            except FlightLogError as err:  # disk full, I/O error: the summary says so
+                log.error("%s; the files written so far are readable (log recover)", err)
             log.debug("flight closed %.2f s after capture ended", time.monotonic() - t_stop)
         return FlightSummary(
             counters=self.counters,

@@ -173,6 +173,8 @@ class Telemetry(RateRequests):
         self._bad_packets = 0
         self._stream: MavlinkStream | None = None
         self.reboots = 0  # autopilot reboots seen (boot clock went back)
+        self._last_hb_ns: int | None = None
+        self._last_rate_request_ns = 0
         self._unknown_packets = 0
         self._callback_errors = 0
         self._timesync_sent = 0
@@ -326,6 +328,7 @@ class Telemetry(RateRequests):
             now = time.monotonic_ns()
             if now >= next_hb:
                 self._send_heartbeat()
+                self._watch_rates(now)
                 next_hb = now + 1_000_000_000
             if self._timesync_period_ns and self._target is not None and now >= next_ts:
                 self._send_timesync()
@@ -405,6 +408,8 @@ class Telemetry(RateRequests):
         if src != self._target:
             return
         self._last_rx_mono_ns = t_mono_ns
+        if mtype == "HEARTBEAT":
+            self._last_hb_ns = t_mono_ns
         with self._cond:
             self._counts[mtype] = self._counts.get(mtype, 0) + 1
             self._arrivals.setdefault(mtype, deque(maxlen=512)).append(t_mono_ns)
@@ -453,6 +458,11 @@ class Telemetry(RateRequests):
             )
 
     def _stamped(self, t_boot_ns: int, t_mono_ns: int) -> None:
+        self._check_boot(t_boot_ns)
+        self.clock.add_arrival(t_mono_ns, t_boot_ns)
+
+    def _check_boot(self, t_boot_ns: int) -> None:
+        """A boot clock more than 2 s behind the newest seen: the autopilot rebooted."""
         last = self._last_boot_ns
         if last is not None and t_boot_ns < last - 2_000_000_000:
             _log.warning(
@@ -461,19 +471,9 @@ class Telemetry(RateRequests):
             )
             self.clock.reset()
             self.reboots += 1
-            if self._rates:  # a rebooted autopilot forgot them; not from this thread (ACKs)
-                threading.Thread(
-                    target=self._rerequest_rates, name="telemetry-rates", daemon=True
-                ).start()
+            self._rerequest_rates_soon()  # a rebooted autopilot forgot them
         if last is None or t_boot_ns > last or t_boot_ns < last - 2_000_000_000:
             self._last_boot_ns = t_boot_ns
-        self.clock.add_arrival(t_mono_ns, t_boot_ns)
-
-    def _rerequest_rates(self) -> None:
-        try:
-            self.request_rates(self._rates)
-        except TelemetryError as err:
-            _log.warning("message rates not re-requested after the reboot: %s", err)
 
     def _on_position(self, msg: Any, t_mono_ns: int) -> None:
         sample = position_from_global_position_int(msg)
@@ -513,6 +513,7 @@ class Telemetry(RateRequests):
         if t0 is None:  # someone else's exchange (e.g. a GCS on the same router)
             return
         self._timesync_received += 1
+        self._check_boot(int(msg.tc1))
         self.clock.add_timesync(t0, t_mono_ns, int(msg.tc1))
 
     def _on_command_ack(self, msg: Any, t_mono_ns: int) -> None:

@@ -46,6 +46,11 @@ class RateRequests:
     _acks: dict[int, int]
     _cmd_retries: int
     _cmd_timeout_s: float
+    _rates: dict[str, float]
+    _target: tuple[int, int] | None
+    _last_hb_ns: int | None
+    _last_rate_request_ns: int
+    _arrivals: dict[str, Any]
     rate_method: RateMethod
 
     def _require_target(self) -> tuple[int, int]:
@@ -130,3 +135,32 @@ class RateRequests:
             for stream, hz in streams.items():
                 with self._send_lock:
                     self._conn.mav.request_data_stream_send(sysid, compid, stream, hz, int(hz > 0))
+
+    def _rerequest_rates_soon(self) -> None:
+        """Ask for the rates again from another thread (the ACKs come through this one)."""
+        now = time.monotonic_ns()
+        if not self._rates or now - self._last_rate_request_ns < 3_000_000_000:
+            return
+        self._last_rate_request_ns = now
+        threading.Thread(target=self._rerequest_rates, name="telemetry-rates", daemon=True).start()
+
+    def _rerequest_rates(self) -> None:
+        try:
+            self.request_rates(self._rates)
+        except TelemetryError as err:
+            _log.warning("message rates not re-requested: %s", err)
+
+    def _watch_rates(self, now_ns: int) -> None:
+        """Heartbeats but none of the requested messages for 3 s (the autopilot rebooted or
+        lost its stream settings while the link was down): request them again."""
+        if self._target is None or not self._rates or self._last_hb_ns is None:
+            return
+        if now_ns - self._last_hb_ns > 2_000_000_000:
+            return  # the link is down: nothing to ask
+        with self._cond:
+            newest = max(
+                (self._arrivals[n][-1] for n in self._rates if self._arrivals.get(n)), default=0
+            )
+        if now_ns - newest > 3_000_000_000:
+            _log.info("no requested message for 3 s while the autopilot is alive: re-requesting")
+            self._rerequest_rates_soon()
