@@ -186,7 +186,7 @@ def test_systemd_unit() -> None:
     assert svc["Restart"] == "on-failure"
     assert svc["KillSignal"] == "SIGINT"
     assert svc["KillMode"] == "mixed"  # SIGINT to holescan only, not to its worker process
-    assert int(svc["TimeoutStopSec"]) >= 30  # drain (10 s) + results thread (15 s) + close
+    assert int(svc["TimeoutStopSec"]) >= 15  # stops in 2-4 s; margin for a slow disk
     assert "RestartPreventExitStatus" not in svc  # exit 2 is also "autopilot not up yet"
     assert unit["Unit"]["StartLimitIntervalSec"] == "0"  # so retry without a limit
     assert unit["Install"]["WantedBy"] == "multi-user.target"
