@@ -150,19 +150,18 @@ def commit_part(tmp: PathLike, path: PathLike, *, force: bool = False) -> None:
 @contextlib.contextmanager
 def atomic_output(
     path: PathLike,
-    mode: str = "wb",
     *,
     inputs: Iterable[PathLike] = (),
     suffixes: Collection[str] | None = None,
     force: bool = False,
-) -> Iterator[IO[bytes] | IO[str]]:
+) -> Iterator[IO[bytes]]:
     """Open ``path`` for writing through ``.STEM.part.EXT``: checked first
     (:func:`check_output`), flushed, fsynced and renamed on success, removed on any error.
     """
     p = check_output(path, inputs=inputs, suffixes=suffixes, force=force)
     tmp = part_path(p)
     try:
-        f = open(tmp, mode)  # noqa: SIM115 (closed below)
+        f = open(tmp, "wb")  # noqa: SIM115 (closed below)
     except OSError as err:
         raise _os_error(p, err) from err
     try:

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from multiprocessing import resource_tracker, shared_memory
 from multiprocessing.synchronize import Event as EventT
 from types import TracebackType
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -123,7 +123,7 @@ def _worker_main(
 
     shm = shared_memory.SharedMemory(name=shm_name)
     try:
-        views = _slot_views(shm.buf, camera.height, camera.width)
+        views = _slot_views(cast(memoryview, shm.buf), camera.height, camera.width)
         ready.set()
         while not stop.is_set():
             if not wake.wait(0.1):
@@ -174,7 +174,7 @@ class DetectionWorker:
             signal.pthread_sigmask(signal.SIG_SETMASK, old)
         size = camera.height * camera.width * 5
         self._shm = shared_memory.SharedMemory(create=True, size=size * N_SLOTS)
-        self._views = _slot_views(self._shm.buf, camera.height, camera.width)
+        self._views = _slot_views(cast(memoryview, self._shm.buf), camera.height, camera.width)
         self._ctrl = ctx.Array("q", [-1, -1, 0, 0, 0])
         self._meta = ctx.Array("q", [0] * (_META * N_SLOTS), lock=False)
         self._wake = ctx.Event()

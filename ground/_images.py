@@ -12,6 +12,7 @@ import os
 import sys
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -59,13 +60,13 @@ def _shown(p: Path) -> str:
     return os.fsencode(p).decode("utf-8", "backslashreplace")
 
 
-def _decode(path: Path) -> npt.NDArray[np.generic]:
+def _decode(path: Path) -> npt.NDArray[Any]:
     data = _read_bytes(path)
     with _quiet_native_stderr():
         img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED) if data else None
     if img is None:
         raise InputError(f"{_shown(Path(path))}: not a readable image")
-    return img  # type: ignore[no-any-return]
+    return np.asarray(img)
 
 
 def read_rgb(path: Path) -> npt.NDArray[np.uint8]:
@@ -79,7 +80,7 @@ def read_rgb(path: Path) -> npt.NDArray[np.uint8]:
         img = cv2.cvtColor(img, cv2.COLOR_BGRA2RGB)
     else:
         img = cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
-    return np.ascontiguousarray(img)  # type: ignore[return-value]
+    return np.ascontiguousarray(img, dtype=np.uint8)
 
 
 def read_depth(path: Path) -> npt.NDArray[np.uint16]:
@@ -95,10 +96,10 @@ def read_depth(path: Path) -> npt.NDArray[np.uint16]:
             f"{name}: depth must be a 16-bit PNG in millimetres, got {img.dtype} "
             "(an 8-bit or float image is not metric depth)"
         )
-    return img  # type: ignore[return-value]
+    return np.asarray(img, dtype=np.uint16)
 
 
-def _encode_to(path: Path, img: npt.NDArray[np.generic]) -> None:
+def _encode_to(path: Path, img: npt.NDArray[Any]) -> None:
     p = Path(path)
     suffix = p.suffix.lower() or ".png"
     try:

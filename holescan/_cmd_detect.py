@@ -69,8 +69,8 @@ def run(args: argparse.Namespace) -> int:
     for i, d in enumerate(dets, 1):
         print(f"  {i}: box {d.box} {d.explain()}")
     if args.json:
-        with atomic_output(args.json, "w", inputs=inputs, force=args.overwrite) as f:
-            f.write(json.dumps([asdict(d) for d in dets], indent=1))  # type: ignore[arg-type]
+        with atomic_output(args.json, inputs=inputs, force=args.overwrite) as f:
+            f.write(json.dumps([asdict(d) for d in dets], indent=1).encode())
     if args.overlay:
         with output_via_part(
             args.overlay, inputs=inputs, suffixes=_OVERLAY_SUFFIXES, force=args.overwrite
