@@ -224,3 +224,20 @@ def test_sigkill_loses_only_the_last_moments(tmp_path: Path) -> None:
     )
     assert indices == list(range(indices[0], indices[-1] + 1))
     assert lost_s < 2.5  # fsync every second (+ the frame in flight)
+
+
+def test_duration_holds_while_the_sensor_is_missing(tmp_path: Path) -> None:
+    """``fly --sensor openni2 --duration 3`` with no Xtion retried forever."""
+    from capture import SensorError
+
+    def no_xtion() -> FloorSource:
+        raise SensorError("no Xtion found on USB")
+
+    cfg = FlightConfig(log_prefix=tmp_path / "f", max_duration_s=3.0, retry_backoff_s=(8.0,))
+    t0 = time.monotonic()
+    summary = Flight(cfg, no_xtion, CAM).run()
+    took = time.monotonic() - t0
+    print(f"\nno sensor, --duration 3: ended after {took:.1f} s")
+    assert took < 8.0  # the worker's start-up included; the 8 s back-off is cut short
+    assert summary.frames_logged == 0  # (under load the worker's start-up can take it all)
+    log_info(summary.log.files)  # a complete (empty) log
