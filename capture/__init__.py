@@ -28,6 +28,7 @@ from capture._mavlink import (
     gps_from_gps_raw_int,
     position_from_global_position_int,
 )
+from capture._mavrates import read_signing_key
 from capture._mcaplog import FlightLogError, FlightLogWriter, LogOptions, WriterStats
 from capture._mcapread import (
     LoggedCalibration,
@@ -135,6 +136,7 @@ __all__ = [
     "part_path",
     "position_from_global_position_int",
     "read_flight_log",
+    "read_signing_key",
     "recover_log",
     "reset_xtion",
     "scan_oni",

@@ -203,6 +203,7 @@ class Flight:
         self._announced: dict[int, tuple[float, float, float]] = {}
         self._lock = threading.Lock()
         self._unix_minus_mono = time.time_ns() - time.monotonic_ns()
+        self._finished = False  # ended by a limit or the source's end, not by a stop
 
     # -- clocks ---------------------------------------------------------------------------
 
@@ -388,10 +389,12 @@ class Flight:
                         cfg.max_frames is not None
                         and self.counters.frames_captured >= cfg.max_frames
                     ):
-                        self.stop.set()
+                        self._finish()
                     if t_end is not None and time.monotonic() >= t_end:
-                        self.stop.set()
+                        self._finish()
                 _close_quietly(source)
+                if not self.stop.is_set():
+                    self._finished = True  # the recording ended by itself
                 return  # end of the recording
             except SensorError as err:
                 _close_quietly(source)
@@ -400,6 +403,12 @@ class Flight:
             except BaseException:
                 _close_quietly(source)
                 raise
+
+    def _finish(self) -> None:
+        """A limit was reached: the flight ends normally (the detector gets time to catch
+        up; a stop asked from outside only gets a short drain)."""
+        self._finished = True
+        self.stop.set()
 
     def _sensor_failed(self, err: SensorError, attempt: int) -> None:
         c = self.counters
@@ -477,7 +486,7 @@ class Flight:
         self._writer = writer
         deadline: threading.Timer | None = None
         if cfg.max_duration_s:  # also while the sensor is missing and being retried
-            deadline = threading.Timer(cfg.max_duration_s, self.stop.set)
+            deadline = threading.Timer(cfg.max_duration_s, self._finish)
             deadline.daemon = True
             deadline.start()
         done = threading.Event()
@@ -497,7 +506,8 @@ class Flight:
                     self._capture(t_end)
                 finally:
                     t_stop = time.monotonic()
-                    for r in worker.drain(timeout=2.0):
+                    # A stop from outside (SIGTERM, Ctrl-C) must end within seconds.
+                    for r in worker.drain(timeout=10.0 if self._finished else 2.0):
                         self._handle_result(r)
                     done.set()
                     results_thread.join(timeout=5.0)

@@ -125,6 +125,8 @@ class Telemetry(RateRequests):
     command_timeout_s, command_retries : per COMMAND_LONG attempt / attempts.
     on_message : called from the receiver thread for every parsed message; keep it quick.
     poses, clock : bring your own (e.g. tuned) buffer / clock; defaults are created.
+    signing_key : MAVLink 2 signing secret (32 bytes, :func:`read_signing_key`): outgoing
+        packets are signed, incoming ones without a valid signature are dropped as bad.
     """
 
     def __init__(
@@ -142,7 +144,11 @@ class Telemetry(RateRequests):
         on_message: MessageCallback | None = None,
         poses: PoseBuffer | None = None,
         clock: ClockSync | None = None,
+        signing_key: bytes | None = None,
     ) -> None:
+        if signing_key is not None and len(signing_key) != 32:
+            raise TelemetryError("a MAVLink 2 signing key is 32 bytes (read_signing_key)")
+        self._signing_key = signing_key
         for name in rates_hz:
             if not hasattr(mavlink, f"MAVLINK_MSG_ID_{name}"):
                 raise ValueError(f"unknown MAVLink message {name!r} in rates_hz")
@@ -197,6 +203,8 @@ class Telemetry(RateRequests):
             )
         except Exception as err:  # pymavlink raises OSError, SerialException, ValueError...
             raise TelemetryError(f"cannot open MAVLink link {self.connection!r}: {err}") from err
+        if self._signing_key is not None:  # unsigned or badly signed packets: bad packets
+            self._conn.setup_signing(self._signing_key, sign_outgoing=True)
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, name="telemetry-rx", daemon=True)
         self._thread.start()

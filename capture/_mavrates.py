@@ -5,15 +5,23 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import threading
 import time
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any, Literal
 
 from capture._errors import CaptureError
 from missions import mavlink
 
-__all__ = ["RateMethod", "RateRequests", "TelemetryError", "TelemetryTimeoutError"]
+__all__ = [
+    "RateMethod",
+    "RateRequests",
+    "TelemetryError",
+    "TelemetryTimeoutError",
+    "read_signing_key",
+]
 
 _log = logging.getLogger("capture._mavlink")
 
@@ -35,6 +43,24 @@ class TelemetryError(CaptureError):
 
 class TelemetryTimeoutError(TelemetryError, TimeoutError):
     """Nothing (heartbeat, command acknowledgement) came in time."""
+
+
+def read_signing_key(path: str | os.PathLike[str]) -> bytes:
+    """A MAVLink 2 signing secret from a file: 64 hex digits (as MAVProxy and QGC show it)
+    or 32 raw bytes. Raises :class:`TelemetryError` naming the problem."""
+    try:
+        raw = Path(path).read_bytes()
+    except OSError as err:
+        raise TelemetryError(f"signing key {path}: cannot read: {err.strerror}") from err
+    text = raw.strip()
+    if len(text) == 64:
+        try:
+            return bytes.fromhex(text.decode("ascii"))
+        except (UnicodeDecodeError, ValueError):
+            pass
+    if len(raw) == 32:
+        return raw
+    raise TelemetryError(f"signing key {path}: expected 64 hex digits or 32 bytes")
 
 
 class RateRequests:

@@ -13,7 +13,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from capture import Telemetry
+from capture import Telemetry, TelemetryError
 from capture._mavstream import MavlinkStream
 from missions import mavlink, parser
 from sim._autopilot import SimAutopilot, SimPath
@@ -147,3 +147,58 @@ def test_serial_link_over_a_pseudo_terminal_pair(tmp_path: Path) -> None:
     finally:
         socat.terminate()
         socat.wait(5)
+
+
+def test_signed_link_ignores_a_forged_unsigned_autopilot(tmp_path: Path) -> None:
+    """MAVLink 2 signing: the key from a file; a signed autopilot is heard, an unsigned
+    forger with the same system id is not (its packets count as bad)."""
+    import socket
+    import threading
+
+    from capture import read_signing_key
+    from missions import open_link
+
+    key = bytes(range(32))
+    (tmp_path / "key").write_text(key.hex() + "\n")
+    assert read_signing_key(tmp_path / "key") == key
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    signed = open_link(f"udpout:127.0.0.1:{port}", source_system=1, source_component=1)
+    signed.setup_signing(key, sign_outgoing=True)
+    forger = open_link(f"udpout:127.0.0.1:{port}", source_system=1, source_component=1)
+    stop = threading.Event()
+    sent = {"signed": 0, "forged": 0}
+
+    def autopilots() -> None:
+        t0 = time.monotonic()
+        while not stop.wait(0.05):
+            ms = int((time.monotonic() - t0) * 1000) + 1000
+            for conn, lat, who in ((signed, 436532000, "signed"), (forger, 100000000, "forged")):
+                conn.mav.heartbeat_send(2, 3, 0, 0, 4)  # quadrotor, ArduPilot, active
+                conn.mav.global_position_int_send(ms, lat, -793832000, 112500, 3000, 0, 0, 0, 0)
+                conn.mav.attitude_send(ms, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+                sent[who] += 1
+
+    t = threading.Thread(target=autopilots, daemon=True)
+    t.start()
+    try:
+        key_file = read_signing_key(tmp_path / "key")
+        with Telemetry(
+            f"udpin:127.0.0.1:{port}", rates_hz={}, timesync_hz=0, signing_key=key_file
+        ) as tel:
+            time.sleep(2.0)
+            st_ = tel.stats()
+            pose = tel.pose_at_mono(time.monotonic_ns() - 100_000_000, wait_s=0.5)
+    finally:
+        stop.set()
+        t.join()
+        signed.close()
+        forger.close()
+    print(f"\nsigning: sent {sent}; heard {dict(st_.messages)}, bad packets {st_.bad_packets}")
+    assert abs(pose.lat_deg - 43.6532) < 1e-6  # never the forger's 10 degrees
+    assert st_.messages.get("GLOBAL_POSITION_INT", 0) <= sent["signed"]
+    assert st_.bad_packets >= 2 * sent["forged"] - 20  # heartbeats and positions refused
+    (tmp_path / "short").write_text("abcd")
+    with pytest.raises(TelemetryError, match="32 bytes"):
+        read_signing_key(tmp_path / "short")
