@@ -220,3 +220,23 @@ def test_no_verb_writes_over_an_input_or_a_flight_log(
     assert out.stat().st_size > 1000
     with pytest.raises(HolescanError, match="also an input"):
         recover_log(a, a)
+
+
+def test_holes_and_export_oni_read_past_a_damaged_chunk(
+    flight: Path,
+    tmp_path: Path,
+    cli_main,
+    capsys: pytest.CaptureFixture[str],  # type: ignore[no-untyped-def]
+) -> None:
+    start, length = chunks_of(flight)[1]
+    bad = variant(flight, tmp_path / "bad.mcap", lambda d: d.__setitem__(
+        start + length // 2, d[start + length // 2] ^ 0x01))  # fmt: skip
+    gpx = tmp_path / "holes.gpx"
+    assert cli_main(["holes", str(bad), "-o", str(gpx), "--min-sightings", "1"]) == 0
+    text = gpx.read_text()
+    assert text.count("<wpt") == N_FRAMES // 5  # the last hole list, written after the damage
+    oni = tmp_path / "bad.oni"
+    assert cli_main(["export-oni", str(bad), str(oni)]) == 0
+    out = capsys.readouterr().out
+    n = int(out.split(":")[-1].split()[0])
+    assert N_FRAMES - 3 <= n < N_FRAMES
