@@ -286,7 +286,7 @@ def test_no_autopilot_times_out() -> None:
 
 
 def test_sim_accepts_and_flies_an_uploaded_mission() -> None:
-    from missions._files import Waypoint
+    from missions import Waypoint
     from missions._protocol import download_mission, upload_mission
 
     home = SimPath()
