@@ -26,7 +26,7 @@ from capture._clock import ClockSync
 from capture._mavlink import Telemetry, TelemetryTimeoutError
 from capture._posebuffer import PoseUnavailable
 from geotag import VehiclePose
-from sim._autopilot import SimAutopilot, SimPath
+from sim import SimAutopilot, SimPath
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import all as mavlink2
