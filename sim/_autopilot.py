@@ -37,10 +37,9 @@ from dataclasses import dataclass
 from types import TracebackType
 from typing import Any
 
-import pymap3d
 from scipy.spatial.transform import Rotation
 
-from geotag import VehiclePose
+from geotag import LocalFrame, VehiclePose
 from missions import MissionReceiver, mavlink, open_link
 from sim._trajectory import SimPath, _Trajectory
 
@@ -188,9 +187,9 @@ class SimAutopilot:
         tau = self._tau(t_boot_ns)
         p, v, _ = self._traj.kinematics(tau)
         home = self.path
-        lat, lon, alt = pymap3d.enu2geodetic(
-            p[0], p[1], p[2], home.home_lat_deg, home.home_lon_deg, home.home_alt_m
-        )
+        lat, lon, alt = LocalFrame(
+            home.home_lat_deg, home.home_lon_deg, home.home_alt_m
+        ).to_geodetic_alt(p[0], p[1], p[2])
         rates = self._traj.body_rates(tau)
         return _State(
             t_boot_ns=t_boot_ns,

@@ -9,9 +9,10 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
-import pymap3d
 from scipy.interpolate import CubicSpline
 from scipy.spatial.transform import Rotation
+
+from geotag import LocalFrame
 
 __all__ = ["SimPath"]
 
@@ -56,14 +57,13 @@ class SimPath:
         so are repeats of the previous point. ``kw``: the other :class:`SimPath` fields.
         """
         enu: list[tuple[float, float, float]] = []
+        home = LocalFrame(home_lat_deg, home_lon_deg, home_alt_m)
         for wp in waypoints:
             frame = getattr(wp, "frame", 3)
             if frame not in (0, 3, 5, 6):
                 continue
             alt_msl = wp.alt_m + (home_alt_m if frame in (3, 6) else 0.0)
-            e, n, u = pymap3d.geodetic2enu(
-                wp.lat_deg, wp.lon_deg, alt_msl, home_lat_deg, home_lon_deg, home_alt_m
-            )
+            e, n, u = home.to_enu(wp.lat_deg, wp.lon_deg, alt_msl)
             point = (float(e), float(n), float(u))
             if not enu or math.dist(point, enu[-1]) > 1e-3:
                 enu.append(point)
