@@ -138,7 +138,7 @@ def shadow_entries(shadowed: np.ndarray, depth: np.ndarray, min_px: int) -> list
     out = []
     for k in range(1, n):
         x, y, w, h, a = (int(v) for v in stats[k])
-        if a >= min_px:
+        if min_px <= a <= 0.15 * shadowed.size:  # a dark patch, not a frame-wide shadow
             out.append(
                 {
                     "kind": "cast_shadow",

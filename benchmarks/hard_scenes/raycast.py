@@ -101,18 +101,36 @@ def _bisect(grid: Grid, C, d, lo, hi):
     return hi
 
 
+def _span(idx: np.ndarray, pad: int, n: int) -> tuple[int, int]:
+    return max(0, int(idx[0]) - pad), min(n, int(idx[-1]) + pad + 1)
+
+
 def _envelopes(grid: Grid, U, radii):
     """Per radius: highest matter (ET), highest matter reachable from below every sheet's
-    underside (EL: floors, and tops of plain columns), lowest underside (BM); flattened."""
+    underside (EL: floors, and tops of plain columns), lowest underside (BM); flattened.
+    Away from sheets EL is ET and BM is out of reach, so those two are filtered only in the
+    window around the sheets."""
     sheet = grid.B > NONE
-    G = np.where(sheet, grid.F, U)
-    Bs = np.where(sheet, grid.B, np.float32(1e3))
     ET, EL, BM = [], [], []
+    rows, cols = np.nonzero(sheet.any(1))[0], np.nonzero(sheet.any(0))[0]
     for r in radii:
         size = 2 * r + 1
-        ET.append(maximum_filter(U, size=size, mode="nearest").ravel())
-        EL.append(maximum_filter(G, size=size, mode="nearest").ravel())
-        BM.append(minimum_filter(Bs, size=size, mode="nearest").ravel())
+        et = maximum_filter(U, size=size, mode="nearest")
+        el, bm = et.copy(), np.full(U.shape, np.float32(1e3))
+        if rows.size:  # filter a window with room for the filter, keep its inner part
+            i0, i1 = _span(rows, 2 * r + 2, U.shape[0])
+            j0, j1 = _span(cols, 2 * r + 2, U.shape[1])
+            k0, k1 = _span(rows, r + 1, U.shape[0])
+            l0, l1 = _span(cols, r + 1, U.shape[1])
+            s, u = sheet[i0:i1, j0:j1], U[i0:i1, j0:j1]
+            e = maximum_filter(np.where(s, grid.F[i0:i1, j0:j1], u), size=size, mode="nearest")
+            b = np.where(s, grid.B[i0:i1, j0:j1], np.float32(1e3))
+            b = minimum_filter(b, size=size, mode="nearest")
+            el[k0:k1, l0:l1] = e[k0 - i0 : k1 - i0, l0 - j0 : l1 - j0]
+            bm[k0:k1, l0:l1] = b[k0 - i0 : k1 - i0, l0 - j0 : l1 - j0]
+        ET.append(et.ravel())
+        EL.append(el.ravel())
+        BM.append(bm.ravel())
     return np.concatenate(ET), np.concatenate(EL), np.concatenate(BM)
 
 
