@@ -178,7 +178,7 @@ def plan_hole(rng, pl: Placer, fid: int, special: str) -> list[dict]:
                 (rng.uniform(0.2, 0.8) * W, H - e),
             )[side]
 
-        margin = 0.0 if special in ("border", "range_limit") else min(rp + 4, 0.4 * H)
+        margin = 0.0 if special == "border" else min(rp + 4, 0.4 * H)
         uv = border_uv if special == "border" else None
         pos = pl.spot(r + 0.2, margin, ok, uv, tries=150)
         if pos is not None:
@@ -334,7 +334,10 @@ def sample_plan(rng: np.random.Generator, intr: Intrinsics) -> Plan:
             special = "range_limit"
         elif rng.random() < 0.15:
             special = "border"
-        feats += plan_hole(rng, pl, fid, special)
+        got = plan_hole(rng, pl, fid, special)
+        if not got and special != "normal":  # no room where it was meant to go
+            got = plan_hole(rng, pl, fid, "normal")
+        feats += got
         fid += 2
     kinds = list(DISTRACTORS)
     w = np.array([DISTRACTORS[k] for k in kinds])
