@@ -1,8 +1,8 @@
-"""Ray casting: analytic boxes, then a two-level march through the layered height field.
+"""Ray casting: analytic boxes, then an adaptive march through the layered height field.
 
 The march steps along each ray while the ray stays above an envelope (the highest matter
-within one step, a max filter of max(T, F)), with steps from 32 cm down to 1.5 cm; where
-it may dip into matter it applies the exact solid test and bisects the crossing.
+within one step, a max filter of max(T, F)), with steps from 1 m down to 1.5 cm; where
+it may dip into matter it applies the exact solid test and refines the crossing.
 """
 
 from __future__ import annotations
@@ -12,9 +12,9 @@ from dataclasses import dataclass
 import numpy as np
 from camera import Intrinsics, project
 from scipy.ndimage import maximum_filter, minimum_filter
-from world import NONE, Box, Grid
+from world import NONE, Box, Grid, clamp
 
-LEVELS = (1.0, 0.32, 0.08, 0.015)  # ray steps (m), coarse to fine
+LEVELS = (1.0, 0.32, 0.08, 0.03, 0.015)  # ray steps (m), coarse to fine
 Z_BOTTOM = -2.0  # rays that get this low have fallen into a void: nothing more to see
 SURF_NONE, SURF_TOP, SURF_FLOOR, SURF_UNDER, SURF_BOX = range(5)
 
@@ -72,18 +72,19 @@ def intersect_boxes(boxes: list[Box], intr: Intrinsics, R, C, dirs):
 
 
 def _refine(grid: Grid, C, d, lo, hi):
-    """Crossing between lo (outside) and hi (inside): secant on the top surface where the
-    cell is a plain height field, bisection elsewhere."""
+    """Crossing between lo (outside) and hi (inside): secant on the top of the matter where
+    no sheet has an underside there (matter is z <= max(T, F)) or onto a sheet's top,
+    bisection elsewhere."""
     xl, yl, zl = C[0] + lo * d[:, 0], C[1] + lo * d[:, 1], C[2] + lo * d[:, 2]
     xh, yh, zh = C[0] + hi * d[:, 0], C[1] + hi * d[:, 1], C[2] + hi * d[:, 2]
-    gx, gy = grid.g(xh, yh)
-    i = np.clip(gy.astype(np.intp), 0, grid.ny - 1) * grid.nx + np.clip(
-        gx.astype(np.intp), 0, grid.nx - 1
-    )
-    plain = ~grid.layered[i]
-    fl = zl - grid.bilinear(grid.T, xl, yl)
-    fh = zh - grid.bilinear(grid.T, xh, yh)
-    sec = plain & (fl > 0) & (fh <= 0)
+    tl, fl_, bl, _ = grid.surfaces(xl, yl)
+    th, fh_, bh, _ = grid.surfaces(xh, yh)
+    fl = zl - np.maximum(tl, fl_)
+    fh = zh - np.maximum(th, fh_)
+    sec = (bl <= NONE) & (bh <= NONE) & (fl > 0) & (fh <= 0)
+    top = ~sec & (zh >= bh) & (zl > tl) & (zh <= th)  # onto the top of a sheet with an underside
+    fl[top], fh[top] = zl[top] - tl[top], zh[top] - th[top]
+    sec |= top
     out = hi.copy()
     out[sec] = lo[sec] + (hi[sec] - lo[sec]) * fl[sec] / (fl[sec] - fh[sec])
     b = np.flatnonzero(~sec)
@@ -166,8 +167,8 @@ def march(grid: Grid, C, D, t_limit):
     run = np.zeros(idx.size, np.int8)
     t_hit = np.full(len(D), np.inf)
     while idx.size:
-        ix = np.clip((bx + t * ax).astype(np.int32), 0, nx - 1)
-        iy = np.clip((by + t * ay).astype(np.int32), 0, ny - 1)
+        ix = clamp((bx + t * ax).astype(np.int32), 0, nx - 1)
+        iy = clamp((by + t * ay).astype(np.int32), 0, ny - 1)
         cell = iy * nx + ix
         zt = cz + t * dz
         safe = np.zeros(idx.size, bool)
@@ -195,8 +196,8 @@ def march(grid: Grid, C, D, t_limit):
             tt = tn[test]
             gx, gy, zt = bx + tt * ax[test], by + tt * ay[test], zn[test]
             cj = pt + (
-                np.clip(gy.astype(np.int32), 0, ny - 1) * np.int64(nx)
-                + np.clip(gx.astype(np.int32), 0, nx - 1)
+                clamp(gy.astype(np.int32), 0, ny - 1) * np.int64(nx)
+                + clamp(gx.astype(np.int32), 0, nx - 1)
             )
             pre = np.flatnonzero((zt <= ET[cj]) & ~((zt < BM[cj]) & (zt > EL[cj])))
             if pre.size:

@@ -44,9 +44,14 @@ class Box:
         return self.centre + (g.reshape(-1, 3) * self.half) @ self.axes.T
 
 
+def clamp(a, lo, hi):
+    """np.clip without its per-call overhead (these run thousands of times per frame)."""
+    return np.minimum(np.maximum(a, lo), hi)
+
+
 def _bilin_setup(gx, gy, nx: int, ny: int):
-    gx = np.clip(gx, 0.0, nx - 1.0)
-    gy = np.clip(gy, 0.0, ny - 1.0)
+    gx = clamp(gx, 0.0, nx - 1.0)
+    gy = clamp(gy, 0.0, ny - 1.0)
     ix = np.minimum(gx.astype(np.intp), nx - 2)
     iy = np.minimum(gy.astype(np.intp), ny - 2)
     return iy * nx + ix, gx - ix, gy - iy
@@ -115,8 +120,8 @@ class Grid:
 
     def nearest(self, fld: np.ndarray, x, y):
         gx, gy = self.g(x, y)
-        ix = np.clip(np.rint(gx).astype(np.intp), 0, self.nx - 1)
-        iy = np.clip(np.rint(gy).astype(np.intp), 0, self.ny - 1)
+        ix = clamp(np.rint(gx).astype(np.intp), 0, self.nx - 1)
+        iy = clamp(np.rint(gy).astype(np.intp), 0, self.ny - 1)
         return fld[iy, ix]
 
     def finish(self) -> None:
@@ -143,7 +148,7 @@ class Grid:
         i, fx, fy = _bilin_setup(gx, gy, self.nx, self.ny)
         t = _bilin(self.T.ravel(), i, fx, fy, self.nx)
         f = _bilin(self.F.ravel(), i, fx, fy, self.nx)
-        bi = np.clip(np.rint(gy).astype(np.intp), 0, self.ny - 1) * self.nx + np.clip(
+        bi = clamp(np.rint(gy).astype(np.intp), 0, self.ny - 1) * self.nx + clamp(
             np.rint(gx).astype(np.intp), 0, self.nx - 1
         )
         return t, f, self.B.ravel()[bi], inb
@@ -178,8 +183,8 @@ class Coarse:
     cell: float
 
     def nearest(self, x, y):
-        ix = np.clip(np.rint((x - self.x0) / self.cell).astype(np.intp), 0, self.data.shape[1] - 1)
-        iy = np.clip(np.rint((y - self.y0) / self.cell).astype(np.intp), 0, self.data.shape[0] - 1)
+        ix = clamp(np.rint((x - self.x0) / self.cell).astype(np.intp), 0, self.data.shape[1] - 1)
+        iy = clamp(np.rint((y - self.y0) / self.cell).astype(np.intp), 0, self.data.shape[0] - 1)
         return self.data[iy, ix]
 
     def bilinear(self, x, y):
@@ -231,8 +236,8 @@ def sky_visibility(hc: Coarse, P: np.ndarray, rng: np.random.Generator) -> np.nd
     pad = int(np.ceil(radii[-1] / hc.cell)) + 1
     h = np.pad(hc.data, pad, mode="edge").ravel()
     nxp = hc.data.shape[1] + 2 * pad
-    ix = np.clip(np.rint((P[:, 0] - hc.x0) / hc.cell).astype(np.intp), 0, hc.data.shape[1] - 1)
-    iy = np.clip(np.rint((P[:, 1] - hc.y0) / hc.cell).astype(np.intp), 0, hc.data.shape[0] - 1)
+    ix = clamp(np.rint((P[:, 0] - hc.x0) / hc.cell).astype(np.intp), 0, hc.data.shape[1] - 1)
+    iy = clamp(np.rint((P[:, 1] - hc.y0) / hc.cell).astype(np.intp), 0, hc.data.shape[0] - 1)
     base = (iy + pad) * nxp + ix + pad
     z = P[:, 2].astype(np.float32)
     vis = np.zeros(len(P), np.float32)
