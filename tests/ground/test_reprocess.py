@@ -37,7 +37,7 @@ from ground._reprocess import (
 )
 from holescan import cli
 from holescan_errors import InputError
-from sim._autopilot import SimAutopilot, SimPath
+from sim import SimAutopilot, SimPath
 from sim._source import SimSource, WorldAnchor
 from sim._world import make_world
 
@@ -358,7 +358,7 @@ def test_ctrl_c_stops_cleanly_and_keeps_what_is_done(
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
-        cwd=Path(__file__).resolve().parents[1],
+        cwd=Path(__file__).resolve().parents[2],
     )
     assert proc.stderr is not None
     first = proc.stderr.readline()  # the first progress line: reading has started
