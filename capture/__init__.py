@@ -16,7 +16,7 @@ from capture._flyconfig import (
     parse_fly_config,
 )
 from capture._frame import Frame, FrameSource
-from capture._holepipeline import HolePipeline
+from capture._holepipeline import HolePipeline, HoleView, crop_view, view_jpeg
 from capture._mavlink import (
     DEFAULT_RATES_HZ,
     Telemetry,
@@ -69,6 +69,7 @@ __all__ = [
     "FrameSource",
     "GpsFix",
     "HolePipeline",
+    "HoleView",
     "LogInfo",
     "LogOptions",
     "LogRecord",
@@ -106,6 +107,7 @@ __all__ = [
     "attitude_from_quaternion",
     "camera_from_fov",
     "check_table",
+    "crop_view",
     "export_oni",
     "find_xtion",
     "fly",
@@ -123,5 +125,6 @@ __all__ = [
     "reset_xtion",
     "scan_oni",
     "scan_records",
+    "view_jpeg",
     "write_oni",
 ]

@@ -26,7 +26,8 @@ import logging
 import queue
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections import OrderedDict
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -36,18 +37,21 @@ import pymap3d
 from capture._clock import ClockUnavailable
 from capture._errors import SensorError
 from capture._frame import Frame, FrameSource
-from capture._holepipeline import HolePipeline
+from capture._holepipeline import HolePipeline, HoleView, view_jpeg
 from capture._mavlink import Telemetry, TelemetryTimeoutError
 from capture._mcaplog import FlightLogWriter, LogOptions, WriterStats
 from capture._posebuffer import PoseUnavailable
 from capture._worker import DetectionWorker, WorkerResult
 from detect import DEFAULT, CameraIntrinsics, DetectParams
-from geotag import CameraMount, Hole, VehiclePose
+from geotag import AnnounceGate, CameraMount, Hole, VehiclePose
 
 log = logging.getLogger(__name__)
 
 SourceFactory = Callable[[], FrameSource]
-HoleListener = Callable[[list[Hole], list[Hole]], None]
+HoleListener = Callable[[list[Hole], list[Hole], Mapping[int, HoleView]], None]
+"""``on_holes(served, news, views)``: every hole that passes the announce gate (the
+waypoints), those new or changed enough to announce now, and the best view of each hole
+in ``news`` whose best view is known (hole id -> :class:`HoleView`)."""
 
 
 @dataclass(frozen=True)
@@ -58,7 +62,10 @@ class FlightConfig:
     params : detector parameters. mount : camera mount on the vehicle.
     frame_timeout_s : no frame for this long = the sensor stalled.
     retry_backoff_s : waits between sensor reopen attempts (the last one repeats).
-    announce_min_sightings : a hole is served/announced once seen in this many frames.
+    announce_min_score, announce_min_sightings, announce_min_span_s : the announce gate
+        (:class:`geotag.AnnounceGate`): a hole is announced, served as a waypoint and its
+        view sent only when its score, sightings and time span reach these. Weaker holes
+        stay candidates (logged, never a waypoint).
     pose_wait_s : how long the results thread waits for telemetry after a frame's time.
     startup_sync_s : at start, wait up to this long for the clock sync and a first pose
         (the sensor opens only then; a silent autopilot just delays the start).
@@ -72,13 +79,22 @@ class FlightConfig:
     log_options: LogOptions = field(default_factory=LogOptions)
     frame_timeout_s: float = 3.0
     retry_backoff_s: tuple[float, ...] = (0.5, 1.0, 2.0, 4.0, 8.0)
-    announce_min_sightings: int = 3
+    announce_min_score: float = AnnounceGate.min_score
+    announce_min_sightings: int = AnnounceGate.min_sightings
+    announce_min_span_s: float = AnnounceGate.min_span_s
     health_period_s: float = 1.0
     pose_wait_s: float = 0.15
     max_frames: int | None = None
     max_duration_s: float | None = None
     startup_sync_s: float = 3.0
     config_record: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def gate(self) -> AnnounceGate:
+        """The announce gate these settings make."""
+        return AnnounceGate(
+            self.announce_min_score, self.announce_min_sightings, self.announce_min_span_s
+        )
 
 
 @dataclass
@@ -201,7 +217,14 @@ class Flight:
         self._telemetry: Telemetry | None = None
         self._worker: DetectionWorker | None = None
         self._announced: dict[int, tuple[float, float, float]] = {}
+        self._gate = config.gate
+        # recent frames' colour images, for the best view of a hole (the worker lags a
+        # few frames behind capture; frames are immutable, so no copies are kept)
+        self._recent: OrderedDict[int, Any] = OrderedDict()
+        self._recent_max = 48
+        self._views: dict[int, HoleView] = {}
         self._lock = threading.Lock()
+        self._recent_lock = threading.Lock()
         self._unix_minus_mono = time.time_ns() - time.monotonic_ns()
 
     # -- clocks ---------------------------------------------------------------------------
@@ -276,20 +299,36 @@ class Flight:
             return
         holes = self.tracker.holes()
         self._writer.write_holes(holes, self.unix_ns(r.t_mono_ns))
-        confirmed = [h for h in holes if h.sightings >= self.config.announce_min_sightings]
-        news = [
-            h
-            for h in changed
-            if h.sightings >= self.config.announce_min_sightings and self._worth_announcing(h)
-        ]
+        self._keep_views(r, changed)
+        served = [h for h in holes if self._gate.passes(h)]
+        news = [h for h in changed if self._worth_announcing(h)]
         for h in news:
             self._announced[h.id] = (h.lat_deg, h.lon_deg, h.score)
             c.announcements += 1
         if self._on_holes is not None and news:
-            self._on_holes(confirmed, news)
+            views = {h.id: self._views[h.id] for h in news if h.id in self._views}
+            self._on_holes(served, news, views)
+
+    def _keep_views(self, r: WorkerResult, changed: tuple[Hole, ...]) -> None:
+        """Encode the best view of each hole whose best view is this frame."""
+        with self._recent_lock:
+            rgb = self._recent.get(r.frame_index)
+        if rgb is None:
+            return
+        for h in changed:
+            if h.best_frame_index != r.frame_index:
+                continue
+            why = next((d.explain() for d in r.detections if d.box == h.best_box), "")
+            try:
+                self._views[h.id] = HoleView(r.frame_index, view_jpeg(rgb, h.best_box), why)
+            except Exception as err:  # a view is nice to have; never stop the flight for it
+                log.warning("view of hole %d not encoded: %s", h.id, err)
 
     def _worth_announcing(self, h: Hole) -> bool:
-        """New, moved more than 0.5 m, or score up by 0.05 since the last announcement."""
+        """Passes the announce gate, and is new to the ground, moved more than 0.5 m or
+        its score rose by 0.05 since it was last announced."""
+        if not self._gate.passes(h):
+            return False
         last = self._announced.get(h.id)
         if last is None:
             return True
@@ -367,6 +406,10 @@ class Flight:
             frame, self.unix_ns(frame.t_mono_ns), pose=pose, t_boot_ns=t_boot
         ):
             c.frames_log_dropped += 1
+        with self._recent_lock:
+            self._recent[frame.index] = frame.rgb
+            while len(self._recent) > self._recent_max:
+                self._recent.popitem(last=False)
         self._worker.offer(frame)
 
     def _capture(self, t_end: float | None) -> None:

@@ -4,8 +4,9 @@
 :class:`~capture._flyconfig.SensorSetup` it is given (the Xtion, a recording, or the
 simulator's, from :func:`sim.fly_sim`) into a :class:`~capture._daemon.Flight` and, when a
 ground station link is configured, a
-:class:`missions.HoleMissionServer` that serves the confirmed holes as a mission and
-announces each new or moved one by STATUSTEXT (through the daemon's ``on_holes``).
+:class:`missions.HoleMissionServer` that serves the holes passing the announce gate as a
+mission, announces each new or moved one by STATUSTEXT and sends its card (best view and
+facts, under the byte budget) through the daemon's ``on_holes``.
 :func:`format_report` is the operator's summary.
 """
 
@@ -14,12 +15,14 @@ from __future__ import annotations
 import contextlib
 import logging
 import threading
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 from capture._daemon import Flight, FlightSummary
 from capture._flyconfig import FlyConfig, SensorSetup, open_sensor
+from capture._holepipeline import HoleView
 from capture._mavlink import Telemetry
-from geotag import Hole
+from geotag import AnnounceGate, Hole
 from missions import HoleMissionServer
 
 __all__ = ["FlyReport", "fly", "format_report"]
@@ -62,10 +65,11 @@ def fly(
                     cfg.sysid,
                     rel_alt_m=cfg.hole_rel_alt_m,
                     clearance_m=cfg.hole_clearance_m,
+                    card_bytes_per_s=cfg.hole_card_bytes_per_s,
                 )
             )
 
-        def on_holes(confirmed: list[Hole], news: list[Hole]) -> None:
+        def on_holes(served: list[Hole], news: list[Hole], views: Mapping[int, HoleView]) -> None:
             for h in news:
                 _log.info(
                     "hole %d at %.7f, %.7f (score %.2f, %d sightings)",
@@ -76,8 +80,11 @@ def fly(
                     h.sightings,
                 )
             if server is not None:
-                server.update_holes(confirmed)
+                server.update_holes(served)
                 announced.extend(server.announce(h) for h in news)
+                for h in news:
+                    if h.id in views:
+                        server.send_card(h, views[h.id].jpeg, views[h.id].why)
 
         if setup is None:
             setup = open_sensor(cfg)
@@ -104,7 +111,7 @@ def fly(
     return FlyReport(summary, str(cfg.sensor), tuple(announced))
 
 
-def format_report(report: FlyReport, min_sightings: int = 3) -> str:
+def format_report(report: FlyReport, gate: AnnounceGate | None = None) -> str:
     """A few lines for the operator: frames, log, detector, telemetry, holes."""
     s = report.summary
     c = s.counters
@@ -129,9 +136,12 @@ def format_report(report: FlyReport, min_sightings: int = 3) -> str:
             f"{tel.get('bad_bytes', 0)} garbage bytes, {tel.get('bad_packets', 0)} bad packets, "
             f"rates by {tel.get('rate_method')}, clock by {tel.get('clock_source')}"
         )
-    confirmed = [h for h in s.holes if h.sightings >= min_sightings]
+    gate = gate or AnnounceGate()
+    confirmed = [h for h in s.holes if gate.passes(h)]
     lines.append(
-        f"holes: {len(confirmed)} confirmed (>= {min_sightings} sightings) of {len(s.holes)}; "
+        f"holes: {len(confirmed)} announced (score >= {gate.min_score:g}, >= "
+        f"{gate.min_sightings} sightings over >= {gate.min_span_s:g} s) of {len(s.holes)}, "
+        f"the rest candidates; "
         f"{c.announcements} announcements, {len(report.announced)} sent to the ground station"
     )
     for h in confirmed:

@@ -14,6 +14,10 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+import cv2
+import numpy as np
+import numpy.typing as npt
+
 from detect import CameraIntrinsics, Detection
 from geotag import (
     CameraMount,
@@ -24,8 +28,9 @@ from geotag import (
     VehiclePose,
     geotag_frame,
 )
+from holescan_errors import InputError
 
-__all__ = ["FrameHoles", "HolePipeline", "PoseOf"]
+__all__ = ["FrameHoles", "HolePipeline", "HoleView", "PoseOf", "crop_view", "view_jpeg"]
 
 PoseOf = Callable[[], VehiclePose | None]
 """Returns the vehicle pose at the frame's capture time, or None when it is unknown."""
@@ -99,3 +104,79 @@ class HolePipeline:
     def holes(self) -> list[Hole]:
         """Every hole so far, sorted by id."""
         return self.tracker.holes()
+
+
+Box = tuple[int, int, int, int]
+
+
+def crop_view(
+    image: npt.NDArray[np.generic], box: Box, *, margin_px: int = 24
+) -> tuple[npt.NDArray[np.generic], Box]:
+    """The part of ``image`` around ``box`` and the box in the crop's pixels.
+
+    The one cropper of a hole's view (the flight's cards, the hole files' thumbnails, the
+    report): ``margin_px`` plus the box's larger side, clipped to the image.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, C) ndarray (colour, or depth in mm).
+    box : (x, y, w, h) pixels.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> crop, b = crop_view(np.zeros((480, 640), np.uint16), (300, 200, 40, 20), margin_px=10)
+    >>> crop.shape, b
+    ((80, 110), (50, 30, 40, 20))
+    """
+    x, y, w, h = (int(v) for v in box)
+    H, W = image.shape[:2]
+    m = max(w, h) + margin_px
+    x0, y0 = max(x - m, 0), max(y - m, 0)
+    x1, y1 = min(x + w + m, W), min(y + h + m, H)
+    if x1 <= x0 or y1 <= y0:
+        raise InputError(f"box {box} lies outside the {W} x {H} image")
+    return image[y0:y1, x0:x1], (x - x0, y - y0, w, h)
+
+
+def view_jpeg(
+    rgb: npt.NDArray[np.uint8],
+    box: Box,
+    *,
+    size_px: int = 96,
+    max_bytes: int = 2800,
+    qualities: Sequence[int] = (70, 55, 40, 28, 18),
+) -> bytes:
+    """A hole's best view as a small JPEG for the radio: crop, box drawn, longer side
+    ``size_px``, the best quality of ``qualities`` that fits ``max_bytes``.
+
+    rgb : (H, W, 3) uint8 ndarray, RGB order. box : (x, y, w, h) pixels.
+    """
+    crop, (bx, by, bw, bh) = crop_view(rgb, box)
+    h, w = crop.shape[:2]
+    scale = size_px / max(h, w)
+    size = (max(1, round(w * scale)), max(1, round(h * scale)))
+    small = cv2.resize(np.ascontiguousarray(crop), size, interpolation=cv2.INTER_AREA)
+    p0 = (round(bx * scale), round(by * scale))
+    p1 = (round((bx + bw) * scale) - 1, round((by + bh) * scale) - 1)
+    cv2.rectangle(small, p0, p1, (255, 64, 0), 1)
+    bgr = cv2.cvtColor(small, cv2.COLOR_RGB2BGR)
+    data = b""
+    for q in qualities:
+        ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, int(q)])
+        if not ok:
+            raise InputError("JPEG encoding of a hole view failed")
+        data = buf.tobytes()
+        if len(data) <= max_bytes:
+            break
+    return data
+
+
+@dataclass(frozen=True)
+class HoleView:
+    """A hole's best view as sent to the ground: ``jpeg`` (:func:`view_jpeg`) and the
+    detector's explanation of that detection (:meth:`detect.Detection.explain`)."""
+
+    frame_index: int
+    jpeg: bytes
+    why: str

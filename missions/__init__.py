@@ -36,6 +36,14 @@ from missions._files import (
     write_waypoints,
     write_wpl,
 )
+from missions._holecards import (
+    CARD_PAYLOAD,
+    CardAssembler,
+    CardSender,
+    card_facts,
+    make_card,
+    read_card,
+)
 from missions._holefiles import (
     HOLE_FORMATS,
     HOLE_SUFFIXES,
@@ -83,6 +91,7 @@ from missions._sun import (
 from missions._survey import XTION, Camera, SurveyParams, SurveyPlan, frame_around, plan_survey
 
 __all__ = [
+    "CARD_PAYLOAD",
     "HOLE_FORMATS",
     "HOLE_SUFFIXES",
     "MAV_CMD_DO_CHANGE_SPEED",
@@ -98,6 +107,8 @@ __all__ = [
     "XTION",
     "Area",
     "Camera",
+    "CardAssembler",
+    "CardSender",
     "FlightCheck",
     "HoleFormat",
     "HoleMissionServer",
@@ -115,6 +126,7 @@ __all__ = [
     "SurveyPlan",
     "UploadReport",
     "Waypoint",
+    "card_facts",
     "check_flight",
     "connect",
     "download_mission",
@@ -126,6 +138,7 @@ __all__ = [
     "hole_statustext",
     "hole_waypoints",
     "local_solar_day",
+    "make_card",
     "mavlink",
     "mavutil",
     "open_link",
@@ -133,6 +146,7 @@ __all__ = [
     "plan_survey",
     "rank_holes",
     "read_area",
+    "read_card",
     "read_geojson",
     "read_gpx",
     "read_kml",

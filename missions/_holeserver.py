@@ -43,6 +43,7 @@ from typing import Any
 
 from geotag import Hole
 from holescan_errors import HolescanError, InputError
+from missions._holecards import CardSender, card_facts, make_card
 from missions._link import mavlink, open_link
 
 __all__ = [
@@ -73,6 +74,7 @@ _MISSION_MESSAGES = frozenset(
         "MISSION_COUNT",
         "MISSION_CLEAR_ALL",
         "MISSION_ACK",
+        "DATA_TRANSMISSION_HANDSHAKE",
     }
 )
 
@@ -174,6 +176,8 @@ class HoleMissionServer:
         :meth:`set_home`).
     rel_alt_m, clearance_m : waypoint altitude, see :func:`hole_waypoints`.
     heartbeat_period_s : HEARTBEAT interval (MAV_TYPE_ONBOARD_CONTROLLER).
+    card_bytes_per_s : byte budget of the hole cards (best view + facts, see
+        :mod:`missions._holecards`) sent by :meth:`send_card`.
 
     Use as a context manager; the link opens on enter and closes on exit. Errors of the
     background thread are raised as :class:`MissionServerError` by :meth:`close`.
@@ -189,6 +193,7 @@ class HoleMissionServer:
         rel_alt_m: float = 10.0,
         clearance_m: float = 5.0,
         heartbeat_period_s: float = 1.0,
+        card_bytes_per_s: float = 1000.0,
     ) -> None:
         if not (1 <= sysid <= 255 and 1 <= compid <= 255):
             raise InputError(f"sysid and compid must be 1..255, got {sysid}, {compid}")
@@ -209,6 +214,8 @@ class HoleMissionServer:
         self._conn: Any = None
         self._error: BaseException | None = None
         self.items_sent = 0
+        self.cards = CardSender(bytes_per_s=card_bytes_per_s)
+        self._card_revs: dict[int, int] = {}
 
     # -- lifecycle -----------------------------------------------------------------------
     def __enter__(self) -> HoleMissionServer:
@@ -283,6 +290,19 @@ class HoleMissionServer:
         _log.info("announced %s", text)
         return text
 
+    def send_card(self, hole: Hole, jpeg: bytes, why: str = "") -> int:
+        """Queue hole ``hole``'s card (its best view ``jpeg`` and facts); return its size.
+
+        Sent under the byte budget by the server's thread; a newer card of the same hole
+        replaces one not yet started.
+        """
+        with self._state_lock:
+            rev = self._card_revs.get(hole.id, 0) + 1
+            self._card_revs[hole.id] = rev
+            card = make_card(jpeg, card_facts(hole, why, rev))
+            self.cards.put(hole.id, card)
+        return len(card)
+
     # -- the link ------------------------------------------------------------------------
     def _send(self, fn: Any) -> None:
         conn = self._conn
@@ -317,15 +337,23 @@ class HoleMissionServer:
                     continue
                 if msg is not None:
                     self._handle(msg)
+                with self._state_lock:
+                    self.cards.pump(self._send)
         except Exception as err:  # surfaced by close()
             _log.exception("mission server thread failed")
             self._error = err
 
     def _handle(self, msg: Any) -> None:
-        if msg.target_system != self.sysid or msg.target_component != self.compid:
-            return
         kind = msg.get_type()
         peer = (msg.get_srcSystem(), msg.get_srcComponent())
+        if kind == "DATA_TRANSMISSION_HANDSHAKE":  # no target fields: any peer may ask
+            if msg.size == 0 and msg.packets == 0:  # a ground station asks for every card
+                _log.info("hole cards requested again by %s", peer)
+                with self._state_lock:
+                    self.cards.resend_all()
+            return
+        if msg.target_system != self.sysid or msg.target_component != self.compid:
+            return
         mission_type = getattr(msg, "mission_type", _MISSION_TYPE_MISSION)
         if kind == "MISSION_ACK":
             _log.debug("MISSION_ACK %d from %s", msg.type, peer)

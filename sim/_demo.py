@@ -28,24 +28,32 @@ import datetime as dt
 import json
 import logging
 import math
+import statistics
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-import pymap3d
 
-from capture import Flight, FlightConfig, FlightSummary, LoggedFrame, LoggedPose, read_flight_log
-from geotag import Hole, VehiclePose
+from capture import (
+    Flight,
+    FlightConfig,
+    FlightSummary,
+    HoleView,
+    LoggedFrame,
+    LoggedPose,
+    read_flight_log,
+)
+from geotag import AnnounceGate, Hole, VehiclePose
 from ground import ReprocessOptions, write_hole_outputs
 from holescan_errors import InputError
 from missions import HoleMissionServer, connect, download_mission
-from sim._sortie import SimSortie, SortieParams, TrueHole, loop_length_m
-from sim._world import RubbleWorld
+from sim._scoring import FalseHole, TruthRow, frames_in_view, score_holes
+from sim._sortie import SimSortie, SortieParams, loop_length_m
 
 __all__ = [
     "DEMO_SORTIE",
@@ -72,7 +80,8 @@ class DemoOptions:
     out : folder for everything (None: a new ``holescan-demo-YYYYmmdd-HHMMSS`` folder in
         the current directory). sortie : the simulated sortie.
     duration_s : seconds of capture (None: one lap of the survey).
-    min_sightings : a hole is confirmed (announced, scored, written) when seen this often.
+    gate : when a hole is announced (served, sent, scored, written); weaker holes stay
+        candidates. card_bytes_per_s : byte budget of the holes' pictures.
     match_m : a confirmed hole this close to a true access hole's centre (or inside its
         opening) found it, metres.
     min_frames_in_view : a true hole counts as seen by the camera when it was whole in at
@@ -82,15 +91,16 @@ class DemoOptions:
     out: Path | None = None
     sortie: SortieParams = DEMO_SORTIE
     duration_s: float | None = None
-    min_sightings: int = 3
+    gate: AnnounceGate = dataclasses.field(default_factory=AnnounceGate)
+    card_bytes_per_s: float = 1000.0
     match_m: float = 0.5
     min_frames_in_view: int = 3
 
     def __post_init__(self) -> None:
         if self.duration_s is not None and not self.duration_s > 0:
             raise InputError(f"duration must be > 0 s, got {self.duration_s}")
-        if self.min_sightings < 1 or self.match_m <= 0 or self.min_frames_in_view < 1:
-            raise InputError("min_sightings, min_frames_in_view >= 1 and match_m > 0 please")
+        if self.match_m <= 0 or self.min_frames_in_view < 1:
+            raise InputError("min_frames_in_view >= 1 and match_m > 0 please")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -111,34 +121,6 @@ class DemoProgress:
 
 
 @dataclasses.dataclass(frozen=True)
-class TruthRow:
-    """One true access hole and what the flight made of it.
-
-    status : ``found``, ``missed`` (seen whole in enough frames, not found) or
-    ``not in view``. x_m, y_m : position in the field (east, north of its south-west corner).
-    hole_id, error_m, sightings : the confirmed hole that found it, its horizontal distance
-    to the truth, its sightings.
-    """
-
-    truth: TrueHole
-    frames_in_view: int
-    status: str
-    hole_id: int | None
-    error_m: float
-    sightings: int
-
-
-@dataclasses.dataclass(frozen=True)
-class FalseHole:
-    """A confirmed hole that is no true access hole; ``nearest`` names the closest feature
-    of the world (a distractor kind, or an access hole farther than the match distance)."""
-
-    hole: Hole
-    nearest: str
-    distance_m: float
-
-
-@dataclasses.dataclass(frozen=True)
 class DemoResult:
     out: Path
     log_files: tuple[Path, ...]
@@ -154,8 +136,12 @@ class DemoResult:
     elapsed_s: float
     interrupted: bool
     world_features: dict[str, int]
-    min_sightings: int
-    match_m: float
+    gate: AnnounceGate
+    candidates: int = 0
+    latency_s: tuple[float, ...] = ()
+    card_bytes: int = 0
+    match_m: float = 0.5
+    cards_sent: int = 0
 
     @property
     def found(self) -> int:
@@ -173,6 +159,12 @@ class DemoResult:
             "missed": self.missed,
             "not_in_view": sum(r.status == "not in view" for r in self.truth),
             "false": len(self.false),
+            "candidates": self.candidates,
+            "gate": dataclasses.asdict(self.gate),
+            "latency_s": list(self.latency_s),
+            "card_bytes": self.card_bytes,
+            "cards_sent": self.cards_sent,
+            "card_bytes_per_s": self.card_bytes / self.capture_s if self.capture_s else None,
             "position_error_m": {
                 "mean": float(np.mean(errors)) if errors else None,
                 "max": max(errors) if errors else None,
@@ -255,88 +247,6 @@ class _GroundStation:
     def close(self) -> None:
         self.stop_listening()
         self.conn.close()
-
-
-# ------------------------------------------------------------------------------ scoring
-
-
-def _frames_in_view(sortie: SimSortie) -> Counter[int]:
-    """World hole id -> frames that showed the whole opening (not cut by the border)."""
-    seen: Counter[int] = Counter()
-    for src in sortie.sources:
-        for _, boxes in src.truth.values():
-            for b in boxes:
-                if not b.iscrowd:
-                    seen[b.hole_id] += 1
-    return seen
-
-
-def _en(world_anchor: Any, lat: float, lon: float) -> tuple[float, float]:
-    x, y, _ = pymap3d.geodetic2enu(
-        lat,
-        lon,
-        world_anchor.alt_m,
-        world_anchor.lat_deg,
-        world_anchor.lon_deg,
-        world_anchor.alt_m,
-    )
-    return float(x), float(y)
-
-
-def score(
-    confirmed: Sequence[Hole],
-    truth: Sequence[TrueHole],
-    world: RubbleWorld,
-    anchor: Any,
-    in_view: Counter[int],
-    opts: DemoOptions,
-) -> tuple[tuple[TruthRow, ...], tuple[FalseHole, ...]]:
-    """Match confirmed holes to the true access holes, nearest pairs first, each used once.
-
-    A confirmed hole finds a true one when it lies within ``opts.match_m`` of its centre or
-    inside its opening (a big hole seen cut by the image border is placed off its centre,
-    yet a crew sent there stands at the hole). Unmatched confirmed holes are false; the
-    nearest feature of the world is named.
-    """
-    from shapely.geometry import Point, Polygon
-
-    xy = [_en(anchor, h.lat_deg, h.lon_deg) for h in confirmed]
-    pairs = []
-    for i, t in enumerate(truth):
-        opening = Polygon(world.holes[t.id].opening)
-        for j, (x, y) in enumerate(xy):
-            d = math.hypot(x - t.x_m, y - t.y_m)
-            if d <= opts.match_m or opening.contains(Point(x, y)):
-                pairs.append((d, i, j))
-    matched: dict[int, tuple[int, float]] = {}
-    used: set[int] = set()
-    for d, i, j in sorted(pairs):
-        if i not in matched and j not in used:
-            matched[i] = (j, d)
-            used.add(j)
-    rows = []
-    for i, t in enumerate(truth):
-        frames = in_view.get(t.id, 0)
-        if i in matched:
-            j, d = matched[i]
-            h = confirmed[j]
-            rows.append(TruthRow(t, frames, "found", h.id, d, h.sightings))
-        else:
-            status = "missed" if frames >= opts.min_frames_in_view else "not in view"
-            rows.append(TruthRow(t, frames, status, None, math.nan, 0))
-    false = []
-    for j, h in enumerate(confirmed):
-        if j in used:
-            continue
-        x, y = xy[j]
-        best = ("nothing", math.inf)
-        for feature in world.holes:
-            d = math.hypot(feature.centre_xy[0] - x, feature.centre_xy[1] - y)
-            if d < best[1]:
-                kind = "access hole" if feature.is_access else feature.kind.replace("_", " ")
-                best = (kind, d)
-        false.append(FalseHole(h, best[0], best[1]))
-    return tuple(rows), tuple(false)
 
 
 # --------------------------------------------------------------------------- the flight
@@ -427,6 +337,8 @@ def run_demo(
     home = (anchor.lat_deg, anchor.lon_deg, anchor.alt_m)
     gcs_port = _free_udp_port()
     announced: list[str] = []
+    first_announced: dict[int, float] = {}
+    card_bytes = cards_sent = 0
     mission_items: int | None = None
     mission_error: str | None = None
     capture_s = 0.0
@@ -438,14 +350,21 @@ def run_demo(
             HoleMissionServer(f"udpout:127.0.0.1:{gcs_port}", 1, home=home)
         )
 
-        def on_holes(confirmed: list[Hole], news: list[Hole]) -> None:
-            server.update_holes(confirmed)
+        def on_holes(served: list[Hole], news: list[Hole], views: Mapping[int, HoleView]) -> None:
+            server.update_holes(served)
             announced.extend(server.announce(h) for h in news)
+            for h in news:
+                if h.id not in first_announced:  # boot-clock span first sighting -> now
+                    first_announced[h.id] = (h.t_last_boot_ns - h.t_first_boot_ns) * 1e-9
+                if h.id in views:
+                    server.send_card(h, views[h.id].jpeg, views[h.id].why)
 
         stack.enter_context(sortie)
         cfg = FlightConfig(
             log_prefix=out / "flight",
-            announce_min_sightings=opts.min_sightings,
+            announce_min_score=opts.gate.min_score,
+            announce_min_sightings=opts.gate.min_sightings,
+            announce_min_span_s=opts.gate.min_span_s,
             config_record={
                 "demo": {"sortie": dataclasses.asdict(opts.sortie), "duration_s": duration}
             },
@@ -470,7 +389,7 @@ def run_demo(
                     duration_s=duration,
                     frames=c.frames_captured,
                     detected=c.frames_detected,
-                    holes=len(flight.tracker.confirmed(opts.min_sightings)),
+                    holes=sum(opts.gate.passes(h) for h in flight.tracker.holes()),
                     announcements=gcs.take_new(),
                 )
 
@@ -488,7 +407,7 @@ def run_demo(
             duration_s=duration,
             frames=summary.counters.frames_captured,
             detected=summary.counters.frames_detected,
-            holes=sum(h.sightings >= opts.min_sightings for h in summary.holes),
+            holes=sum(opts.gate.passes(h) for h in summary.holes),
             announcements=gcs.take_new(),
         )
         gcs.stop_listening()
@@ -499,10 +418,19 @@ def run_demo(
             mission_error = f"{type(err).__name__}: {err}"
             _log.warning("ground station could not download the hole mission: %s", err)
         received = tuple(gcs.texts)
+        card_bytes, cards_sent = server.cards.bytes_sent, server.cards.cards_sent
     interrupted = capture_s < duration - 1.0
-    confirmed = tuple(h for h in summary.holes if h.sightings >= opts.min_sightings)
+    confirmed = tuple(h for h in summary.holes if opts.gate.passes(h))
     truth = sortie.truth
-    rows, false = score(confirmed, truth, sortie.world, anchor, _frames_in_view(sortie), opts)
+    rows, false = score_holes(
+        confirmed,
+        truth,
+        sortie.world,
+        anchor,
+        frames_in_view(sortie.sources),
+        match_m=opts.match_m,
+        min_frames_in_view=opts.min_frames_in_view,
+    )
     log_files = tuple(summary.log.files)
     views, track, boot_to_unix = _views_and_track(log_files, confirmed)
     kinds = Counter(str(h.kind) for h in sortie.world.holes)
@@ -521,7 +449,7 @@ def run_demo(
         confirmed,
         views,  # type: ignore[arg-type]
         track,
-        opts=ReprocessOptions(workers=0, min_sightings=opts.min_sightings),
+        opts=ReprocessOptions(workers=0, min_sightings=opts.gate.min_sightings),
         home=home,
         boot_to_unix_ns=boot_to_unix,
         truth=[(f"true hole {t.id}", t.lat_deg, t.lon_deg) for t in truth],
@@ -543,7 +471,11 @@ def run_demo(
         elapsed_s=time.monotonic() - t_start,
         interrupted=interrupted,
         world_features=dict(kinds),
-        min_sightings=opts.min_sightings,
+        gate=opts.gate,
+        candidates=len(summary.holes) - len(confirmed),
+        latency_s=tuple(first_announced[h.id] for h in confirmed if h.id in first_announced),
+        card_bytes=card_bytes,
+        cards_sent=cards_sent,
         match_m=opts.match_m,
     )
     path = out / "demo.json"
@@ -565,8 +497,10 @@ def format_result(r: DemoResult) -> list[str]:
         f"{n_access} access holes and {distractors} distractors in the field",
         f"frames: {c.frames_captured} captured ({c.frames_captured / max(r.capture_s, 1e-9):.1f}"
         f"/s), {c.frames_detected} detected, {c.frames_unposed} not posed at capture",
-        f"holes against the simulator's truth (a confirmed hole, >= {r.min_sightings} "
-        f"sightings, inside a true opening or within {r.match_m:g} m of its centre finds it):",
+        f"holes against the simulator's truth (an announced hole: score >= "
+        f"{r.gate.min_score:g}, >= {r.gate.min_sightings} sightings over >= "
+        f"{r.gate.min_span_s:g} s; inside a true opening or within {r.match_m:g} m of its "
+        f"centre finds it; {r.candidates} weaker candidates not announced):",
     ]
     for row in r.truth:
         t = row.truth
@@ -597,7 +531,17 @@ def format_result(r: DemoResult) -> list[str]:
     lines.append(
         f"  => found {r.found} of {in_view} in view, missed {r.missed}, false {len(r.false)}" + err
     )
+    if r.latency_s:
+        lines.append(
+            f"  first sighting -> announcement: median {statistics.median(r.latency_s):.1f} s, "
+            f"max {max(r.latency_s):.1f} s (autopilot clock)"
+        )
     gcs = f"ground station: {len(r.announcements)} STATUSTEXT announcements"
+    if r.capture_s > 0:
+        gcs += (
+            f", {r.cards_sent} hole pictures ({r.card_bytes} B, "
+            f"{r.card_bytes / r.capture_s:.0f} B/s over the flight)"
+        )
     if r.mission_items is not None:
         gcs += f", downloaded a mission of {r.mission_items} hole waypoints (component 191)"
     else:
