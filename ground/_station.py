@@ -40,7 +40,8 @@ class GroundOptions:
     mavlink : connection to the vehicle's stream. out : the station's folder (state,
     pictures, files). sysid : the vehicle (None: first heard). http_host, http_port :
     the live page (port 0: any free one; None: no page). cot_url : pytak COT_URL (None:
-    no TAK). station : name in the CoT uids. cot_stale_s, cot_refresh_s : CoT stale time
+    no TAK). cot_proto : 0 = CoT XML, 1 = TAK protocol v1 (protobuf, via takproto).
+    station : name in the CoT uids. cot_stale_s, cot_refresh_s : CoT stale time
     and re-send period. kml_refresh_s : Google Earth's NetworkLink reload period.
     """
 
@@ -51,6 +52,7 @@ class GroundOptions:
     http_host: str = "127.0.0.1"
     http_port: int | None = 8080
     cot_url: str | None = DEFAULT_COT_URL
+    cot_proto: int = 0
     station: str = "ground"
     cot_stale_s: float = 3600.0
     cot_refresh_s: float = 600.0
@@ -81,7 +83,8 @@ class GroundStation:
                     StationWeb(self.state, o.http_host, o.http_port, on_mark=self.mark)
                 )
             if o.cot_url is not None:
-                self.cot = self._stack.enter_context(CotPublisher(o.cot_url))
+                extra = {"TAK_PROTO": str(o.cot_proto)}
+                self.cot = self._stack.enter_context(CotPublisher(o.cot_url, extra))
             self.state.listeners.append(lambda _v: self._dirty.set())
             self._dirty.set()
             self._worker.start()

@@ -212,7 +212,9 @@ class VehicleLink:
                     self.bad += 1
                     _log.warning("a picture without hole facts was ignored")
                 else:
-                    self.state.on_card(facts, card)
+                    h = self.state.on_card(facts, card)
+                    if h is not None and h.seq is None:  # not yet seen in the mission
+                        self._next_mission = min(self._next_mission, now + 2.0)
         elif kind == "ATTITUDE":
             self._yaw = float(msg.yaw)
         elif kind == "GLOBAL_POSITION_INT" and comp != _COMPANION:

@@ -37,6 +37,13 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="TAK: pytak COT_URL (default mesh multicast udp+wo://239.2.3.1:6969; "
         "tcp://HOST:8087, tls://HOST:8089), or 'off'",
     )
+    p.add_argument(
+        "--cot-proto",
+        type=int,
+        choices=(0, 1),
+        default=0,
+        help="0: CoT XML (default), 1: TAK protocol v1 protobuf (needs takproto)",
+    )
     p.add_argument("--station", default="ground", help="name used in the CoT uids")
     p.set_defaults(func=run)
 
@@ -60,6 +67,7 @@ def run(args: argparse.Namespace) -> int:
         http_host=host or "127.0.0.1",
         http_port=port,
         cot_url=None if args.cot == "off" else args.cot,
+        cot_proto=args.cot_proto,
         station=args.station,
     )
     stop = threading.Event()
