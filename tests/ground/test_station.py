@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import configparser
+import contextlib
 import json
 import shutil
 import socket
@@ -91,10 +92,8 @@ class PytakReceiver:
 
         self._task = self._loop.create_task(main())
         self._loop.run_until_complete(asyncio.sleep(0))
-        try:
+        with contextlib.suppress(asyncio.CancelledError, RuntimeError):
             self._loop.run_until_complete(self._task)
-        except (asyncio.CancelledError, RuntimeError):
-            pass
 
     def close(self) -> None:
         self._loop.call_soon_threadsafe(self._task.cancel)

@@ -56,10 +56,12 @@ class Wire:
         self.bytes: list[bytes] = []
 
     def send(self, fn: Any) -> None:
+        wire = self
+
         class Capture:
-            def __getattr__(_, name: str) -> Any:
-                encode = getattr(self.mav, name.removesuffix("_send") + "_encode")
-                return lambda *a: self.bytes.append(encode(*a).pack(self.mav))
+            def __getattr__(self, name: str) -> Any:
+                encode = getattr(wire.mav, name.removesuffix("_send") + "_encode")
+                return lambda *a: wire.bytes.append(encode(*a).pack(wire.mav))
 
         fn(Capture())
 
