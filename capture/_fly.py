@@ -36,11 +36,15 @@ class FlyReport:
 
     summary : the daemon's :class:`~capture._daemon.FlightSummary`. sensor : what was flown.
     announced : STATUSTEXTs sent to the ground station, in order.
+    cards_sent, card_bytes : hole cards (best view + facts) sent whole, and the MAVLink
+    bytes they took.
     """
 
     summary: FlightSummary
     sensor: str
     announced: tuple[str, ...] = ()
+    cards_sent: int = 0
+    card_bytes: int = 0
 
 
 def fly(
@@ -108,7 +112,12 @@ def fly(
         if stop is not None:
             flight.stop = stop
         summary = flight.run()
-    return FlyReport(summary, str(cfg.sensor), tuple(announced))
+        if server is not None:
+            server.flush_cards(timeout_s=10.0)  # let the last pictures go out
+            cards = (server.cards.cards_sent, server.cards.bytes_sent)
+        else:
+            cards = (0, 0)
+    return FlyReport(summary, str(cfg.sensor), tuple(announced), *cards)
 
 
 def format_report(report: FlyReport, gate: AnnounceGate | None = None) -> str:
@@ -144,6 +153,11 @@ def format_report(report: FlyReport, gate: AnnounceGate | None = None) -> str:
         f"the rest candidates; "
         f"{c.announcements} announcements, {len(report.announced)} sent to the ground station"
     )
+    if report.cards_sent or report.card_bytes:
+        lines.append(
+            f"hole pictures: {report.cards_sent} sent, {report.card_bytes} B "
+            f"({report.card_bytes / dur:.0f} B/s over the flight)"
+        )
     for h in confirmed:
         lines.append(
             f"  hole {h.id}: {h.lat_deg:.7f}, {h.lon_deg:.7f} +-{h.sigma_h_m:.2f} m, score "

@@ -93,6 +93,7 @@ class VehicleLink:
         self._next_mission = math.inf
         self._mission: dict[str, Any] | None = None
         self._yaw = 0.0
+        self._missing_before: frozenset[int] = frozenset()
 
     def __enter__(self) -> VehicleLink:
         self._thread.start()
@@ -282,5 +283,12 @@ class VehicleLink:
             if unknown:
                 _log.info("%d served waypoints are not known here; asking for cards", unknown)
                 self._request_cards()
+            # holes heard of (STATUSTEXT, card) but not in this mission: it was snapshotted
+            # before they were served; look again soon, once per new set of them
+            _, known, _ = self.state.snapshot()
+            missing = frozenset(h.id for h in known if h.seq is None and h.mark != "rejected")
+            if missing and missing != self._missing_before:
+                self._next_mission = now + 3.0
+            self._missing_before = missing
             return
         self._request_next()

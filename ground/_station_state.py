@@ -19,6 +19,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
+import math
 import os
 import re
 import threading
@@ -253,23 +254,33 @@ class StationState:
         self._changed()
         return h
 
-    def on_mission(self, items: list[tuple[int, float, float]]) -> int:
+    def on_mission(self, items: list[tuple[int, float, float]], match_m: float = 1.5) -> int:
         """Take a downloaded hole mission ((seq, lat, lon) of the hole items); return how
-        many items match no known hole (the ground is missing something)."""
-        unknown = 0
+        many items match no known hole (the ground is missing something).
+
+        Items are paired with holes nearest first, each used once, within ``match_m``: the
+        mission may hold a newer position of a hole than its last announcement (the
+        vehicle re-announces only moves over 0.5 m).
+        """
         with self._lock:
-            for h in self.holes.values():
-                h.seq = None
+            holes = list(self.holes.values())
+            pairs = []
             for seq, lat, lon in items:
-                best = min(
-                    self.holes.values(),
-                    key=lambda h: abs(h.lat - lat) + abs(h.lon - lon),
-                    default=None,
-                )
-                if best is not None and abs(best.lat - lat) + abs(best.lon - lon) < 2e-6:
-                    best.seq = seq
-                else:
-                    unknown += 1
+                k = 111_320.0 * math.cos(math.radians(lat))
+                for h in holes:
+                    d = math.hypot((h.lat - lat) * 111_320.0, (h.lon - lon) * k)
+                    if d <= match_m:
+                        pairs.append((d, seq, h.id))
+            pairs.sort()
+            seqs: dict[int, int] = {}
+            used: set[int] = set()
+            for _, seq, hid in pairs:
+                if seq not in used and hid not in seqs:
+                    seqs[hid] = seq
+                    used.add(seq)
+            for h in holes:
+                h.seq = seqs.get(h.id)
+            unknown = len(items) - len(used)
         self._changed()
         return unknown
 

@@ -303,6 +303,16 @@ class HoleMissionServer:
             self.cards.put(hole.id, card)
         return len(card)
 
+    def flush_cards(self, timeout_s: float = 10.0) -> bool:
+        """Wait (at most ``timeout_s``) until every queued card is sent; True when done."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            with self._state_lock:
+                if self.cards.pending == 0:
+                    return True
+            time.sleep(0.1)
+        return False
+
     # -- the link ------------------------------------------------------------------------
     def _send(self, fn: Any) -> None:
         conn = self._conn

@@ -24,9 +24,9 @@ from sim._demo import (
     DemoResult,
     FalseHole,
     TruthRow,
-    format_result,
     run_demo,
 )
+from sim._demo_format import format_result
 from sim._fly import SIM_TABLE, SimFlyReport, fly_sim, format_sim_report, sortie_params
 from sim._render import GtBox, hole_boxes, render, render_exact
 from sim._scoring import count_in_view, frames_in_view, score_holes

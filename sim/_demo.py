@@ -8,9 +8,10 @@ One call runs what a real sortie runs, with no hardware:
   MAVLink over loopback UDP (telemetry, TIMESYNC, SYSTEM_TIME);
 * the capture daemon (:class:`capture._daemon.Flight`) with the simulated Xtion: MCAP flight
   log, detection worker, geotags, holes;
-* the hole mission server (:class:`missions.HoleMissionServer`) announcing each confirmed
-  hole by STATUSTEXT to a ground station, which is played by a pymavlink peer here: it
-  prints the announcements as they come and downloads the hole mission at the end.
+* the hole mission server (:class:`missions.HoleMissionServer`) announcing each hole that
+  passes the announce gate by STATUSTEXT and sending its picture, to the ground station
+  app (:class:`ground.GroundStation`, as ``holescan ground`` runs it) on a loopback link:
+  it collects the holes, pictures and the hole mission into ``OUT/ground``.
 
 It stops after one lap of the survey (or ``duration_s`` of capture), then scores the holes
 the flight confirmed against the simulator's truth: every true access hole the camera saw
@@ -28,7 +29,6 @@ import datetime as dt
 import json
 import logging
 import math
-import statistics
 import threading
 import time
 from collections import Counter
@@ -49,9 +49,9 @@ from capture import (
     read_flight_log,
 )
 from geotag import AnnounceGate, Hole, VehiclePose
-from ground import ReprocessOptions, write_hole_outputs
+from ground import GroundOptions, GroundStation, ReprocessOptions, write_hole_outputs
 from holescan_errors import InputError
-from missions import HoleMissionServer, connect, download_mission
+from missions import HoleMissionServer
 from sim._scoring import FalseHole, TruthRow, frames_in_view, score_holes
 from sim._sortie import SimSortie, SortieParams, loop_length_m
 
@@ -62,7 +62,6 @@ __all__ = [
     "DemoResult",
     "FalseHole",
     "TruthRow",
-    "format_result",
     "run_demo",
 ]
 
@@ -142,6 +141,7 @@ class DemoResult:
     card_bytes: int = 0
     match_m: float = 0.5
     cards_sent: int = 0
+    pictures_at_ground: int = 0
 
     @property
     def found(self) -> int:
@@ -164,6 +164,7 @@ class DemoResult:
             "latency_s": list(self.latency_s),
             "card_bytes": self.card_bytes,
             "cards_sent": self.cards_sent,
+            "pictures_at_ground": self.pictures_at_ground,
             "card_bytes_per_s": self.card_bytes / self.capture_s if self.capture_s else None,
             "position_error_m": {
                 "mean": float(np.mean(errors)) if errors else None,
@@ -201,52 +202,38 @@ class DemoResult:
 # --------------------------------------------------------------------- ground station
 
 
-class _GroundStation:
-    """A pymavlink peer playing the ground station: collects STATUSTEXTs, then downloads
-    the hole mission from the companion computer (component 191)."""
+class _Ground:
+    """The ground station app (:class:`ground.GroundStation`, what ``holescan ground``
+    runs) in-process on the demo's loopback link: holes, pictures, the hole mission."""
 
-    def __init__(self, port: int) -> None:
-        self.link = f"udpin:127.0.0.1:{port}"
-        self.conn = connect(self.link, source_system=255, source_component=190)
-        self.texts: list[str] = []
-        self._new: list[str] = []
-        self._lock = threading.Lock()
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="demo-gcs", daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        while not self._stop.is_set():
-            msg = self.conn.recv_match(type="STATUSTEXT", blocking=True, timeout=0.2)
-            if msg is None:
-                continue
-            text = str(msg.text).rstrip("\x00")
-            with self._lock:
-                self.texts.append(text)
-                self._new.append(text)
+    def __init__(self, port: int, folder: Path) -> None:
+        opts = GroundOptions(
+            mavlink=f"udpin:127.0.0.1:{port}", out=folder, http_port=None, cot_url=None
+        )
+        self.station = GroundStation(opts).__enter__()
+        self._told: set[int] = set()
 
     def take_new(self) -> tuple[str, ...]:
-        with self._lock:
-            new, self._new = tuple(self._new), []
-            return new
+        """One line per hole the ground heard of since the last call."""
+        _, holes, _ = self.station.state.snapshot()
+        new = [h for h in holes if h.id not in self._told]
+        self._told.update(h.id for h in new)
+        return tuple(f"hole {h.id} score {h.score:.2f} at {h.lat:.7f}, {h.lon:.7f}" for h in new)
 
-    def stop_listening(self) -> None:
-        self._stop.set()
-        self._thread.join(timeout=2.0)
-
-    def download(self, sysid: int, compid: int) -> int:
-        """Download the served mission; returns the number of hole waypoints (home excluded)."""
-        items = download_mission(
-            self.conn,
-            target_system=sysid,
-            target_component=compid,
-            heartbeat_timeout_s=5.0,
-        )
-        return max(len(items) - 1, 0)
+    def wait_complete(self, ids: set[int], timeout_s: float) -> bool:
+        """Wait until every hole of ``ids`` is at the ground with its picture, in the
+        downloaded mission."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            _, holes, _ = self.station.state.snapshot()
+            done = {h.id for h in holes if h.has_picture and h.seq is not None}
+            if ids <= done:
+                return True
+            time.sleep(0.2)
+        return False
 
     def close(self) -> None:
-        self.stop_listening()
-        self.conn.close()
+        self.station.__exit__(None, None, None)
 
 
 # --------------------------------------------------------------------------- the flight
@@ -341,10 +328,11 @@ def run_demo(
     card_bytes = cards_sent = 0
     mission_items: int | None = None
     mission_error: str | None = None
+    pictures = 0
     capture_s = 0.0
     report("start", duration_s=duration)
     with contextlib.ExitStack() as stack:
-        gcs = _GroundStation(gcs_port)
+        gcs = _Ground(gcs_port, out / "ground")
         stack.callback(gcs.close)
         server = stack.enter_context(
             HoleMissionServer(f"udpout:127.0.0.1:{gcs_port}", 1, home=home)
@@ -410,14 +398,14 @@ def run_demo(
             holes=sum(opts.gate.passes(h) for h in summary.holes),
             announcements=gcs.take_new(),
         )
-        gcs.stop_listening()
-        time.sleep(0.3)  # the last STATUSTEXTs in flight on the loopback link
-        try:
-            mission_items = gcs.download(1, server.compid)
-        except Exception as err:  # shown in the result: the demo still reports the rest
-            mission_error = f"{type(err).__name__}: {err}"
-            _log.warning("ground station could not download the hole mission: %s", err)
-        received = tuple(gcs.texts)
+        served_ids = {h.id for h in summary.holes if opts.gate.passes(h)}
+        server.flush_cards(timeout_s=30.0)
+        if not gcs.wait_complete(served_ids, timeout_s=30.0):
+            mission_error = "not every announced hole reached the ground with its picture"
+        _, ground_holes, _ = gcs.station.state.snapshot()
+        mission_items = sum(h.seq is not None for h in ground_holes)
+        pictures = sum(h.has_picture for h in ground_holes if h.id in served_ids)
+        received = tuple(announced)
         card_bytes, cards_sent = server.cards.bytes_sent, server.cards.cards_sent
     interrupted = capture_s < duration - 1.0
     confirmed = tuple(h for h in summary.holes if opts.gate.passes(h))
@@ -476,83 +464,9 @@ def run_demo(
         latency_s=tuple(first_announced[h.id] for h in confirmed if h.id in first_announced),
         card_bytes=card_bytes,
         cards_sent=cards_sent,
+        pictures_at_ground=pictures,
         match_m=opts.match_m,
     )
     path = out / "demo.json"
     path.write_text(json.dumps(result.numbers(), indent=1) + "\n")
     return dataclasses.replace(result, files=(*result.files, ("result", path)))
-
-
-# ------------------------------------------------------------------------------ output
-
-
-def format_result(r: DemoResult) -> list[str]:
-    """What the demo prints at the end."""
-    c = r.summary.counters
-    n_access = r.world_features.get("access", 0)
-    distractors = sum(r.world_features.values()) - n_access
-    cut = " (stopped early)" if r.interrupted else ""
-    lines = [
-        f"holescan demo: {r.capture_s:.0f} s of a simulated dawn survey{cut}, "
-        f"{n_access} access holes and {distractors} distractors in the field",
-        f"frames: {c.frames_captured} captured ({c.frames_captured / max(r.capture_s, 1e-9):.1f}"
-        f"/s), {c.frames_detected} detected, {c.frames_unposed} not posed at capture",
-        f"holes against the simulator's truth (an announced hole: score >= "
-        f"{r.gate.min_score:g}, >= {r.gate.min_sightings} sightings over >= "
-        f"{r.gate.min_span_s:g} s; inside a true opening or within {r.match_m:g} m of its "
-        f"centre finds it; {r.candidates} weaker candidates not announced):",
-    ]
-    for row in r.truth:
-        t = row.truth
-        where = f"true hole {t.id} at ({t.x_m:.1f}, {t.y_m:.1f}) m, {t.major_m:.2f} m wide"
-        if row.status == "found":
-            score = next(h.score for h in r.confirmed if h.id == row.hole_id)
-            lines.append(
-                f"  {where}: FOUND as hole {row.hole_id} (score {score:.2f}), "
-                f"{100 * row.error_m:.0f} cm off, {row.sightings} sightings"
-            )
-        elif row.status == "missed":
-            lines.append(f"  {where}: MISSED (whole in view in {row.frames_in_view} frames)")
-        else:
-            lines.append(f"  {where}: not in view (outside what the survey saw)")
-    for f in r.false:
-        lines.append(
-            f"  hole {f.hole.id}: FALSE (score {f.hole.score:.2f}, {f.hole.sightings} sightings;"
-            f" nearest feature: {f.nearest}, {f.distance_m:.2f} m)"
-        )
-    errors = [row.error_m for row in r.truth if row.status == "found"]
-    in_view = sum(row.status != "not in view" for row in r.truth)
-    err = (
-        f"; position error mean {100 * float(np.mean(errors)):.0f} cm, max "
-        f"{100 * max(errors):.0f} cm"
-        if errors
-        else ""
-    )
-    lines.append(
-        f"  => found {r.found} of {in_view} in view, missed {r.missed}, false {len(r.false)}" + err
-    )
-    if r.latency_s:
-        lines.append(
-            f"  first sighting -> announcement: median {statistics.median(r.latency_s):.1f} s, "
-            f"max {max(r.latency_s):.1f} s (autopilot clock)"
-        )
-    gcs = f"ground station: {len(r.announcements)} STATUSTEXT announcements"
-    if r.capture_s > 0:
-        gcs += (
-            f", {r.cards_sent} hole pictures ({r.card_bytes} B, "
-            f"{r.card_bytes / r.capture_s:.0f} B/s over the flight)"
-        )
-    if r.mission_items is not None:
-        gcs += f", downloaded a mission of {r.mission_items} hole waypoints (component 191)"
-    else:
-        gcs += f", mission download failed ({r.mission_error})"
-    lines.append(gcs)
-    lines.append(f"files in {r.out}:")
-    lines += [f"  flight log  {p}" for p in r.log_files]
-    lines += [f"  {kind:<11} {p}" for kind, p in r.files]
-    lines.append(
-        f"reprocess it: holescan reprocess {' '.join(str(p) for p in r.log_files)} "
-        f"--out {r.out / 'reprocessed'}"
-    )
-    lines.append(f"({r.elapsed_s:.0f} s in all)")
-    return lines
