@@ -77,7 +77,9 @@ def fly_world(seed: int, fps: float) -> dict[str, Any]:
         pose = VehiclePose(**{**truth_pose.__dict__, "eph_m": p.eph_m})
         rng = np.random.default_rng((seed, k))
         cond = random_conditions(rng, Conditions())
-        rgb, depth, boxes = render(world, camera_pose_in_world(pose, mount, p.anchor), camera, rng, cond)
+        rgb, depth, boxes = render(
+            world, camera_pose_in_world(pose, mount, p.anchor), camera, rng, cond
+        )
         boxes_seen.append(boxes)
         dets = detect_holes(rgb, depth, camera)
         step = pipeline.add(k, dets, lambda pose=pose: pose)
@@ -225,7 +227,10 @@ def main(argv: list[str] | None = None) -> int:
         kinds[h["nearest"]] = kinds.get(h["nearest"], 0) + 1
     print("  false holes by nearest feature:", kinds)
     fal3 = [h for h in fal if h["history"][-1][2] >= 3]
-    print(f"  false with >= 3 sightings: n={len(fal3)} score {_pct([h['history'][-1][1] for h in fal3])}")
+    print(
+        f"  false with >= 3 sightings: n={len(fal3)} "
+        f"score {_pct([h['history'][-1][1] for h in fal3])}"
+    )
     print("gate                         delivered precision recall  latency median/max s")
     for s in (0.3, 0.4, 0.5, 0.55, 0.6, 0.65, 0.7, 0.75):
         for n in (2, 3, 5):
@@ -244,7 +249,10 @@ def main(argv: list[str] | None = None) -> int:
         for s in (0.3, 0.4, 0.5, 0.6, 0.7):
             tp = sum(v >= s for v in a["true"])
             fp = sum(v >= s for v in a["false"])
-            print(f"  score>={s:.1f}: true kept {tp}/{len(a['true'])}, false kept {fp}/{len(a['false'])}")
+            print(
+                f"  score>={s:.1f}: true kept {tp}/{len(a['true'])}, "
+                f"false kept {fp}/{len(a['false'])}"
+            )
     return 0
 
 
