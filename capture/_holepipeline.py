@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
@@ -110,32 +111,38 @@ Box = tuple[int, int, int, int]
 
 
 def crop_view(
-    image: npt.NDArray[np.generic], box: Box, *, margin_px: int = 24
-) -> tuple[npt.NDArray[np.generic], Box]:
+    image: npt.NDArray[Any], box: Box, *, margin_px: int = 24, margin_frac: float = 0.5
+) -> tuple[npt.NDArray[Any], Box]:
     """The part of ``image`` around ``box`` and the box in the crop's pixels.
 
     The one cropper of a hole's view (the flight's cards, the hole files' thumbnails, the
-    report): ``margin_px`` plus the box's larger side, clipped to the image.
+    report): a margin of ``margin_frac`` of the box's larger side, at least ``margin_px``,
+    clipped to the image. The crop is a view into ``image`` (copy it to keep it).
 
     Parameters
     ----------
     image : (H, W) or (H, W, C) ndarray (colour, or depth in mm).
-    box : (x, y, w, h) pixels.
+    box : (x, y, w, h) pixels, w and h > 0.
+
+    Raises
+    ------
+    holescan_errors.InputError
+        An empty box, or one entirely outside the image.
 
     Examples
     --------
     >>> import numpy as np
     >>> crop, b = crop_view(np.zeros((480, 640), np.uint16), (300, 200, 40, 20), margin_px=10)
     >>> crop.shape, b
-    ((80, 110), (50, 30, 40, 20))
+    ((60, 80), (20, 20, 40, 20))
     """
     x, y, w, h = (int(v) for v in box)
     H, W = image.shape[:2]
-    m = max(w, h) + margin_px
+    m = max(margin_px, round(margin_frac * max(w, h)))
     x0, y0 = max(x - m, 0), max(y - m, 0)
     x1, y1 = min(x + w + m, W), min(y + h + m, H)
-    if x1 <= x0 or y1 <= y0:
-        raise InputError(f"box {box} lies outside the {W} x {H} image")
+    if w <= 0 or h <= 0 or x1 <= x0 or y1 <= y0:
+        raise InputError(f"box {box} is empty or outside the {W} x {H} image")
     return image[y0:y1, x0:x1], (x - x0, y - y0, w, h)
 
 
@@ -152,7 +159,7 @@ def view_jpeg(
 
     rgb : (H, W, 3) uint8 ndarray, RGB order. box : (x, y, w, h) pixels.
     """
-    crop, (bx, by, bw, bh) = crop_view(rgb, box)
+    crop, (bx, by, bw, bh) = crop_view(rgb, box, margin_frac=0.6)
     h, w = crop.shape[:2]
     scale = size_px / max(h, w)
     size = (max(1, round(w * scale)), max(1, round(h * scale)))

@@ -46,6 +46,7 @@ from capture import (
     HoleView,
     LoggedFrame,
     LoggedPose,
+    crop_view,
     read_flight_log,
 )
 from geotag import AnnounceGate, Hole, VehiclePose
@@ -279,15 +280,9 @@ def _views_and_track(
             continue
         assert isinstance(rec, LoggedFrame)
         for h in wanted.get(rec.frame.index, ()):
-            x, y, w, ht = (int(v) for v in h.best_box)
-            m = max(w, ht) + 24
-            H, W = rec.frame.depth.shape
-            x0, y0, x1, y1 = max(x - m, 0), max(y - m, 0), min(x + w + m, W), min(y + ht + m, H)
-            views[h.id] = (
-                rec.frame.rgb[y0:y1, x0:x1].copy(),
-                rec.frame.depth[y0:y1, x0:x1].copy(),
-                (x - x0, y - y0, w, ht),
-            )
+            rgb, box = crop_view(rec.frame.rgb, h.best_box)
+            depth, _ = crop_view(rec.frame.depth, h.best_box)
+            views[h.id] = (rgb.copy(), depth.copy(), box)
     return views, track, boot_to_unix
 
 
