@@ -5,7 +5,8 @@
 * :func:`write_waypoints` and the per-format writers/readers - QGC ``.plan``, QGC WPL 110,
   KML, GeoJSON, GPX, generic over :class:`Waypoint` records (survey paths and found holes).
 * :func:`upload_mission` / :func:`download_mission` - MAVLink mission protocol client;
-  :class:`MissionReceiver` / :class:`MissionServer` - the vehicle's side.
+  :class:`MissionReceiver` / :class:`MissionServer` - the vehicle's side (one
+  implementation: the simulated autopilot's and the hole server's).
 * :func:`write_hole_file` - found holes as GPX, KML/KMZ (thumbnails), GeoJSON, .plan, WPL.
 * :class:`HoleMissionServer` - serves found holes live as a mission (component 191) and
   announces them by STATUSTEXT.
@@ -57,7 +58,6 @@ from missions._holefiles import (
 )
 from missions._holeserver import (
     HoleMissionServer,
-    HoleWaypoint,
     MissionServerError,
     hole_statustext,
     hole_waypoints,
@@ -66,9 +66,7 @@ from missions._link import mavlink, mavutil, open_link, parser
 from missions._protocol import (
     MAV_MISSION_ACCEPTED,
     MissionError,
-    MissionReceiver,
     MissionRejectedError,
-    MissionServer,
     MissionTimeoutError,
     UploadReport,
     connect,
@@ -89,6 +87,7 @@ from missions._sun import (
     sunrise_sunset,
 )
 from missions._survey import XTION, Camera, SurveyParams, SurveyPlan, frame_around, plan_survey
+from missions._vehicle import MissionReceiver, MissionServer
 
 __all__ = [
     "CARD_PAYLOAD",
@@ -112,7 +111,6 @@ __all__ = [
     "FlightCheck",
     "HoleFormat",
     "HoleMissionServer",
-    "HoleWaypoint",
     "MissionError",
     "MissionReceiver",
     "MissionRejectedError",

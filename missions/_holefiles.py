@@ -34,6 +34,7 @@ Latitudes and longitudes are written with 8 decimals (about 1 mm).
 from __future__ import annotations
 
 import base64
+import dataclasses
 import datetime as dt
 import html
 import math
@@ -239,19 +240,13 @@ def hole_mission(
         raise InputError("hole ids must be unique")
     served = hole_waypoints(holes, home=home, rel_alt_m=rel_alt_m, clearance_m=clearance_m)
     items = []
-    for item in served[1:]:
-        assert item.hole_id is not None
-        h = by_id[item.hole_id]
+    for seq, item in enumerate(served[1:], start=1):
+        h = by_id[int(item.properties["hole_id"])]
         items.append(
-            Waypoint(
-                h.lat_deg,
-                h.lon_deg,
-                item.alt_m,
-                name=f"hole {h.id}",
-                description=hole_description(h, item.seq, boot_to_unix_ns),
-                properties=hole_properties(h, item.seq, boot_to_unix_ns),
-                command=item.command,
-                frame=item.frame,
+            dataclasses.replace(
+                item,
+                description=hole_description(h, seq, boot_to_unix_ns),
+                properties=hole_properties(h, seq, boot_to_unix_ns),
             )
         )
     home_wp = None
