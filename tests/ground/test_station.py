@@ -30,9 +30,9 @@ import numpy as np
 import pytest
 
 from geotag import Hole
-from ground import GroundOptions, GroundStation, StationState
+from ground import GroundOptions, GroundStation, StationState, state_document
 from holescan import cli
-from missions import HoleMissionServer
+from missions import HoleMissionServer, mavlink
 
 NODE_COT = Path(__file__).parent / "cot"
 HOME = (43.6532, -79.3832)
@@ -246,6 +246,31 @@ def test_holes_pictures_files_and_cot(rig: dict[str, Any]) -> None:
     assert server.cards.bytes_sent > 0
 
 
+def test_track_and_footprints_from_the_autopilot(rig: dict[str, Any]) -> None:
+    """GLOBAL_POSITION_INT/ATTITUDE of the autopilot (component 1) draw the track."""
+    station, server = rig["station"], rig["server"]
+    announce(server, [hole(1)])
+    wait_for(lambda: 1 in station.state.holes, 5.0, "hole 1")
+    autopilot = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+
+    def send(msg: Any) -> None:
+        server.send_with(lambda mav: mav.file.write(msg.pack(autopilot)))
+
+    for k in range(4):
+        lat, lon = int((HOME[0] + k * 1e-5) * 1e7), int(HOME[1] * 1e7)
+        send(autopilot.attitude_encode(k * 1000, 0.0, 0.0, 0.5, 0.0, 0.0, 0.0))
+        send(autopilot.global_position_int_encode(k * 1000, lat, lon, 123_000, 3_000, 0, 0, 0, 0))
+        time.sleep(1.1)
+    wait_for(lambda: len(station.state.track) >= 3, 5.0, "the track")
+    doc = state_document(station.state, footprint_every=1)
+    assert len(doc["track"]) >= 3 and len(doc["footprints"]) >= 3
+    (x0, y0), (x1, y1) = doc["track"][0], doc["track"][1]
+    assert y1 - y0 == pytest.approx(1.113, abs=0.01) and abs(x1 - x0) < 0.01  # metres north
+    fp = np.array(doc["footprints"][0])
+    w = np.linalg.norm(fp[1] - fp[0])  # across track at 3 m: 2 * 3 tan(29 deg)
+    assert w == pytest.approx(2 * 3.0 * np.tan(np.radians(29.0)), abs=0.02)
+
+
 def test_link_cut_for_10_s_loses_no_hole(rig: dict[str, Any]) -> None:
     station, server, relay = rig["station"], rig["server"], rig["relay"]
     announce(server, [hole(1)])
@@ -302,7 +327,7 @@ def test_bad_link_and_garbage_keep_the_station_going(
         junk.sendto(b"\xfd\x09\x00\x00", ("127.0.0.1", port))
         junk.close()
         announce(srv, [hole(1)])
-        srv._send(lambda mav: mav.statustext_send(5, b"HOLE 99 7.5 999 999"))  # nonsense
+        srv.send_with(lambda mav: mav.statustext_send(5, b"HOLE 99 7.5 999 999"))  # nonsense
         wait_for(complete(station, {1}), 30.0, "hole 1 despite the garbage")
         assert set(station.state.holes) == {1}
     # the CLI: a bad option is one line and exit code 2
