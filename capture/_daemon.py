@@ -300,8 +300,9 @@ class Flight:
         holes = self.tracker.holes()
         self._writer.write_holes(holes, self.unix_ns(r.t_mono_ns))
         self._keep_views(r, changed)
-        served = [h for h in holes if self._gate.passes(h)]
-        news = [h for h in changed if self._worth_announcing(h)]
+        served = self._gate.select(holes, announced=self._announced)
+        served_ids = {h.id for h in served}
+        news = [h for h in changed if h.id in served_ids and self._worth_announcing(h)]
         for h in news:
             self._announced[h.id] = (h.lat_deg, h.lon_deg, h.score)
             c.announcements += 1

@@ -146,7 +146,8 @@ def format_report(report: FlyReport, gate: AnnounceGate | None = None) -> str:
             f"rates by {tel.get('rate_method')}, clock by {tel.get('clock_source')}"
         )
     gate = gate or AnnounceGate()
-    confirmed = [h for h in s.holes if gate.passes(h)]
+    said = {int(t.split()[1]) for t in report.announced}
+    confirmed = gate.select(s.holes, said)
     lines.append(
         f"holes: {len(confirmed)} announced (score >= {gate.min_score:g}, >= "
         f"{gate.min_sightings} sightings over >= {gate.min_span_s:g} s) of {len(s.holes)}, "

@@ -30,7 +30,7 @@ GPS part, which only averages down over independent stretches of ``gps_decorrela
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import pymap3d
@@ -270,6 +270,9 @@ class AnnounceGate:
         hole meanwhile (0.6-1 m/s on a survey), so the views come from different
         positions: a one-view artefact (a glint, a shadow edge) does not repeat.
 
+    min_separation_m, separation_fraction : a passing hole this close to one already
+        kept is the same opening seen twice (see :meth:`select`).
+
     Holes that do not pass stay *candidates*: logged and written to the hole files marked
     as such, never a waypoint.
 
@@ -287,12 +290,34 @@ class AnnounceGate:
     min_score: float = 0.6
     min_sightings: int = 3
     min_span_s: float = 0.3
+    min_separation_m: float = 0.5
+    separation_fraction: float = 0.5
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.min_score <= 1.0:
             raise InputError(f"announce min_score must be in [0, 1], got {self.min_score}")
         if self.min_sightings < 1 or not self.min_span_s >= 0.0:
             raise InputError("announce min_sightings must be >= 1 and min_span_s >= 0")
+
+    def select(self, holes: Sequence[Hole], announced: Iterable[int] = ()) -> list[Hole]:
+        """The holes to announce and serve: those that pass, less duplicates.
+
+        A duplicate lies within ``max(min_separation_m, separation_fraction * major
+        axis)`` of a hole kept before it: the tracker keeps one sighting per hole per
+        frame, so a detector that boxes one opening twice in a frame makes two holes at
+        the same place. Holes already ``announced`` are always kept (the ground has them);
+        the others in id order. Sorted by id.
+        """
+        done = set(announced)
+        ordered = sorted(
+            (h for h in holes if self.passes(h)), key=lambda h: (h.id not in done, h.id)
+        )
+        kept: list[Hole] = []
+        for h in ordered:
+            if h.id not in done and any(_duplicate(h, k, self) for k in kept):
+                continue
+            kept.append(h)
+        return sorted(kept, key=lambda h: h.id)
 
     def passes(self, hole: Hole) -> bool:
         """True when ``hole`` is strong enough to be announced."""
@@ -302,3 +327,9 @@ class AnnounceGate:
             and hole.sightings >= self.min_sightings
             and span_s >= self.min_span_s
         )
+
+
+def _duplicate(a: Hole, b: Hole, gate: AnnounceGate) -> bool:
+    radius = max(gate.min_separation_m, gate.separation_fraction * max(a.major_m, b.major_m))
+    n, e, _ = pymap3d.geodetic2ned(a.lat_deg, a.lon_deg, b.alt_m, b.lat_deg, b.lon_deg, b.alt_m)
+    return bool(math.hypot(float(n), float(e)) < radius)

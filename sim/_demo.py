@@ -372,7 +372,7 @@ def run_demo(
                     duration_s=duration,
                     frames=c.frames_captured,
                     detected=c.frames_detected,
-                    holes=sum(opts.gate.passes(h) for h in flight.tracker.holes()),
+                    holes=len(opts.gate.select(flight.tracker.holes(), first_announced)),
                     announcements=gcs.take_new(),
                 )
 
@@ -390,10 +390,10 @@ def run_demo(
             duration_s=duration,
             frames=summary.counters.frames_captured,
             detected=summary.counters.frames_detected,
-            holes=sum(opts.gate.passes(h) for h in summary.holes),
+            holes=len(opts.gate.select(summary.holes, first_announced)),
             announcements=gcs.take_new(),
         )
-        served_ids = {h.id for h in summary.holes if opts.gate.passes(h)}
+        served_ids = {h.id for h in opts.gate.select(summary.holes, first_announced)}
         server.flush_cards(timeout_s=30.0)
         if not gcs.wait_complete(served_ids, timeout_s=30.0):
             mission_error = "not every announced hole reached the ground with its picture"
@@ -403,7 +403,7 @@ def run_demo(
         received = tuple(announced)
         card_bytes, cards_sent = server.cards.bytes_sent, server.cards.cards_sent
     interrupted = capture_s < duration - 1.0
-    confirmed = tuple(h for h in summary.holes if opts.gate.passes(h))
+    confirmed = tuple(opts.gate.select(summary.holes, first_announced))
     truth = sortie.truth
     rows, false = score_holes(
         confirmed,

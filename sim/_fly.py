@@ -117,7 +117,8 @@ def format_sim_report(report: SimFlyReport, gate: AnnounceGate | None = None) ->
         if ms is not None
         else "sim: no frame rendered"
     )
-    confirmed = [h for h in report.flight.summary.holes if gate.passes(h)]
+    said = {int(t.split()[1]) for t in report.flight.announced}
+    confirmed = gate.select(report.flight.summary.holes, said)
     for t in report.truth:
         near = [
             (math.hypot(*local_en_m(h.lat_deg, h.lon_deg, t.lat_deg, t.lon_deg)), h.id)
