@@ -26,7 +26,6 @@ import logging
 import queue
 import threading
 import time
-from collections import OrderedDict
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -37,7 +36,7 @@ import pymap3d
 from capture._clock import ClockUnavailable
 from capture._errors import SensorError
 from capture._frame import Frame, FrameSource
-from capture._holepipeline import HolePipeline, HoleView, view_jpeg
+from capture._holepipeline import BestViews, HolePipeline, HoleView
 from capture._mavlink import Telemetry, TelemetryTimeoutError
 from capture._mcaplog import FlightLogWriter, LogOptions, WriterStats
 from capture._posebuffer import PoseUnavailable
@@ -218,13 +217,8 @@ class Flight:
         self._worker: DetectionWorker | None = None
         self._announced: dict[int, tuple[float, float, float]] = {}
         self._gate = config.gate
-        # recent frames' colour images, for the best view of a hole (the worker lags a
-        # few frames behind capture; frames are immutable, so no copies are kept)
-        self._recent: OrderedDict[int, Any] = OrderedDict()
-        self._recent_max = 48
-        self._views: dict[int, HoleView] = {}
+        self._views = BestViews()
         self._lock = threading.Lock()
-        self._recent_lock = threading.Lock()
         self._unix_minus_mono = time.time_ns() - time.monotonic_ns()
 
     # -- clocks ---------------------------------------------------------------------------
@@ -299,7 +293,7 @@ class Flight:
             return
         holes = self.tracker.holes()
         self._writer.write_holes(holes, self.unix_ns(r.t_mono_ns))
-        self._keep_views(r, changed)
+        self._views.update(r.frame_index, r.detections, changed)
         served = self._gate.select(holes, announced=self._announced)
         served_ids = {h.id for h in served}
         news = [h for h in changed if h.id in served_ids and self._worth_announcing(h)]
@@ -307,23 +301,8 @@ class Flight:
             self._announced[h.id] = (h.lat_deg, h.lon_deg, h.score)
             c.announcements += 1
         if self._on_holes is not None and news:
-            views = {h.id: self._views[h.id] for h in news if h.id in self._views}
+            views = {h.id: v for h in news if (v := self._views.get(h.id)) is not None}
             self._on_holes(served, news, views)
-
-    def _keep_views(self, r: WorkerResult, changed: tuple[Hole, ...]) -> None:
-        """Encode the best view of each hole whose best view is this frame."""
-        with self._recent_lock:
-            rgb = self._recent.get(r.frame_index)
-        if rgb is None:
-            return
-        for h in changed:
-            if h.best_frame_index != r.frame_index:
-                continue
-            why = next((d.explain() for d in r.detections if d.box == h.best_box), "")
-            try:
-                self._views[h.id] = HoleView(r.frame_index, view_jpeg(rgb, h.best_box), why)
-            except Exception as err:  # a view is nice to have; never stop the flight for it
-                log.warning("view of hole %d not encoded: %s", h.id, err)
 
     def _worth_announcing(self, h: Hole) -> bool:
         """Passes the announce gate, and is new to the ground, moved more than 0.5 m or
@@ -407,10 +386,7 @@ class Flight:
             frame, self.unix_ns(frame.t_mono_ns), pose=pose, t_boot_ns=t_boot
         ):
             c.frames_log_dropped += 1
-        with self._recent_lock:
-            self._recent[frame.index] = frame.rgb
-            while len(self._recent) > self._recent_max:
-                self._recent.popitem(last=False)
+        self._views.add_frame(frame.index, frame.rgb)
         self._worker.offer(frame)
 
     def _capture(self, t_end: float | None) -> None:

@@ -11,6 +11,9 @@ getting it may wait for telemetry).
 
 from __future__ import annotations
 
+import logging
+import threading
+from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -31,7 +34,17 @@ from geotag import (
 )
 from holescan_errors import InputError
 
-__all__ = ["FrameHoles", "HolePipeline", "HoleView", "PoseOf", "crop_view", "view_jpeg"]
+_log = logging.getLogger(__name__)
+
+__all__ = [
+    "BestViews",
+    "FrameHoles",
+    "HolePipeline",
+    "HoleView",
+    "PoseOf",
+    "crop_view",
+    "view_jpeg",
+]
 
 PoseOf = Callable[[], VehiclePose | None]
 """Returns the vehicle pose at the frame's capture time, or None when it is unknown."""
@@ -187,3 +200,49 @@ class HoleView:
     frame_index: int
     jpeg: bytes
     why: str
+
+
+class BestViews:
+    """Each hole's best view, encoded when it changes (thread-safe).
+
+    The capture thread offers every frame's colour image (:meth:`add_frame`; the last
+    ``keep_frames`` are kept by reference, frames being immutable: the detection worker
+    lags a few frames behind); the results thread, after merging a frame's detections,
+    calls :meth:`update` and the holes whose best view is that frame get a new
+    :class:`HoleView` (JPEG via :func:`view_jpeg`, the detection's explanation).
+    """
+
+    def __init__(self, keep_frames: int = 48) -> None:
+        self.keep_frames = keep_frames
+        self._frames: OrderedDict[int, npt.NDArray[np.uint8]] = OrderedDict()
+        self._views: dict[int, HoleView] = {}
+        self._lock = threading.Lock()
+
+    def add_frame(self, index: int, rgb: npt.NDArray[np.uint8]) -> None:
+        with self._lock:
+            self._frames[index] = rgb
+            while len(self._frames) > self.keep_frames:
+                self._frames.popitem(last=False)
+
+    def update(
+        self, frame_index: int, detections: Sequence[Detection], changed: Sequence[Hole]
+    ) -> None:
+        with self._lock:
+            rgb = self._frames.get(frame_index)
+        if rgb is None:
+            return
+        for h in changed:
+            if h.best_frame_index != frame_index:
+                continue
+            why = next((d.explain() for d in detections if d.box == h.best_box), "")
+            try:
+                view = HoleView(frame_index, view_jpeg(rgb, h.best_box), why)
+            except Exception as err:  # a picture is nice to have; never stop the flight
+                _log.warning("view of hole %d not encoded: %s", h.id, err)
+                continue
+            with self._lock:
+                self._views[h.id] = view
+
+    def get(self, hole_id: int) -> HoleView | None:
+        with self._lock:
+            return self._views.get(hole_id)
