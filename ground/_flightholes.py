@@ -524,6 +524,7 @@ def export_flight_holes(
                 rel_alt_m=rel_alt_m,
                 clearance_m=clearance_m,
                 name=name,
+                candidates=[h for h in flight.holes if h not in keep],
             )
         except OSError as err:
             raise InputError(f"cannot write {path}: {err.strerror or err}") from err

@@ -143,3 +143,23 @@ def test_newer_card_replaces_an_unsent_one_and_repeats_are_bounded() -> None:
     assert sender.cards_sent == 3  # once + two repeats 10 s apart
     with pytest.raises(InputError):
         CardSender(bytes_per_s=1.0)
+
+
+def test_candidates_are_marked_in_the_files_and_never_a_waypoint(tmp_path: Any) -> None:
+    import json as _json
+
+    from missions import write_hole_file
+
+    strong = HOLE
+    weak = Hole(
+        8, 43.6533, -79.3833, 121.0, 0.5, 0.21, 4, 10**9, 2 * 10**9, 3, (1, 2, 3, 4), 0.3, 0.2
+    )
+    gj = write_hole_file(tmp_path / "h.geojson", [strong], "geojson", candidates=[weak])
+    feats = {
+        f["properties"]["name"]: f["properties"] for f in _json.loads(gj.read_text())["features"]
+    }
+    assert feats["hole 7"].get("candidate") is None and feats["candidate 8"]["candidate"] is True
+    plan = write_hole_file(tmp_path / "h.plan", [strong], "plan", candidates=[weak])
+    assert len(_json.loads(plan.read_text())["mission"]["items"]) == 1
+    kml = write_hole_file(tmp_path / "h.kml", [strong], "kml", candidates=[weak]).read_text()
+    assert "candidate 8" in kml and "not announced" in kml
