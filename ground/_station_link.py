@@ -94,6 +94,7 @@ class VehicleLink:
         self._mission: dict[str, Any] | None = None
         self._yaw = 0.0
         self._missing_before: frozenset[int] = frozenset()
+        self._open_failed = False
 
     def __enter__(self) -> VehicleLink:
         self._thread.start()
@@ -119,21 +120,23 @@ class VehicleLink:
                 baud=self.baud,
             )
         except Exception as err:  # pymavlink: OSError, ValueError, SerialException
-            _log.error("cannot open the MAVLink link %r: %s; retrying", self.connection, err)
+            if not self._open_failed:  # one line, not one every retry
+                _log.error(
+                    "cannot open the MAVLink link %r: %s; retrying every 5 s",
+                    self.connection,
+                    err,
+                )
+            self._open_failed = True
             return False
+        self._open_failed = False
         _log.info("listening for the vehicle on %s", self.connection)
         return True
 
     def _run(self) -> None:
-        warned_open = False
         while not self._stop.is_set():
-            if self._conn is None:
-                if not self._open():
-                    warned_open = True
-                    self._stop.wait(5.0)
-                    continue
-                if warned_open:
-                    _log.warning("MAVLink link %r open now", self.connection)
+            if self._conn is None and not self._open():
+                self._stop.wait(5.0)
+                continue
             try:
                 msg = self._conn.recv_match(type=_WANTED, blocking=True, timeout=0.2)
             except Exception as err:  # a dead serial port, a closed socket
