@@ -265,7 +265,8 @@ class AnnounceGate:
 
     min_score : its best detector score (named so that it can become a calibrated
         probability ``p_hole`` when the detector has one).
-    min_sightings : frames it was seen in.
+    min_sightings : frames it was seen in (2: the count depends on the detector's frame
+        rate, which drops to ~2.5 frames/s on a loaded computer; the time span does not).
     min_span_s : seconds between its first and last sighting. The vehicle moves over the
         hole meanwhile (0.6-1 m/s on a survey), so the views come from different
         positions: a one-view artefact (a glint, a shadow edge) does not repeat.
@@ -282,13 +283,13 @@ class AnnounceGate:
 
     Examples
     --------
-    >>> gate = AnnounceGate(min_score=0.6, min_sightings=3, min_span_s=0.3)
+    >>> gate = AnnounceGate(min_score=0.6, min_sightings=2, min_span_s=0.3)
     >>> gate.min_score
     0.6
     """
 
     min_score: float = 0.6
-    min_sightings: int = 3
+    min_sightings: int = 2
     min_span_s: float = 0.3
     min_separation_m: float = 0.5
     separation_fraction: float = 0.5
