@@ -19,6 +19,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import threading
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -68,6 +69,7 @@ class GroundStation:
         self.state = StationState.open(opts.out)
         self._stack = contextlib.ExitStack()
         self._sent: dict[int, tuple[object, ...]] = {}
+        self._files_key: tuple[object, ...] | None = None
         self._dirty = threading.Event()
         self._stop = threading.Event()
         self.web: StationWeb | None = None
@@ -117,23 +119,28 @@ class GroundStation:
     # -- following the state -----------------------------------------------------------
     def _follow(self) -> None:
         refresh = self.opts.cot_refresh_s
+        last_refresh = time.monotonic()
         while not self._stop.is_set():
-            if self._dirty.wait(refresh):
+            if self._dirty.wait(min(refresh, 5.0)):
                 self._dirty.clear()
-                self._flush()
-            else:
-                self._sent.clear()  # re-send every hole before its CoT goes stale
-                self._flush()
+            if time.monotonic() - last_refresh >= refresh:
+                last_refresh = time.monotonic()
+                with self._flush_lock:
+                    self._sent.clear()  # re-send every hole before its CoT goes stale
+            self._flush()
 
     _flush_lock = threading.Lock()
 
     def _flush(self) -> None:
         with self._flush_lock:
             _, holes, _ = self.state.snapshot()
-            try:
-                write_station_files(self.opts.out, holes, refresh_s=self.opts.kml_refresh_s)
-            except OSError as err:
-                _log.error("hole files not written: %s", err)
+            files_key = tuple(tuple(h.to_json().items()) for h in holes)
+            if files_key != self._files_key:  # the track alone changes nothing in the files
+                try:
+                    write_station_files(self.opts.out, holes, refresh_s=self.opts.kml_refresh_s)
+                    self._files_key = files_key
+                except OSError as err:
+                    _log.error("hole files not written: %s", err)
             if self.cot is None:
                 return
             events: list[bytes] = []
