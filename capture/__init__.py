@@ -16,7 +16,7 @@ from capture._flyconfig import (
     parse_fly_config,
 )
 from capture._frame import Frame, FrameSource
-from capture._holepipeline import HolePipeline
+from capture._holepipeline import HolePipeline, HoleView, crop_view, view_jpeg
 from capture._mavlink import (
     DEFAULT_RATES_HZ,
     Telemetry,
@@ -79,6 +79,7 @@ __all__ = [
     "FrameSource",
     "GpsFix",
     "HolePipeline",
+    "HoleView",
     "LogInfo",
     "LogOptions",
     "LogRecord",
@@ -121,6 +122,7 @@ __all__ = [
     "check_output",
     "check_table",
     "commit_part",
+    "crop_view",
     "export_oni",
     "find_xtion",
     "fly",
@@ -141,5 +143,6 @@ __all__ = [
     "reset_xtion",
     "scan_oni",
     "scan_records",
+    "view_jpeg",
     "write_oni",
 ]

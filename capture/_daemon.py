@@ -26,7 +26,7 @@ import logging
 import queue
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -36,18 +36,21 @@ import pymap3d
 from capture._clock import ClockUnavailable
 from capture._errors import SensorError
 from capture._frame import Frame, FrameSource
-from capture._holepipeline import HolePipeline
+from capture._holepipeline import BestViews, HolePipeline, HoleView
 from capture._mavlink import Telemetry, TelemetryTimeoutError
 from capture._mcaplog import FlightLogError, FlightLogWriter, LogOptions, WriterStats
 from capture._posebuffer import PoseUnavailable
 from capture._worker import DetectionWorker, WorkerResult
 from detect import DEFAULT, CameraIntrinsics, DetectParams
-from geotag import CameraMount, Hole, VehiclePose
+from geotag import AnnounceGate, CameraMount, Hole, VehiclePose
 
 log = logging.getLogger(__name__)
 
 SourceFactory = Callable[[], FrameSource]
-HoleListener = Callable[[list[Hole], list[Hole]], None]
+HoleListener = Callable[[list[Hole], list[Hole], Mapping[int, HoleView]], None]
+"""``on_holes(served, news, views)``: every hole that passes the announce gate (the
+waypoints), those new or changed enough to announce now, and the best view of each hole
+in ``news`` whose best view is known (hole id -> :class:`HoleView`)."""
 
 
 @dataclass(frozen=True)
@@ -58,7 +61,10 @@ class FlightConfig:
     params : detector parameters. mount : camera mount on the vehicle.
     frame_timeout_s : no frame for this long = the sensor stalled.
     retry_backoff_s : waits between sensor reopen attempts (the last one repeats).
-    announce_min_sightings : a hole is served/announced once seen in this many frames.
+    announce_min_score, announce_min_sightings, announce_min_span_s : the announce gate
+        (:class:`geotag.AnnounceGate`): a hole is announced, served as a waypoint and its
+        view sent only when its score, sightings and time span reach these. Weaker holes
+        stay candidates (logged, never a waypoint).
     pose_wait_s : how long the results thread waits for telemetry after a frame's time.
     startup_sync_s : at start, wait up to this long for the clock sync and a first pose
         (the sensor opens only then; a silent autopilot just delays the start).
@@ -72,13 +78,22 @@ class FlightConfig:
     log_options: LogOptions = field(default_factory=LogOptions)
     frame_timeout_s: float = 3.0
     retry_backoff_s: tuple[float, ...] = (0.5, 1.0, 2.0, 4.0, 8.0)
-    announce_min_sightings: int = 3
+    announce_min_score: float = AnnounceGate.min_score
+    announce_min_sightings: int = AnnounceGate.min_sightings
+    announce_min_span_s: float = AnnounceGate.min_span_s
     health_period_s: float = 1.0
     pose_wait_s: float = 0.15
     max_frames: int | None = None
     max_duration_s: float | None = None
     startup_sync_s: float = 3.0
     config_record: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def gate(self) -> AnnounceGate:
+        """The announce gate these settings make."""
+        return AnnounceGate(
+            self.announce_min_score, self.announce_min_sightings, self.announce_min_span_s
+        )
 
 
 @dataclass
@@ -201,6 +216,8 @@ class Flight:
         self._telemetry: Telemetry | None = None
         self._worker: DetectionWorker | None = None
         self._announced: dict[int, tuple[float, float, float]] = {}
+        self._gate = config.gate
+        self._views = BestViews()
         self._lock = threading.Lock()
         self._unix_minus_mono = time.time_ns() - time.monotonic_ns()
         self._finished = False  # ended by a limit or the source's end, not by a stop
@@ -277,20 +294,22 @@ class Flight:
             return
         holes = self.tracker.holes()
         self._writer.write_holes(holes, self.unix_ns(r.t_mono_ns))
-        confirmed = [h for h in holes if h.sightings >= self.config.announce_min_sightings]
-        news = [
-            h
-            for h in changed
-            if h.sightings >= self.config.announce_min_sightings and self._worth_announcing(h)
-        ]
+        self._views.update(r.frame_index, r.detections, changed)
+        served = self._gate.select(holes, announced=self._announced)
+        served_ids = {h.id for h in served}
+        news = [h for h in changed if h.id in served_ids and self._worth_announcing(h)]
         for h in news:
             self._announced[h.id] = (h.lat_deg, h.lon_deg, h.score)
             c.announcements += 1
         if self._on_holes is not None and news:
-            self._on_holes(confirmed, news)
+            views = {h.id: v for h in news if (v := self._views.get(h.id)) is not None}
+            self._on_holes(served, news, views)
 
     def _worth_announcing(self, h: Hole) -> bool:
-        """New, moved more than 0.5 m, or score up by 0.05 since the last announcement."""
+        """Passes the announce gate, and is new to the ground, moved more than 0.5 m or
+        its score rose by 0.05 since it was last announced."""
+        if not self._gate.passes(h):
+            return False
         last = self._announced.get(h.id)
         if last is None:
             return True
@@ -368,6 +387,7 @@ class Flight:
             frame, self.unix_ns(frame.t_mono_ns), pose=pose, t_boot_ns=t_boot
         ):
             c.frames_log_dropped += 1
+        self._views.add_frame(frame.index, frame.rgb)
         self._worker.offer(frame)
 
     def _capture(self, t_end: float | None) -> None:

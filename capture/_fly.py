@@ -4,8 +4,9 @@
 :class:`~capture._flyconfig.SensorSetup` it is given (the Xtion, a recording, or the
 simulator's, from :func:`sim.fly_sim`) into a :class:`~capture._daemon.Flight` and, when a
 ground station link is configured, a
-:class:`missions.HoleMissionServer` that serves the confirmed holes as a mission and
-announces each new or moved one by STATUSTEXT (through the daemon's ``on_holes``).
+:class:`missions.HoleMissionServer` that serves the holes passing the announce gate as a
+mission, announces each new or moved one by STATUSTEXT and sends its card (best view and
+facts, under the byte budget) through the daemon's ``on_holes``.
 :func:`format_report` is the operator's summary.
 """
 
@@ -14,12 +15,14 @@ from __future__ import annotations
 import contextlib
 import logging
 import threading
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 from capture._daemon import Flight, FlightSummary
 from capture._flyconfig import FlyConfig, SensorSetup, open_sensor
+from capture._holepipeline import HoleView
 from capture._mavlink import Telemetry
-from geotag import Hole
+from geotag import AnnounceGate, Hole
 from missions import HoleMissionServer
 
 __all__ = ["FlyReport", "fly", "format_report"]
@@ -33,11 +36,15 @@ class FlyReport:
 
     summary : the daemon's :class:`~capture._daemon.FlightSummary`. sensor : what was flown.
     announced : STATUSTEXTs sent to the ground station, in order.
+    cards_sent, card_bytes : hole cards (best view + facts) sent whole, and the MAVLink
+    bytes they took.
     """
 
     summary: FlightSummary
     sensor: str
     announced: tuple[str, ...] = ()
+    cards_sent: int = 0
+    card_bytes: int = 0
 
 
 def fly(
@@ -62,10 +69,11 @@ def fly(
                     cfg.sysid,
                     rel_alt_m=cfg.hole_rel_alt_m,
                     clearance_m=cfg.hole_clearance_m,
+                    card_bytes_per_s=cfg.hole_card_bytes_per_s,
                 )
             )
 
-        def on_holes(confirmed: list[Hole], news: list[Hole]) -> None:
+        def on_holes(served: list[Hole], news: list[Hole], views: Mapping[int, HoleView]) -> None:
             for h in news:
                 _log.info(
                     "hole %d at %.7f, %.7f (score %.2f, %d sightings)",
@@ -76,8 +84,11 @@ def fly(
                     h.sightings,
                 )
             if server is not None:
-                server.update_holes(confirmed)
+                server.update_holes(served)
                 announced.extend(server.announce(h) for h in news)
+                for h in news:
+                    if h.id in views:
+                        server.send_card(h, views[h.id].jpeg, views[h.id].why)
 
         if setup is None:
             setup = open_sensor(cfg)
@@ -101,10 +112,15 @@ def fly(
         if stop is not None:
             flight.stop = stop
         summary = flight.run()
-    return FlyReport(summary, str(cfg.sensor), tuple(announced))
+        if server is not None:
+            server.flush_cards(timeout_s=10.0)  # let the last pictures go out
+            cards = (server.cards.cards_sent, server.cards.bytes_sent)
+        else:
+            cards = (0, 0)
+    return FlyReport(summary, str(cfg.sensor), tuple(announced), *cards)
 
 
-def format_report(report: FlyReport, min_sightings: int = 3) -> str:
+def format_report(report: FlyReport, gate: AnnounceGate | None = None) -> str:
     """A few lines for the operator: frames, log, detector, telemetry, holes."""
     s = report.summary
     c = s.counters
@@ -129,11 +145,20 @@ def format_report(report: FlyReport, min_sightings: int = 3) -> str:
             f"{tel.get('bad_bytes', 0)} garbage bytes, {tel.get('bad_packets', 0)} bad packets, "
             f"rates by {tel.get('rate_method')}, clock by {tel.get('clock_source')}"
         )
-    confirmed = [h for h in s.holes if h.sightings >= min_sightings]
+    gate = gate or AnnounceGate()
+    said = {int(t.split()[1]) for t in report.announced}
+    confirmed = gate.select(s.holes, said)
     lines.append(
-        f"holes: {len(confirmed)} confirmed (>= {min_sightings} sightings) of {len(s.holes)}; "
+        f"holes: {len(confirmed)} announced (score >= {gate.min_score:g}, >= "
+        f"{gate.min_sightings} sightings over >= {gate.min_span_s:g} s) of {len(s.holes)}, "
+        f"the rest candidates; "
         f"{c.announcements} announcements, {len(report.announced)} sent to the ground station"
     )
+    if report.cards_sent or report.card_bytes:
+        lines.append(
+            f"hole pictures: {report.cards_sent} sent, {report.card_bytes} B "
+            f"({report.card_bytes / dur:.0f} B/s over the flight)"
+        )
     for h in confirmed:
         lines.append(
             f"  hole {h.id}: {h.lat_deg:.7f}, {h.lon_deg:.7f} +-{h.sigma_h_m:.2f} m, score "

@@ -44,7 +44,7 @@ from capture._errors import SensorError
 from capture._frame import Frame, FrameSource
 from capture._mcaplog import LogOptions
 from detect import DEFAULT, PAPER, SEARCHERS, CameraIntrinsics, DetectParams
-from geotag import CameraMount
+from geotag import AnnounceGate, CameraMount
 from holescan_errors import InputError
 
 __all__ = [
@@ -109,7 +109,10 @@ _TABLES: dict[str, dict[str, tuple[tuple[type, ...], Any]]] = {
         "max_queued_messages": ((int,), 20_000),
     },
     "holes": {
-        "announce_min_sightings": ((int,), 3),
+        "announce_min_score": (_NUM, AnnounceGate.min_score),
+        "announce_min_sightings": ((int,), AnnounceGate.min_sightings),
+        "announce_min_span_s": (_NUM, AnnounceGate.min_span_s),
+        "card_bytes_per_s": (_NUM, 1000.0),
         "rel_alt_m": (_NUM, 10.0),
         "clearance_m": (_NUM, 5.0),
     },
@@ -152,6 +155,7 @@ class FlyConfig:
     realtime : replay ``oni``/``mcap`` recordings at their recorded pace.
     flight : the daemon's settings (its ``log_prefix`` is set per flight by
     :meth:`flight_config`). hole_rel_alt_m, hole_clearance_m : served waypoints' altitude.
+    hole_card_bytes_per_s : byte budget of the holes' pictures to the ground station.
     sim_table : the ``[sim]`` table as written (checked by :mod:`sim`). record : the settings
     as flat ``table.key`` -> value
     (logged as the flight's ``holescan.config`` metadata).
@@ -171,6 +175,7 @@ class FlyConfig:
     flight: FlightConfig = field(default_factory=lambda: FlightConfig(log_prefix=Path("flight")))
     hole_rel_alt_m: float = 10.0
     hole_clearance_m: float = 5.0
+    hole_card_bytes_per_s: float = 1000.0
     sim_table: Mapping[str, Any] = field(default_factory=dict)
     record: Mapping[str, Any] = field(default_factory=dict)
 
@@ -317,8 +322,16 @@ def parse_fly_config(
     )
 
     holes = tables["holes"]
-    if holes["announce_min_sightings"] < 1:
-        raise InputError(f"{where}: holes.announce_min_sightings must be >= 1")
+    try:
+        AnnounceGate(
+            float(holes["announce_min_score"]),
+            holes["announce_min_sightings"],
+            float(holes["announce_min_span_s"]),
+        )
+    except InputError as err:
+        raise InputError(f"{where}: [holes] {err}") from err
+    if not float(holes["card_bytes_per_s"]) >= 100.0:
+        raise InputError(f"{where}: holes.card_bytes_per_s must be >= 100")
 
     flight = FlightConfig(
         log_prefix=Path("flight"),
@@ -327,7 +340,9 @@ def parse_fly_config(
         log_options=options,
         frame_timeout_s=float(cap["frame_timeout_s"]),
         retry_backoff_s=backoff,
+        announce_min_score=float(holes["announce_min_score"]),
         announce_min_sightings=holes["announce_min_sightings"],
+        announce_min_span_s=float(holes["announce_min_span_s"]),
         health_period_s=float(cap["health_period_s"]),
         pose_wait_s=float(cap["pose_wait_s"]),
         startup_sync_s=float(cap["startup_sync_s"]),
@@ -355,6 +370,7 @@ def parse_fly_config(
         flight=flight,
         hole_rel_alt_m=float(holes["rel_alt_m"]),
         hole_clearance_m=float(holes["clearance_m"]),
+        hole_card_bytes_per_s=float(holes["card_bytes_per_s"]),
         sim_table=dict(sim_table),
         record=record,
     )

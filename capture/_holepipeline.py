@@ -11,8 +11,16 @@ getting it may wait for telemetry).
 
 from __future__ import annotations
 
+import logging
+import threading
+from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
+
+import cv2
+import numpy as np
+import numpy.typing as npt
 
 from detect import CameraIntrinsics, Detection
 from geotag import (
@@ -24,8 +32,19 @@ from geotag import (
     VehiclePose,
     geotag_frame,
 )
+from holescan_errors import InputError
 
-__all__ = ["FrameHoles", "HolePipeline", "PoseOf"]
+_log = logging.getLogger(__name__)
+
+__all__ = [
+    "BestViews",
+    "FrameHoles",
+    "HolePipeline",
+    "HoleView",
+    "PoseOf",
+    "crop_view",
+    "view_jpeg",
+]
 
 PoseOf = Callable[[], VehiclePose | None]
 """Returns the vehicle pose at the frame's capture time, or None when it is unknown."""
@@ -99,3 +118,131 @@ class HolePipeline:
     def holes(self) -> list[Hole]:
         """Every hole so far, sorted by id."""
         return self.tracker.holes()
+
+
+Box = tuple[int, int, int, int]
+
+
+def crop_view(
+    image: npt.NDArray[Any], box: Box, *, margin_px: int = 24, margin_frac: float = 0.5
+) -> tuple[npt.NDArray[Any], Box]:
+    """The part of ``image`` around ``box`` and the box in the crop's pixels.
+
+    The one cropper of a hole's view (the flight's cards, the hole files' thumbnails, the
+    report): a margin of ``margin_frac`` of the box's larger side, at least ``margin_px``,
+    clipped to the image. The crop is a view into ``image`` (copy it to keep it).
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, C) ndarray (colour, or depth in mm).
+    box : (x, y, w, h) pixels, w and h > 0.
+
+    Raises
+    ------
+    holescan_errors.InputError
+        An empty box, or one entirely outside the image.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> crop, b = crop_view(np.zeros((480, 640), np.uint16), (300, 200, 40, 20), margin_px=10)
+    >>> crop.shape, b
+    ((60, 80), (20, 20, 40, 20))
+    """
+    x, y, w, h = (int(v) for v in box)
+    H, W = image.shape[:2]
+    m = max(margin_px, round(margin_frac * max(w, h)))
+    x0, y0 = max(x - m, 0), max(y - m, 0)
+    x1, y1 = min(x + w + m, W), min(y + h + m, H)
+    if w <= 0 or h <= 0 or x1 <= x0 or y1 <= y0:
+        raise InputError(f"box {box} is empty or outside the {W} x {H} image")
+    return image[y0:y1, x0:x1], (x - x0, y - y0, w, h)
+
+
+def view_jpeg(
+    rgb: npt.NDArray[np.uint8],
+    box: Box,
+    *,
+    size_px: int = 96,
+    max_bytes: int = 2800,
+    qualities: Sequence[int] = (70, 55, 40, 28, 18),
+) -> bytes:
+    """A hole's best view as a small JPEG for the radio: crop, box drawn, longer side
+    ``size_px``, the best quality of ``qualities`` that fits ``max_bytes``.
+
+    rgb : (H, W, 3) uint8 ndarray, RGB order. box : (x, y, w, h) pixels.
+    """
+    crop, (bx, by, bw, bh) = crop_view(rgb, box, margin_frac=0.6)
+    h, w = crop.shape[:2]
+    scale = size_px / max(h, w)
+    size = (max(1, round(w * scale)), max(1, round(h * scale)))
+    small = cv2.resize(np.ascontiguousarray(crop), size, interpolation=cv2.INTER_AREA)
+    p0 = (round(bx * scale), round(by * scale))
+    p1 = (round((bx + bw) * scale) - 1, round((by + bh) * scale) - 1)
+    cv2.rectangle(small, p0, p1, (255, 64, 0), 1)
+    bgr = cv2.cvtColor(small, cv2.COLOR_RGB2BGR)
+    data = b""
+    for q in qualities:
+        ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, int(q)])
+        if not ok:
+            raise InputError("JPEG encoding of a hole view failed")
+        data = buf.tobytes()
+        if len(data) <= max_bytes:
+            break
+    return data
+
+
+@dataclass(frozen=True)
+class HoleView:
+    """A hole's best view as sent to the ground: ``jpeg`` (:func:`view_jpeg`) and the
+    detector's explanation of that detection (:meth:`detect.Detection.explain`)."""
+
+    frame_index: int
+    jpeg: bytes
+    why: str
+
+
+class BestViews:
+    """Each hole's best view, encoded when it changes (thread-safe).
+
+    The capture thread offers every frame's colour image (:meth:`add_frame`; the last
+    ``keep_frames`` are kept by reference, frames being immutable: the detection worker
+    lags a few frames behind); the results thread, after merging a frame's detections,
+    calls :meth:`update` and the holes whose best view is that frame get a new
+    :class:`HoleView` (JPEG via :func:`view_jpeg`, the detection's explanation).
+    """
+
+    def __init__(self, keep_frames: int = 48) -> None:
+        self.keep_frames = keep_frames
+        self._frames: OrderedDict[int, npt.NDArray[np.uint8]] = OrderedDict()
+        self._views: dict[int, HoleView] = {}
+        self._lock = threading.Lock()
+
+    def add_frame(self, index: int, rgb: npt.NDArray[np.uint8]) -> None:
+        with self._lock:
+            self._frames[index] = rgb
+            while len(self._frames) > self.keep_frames:
+                self._frames.popitem(last=False)
+
+    def update(
+        self, frame_index: int, detections: Sequence[Detection], changed: Sequence[Hole]
+    ) -> None:
+        with self._lock:
+            rgb = self._frames.get(frame_index)
+        if rgb is None:
+            return
+        for h in changed:
+            if h.best_frame_index != frame_index:
+                continue
+            why = next((d.explain() for d in detections if d.box == h.best_box), "")
+            try:
+                view = HoleView(frame_index, view_jpeg(rgb, h.best_box), why)
+            except Exception as err:  # a picture is nice to have; never stop the flight
+                _log.warning("view of hole %d not encoded: %s", h.id, err)
+                continue
+            with self._lock:
+                self._views[h.id] = view
+
+    def get(self, hole_id: int) -> HoleView | None:
+        with self._lock:
+            return self._views.get(hole_id)

@@ -8,7 +8,7 @@ from geotag._camera import (
     rotation_ned_from_optical,
 )
 from geotag._local import LocalFrame, local_en_m
-from geotag._merge import Hole, HoleTracker, MergeParams
+from geotag._merge import AnnounceGate, Hole, HoleTracker, MergeParams
 from geotag._project import (
     ErrorModel,
     HoleSighting,
@@ -19,6 +19,7 @@ from geotag._project import (
 from geotag._types import VehiclePose
 
 __all__ = [
+    "AnnounceGate",
     "CameraMount",
     "ErrorModel",
     "GimbalAttitude",

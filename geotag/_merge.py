@@ -30,7 +30,7 @@ GPS part, which only averages down over independent stretches of ``gps_decorrela
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import pymap3d
@@ -38,7 +38,7 @@ import pymap3d
 from geotag._project import HoleSighting
 from holescan_errors import InputError
 
-__all__ = ["Hole", "HoleTracker", "MergeParams"]
+__all__ = ["AnnounceGate", "Hole", "HoleTracker", "MergeParams"]
 
 _MIN_REL_SIGMA_M = 0.01
 
@@ -255,3 +255,82 @@ class HoleTracker:
     def confirmed(self, min_sightings: int = 2) -> list[Hole]:
         """Holes seen at least ``min_sightings`` times, sorted by id."""
         return [self._hole(t) for t in self._tracks if t.count >= min_sightings]
+
+
+@dataclass(frozen=True)
+class AnnounceGate:
+    """When a hole is worth a rescuer's look: announced, served as a waypoint, sent on.
+
+    A hole passes when all three hold:
+
+    min_score : its best detector score (named so that it can become a calibrated
+        probability ``p_hole`` when the detector has one).
+    min_sightings : frames it was seen in (2: the count depends on the detector's frame
+        rate, which drops to ~2.5 frames/s on a loaded computer; the time span does not).
+    min_span_s : seconds between its first and last sighting. The vehicle moves over the
+        hole meanwhile (0.6-1 m/s on a survey), so the views come from different
+        positions: a one-view artefact (a glint, a shadow edge) does not repeat.
+
+    min_separation_m, separation_fraction : a passing hole this close to one already
+        kept is the same opening seen twice (see :meth:`select`).
+
+    Holes that do not pass stay *candidates*: logged and written to the hole files marked
+    as such, never a waypoint.
+
+    The defaults were chosen from the score distributions of true and false holes over
+    12 simulated worlds (``benchmarks/bench_announce.py``; figures in the README, "What
+    is announced"): see there for the measurement.
+
+    Examples
+    --------
+    >>> gate = AnnounceGate(min_score=0.6, min_sightings=2, min_span_s=0.3)
+    >>> gate.min_score
+    0.6
+    """
+
+    min_score: float = 0.6
+    min_sightings: int = 2
+    min_span_s: float = 0.3
+    min_separation_m: float = 0.5
+    separation_fraction: float = 0.5
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.min_score <= 1.0:
+            raise InputError(f"announce min_score must be in [0, 1], got {self.min_score}")
+        if self.min_sightings < 1 or not self.min_span_s >= 0.0:
+            raise InputError("announce min_sightings must be >= 1 and min_span_s >= 0")
+
+    def select(self, holes: Sequence[Hole], announced: Iterable[int] = ()) -> list[Hole]:
+        """The holes to announce and serve: those that pass, less duplicates.
+
+        A duplicate lies within ``max(min_separation_m, separation_fraction * major
+        axis)`` of a hole kept before it: the tracker keeps one sighting per hole per
+        frame, so a detector that boxes one opening twice in a frame makes two holes at
+        the same place. Holes already ``announced`` are always kept (the ground has them);
+        the others in id order. Sorted by id.
+        """
+        done = set(announced)
+        ordered = sorted(
+            (h for h in holes if self.passes(h)), key=lambda h: (h.id not in done, h.id)
+        )
+        kept: list[Hole] = []
+        for h in ordered:
+            if h.id not in done and any(_duplicate(h, k, self) for k in kept):
+                continue
+            kept.append(h)
+        return sorted(kept, key=lambda h: h.id)
+
+    def passes(self, hole: Hole) -> bool:
+        """True when ``hole`` is strong enough to be announced."""
+        span_s = (hole.t_last_boot_ns - hole.t_first_boot_ns) * 1e-9
+        return (
+            hole.score >= self.min_score
+            and hole.sightings >= self.min_sightings
+            and span_s >= self.min_span_s
+        )
+
+
+def _duplicate(a: Hole, b: Hole, gate: AnnounceGate) -> bool:
+    radius = max(gate.min_separation_m, gate.separation_fraction * max(a.major_m, b.major_m))
+    n, e, _ = pymap3d.geodetic2ned(a.lat_deg, a.lon_deg, b.alt_m, b.lat_deg, b.lon_deg, b.alt_m)
+    return bool(math.hypot(float(n), float(e)) < radius)

@@ -7,10 +7,14 @@
 * :func:`write_report` - a flight's self-contained HTML report.
 * :func:`load_dataset` / :func:`write_dataset` and :func:`evaluate_dataset` - annotated
   RGB-D datasets (COCO layout) and the detector's AP on them.
+* :func:`run_ground` / :class:`GroundStation` - ``holescan ground``: the live ground
+  station app (holes from the vehicle's MAVLink stream, state file, live page, TAK CoT,
+  KML/GeoJSON/GPX always current).
 * :func:`read_rgb` / :func:`read_depth` / :func:`read_camera` and :func:`draw_detections` -
   image files and overlays for ``holescan detect``.
 """
 
+from ground._cot import COT_TYPE, DEFAULT_COT_URL, CotError, CotPublisher, hole_cot, withdraw_cot
 from ground._datasets import (
     CATEGORY,
     Dataset,
@@ -57,16 +61,36 @@ from ground._reprocess import (
     reprocess_flight,
     write_hole_outputs,
 )
+from ground._station import GroundOptions, GroundStation, run_ground
+from ground._station_files import hole_summary, hole_waypoint, write_station_files
+from ground._station_link import VehicleLink
+from ground._station_state import (
+    MARKS,
+    GroundHole,
+    StationState,
+    TrackPoint,
+    atomic_write,
+    parse_hole_statustext,
+)
+from ground._web import StationWeb, state_document
 
 __all__ = [
     "CATEGORY",
+    "COT_TYPE",
+    "DEFAULT_COT_URL",
+    "MARKS",
     "SCORE_BANDS",
+    "CotError",
+    "CotPublisher",
     "Dataset",
     "DatasetImage",
     "EvalReport",
     "ExportReport",
     "FlightHoles",
     "FlightResult",
+    "GroundHole",
+    "GroundOptions",
+    "GroundStation",
     "HoleMatch",
     "HoleThumbnail",
     "Progress",
@@ -74,6 +98,11 @@ __all__ = [
     "ReprocessResult",
     "Sample",
     "ScoreBand",
+    "StationState",
+    "StationWeb",
+    "TrackPoint",
+    "VehicleLink",
+    "atomic_write",
     "default_out_path",
     "depth_colour",
     "detect_image",
@@ -84,10 +113,14 @@ __all__ = [
     "format_table",
     "ground_truth",
     "group_flights",
+    "hole_cot",
+    "hole_summary",
+    "hole_waypoint",
     "load_dataset",
     "load_image_pair",
     "log_stem",
     "match_points",
+    "parse_hole_statustext",
     "plot_pr",
     "read_camera",
     "read_depth",
@@ -99,12 +132,16 @@ __all__ = [
     "reprocess",
     "reprocess_flight",
     "run_detector",
+    "run_ground",
     "score_band",
     "segmentation",
+    "state_document",
+    "withdraw_cot",
     "write_coco_results",
     "write_dataset",
     "write_depth",
     "write_hole_outputs",
     "write_report",
     "write_rgb",
+    "write_station_files",
 ]

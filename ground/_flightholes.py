@@ -46,6 +46,7 @@ from capture import (
     TruncatedLogError,
     check_output,
     commit_part,
+    crop_view,
     part_path,
     read_flight_log,
 )
@@ -190,20 +191,19 @@ class _View:
 
 def _crop(rec: LoggedFrame, box: _Box) -> _View | None:
     rgb, depth = rec.frame.rgb, rec.frame.depth
-    height, width = depth.shape
-    x, y, w, h = (int(v) for v in box)
-    margin = max(24, max(w, h) // 2)
-    x0, y0 = max(0, x - margin), max(0, y - margin)
-    x1, y1 = min(width, x + w + margin), min(height, y + h + margin)
-    if x1 <= x0 or y1 <= y0 or w <= 0 or h <= 0:
+    try:
+        rgb_c, box_in_crop = crop_view(rgb, box)
+        depth_c, _ = crop_view(depth, box)
+    except InputError:
+        height, width = depth.shape
         _log.warning("box %s lies outside frame %d (%dx%d)", box, rec.frame.index, width, height)
         return None
     return _View(
-        rgb=rgb[y0:y1, x0:x1].copy(),
-        depth=depth[y0:y1, x0:x1].copy(),
-        box_in_crop=(x - x0, y - y0, w, h),
+        rgb=rgb_c.copy(),
+        depth=depth_c.copy(),
+        box_in_crop=box_in_crop,
         frame_index=rec.frame.index,
-        box=(x, y, w, h),
+        box=tuple(int(v) for v in box),  # type: ignore[arg-type]
         t_unix_ns=rec.t_unix_ns,
         t_boot_ns=rec.t_boot_ns,
     )
@@ -535,6 +535,7 @@ def export_flight_holes(
                 rel_alt_m=rel_alt_m,
                 clearance_m=clearance_m,
                 name=name,
+                candidates=[h for h in flight.holes if h not in keep],
             )
         except OSError as err:
             tmp.unlink(missing_ok=True)

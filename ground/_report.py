@@ -25,6 +25,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from capture import crop_view
 from geotag import Hole, LocalFrame, VehiclePose
 from ground._overlay import depth_colour
 from ground._reportmap import _R95, _THUMB_W, SCORE_BANDS, ScoreBand, _e, _legend, _maps, score_band
@@ -321,17 +322,18 @@ def thumbnails(
     H, W = depth.shape
     if w <= 0 or h <= 0 or x < 0 or y < 0 or x + w > W or y + h > H:
         raise InputError(f"box {box} (x, y, w, h) is empty or outside the {W}x{H} view")
-    m = max(round(0.6 * max(w, h)), 24)
-    x0, y0, x1, y1 = max(x - m, 0), max(y - m, 0), min(x + w + m, W), min(y + h + m, H)
-    f = min(width / (x1 - x0), width / (y1 - y0))
-    size = (max(round((x1 - x0) * f), 1), max(round((y1 - y0) * f), 1))
+    rgb_c, (bx, by, _, _) = crop_view(rgb, (x, y, w, h), margin_frac=0.6)
+    depth_c, _ = crop_view(depth, (x, y, w, h), margin_frac=0.6)
+    ch, cw = depth_c.shape
+    f = min(width / cw, width / ch)
+    size = (max(round(cw * f), 1), max(round(ch * f), 1))
     interp = cv2.INTER_AREA if f < 1 else cv2.INTER_LINEAR
     out: list[npt.NDArray[np.uint8]] = []
-    for img in (rgb[y0:y1, x0:x1], depth_colour(depth[y0:y1, x0:x1])):
+    for img in (rgb_c, depth_colour(depth_c)):
         resized = cv2.resize(np.ascontiguousarray(img), size, interpolation=interp)
         t = np.ascontiguousarray(resized, dtype=np.uint8)
-        p0 = (round((x - x0) * f), round((y - y0) * f))
-        p1 = (round((x + w - x0) * f) - 1, round((y + h - y0) * f) - 1)
+        p0 = (round(bx * f), round(by * f))
+        p1 = (round((bx + w) * f) - 1, round((by + h) * f) - 1)
         cv2.rectangle(t, p0, p1, (255, 255, 255), 4, cv2.LINE_AA)
         cv2.rectangle(t, p0, p1, colour, 2, cv2.LINE_AA)
         out.append(t)

@@ -85,7 +85,7 @@ class _Display:
             if text:
                 self._line(text, True)
         for text in p.announcements:
-            self._line(f"  ground station got STATUSTEXT: {text}", True)
+            self._line(f"  ground station: {text}", True)
         if p.phase != "flying":
             return
         now = time.monotonic()

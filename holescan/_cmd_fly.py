@@ -72,14 +72,14 @@ def run(args: argparse.Namespace) -> int:
             signal.signal(signal.SIGINT, signal.default_int_handler)
 
     previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-    min_sightings = cfg.flight.announce_min_sightings
+    gate = cfg.flight.gate
     try:
         if cfg.sensor.kind == "sim":  # the simulator is loaded only when asked for
             from sim import fly_sim, format_sim_report
 
-            print(format_sim_report(fly_sim(cfg, stop=stop), min_sightings))
+            print(format_sim_report(fly_sim(cfg, stop=stop), gate))
         else:
-            print(format_report(fly(cfg, stop=stop), min_sightings))
+            print(format_report(fly(cfg, stop=stop), gate))
     finally:
         for s, handler in previous.items():
             signal.signal(s, handler)

@@ -31,6 +31,7 @@ _COMMAND_MODULES = (
     "holescan._cmd_fly",
     "holescan._cmd_reprocess",
     "holescan._cmd_demo",
+    "holescan._cmd_ground",
 )
 
 

@@ -5,7 +5,8 @@
 * :func:`write_waypoints` and the per-format writers/readers - QGC ``.plan``, QGC WPL 110,
   KML, GeoJSON, GPX, generic over :class:`Waypoint` records (survey paths and found holes).
 * :func:`upload_mission` / :func:`download_mission` - MAVLink mission protocol client;
-  :class:`MissionReceiver` / :class:`MissionServer` - the vehicle's side.
+  :class:`MissionReceiver` / :class:`MissionServer` - the vehicle's side (one
+  implementation: the simulated autopilot's and the hole server's).
 * :func:`write_hole_file` - found holes as GPX, KML/KMZ (thumbnails), GeoJSON, .plan, WPL.
 * :class:`HoleMissionServer` - serves found holes live as a mission (component 191) and
   announces them by STATUSTEXT.
@@ -13,10 +14,19 @@
 
 from missions._files import read_area, read_waypoints, write_waypoints
 from missions._geofiles import read_geojson, read_gpx, read_kml, write_geojson, write_gpx, write_kml
+from missions._holecards import (
+    CARD_PAYLOAD,
+    CardAssembler,
+    CardSender,
+    card_facts,
+    make_card,
+    read_card,
+)
 from missions._holefiles import (
     HOLE_FORMATS,
     HOLE_SUFFIXES,
     HoleFormat,
+    candidate_points,
     hole_description,
     hole_mission,
     hole_points,
@@ -26,7 +36,6 @@ from missions._holefiles import (
 )
 from missions._holeserver import (
     HoleMissionServer,
-    HoleWaypoint,
     MissionServerError,
     hole_statustext,
     hole_waypoints,
@@ -35,9 +44,7 @@ from missions._link import mavlink, mavutil, open_link, parser
 from missions._protocol import (
     MAV_MISSION_ACCEPTED,
     MissionError,
-    MissionReceiver,
     MissionRejectedError,
-    MissionServer,
     MissionTimeoutError,
     UploadReport,
     connect,
@@ -59,6 +66,7 @@ from missions._sun import (
     sunrise_sunset,
 )
 from missions._survey import XTION, Camera, SurveyParams, SurveyPlan, frame_around, plan_survey
+from missions._vehicle import MissionReceiver, MissionServer
 from missions._waypoint import (
     MAV_CMD_DO_CHANGE_SPEED,
     MAV_CMD_NAV_LAND,
@@ -73,6 +81,7 @@ from missions._waypoint import (
 )
 
 __all__ = [
+    "CARD_PAYLOAD",
     "HOLE_FORMATS",
     "HOLE_SUFFIXES",
     "MAV_CMD_DO_CHANGE_SPEED",
@@ -88,10 +97,11 @@ __all__ = [
     "XTION",
     "Area",
     "Camera",
+    "CardAssembler",
+    "CardSender",
     "FlightCheck",
     "HoleFormat",
     "HoleMissionServer",
-    "HoleWaypoint",
     "MissionError",
     "MissionReceiver",
     "MissionRejectedError",
@@ -105,6 +115,8 @@ __all__ = [
     "SurveyPlan",
     "UploadReport",
     "Waypoint",
+    "candidate_points",
+    "card_facts",
     "check_flight",
     "connect",
     "download_mission",
@@ -116,6 +128,7 @@ __all__ = [
     "hole_statustext",
     "hole_waypoints",
     "local_solar_day",
+    "make_card",
     "mavlink",
     "mavutil",
     "open_link",
@@ -123,6 +136,7 @@ __all__ = [
     "plan_survey",
     "rank_holes",
     "read_area",
+    "read_card",
     "read_geojson",
     "read_gpx",
     "read_kml",

@@ -34,6 +34,7 @@ Latitudes and longitudes are written with 8 decimals (about 1 mm).
 from __future__ import annotations
 
 import base64
+import dataclasses
 import datetime as dt
 import html
 import math
@@ -54,6 +55,7 @@ __all__ = [
     "HOLE_FORMATS",
     "HOLE_SUFFIXES",
     "HoleFormat",
+    "candidate_points",
     "hole_description",
     "hole_mission",
     "hole_points",
@@ -205,6 +207,26 @@ def hole_points(
     return out
 
 
+def candidate_points(holes: Iterable[Hole], *, on_ground: bool = False) -> list[Waypoint]:
+    """Weaker holes (candidates, not announced) as points marked so, by confidence."""
+    out = []
+    for rank, h in enumerate(rank_holes(holes), start=1):
+        props = {**hole_properties(h, rank), "candidate": True}
+        out.append(
+            Waypoint(
+                h.lat_deg,
+                h.lon_deg,
+                0.0 if on_ground else h.alt_m,
+                name=f"candidate {h.id}",
+                description="candidate, not announced (too weak to send a crew): "
+                + hole_description(h, rank),
+                properties=props,
+                frame=MAV_FRAME_GLOBAL_RELATIVE_ALT if on_ground else MAV_FRAME_GLOBAL,
+            )
+        )
+    return out
+
+
 def hole_mission(
     holes: Iterable[Hole],
     *,
@@ -232,19 +254,13 @@ def hole_mission(
         raise InputError("hole ids must be unique")
     served = hole_waypoints(holes, home=home, rel_alt_m=rel_alt_m, clearance_m=clearance_m)
     items = []
-    for item in served[1:]:
-        assert item.hole_id is not None
-        h = by_id[item.hole_id]
+    for seq, item in enumerate(served[1:], start=1):
+        h = by_id[int(item.properties["hole_id"])]
         items.append(
-            Waypoint(
-                h.lat_deg,
-                h.lon_deg,
-                item.alt_m,
-                name=f"hole {h.id}",
-                description=hole_description(h, item.seq, boot_to_unix_ns),
-                properties=hole_properties(h, item.seq, boot_to_unix_ns),
-                command=item.command,
-                frame=item.frame,
+            dataclasses.replace(
+                item,
+                description=hole_description(h, seq, boot_to_unix_ns),
+                properties=hole_properties(h, seq, boot_to_unix_ns),
             )
         )
     home_wp = None
@@ -282,6 +298,7 @@ def write_hole_file(
     rel_alt_m: float = 10.0,
     clearance_m: float = 5.0,
     name: str = "holescan holes",
+    candidates: Iterable[Hole] = (),
 ) -> Path:
     """Write ``holes`` to ``path`` in format ``fmt`` (see the module docstring).
 
@@ -296,6 +313,9 @@ def write_hole_file(
     boot_to_unix_ns : add to autopilot boot times to get Unix time (first/last seen).
     rel_alt_m, clearance_m : mission altitude (``plan``/``wpl``), see :func:`hole_mission`.
     name : the KML document's name.
+    candidates : weaker holes (not announced): added to GPX, KML and GeoJSON as points
+        named ``candidate <id>`` with ``properties["candidate"] = True``; never in a
+        mission (``plan``, ``wpl``) nor in the KMZ.
     """
     path = Path(path)
     holes = tuple(holes)
@@ -304,10 +324,11 @@ def write_hole_file(
     if fmt not in HOLE_FORMATS:
         raise InputError(f"unknown hole file format {fmt!r}; use one of {', '.join(HOLE_FORMATS)}")
     thumbs = thumbnails or {}
+    weak = candidate_points(candidates, on_ground=fmt == "kml")
     if fmt == "gpx":
-        return write_gpx(path, hole_points(holes, boot_to_unix_ns=boot_to_unix_ns))
+        return write_gpx(path, hole_points(holes, boot_to_unix_ns=boot_to_unix_ns) + weak)
     if fmt == "geojson":
-        points = hole_points(holes, boot_to_unix_ns=boot_to_unix_ns)
+        points = hole_points(holes, boot_to_unix_ns=boot_to_unix_ns) + weak
         return write_geojson(path, points, altitude=False)
     if fmt == "kml":
         src = {
@@ -316,7 +337,7 @@ def write_hole_file(
             if h.id in thumbs
         }
         points = hole_points(holes, boot_to_unix_ns=boot_to_unix_ns, on_ground=True, image_src=src)
-        return write_kml(path, points, document_name=name)
+        return write_kml(path, points + weak, document_name=name)
     if fmt == "kmz":
         return _write_kmz(path, holes, thumbs, boot_to_unix_ns, name)
     home_wp, items = hole_mission(

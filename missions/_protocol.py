@@ -1,13 +1,10 @@
-"""The MAVLink mission protocol: upload/download client and a vehicle-side receiver.
+"""The MAVLink mission protocol, client side, and the wire format of items.
 
 Client (ground or companion side): :func:`upload_mission` sends MISSION_COUNT, answers
 each MISSION_REQUEST_INT (or legacy MISSION_REQUEST) with MISSION_ITEM_INT (MISSION_ITEM),
 resends on silence, and waits for MISSION_ACK. :func:`download_mission` pulls a mission.
-
-Vehicle side: :class:`MissionReceiver` is the autopilot's half as a state machine without
-I/O (feed it messages, send what it returns), so a simulated autopilot can embed it;
-:class:`MissionServer` runs one on a link in a thread and sends heartbeats, for tests and
-for playing the autopilot on loopback.
+The vehicle side is :mod:`missions._vehicle`. :class:`missions.Waypoint` is the one item
+record; degE7 exists only in the messages built and read here.
 
 pymavlink picks MAVLink 1 or 2 from the environment when first imported; links opened here
 always speak MAVLink 2 (MAVProxy needs it) whatever that choice was.
@@ -16,22 +13,19 @@ always speak MAVLink 2 (MAVProxy needs it) whatever that choice was.
 from __future__ import annotations
 
 import logging
-import threading
 import time
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
-from holescan_errors import HolescanError, InputError
+from holescan_errors import HolescanError
 from missions._link import mavlink, open_link
 from missions._waypoint import MAV_CMD_NAV_WAYPOINT, MAV_FRAME_GLOBAL, MAV_FRAME_MISSION, Waypoint
 
 __all__ = [
     "MAV_MISSION_ACCEPTED",
     "MissionError",
-    "MissionReceiver",
     "MissionRejectedError",
-    "MissionServer",
     "MissionTimeoutError",
     "UploadReport",
     "connect",
@@ -364,276 +358,3 @@ def download_mission(
     finally:
         if own:
             conn.close()
-
-
-# ----------------------------------------------------------------------------- vehicle side
-
-
-@dataclass
-class _Transfer:
-    peer: tuple[int, int]
-    count: int
-    items: list[Waypoint] = field(default_factory=list)
-    last_request_ns: int = 0
-    tries: int = 0
-
-
-class MissionReceiver:
-    """The autopilot's half of the mission protocol, without I/O.
-
-    Feed every received message to :meth:`handle` and call :meth:`poll` regularly; send
-    the messages both return (addressed to the peer). Supports upload (MISSION_COUNT ->
-    MISSION_REQUEST_INT/MISSION_REQUEST per item -> MISSION_ACK), download
-    (MISSION_REQUEST_LIST) and MISSION_CLEAR_ALL, for mission type 0 (waypoints).
-
-    Parameters
-    ----------
-    system_id, component_id : this vehicle's ids (messages to others are ignored).
-    capacity : most items it stores; a longer upload gets MAV_MISSION_NO_SPACE.
-    validate : called with the complete upload; returns a MAV_MISSION_RESULT (0 accepts).
-    legacy : request items with the deprecated MISSION_REQUEST (float lat/lon).
-    item_timeout_s, retries : re-request an item after this much silence, then give up.
-    """
-
-    def __init__(
-        self,
-        *,
-        system_id: int = 1,
-        component_id: int = 1,
-        capacity: int = 700,
-        validate: Callable[[Sequence[Waypoint]], int] | None = None,
-        legacy: bool = False,
-        item_timeout_s: float = 1.0,
-        retries: int = 5,
-    ) -> None:
-        self.system_id = system_id
-        self.component_id = component_id
-        self.capacity = capacity
-        self.validate = validate
-        self.legacy = legacy
-        self.item_timeout_ns = round(item_timeout_s * _NS)
-        self.retries = retries
-        self.mission: tuple[Waypoint, ...] = ()
-        self.uploads_accepted = 0
-        self.last_result: int | None = None
-        self._rx: _Transfer | None = None
-        self._done: tuple[tuple[int, int], int, int] | None = (
-            None  # last upload: peer, count, result
-        )
-
-    @property
-    def receiving(self) -> bool:
-        return self._rx is not None
-
-    def _for_me(self, msg: Any) -> bool:
-        ts = getattr(msg, "target_system", self.system_id)
-        tc = getattr(msg, "target_component", self.component_id)
-        return ts == self.system_id and tc in (0, self.component_id)
-
-    def _ack(self, peer: tuple[int, int], result: int) -> Any:
-        self.last_result = result
-        return mavlink.MAVLink_mission_ack_message(peer[0], peer[1], result, 0)
-
-    def _request(self, now_ns: int) -> Any:
-        rx = self._rx
-        assert rx is not None
-        rx.last_request_ns = now_ns
-        m = mavlink
-        seq = len(rx.items)
-        if self.legacy:
-            return m.MAVLink_mission_request_message(rx.peer[0], rx.peer[1], seq, 0)
-        return m.MAVLink_mission_request_int_message(rx.peer[0], rx.peer[1], seq, 0)
-
-    def handle(self, msg: Any, now_ns: int) -> list[Any]:
-        """React to one received message; returns the messages to send."""
-        kind = msg.get_type()
-        if not kind.startswith("MISSION_") or not self._for_me(msg):
-            return []
-        peer = (msg.get_srcSystem(), msg.get_srcComponent())
-        if getattr(msg, "mission_type", 0) != 0:
-            return [self._ack(peer, mavlink.MAV_MISSION_UNSUPPORTED)]
-        if kind == "MISSION_COUNT":
-            if msg.count > self.capacity:
-                self._rx = None
-                return [self._ack(peer, mavlink.MAV_MISSION_NO_SPACE)]
-            if msg.count == 0:
-                self._rx = None
-                self.mission = ()
-                return [self._ack(peer, MAV_MISSION_ACCEPTED)]
-            self._done = None
-            self._rx = _Transfer(peer, int(msg.count))
-            return [self._request(now_ns)]
-        if kind in ("MISSION_ITEM_INT", "MISSION_ITEM"):
-            return self._on_item(msg, peer, now_ns)
-        if kind == "MISSION_REQUEST_LIST":
-            m = mavlink
-            return [m.MAVLink_mission_count_message(peer[0], peer[1], len(self.mission), 0)]
-        if kind in ("MISSION_REQUEST_INT", "MISSION_REQUEST"):
-            seq = int(msg.seq)
-            if not 0 <= seq < len(self.mission):
-                return [self._ack(peer, mavlink.MAV_MISSION_INVALID_SEQUENCE)]
-            return [
-                _item_message(
-                    self.mission[seq],
-                    seq,
-                    peer,
-                    use_int=kind == "MISSION_REQUEST_INT",
-                    current=int(seq == 0),
-                )
-            ]
-        if kind == "MISSION_CLEAR_ALL":
-            self._rx = None
-            self.mission = ()
-            return [self._ack(peer, MAV_MISSION_ACCEPTED)]
-        return []
-
-    def _on_item(self, msg: Any, peer: tuple[int, int], now_ns: int) -> list[Any]:
-        rx = self._rx
-        done = self._done
-        if rx is None and done is not None and done[0] == peer and int(msg.seq) == done[1] - 1:
-            # The peer resent the last item: our MISSION_ACK was lost, send it again.
-            return [self._ack(peer, done[2])]
-        if rx is None or peer != rx.peer:
-            return []
-        if int(msg.seq) != len(rx.items):
-            return [self._request(now_ns)]
-        try:
-            rx.items.append(_waypoint_from_message(msg))
-        except InputError:
-            self._rx = None
-            return [self._ack(peer, mavlink.MAV_MISSION_ERROR)]
-        rx.tries = 0
-        if len(rx.items) < rx.count:
-            return [self._request(now_ns)]
-        self._rx = None
-        result = self.validate(rx.items) if self.validate is not None else MAV_MISSION_ACCEPTED
-        self._done = (peer, rx.count, result)
-        if result == MAV_MISSION_ACCEPTED:
-            self.mission = tuple(rx.items)
-            self.uploads_accepted += 1
-        return [self._ack(peer, result)]
-
-    def poll(self, now_ns: int) -> list[Any]:
-        """Re-request the awaited item after a silence; give up after the retries."""
-        rx = self._rx
-        if rx is None or now_ns - rx.last_request_ns < self.item_timeout_ns:
-            return []
-        rx.tries += 1
-        if rx.tries > self.retries:
-            self._rx = None
-            return [self._ack(rx.peer, mavlink.MAV_MISSION_OPERATION_CANCELLED)]
-        return [self._request(now_ns)]
-
-
-class MissionServer:
-    """Play a vehicle on a MAVLink link: heartbeats at 1 Hz and a :class:`MissionReceiver`.
-
-    Runs in a thread (use as a context manager). ``drop`` is called with each outgoing
-    message; returning True drops it, to simulate a lossy link in tests.
-
-    Parameters
-    ----------
-    link : e.g. ``udpin:127.0.0.1:14555`` (answers whoever speaks first) or
-        ``udpout:127.0.0.1:14550`` (speaks first, e.g. to MAVProxy's ``udpin``).
-    """
-
-    def __init__(
-        self,
-        link: str,
-        receiver: MissionReceiver | None = None,
-        *,
-        drop: Callable[[Any], bool] | None = None,
-        heartbeat_period_s: float = 1.0,
-    ) -> None:
-        self.receiver = receiver if receiver is not None else MissionReceiver()
-        self.link = link
-        self.drop = drop
-        self.heartbeat_period_s = heartbeat_period_s
-        self.sent: list[str] = []
-        self.dropped: list[str] = []
-        self.received: list[str] = []
-        self._conn: Any = None
-        self._stop = threading.Event()
-        self._accepted = threading.Condition()
-        self._thread: threading.Thread | None = None
-        self._error: BaseException | None = None
-
-    def __enter__(self) -> MissionServer:
-        self.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
-
-    def start(self) -> None:
-        self._conn = connect(
-            self.link,
-            source_system=self.receiver.system_id,
-            source_component=self.receiver.component_id,
-        )
-        self._thread = threading.Thread(target=self._run, name="mission-server", daemon=True)
-        self._thread.start()
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=5.0)
-        if self._conn is not None:
-            self._conn.close()
-            self._conn = None
-
-    def wait_accepted(self, uploads: int = 1, timeout_s: float = 10.0) -> tuple[Waypoint, ...]:
-        """Block until ``uploads`` uploads were accepted; returns the stored mission."""
-        deadline = time.monotonic() + timeout_s
-        with self._accepted:
-            while self.receiver.uploads_accepted < uploads:
-                remaining = deadline - time.monotonic()
-                if remaining <= 0 or self._error is not None:
-                    raise TimeoutError(
-                        f"no accepted upload within {timeout_s:g} s "
-                        f"(last result {self.receiver.last_result})"
-                    ) from self._error
-                self._accepted.wait(remaining)
-            return self.receiver.mission
-
-    def _send(self, out: Sequence[Any]) -> None:
-        for msg in out:
-            label = msg.get_type() + (f" {msg.seq}" if hasattr(msg, "seq") else "")
-            if self.drop is not None and self.drop(msg):
-                self.dropped.append(label)
-                continue
-            self.sent.append(label)
-            self._conn.mav.send(msg)
-
-    def _run(self) -> None:
-        conn = self._conn
-        period = self.heartbeat_period_s
-        next_beat = 0.0
-        known: set[object] = set()
-        try:
-            while not self._stop.is_set():
-                now = time.monotonic()
-                if now >= next_beat:
-                    _heartbeat(conn, gcs=False)
-                    next_beat = now + period
-                msg = conn.recv_match(blocking=True, timeout=0.02)
-                now_ns = time.monotonic_ns()
-                before = self.receiver.uploads_accepted
-                if msg is not None and msg.get_type() != "BAD_DATA":
-                    self.received.append(msg.get_type())
-                    clients = set(getattr(conn, "clients", ()))  # udpin: peer addresses
-                    if msg.get_type() == "HEARTBEAT" and not clients <= known:
-                        known |= clients
-                        next_beat = 0.0  # a new peer: answer its heartbeat at once
-                    self._send(self.receiver.handle(msg, now_ns))
-                self._send(self.receiver.poll(now_ns))
-                if self.receiver.uploads_accepted != before:
-                    with self._accepted:
-                        self._accepted.notify_all()
-        except (OSError, ValueError) as err:
-            if not self._stop.is_set():
-                log.warning("mission server stopped: %s", err)
-                self._error = err
-        finally:
-            with self._accepted:
-                self._accepted.notify_all()

@@ -24,12 +24,13 @@ from sim._demo import (
     DemoResult,
     FalseHole,
     TruthRow,
-    format_result,
     run_demo,
 )
+from sim._demo_format import format_result
 from sim._fly import SIM_TABLE, SimFlyReport, fly_sim, format_sim_report, sortie_params
 from sim._lap import LapReplay, prerender_lap
 from sim._render import GtBox, hole_boxes, render, render_exact
+from sim._scoring import count_in_view, frames_in_view, score_holes
 from sim._sortie import (
     DEFAULT_ANCHOR,
     SimSortie,
@@ -72,9 +73,11 @@ __all__ = [
     "TruthRow",
     "WorldAnchor",
     "camera_pose_in_world",
+    "count_in_view",
     "fly_sim",
     "format_result",
     "format_sim_report",
+    "frames_in_view",
     "hole_boxes",
     "lap_frames",
     "loop_length_m",
@@ -87,6 +90,7 @@ __all__ = [
     "render_exact",
     "run_demo",
     "sample_pose",
+    "score_holes",
     "sortie_params",
     "survey_path",
     "synth_dataset",

@@ -8,9 +8,10 @@ One call runs what a real sortie runs, with no hardware:
   MAVLink over loopback UDP (telemetry, TIMESYNC, SYSTEM_TIME);
 * the capture daemon (:class:`capture._daemon.Flight`) with the simulated Xtion: MCAP flight
   log, detection worker, geotags, holes;
-* the hole mission server (:class:`missions.HoleMissionServer`) announcing each confirmed
-  hole by STATUSTEXT to a ground station, which is played by a pymavlink peer here: it
-  prints the announcements as they come and downloads the hole mission at the end.
+* the hole mission server (:class:`missions.HoleMissionServer`) announcing each hole that
+  passes the announce gate by STATUSTEXT and sending its picture, to the ground station
+  app (:class:`ground.GroundStation`, as ``holescan ground`` runs it) on a loopback link:
+  it collects the holes, pictures and the hole mission into ``OUT/ground``.
 
 It stops after one lap of the survey (or ``duration_s`` of capture), then scores the holes
 the flight confirmed against the simulator's truth: every true access hole the camera saw
@@ -31,21 +32,29 @@ import math
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-import pymap3d
 
-from capture import Flight, FlightConfig, FlightSummary, LoggedFrame, LoggedPose, read_flight_log
-from geotag import Hole, VehiclePose
-from ground import ReprocessOptions, write_hole_outputs
+from capture import (
+    Flight,
+    FlightConfig,
+    FlightSummary,
+    HoleView,
+    LoggedFrame,
+    LoggedPose,
+    crop_view,
+    read_flight_log,
+)
+from geotag import AnnounceGate, Hole, VehiclePose
+from ground import GroundOptions, GroundStation, ReprocessOptions, write_hole_outputs
 from holescan_errors import InputError
-from missions import HoleMissionServer, connect, download_mission
-from sim._sortie import SimSortie, SortieParams, TrueHole, loop_length_m
-from sim._world import RubbleWorld
+from missions import HoleMissionServer
+from sim._scoring import FalseHole, TruthRow, frames_in_view, score_holes
+from sim._sortie import SimSortie, SortieParams, loop_length_m
 
 __all__ = [
     "DEMO_SORTIE",
@@ -54,7 +63,6 @@ __all__ = [
     "DemoResult",
     "FalseHole",
     "TruthRow",
-    "format_result",
     "run_demo",
 ]
 
@@ -72,7 +80,8 @@ class DemoOptions:
     out : folder for everything (None: a new ``holescan-demo-YYYYmmdd-HHMMSS`` folder in
         the current directory). sortie : the simulated sortie.
     duration_s : seconds of capture (None: one lap of the survey).
-    min_sightings : a hole is confirmed (announced, scored, written) when seen this often.
+    gate : when a hole is announced (served, sent, scored, written); weaker holes stay
+        candidates. card_bytes_per_s : byte budget of the holes' pictures.
     match_m : a confirmed hole this close to a true access hole's centre (or inside its
         opening) found it, metres.
     min_frames_in_view : a true hole counts as seen by the camera when it was whole in at
@@ -82,15 +91,16 @@ class DemoOptions:
     out: Path | None = None
     sortie: SortieParams = DEMO_SORTIE
     duration_s: float | None = None
-    min_sightings: int = 3
+    gate: AnnounceGate = dataclasses.field(default_factory=AnnounceGate)
+    card_bytes_per_s: float = 1000.0
     match_m: float = 0.5
     min_frames_in_view: int = 3
 
     def __post_init__(self) -> None:
         if self.duration_s is not None and not self.duration_s > 0:
             raise InputError(f"duration must be > 0 s, got {self.duration_s}")
-        if self.min_sightings < 1 or self.match_m <= 0 or self.min_frames_in_view < 1:
-            raise InputError("min_sightings, min_frames_in_view >= 1 and match_m > 0 please")
+        if self.match_m <= 0 or self.min_frames_in_view < 1:
+            raise InputError("min_frames_in_view >= 1 and match_m > 0 please")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -111,34 +121,6 @@ class DemoProgress:
 
 
 @dataclasses.dataclass(frozen=True)
-class TruthRow:
-    """One true access hole and what the flight made of it.
-
-    status : ``found``, ``missed`` (seen whole in enough frames, not found) or
-    ``not in view``. x_m, y_m : position in the field (east, north of its south-west corner).
-    hole_id, error_m, sightings : the confirmed hole that found it, its horizontal distance
-    to the truth, its sightings.
-    """
-
-    truth: TrueHole
-    frames_in_view: int
-    status: str
-    hole_id: int | None
-    error_m: float
-    sightings: int
-
-
-@dataclasses.dataclass(frozen=True)
-class FalseHole:
-    """A confirmed hole that is no true access hole; ``nearest`` names the closest feature
-    of the world (a distractor kind, or an access hole farther than the match distance)."""
-
-    hole: Hole
-    nearest: str
-    distance_m: float
-
-
-@dataclasses.dataclass(frozen=True)
 class DemoResult:
     out: Path
     log_files: tuple[Path, ...]
@@ -154,8 +136,13 @@ class DemoResult:
     elapsed_s: float
     interrupted: bool
     world_features: dict[str, int]
-    min_sightings: int
-    match_m: float
+    gate: AnnounceGate
+    candidates: int = 0
+    latency_s: tuple[float, ...] = ()
+    card_bytes: int = 0
+    match_m: float = 0.5
+    cards_sent: int = 0
+    pictures_at_ground: int = 0
 
     @property
     def found(self) -> int:
@@ -173,6 +160,13 @@ class DemoResult:
             "missed": self.missed,
             "not_in_view": sum(r.status == "not in view" for r in self.truth),
             "false": len(self.false),
+            "candidates": self.candidates,
+            "gate": dataclasses.asdict(self.gate),
+            "latency_s": list(self.latency_s),
+            "card_bytes": self.card_bytes,
+            "cards_sent": self.cards_sent,
+            "pictures_at_ground": self.pictures_at_ground,
+            "card_bytes_per_s": self.card_bytes / self.capture_s if self.capture_s else None,
             "position_error_m": {
                 "mean": float(np.mean(errors)) if errors else None,
                 "max": max(errors) if errors else None,
@@ -209,134 +203,38 @@ class DemoResult:
 # --------------------------------------------------------------------- ground station
 
 
-class _GroundStation:
-    """A pymavlink peer playing the ground station: collects STATUSTEXTs, then downloads
-    the hole mission from the companion computer (component 191)."""
+class _Ground:
+    """The ground station app (:class:`ground.GroundStation`, what ``holescan ground``
+    runs) in-process on the demo's loopback link: holes, pictures, the hole mission."""
 
-    def __init__(self, port: int) -> None:
-        self.link = f"udpin:127.0.0.1:{port}"
-        self.conn = connect(self.link, source_system=255, source_component=190)
-        self.texts: list[str] = []
-        self._new: list[str] = []
-        self._lock = threading.Lock()
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="demo-gcs", daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        while not self._stop.is_set():
-            msg = self.conn.recv_match(type="STATUSTEXT", blocking=True, timeout=0.2)
-            if msg is None:
-                continue
-            text = str(msg.text).rstrip("\x00")
-            with self._lock:
-                self.texts.append(text)
-                self._new.append(text)
+    def __init__(self, port: int, folder: Path) -> None:
+        opts = GroundOptions(
+            mavlink=f"udpin:127.0.0.1:{port}", out=folder, http_port=None, cot_url=None
+        )
+        self.station = GroundStation(opts).__enter__()
+        self._told: set[int] = set()
 
     def take_new(self) -> tuple[str, ...]:
-        with self._lock:
-            new, self._new = tuple(self._new), []
-            return new
+        """One line per hole the ground heard of since the last call."""
+        _, holes, _ = self.station.state.snapshot()
+        new = [h for h in holes if h.id not in self._told]
+        self._told.update(h.id for h in new)
+        return tuple(f"hole {h.id} score {h.score:.2f} at {h.lat:.7f}, {h.lon:.7f}" for h in new)
 
-    def stop_listening(self) -> None:
-        self._stop.set()
-        self._thread.join(timeout=2.0)
-
-    def download(self, sysid: int, compid: int) -> int:
-        """Download the served mission; returns the number of hole waypoints (home excluded)."""
-        items = download_mission(
-            self.conn,
-            target_system=sysid,
-            target_component=compid,
-            heartbeat_timeout_s=5.0,
-        )
-        return max(len(items) - 1, 0)
+    def wait_complete(self, ids: set[int], timeout_s: float) -> bool:
+        """Wait until every hole of ``ids`` is at the ground with its picture, in the
+        downloaded mission."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            _, holes, _ = self.station.state.snapshot()
+            done = {h.id for h in holes if h.has_picture and h.seq is not None}
+            if ids <= done:
+                return True
+            time.sleep(0.2)
+        return False
 
     def close(self) -> None:
-        self.stop_listening()
-        self.conn.close()
-
-
-# ------------------------------------------------------------------------------ scoring
-
-
-def _frames_in_view(sortie: SimSortie) -> Counter[int]:
-    """World hole id -> frames that showed the whole opening (not cut by the border)."""
-    seen: Counter[int] = Counter()
-    for src in sortie.sources:
-        for _, boxes in src.truth.values():
-            for b in boxes:
-                if not b.iscrowd:
-                    seen[b.hole_id] += 1
-    return seen
-
-
-def _en(world_anchor: Any, lat: float, lon: float) -> tuple[float, float]:
-    x, y, _ = pymap3d.geodetic2enu(
-        lat,
-        lon,
-        world_anchor.alt_m,
-        world_anchor.lat_deg,
-        world_anchor.lon_deg,
-        world_anchor.alt_m,
-    )
-    return float(x), float(y)
-
-
-def score(
-    confirmed: Sequence[Hole],
-    truth: Sequence[TrueHole],
-    world: RubbleWorld,
-    anchor: Any,
-    in_view: Counter[int],
-    opts: DemoOptions,
-) -> tuple[tuple[TruthRow, ...], tuple[FalseHole, ...]]:
-    """Match confirmed holes to the true access holes, nearest pairs first, each used once.
-
-    A confirmed hole finds a true one when it lies within ``opts.match_m`` of its centre or
-    inside its opening (a big hole seen cut by the image border is placed off its centre,
-    yet a crew sent there stands at the hole). Unmatched confirmed holes are false; the
-    nearest feature of the world is named.
-    """
-    from shapely.geometry import Point, Polygon
-
-    xy = [_en(anchor, h.lat_deg, h.lon_deg) for h in confirmed]
-    pairs = []
-    for i, t in enumerate(truth):
-        opening = Polygon(world.holes[t.id].opening)
-        for j, (x, y) in enumerate(xy):
-            d = math.hypot(x - t.x_m, y - t.y_m)
-            if d <= opts.match_m or opening.contains(Point(x, y)):
-                pairs.append((d, i, j))
-    matched: dict[int, tuple[int, float]] = {}
-    used: set[int] = set()
-    for d, i, j in sorted(pairs):
-        if i not in matched and j not in used:
-            matched[i] = (j, d)
-            used.add(j)
-    rows = []
-    for i, t in enumerate(truth):
-        frames = in_view.get(t.id, 0)
-        if i in matched:
-            j, d = matched[i]
-            h = confirmed[j]
-            rows.append(TruthRow(t, frames, "found", h.id, d, h.sightings))
-        else:
-            status = "missed" if frames >= opts.min_frames_in_view else "not in view"
-            rows.append(TruthRow(t, frames, status, None, math.nan, 0))
-    false = []
-    for j, h in enumerate(confirmed):
-        if j in used:
-            continue
-        x, y = xy[j]
-        best = ("nothing", math.inf)
-        for feature in world.holes:
-            d = math.hypot(feature.centre_xy[0] - x, feature.centre_xy[1] - y)
-            if d < best[1]:
-                kind = "access hole" if feature.is_access else feature.kind.replace("_", " ")
-                best = (kind, d)
-        false.append(FalseHole(h, best[0], best[1]))
-    return tuple(rows), tuple(false)
+        self.station.__exit__(None, None, None)
 
 
 # --------------------------------------------------------------------------- the flight
@@ -382,15 +280,9 @@ def _views_and_track(
             continue
         assert isinstance(rec, LoggedFrame)
         for h in wanted.get(rec.frame.index, ()):
-            x, y, w, ht = (int(v) for v in h.best_box)
-            m = max(w, ht) + 24
-            H, W = rec.frame.depth.shape
-            x0, y0, x1, y1 = max(x - m, 0), max(y - m, 0), min(x + w + m, W), min(y + ht + m, H)
-            views[h.id] = (
-                rec.frame.rgb[y0:y1, x0:x1].copy(),
-                rec.frame.depth[y0:y1, x0:x1].copy(),
-                (x - x0, y - y0, w, ht),
-            )
+            rgb, box = crop_view(rec.frame.rgb, h.best_box)
+            depth, _ = crop_view(rec.frame.depth, h.best_box)
+            views[h.id] = (rgb.copy(), depth.copy(), box)
     return views, track, boot_to_unix
 
 
@@ -427,25 +319,35 @@ def run_demo(
     home = (anchor.lat_deg, anchor.lon_deg, anchor.alt_m)
     gcs_port = _free_udp_port()
     announced: list[str] = []
+    first_announced: dict[int, float] = {}
+    card_bytes = cards_sent = 0
     mission_items: int | None = None
     mission_error: str | None = None
+    pictures = 0
     capture_s = 0.0
     report("start", duration_s=duration)
     with contextlib.ExitStack() as stack:
-        gcs = _GroundStation(gcs_port)
+        gcs = _Ground(gcs_port, out / "ground")
         stack.callback(gcs.close)
         server = stack.enter_context(
             HoleMissionServer(f"udpout:127.0.0.1:{gcs_port}", 1, home=home)
         )
 
-        def on_holes(confirmed: list[Hole], news: list[Hole]) -> None:
-            server.update_holes(confirmed)
+        def on_holes(served: list[Hole], news: list[Hole], views: Mapping[int, HoleView]) -> None:
+            server.update_holes(served)
             announced.extend(server.announce(h) for h in news)
+            for h in news:
+                if h.id not in first_announced:  # boot-clock span first sighting -> now
+                    first_announced[h.id] = (h.t_last_boot_ns - h.t_first_boot_ns) * 1e-9
+                if h.id in views:
+                    server.send_card(h, views[h.id].jpeg, views[h.id].why)
 
         stack.enter_context(sortie)
         cfg = FlightConfig(
             log_prefix=out / "flight",
-            announce_min_sightings=opts.min_sightings,
+            announce_min_score=opts.gate.min_score,
+            announce_min_sightings=opts.gate.min_sightings,
+            announce_min_span_s=opts.gate.min_span_s,
             config_record={
                 "demo": {"sortie": dataclasses.asdict(opts.sortie), "duration_s": duration}
             },
@@ -470,7 +372,7 @@ def run_demo(
                     duration_s=duration,
                     frames=c.frames_captured,
                     detected=c.frames_detected,
-                    holes=len(flight.tracker.confirmed(opts.min_sightings)),
+                    holes=len(opts.gate.select(flight.tracker.holes(), first_announced)),
                     announcements=gcs.take_new(),
                 )
 
@@ -488,21 +390,30 @@ def run_demo(
             duration_s=duration,
             frames=summary.counters.frames_captured,
             detected=summary.counters.frames_detected,
-            holes=sum(h.sightings >= opts.min_sightings for h in summary.holes),
+            holes=len(opts.gate.select(summary.holes, first_announced)),
             announcements=gcs.take_new(),
         )
-        gcs.stop_listening()
-        time.sleep(0.3)  # the last STATUSTEXTs in flight on the loopback link
-        try:
-            mission_items = gcs.download(1, server.compid)
-        except Exception as err:  # shown in the result: the demo still reports the rest
-            mission_error = f"{type(err).__name__}: {err}"
-            _log.warning("ground station could not download the hole mission: %s", err)
-        received = tuple(gcs.texts)
+        served_ids = {h.id for h in opts.gate.select(summary.holes, first_announced)}
+        server.flush_cards(timeout_s=30.0)
+        if not gcs.wait_complete(served_ids, timeout_s=30.0):
+            mission_error = "not every announced hole reached the ground with its picture"
+        _, ground_holes, _ = gcs.station.state.snapshot()
+        mission_items = sum(h.seq is not None for h in ground_holes)
+        pictures = sum(h.has_picture for h in ground_holes if h.id in served_ids)
+        received = tuple(announced)
+        card_bytes, cards_sent = server.cards.bytes_sent, server.cards.cards_sent
     interrupted = capture_s < duration - 1.0
-    confirmed = tuple(h for h in summary.holes if h.sightings >= opts.min_sightings)
+    confirmed = tuple(opts.gate.select(summary.holes, first_announced))
     truth = sortie.truth
-    rows, false = score(confirmed, truth, sortie.world, anchor, _frames_in_view(sortie), opts)
+    rows, false = score_holes(
+        confirmed,
+        truth,
+        sortie.world,
+        anchor,
+        frames_in_view(sortie.sources),
+        match_m=opts.match_m,
+        min_frames_in_view=opts.min_frames_in_view,
+    )
     log_files = tuple(summary.log.files)
     views, track, boot_to_unix = _views_and_track(log_files, confirmed)
     kinds = Counter(str(h.kind) for h in sortie.world.holes)
@@ -521,7 +432,7 @@ def run_demo(
         confirmed,
         views,  # type: ignore[arg-type]
         track,
-        opts=ReprocessOptions(workers=0, min_sightings=opts.min_sightings),
+        opts=ReprocessOptions(workers=0, min_sightings=opts.gate.min_sightings),
         home=home,
         boot_to_unix_ns=boot_to_unix,
         truth=[(f"true hole {t.id}", t.lat_deg, t.lon_deg) for t in truth],
@@ -543,72 +454,14 @@ def run_demo(
         elapsed_s=time.monotonic() - t_start,
         interrupted=interrupted,
         world_features=dict(kinds),
-        min_sightings=opts.min_sightings,
+        gate=opts.gate,
+        candidates=len(summary.holes) - len(confirmed),
+        latency_s=tuple(first_announced[h.id] for h in confirmed if h.id in first_announced),
+        card_bytes=card_bytes,
+        cards_sent=cards_sent,
+        pictures_at_ground=pictures,
         match_m=opts.match_m,
     )
     path = out / "demo.json"
     path.write_text(json.dumps(result.numbers(), indent=1) + "\n")
     return dataclasses.replace(result, files=(*result.files, ("result", path)))
-
-
-# ------------------------------------------------------------------------------ output
-
-
-def format_result(r: DemoResult) -> list[str]:
-    """What the demo prints at the end."""
-    c = r.summary.counters
-    n_access = r.world_features.get("access", 0)
-    distractors = sum(r.world_features.values()) - n_access
-    cut = " (stopped early)" if r.interrupted else ""
-    lines = [
-        f"holescan demo: {r.capture_s:.0f} s of a simulated dawn survey{cut}, "
-        f"{n_access} access holes and {distractors} distractors in the field",
-        f"frames: {c.frames_captured} captured ({c.frames_captured / max(r.capture_s, 1e-9):.1f}"
-        f"/s), {c.frames_detected} detected, {c.frames_unposed} not posed at capture",
-        f"holes against the simulator's truth (a confirmed hole, >= {r.min_sightings} "
-        f"sightings, inside a true opening or within {r.match_m:g} m of its centre finds it):",
-    ]
-    for row in r.truth:
-        t = row.truth
-        where = f"true hole {t.id} at ({t.x_m:.1f}, {t.y_m:.1f}) m, {t.major_m:.2f} m wide"
-        if row.status == "found":
-            score = next(h.score for h in r.confirmed if h.id == row.hole_id)
-            lines.append(
-                f"  {where}: FOUND as hole {row.hole_id} (score {score:.2f}), "
-                f"{100 * row.error_m:.0f} cm off, {row.sightings} sightings"
-            )
-        elif row.status == "missed":
-            lines.append(f"  {where}: MISSED (whole in view in {row.frames_in_view} frames)")
-        else:
-            lines.append(f"  {where}: not in view (outside what the survey saw)")
-    for f in r.false:
-        lines.append(
-            f"  hole {f.hole.id}: FALSE (score {f.hole.score:.2f}, {f.hole.sightings} sightings;"
-            f" nearest feature: {f.nearest}, {f.distance_m:.2f} m)"
-        )
-    errors = [row.error_m for row in r.truth if row.status == "found"]
-    in_view = sum(row.status != "not in view" for row in r.truth)
-    err = (
-        f"; position error mean {100 * float(np.mean(errors)):.0f} cm, max "
-        f"{100 * max(errors):.0f} cm"
-        if errors
-        else ""
-    )
-    lines.append(
-        f"  => found {r.found} of {in_view} in view, missed {r.missed}, false {len(r.false)}" + err
-    )
-    gcs = f"ground station: {len(r.announcements)} STATUSTEXT announcements"
-    if r.mission_items is not None:
-        gcs += f", downloaded a mission of {r.mission_items} hole waypoints (component 191)"
-    else:
-        gcs += f", mission download failed ({r.mission_error})"
-    lines.append(gcs)
-    lines.append(f"files in {r.out}:")
-    lines += [f"  flight log  {p}" for p in r.log_files]
-    lines += [f"  {kind:<11} {p}" for kind, p in r.files]
-    lines.append(
-        f"reprocess it: holescan reprocess {' '.join(str(p) for p in r.log_files)} "
-        f"--out {r.out / 'reprocessed'}"
-    )
-    lines.append(f"({r.elapsed_s:.0f} s in all)")
-    return lines

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from capture import FlyConfig, FlyReport, SensorSetup, check_table, fly, format_report, numbers
-from geotag import local_en_m
+from geotag import AnnounceGate, local_en_m
 from sim._sortie import DEFAULT_ANCHOR, SimSortie, SortieParams, TrueHole
 from sim._source import WorldAnchor
 
@@ -107,16 +107,18 @@ def fly_sim(cfg: FlyConfig, *, stop: threading.Event | None = None) -> SimFlyRep
     )
 
 
-def format_sim_report(report: SimFlyReport, min_sightings: int = 3) -> str:
+def format_sim_report(report: SimFlyReport, gate: AnnounceGate | None = None) -> str:
     """:func:`capture.format_report`, then the simulator's lateness and the truth found."""
-    lines = [format_report(report.flight, min_sightings)]
+    gate = gate or AnnounceGate()
+    lines = [format_report(report.flight, gate)]
     ms = report.render_ms_median
     lines.append(
         f"sim: render {ms:.1f} ms/frame median, {report.late_frames} frames late"
         if ms is not None
         else "sim: no frame rendered"
     )
-    confirmed = [h for h in report.flight.summary.holes if h.sightings >= min_sightings]
+    said = {int(t.split()[1]) for t in report.flight.announced}
+    confirmed = gate.select(report.flight.summary.holes, said)
     for t in report.truth:
         near = [
             (math.hypot(*local_en_m(h.lat_deg, h.lon_deg, t.lat_deg, t.lon_deg)), h.id)

@@ -237,8 +237,10 @@ def test_every_format_parses_back_with_its_standard_reader(
 
     # GPX: gpxpy.
     gpx = gpxpy.parse((tmp_path / "out" / "h.gpx").read_text(encoding="utf-8"))
-    assert [p.name for p in gpx.waypoints] == [f"hole {i}" for i in ids]
-    for wpt, h in zip(gpx.waypoints, holes, strict=True):
+    # the hole seen once follows, marked as a candidate (never a waypoint of the mission)
+    assert [p.name for p in gpx.waypoints] == [f"hole {i}" for i in ids] + ["candidate 3"]
+    assert "candidate, not announced" in (gpx.waypoints[-1].description or "")
+    for wpt, h in zip(gpx.waypoints[:2], holes, strict=True):
         assert (wpt.latitude, wpt.longitude) == (
             pytest.approx(h.lat_deg, abs=1e-7), pytest.approx(h.lon_deg, abs=1e-7))  # fmt: skip
         assert f"score {h.score:.2f}" in wpt.description
@@ -251,8 +253,8 @@ def test_every_format_parses_back_with_its_standard_reader(
     # KML: an XML parser; thumbnails inline as data: URIs.
     root = ET.parse(tmp_path / "out" / "h.kml").getroot()
     pms = root.findall(".//k:Placemark", KML)
-    assert len(pms) == 2
-    for pm, h in zip(pms, holes, strict=True):
+    assert len(pms) == 3 and pms[2].findtext("k:name", "", KML) == "candidate 3"
+    for pm, h in zip(pms[:2], holes, strict=True):
         data = {
             d.get("name"): json.loads(d.findtext("k:value", "", KML))
             for d in pm.iterfind(".//k:Data", KML)
@@ -279,7 +281,8 @@ def test_every_format_parses_back_with_its_standard_reader(
 
     # GeoJSON: json.
     feats = json.loads((tmp_path / "out" / "h.geojson").read_text())["features"]
-    for f, h in zip(feats, holes, strict=True):
+    assert feats[-1]["properties"]["candidate"] is True and len(feats) == 3
+    for f, h in zip(feats[:2], holes, strict=True):
         lon, lat = f["geometry"]["coordinates"]
         assert (lat, lon) == (
             pytest.approx(h.lat_deg, abs=1e-7),
@@ -344,7 +347,8 @@ def test_rotated_parts_are_read_as_one_flight(tmp_path: Path, main: Main) -> Non
     out = tmp_path / "rot.geojson"
     assert main(["holes", str(paths[0]), "--format", "geojson", "--out", str(out)]) == 0
     feats = json.loads(out.read_text())["features"]
-    assert [f["properties"]["hole_id"] for f in feats] == [1, 2]
+    assert [f["properties"]["hole_id"] for f in feats] == [1, 2, 3]
+    assert [f["properties"].get("candidate", False) for f in feats] == [False, False, True]
 
 
 def test_a_log_cut_off_by_a_crash_still_exports(
@@ -363,7 +367,7 @@ def test_a_log_cut_off_by_a_crash_still_exports(
     assert "recover" in got.truncated[0]
     assert got.holes == tuple(final_holes()[k] for k in (1, 2, 3))
     pms = ET.parse(out).getroot().findall(".//k:Placemark", KML)
-    assert [pm.findtext("k:name", "", KML) for pm in pms] == ["hole 1", "hole 2"]
+    assert [pm.findtext("k:name", "", KML) for pm in pms] == ["hole 1", "hole 2", "candidate 3"]
 
 
 def test_a_best_view_missing_from_the_log_only_loses_its_picture(

@@ -19,7 +19,6 @@ import pytest
 from geotag import Hole
 from missions._holeserver import (
     HoleMissionServer,
-    HoleWaypoint,
     MissionServerError,
     hole_statustext,
     hole_waypoints,
@@ -61,18 +60,29 @@ def recv(conn: Any, kind: str, timeout: float = 5.0) -> Any:
 
 def test_hole_waypoints_home_first_then_by_confidence() -> None:
     items = hole_waypoints(HOLES, home=(45.1, 7.6, 25.0), rel_alt_m=10.0, clearance_m=8.0)
-    assert items[0] == HoleWaypoint(0, None, 0, 16, 451000000, 76000000, 25.0)
-    assert [w.hole_id for w in items[1:]] == ORDER
-    assert [w.seq for w in items] == [0, 1, 2, 3, 4]
+    home = items[0]
+    assert (home.lat_deg, home.lon_deg, home.alt_m, home.frame, home.command) == (
+        45.1,
+        7.6,
+        25.0,
+        0,
+        16,
+    )
+    assert [w.properties["hole_id"] for w in items[1:]] == ORDER
+    assert len(items) == 5
     assert {(w.frame, w.command) for w in items[1:]} == {(3, 16)}
     # Holes at 31 m MSL, home at 25 m: 6 m + 8 m clearance = 14 m above home.
     assert {w.alt_m for w in items[1:]} == {14.0}
     by_id = {h.id: h for h in HOLES}
-    for w in items[1:]:
-        assert w.lat_e7 == round(by_id[w.hole_id].lat_deg * 1e7)  # type: ignore[index]
-        assert w.lon_e7 == round(by_id[w.hole_id].lon_deg * 1e7)  # type: ignore[index]
+    for w in items[1:]:  # full precision in the record; degE7 only on the wire
+        h = by_id[w.properties["hole_id"]]
+        assert (w.lat_deg, w.lon_deg) == (h.lat_deg, h.lon_deg)
     unknown_home = hole_waypoints(HOLES[:1])
-    assert (unknown_home[0].lat_e7, unknown_home[0].lon_e7, unknown_home[1].alt_m) == (0, 0, 10.0)
+    assert (unknown_home[0].lat_deg, unknown_home[0].lon_deg, unknown_home[1].alt_m) == (
+        0.0,
+        0.0,
+        10.0,
+    )
 
 
 def test_statustext_fits_fifty_characters() -> None:

@@ -19,7 +19,7 @@ import pytest
 from shapely.geometry import Point, Polygon
 
 from capture import log_info
-from geotag import Hole
+from geotag import AnnounceGate, Hole
 from ground._flightholes import read_flight_holes
 from holescan import cli
 from sim._demo import DEMO_SORTIE
@@ -58,7 +58,8 @@ def test_printed_score_is_the_truth(demo: tuple[Path, str]) -> None:
     a = sortie.anchor
     truth = {t.id: t for t in true_holes(world, a)}
     flight = read_flight_holes(sorted(out.glob("flight_*.mcap")), thumbnails=False)
-    confirmed = {h.id: h for h in flight.holes if h.sightings >= 3}
+    said = {int(t.split()[1]) for t in json.loads((out / "demo.json").read_text())["announcements"]}
+    confirmed = {h.id: h for h in AnnounceGate().select(flight.holes, said)}
 
     def centre_m(h: Hole, t: TrueHole) -> float:
         return distance_m(h.lat_deg, h.lon_deg, t.lat_deg, t.lon_deg)

@@ -1,0 +1,261 @@
+#!/usr/bin/env python3
+"""What is worth announcing: score, sightings and time span of true and false holes.
+
+For each simulated world (``SortieParams(world_seed=S)``, the demo's 10 x 10 m survey at
+3 m with the full set of distractors: small holes, cracks, depressions, stains, shadows),
+one lap of the survey is rendered from the simulated autopilot's true pose at ``--fps``
+frames per second (the flight's detector keeps up with ~18 of the camera's 30 fps), each
+frame is detected and the detections merged into holes by the flight's own
+:class:`capture.HolePipeline` (GPS accuracy reported as in the demo, 1.2 m). Every change
+of every hole is recorded (time, best score, sightings, time span of its sightings). The
+final holes are scored against the world's truth (:func:`sim.score_holes`: a hole within
+0.5 m of a true access hole's centre, or inside its opening, is true).
+
+Then each gate ``score >= s and sightings >= n and span >= t`` of a grid is replayed over
+the recorded histories: a hole is delivered at the first change that passes the gate.
+Printed: the score/sightings/span distributions of true and false holes, and per gate the
+delivered precision, the recall of holes in view (whole in >= 3 frames), and the time from
+first sighting to delivery (median, max).
+
+Also (``--alien DATASET``): per-detection scores of true and false detections on the
+independent scenes of ``benchmarks/alien_scenes.py`` (IoU > 0.5 with an access hole).
+
+Usage::
+
+    nice python benchmarks/bench_announce.py --seeds 1-8 --fps 10 --jobs 2 --json out.json \
+        --alien DATASET   # README figures: these settings, alien seed 7 (100 scenes)
+"""
+
+from __future__ import annotations
+
+import argparse
+import concurrent.futures
+import json
+import math
+import statistics
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from capture import HolePipeline
+from detect import CameraIntrinsics, detect_holes
+from geotag import CameraMount, VehiclePose
+from sim import (
+    Conditions,
+    SimAutopilot,
+    SortieParams,
+    camera_pose_in_world,
+    count_in_view,
+    loop_length_m,
+    make_sortie_world,
+    random_conditions,
+    render,
+    score_holes,
+    survey_path,
+    true_holes,
+)
+
+
+def fly_world(seed: int, fps: float) -> dict[str, Any]:
+    """One lap over world ``seed``: hole histories and their truth."""
+    p = SortieParams(world_seed=seed, n_access_holes=4, fps=fps)
+    world = make_sortie_world(p)
+    _, path = survey_path(world, p)
+    ap = SimAutopilot("udpout:127.0.0.1:9", path, uptime_at_start_s=p.clock_offset_s)
+    camera = CameraIntrinsics.xtion()
+    mount = CameraMount()
+    pipeline = HolePipeline(camera, mount)
+    n = int(loop_length_m(path) / path.speed_m_s * fps)
+    history: dict[int, list[tuple[float, float, int, float]]] = {}
+    boxes_seen = []
+    t0 = time.perf_counter()
+    for k in range(n):
+        t_boot = round(p.clock_offset_s * 1e9) + round(k * 1e9 / fps)
+        truth_pose = ap.truth_pose(t_boot)
+        pose = VehiclePose(**{**truth_pose.__dict__, "eph_m": p.eph_m})
+        rng = np.random.default_rng((seed, k))
+        cond = random_conditions(rng, Conditions())
+        rgb, depth, boxes = render(
+            world, camera_pose_in_world(pose, mount, p.anchor), camera, rng, cond
+        )
+        boxes_seen.append(boxes)
+        dets = detect_holes(rgb, depth, camera)
+        step = pipeline.add(k, dets, lambda pose=pose: pose)
+        for h in step.changed:
+            span = (h.t_last_boot_ns - h.t_first_boot_ns) * 1e-9
+            history.setdefault(h.id, []).append((k / fps, h.score, h.sightings, span))
+    holes = pipeline.holes()
+    truth = true_holes(world, p.anchor)
+    rows, false = score_holes(holes, truth, world, p.anchor, count_in_view(boxes_seen))
+    in_view = {r.truth.id for r in rows if r.status != "not in view"}
+    seen = count_in_view(boxes_seen)
+    # the holes a crew sent to would find each true hole at (duplicates included)
+    finds: dict[int, list[int]] = {t.id: [] for t in truth}
+    for h in holes:
+        for t in truth:
+            r, _ = score_holes([h], [t], world, p.anchor, seen)
+            if r[0].status == "found":
+                finds[t.id].append(h.id)
+    true_ids = {i for ids in finds.values() for i in ids}
+    match_for = {str(t): ids for t, ids in finds.items() if t in in_view}
+    false_kind = {f.hole.id: f.nearest for f in false}
+    return {
+        "seed": seed,
+        "frames": n,
+        "seconds": time.perf_counter() - t0,
+        "holes": [
+            {
+                "id": h.id,
+                "true": h.id in true_ids,
+                "nearest": false_kind.get(h.id, "access hole"),
+                "history": history[h.id],
+            }
+            for h in holes
+        ],
+        "truth_in_view": match_for,
+    }
+
+
+def replay(worlds: list[dict[str, Any]], s: float, n: int, span: float) -> dict[str, Any]:
+    delivered = true_delivered = 0
+    latency = []
+    in_view = found = 0
+    for w in worlds:
+        first_pass: dict[int, float] = {}
+        for h in w["holes"]:
+            t_first = h["history"][0][0]
+            for t, score, k, sp in h["history"]:
+                if score >= s and k >= n and sp >= span:
+                    first_pass[h["id"]] = t - t_first
+                    break
+        for h in w["holes"]:
+            if h["id"] in first_pass:
+                delivered += 1
+                true_delivered += h["true"]
+        for cands in w["truth_in_view"].values():
+            in_view += 1
+            got = [first_pass[c] for c in cands if c in first_pass]
+            if got:
+                found += 1
+                latency.append(min(got))
+    return {
+        "score": s,
+        "sightings": n,
+        "span_s": span,
+        "delivered": delivered,
+        "precision": true_delivered / delivered if delivered else math.nan,
+        "recall": found / in_view if in_view else math.nan,
+        "in_view": in_view,
+        "latency_median_s": statistics.median(latency) if latency else math.nan,
+        "latency_max_s": max(latency) if latency else math.nan,
+    }
+
+
+def alien_scores(dataset: Path) -> dict[str, list[float]]:
+    """Per-detection scores on an alien dataset: true (IoU > 0.5 with an access hole), false."""
+    import cv2
+
+    from detect import box_iou
+
+    coco = json.loads((dataset / "annotations.json").read_text())
+    cam = json.loads((dataset / "camera.json").read_text())
+    camera = CameraIntrinsics(**{k: cam[k] for k in ("width", "height", "fx", "fy", "cx", "cy")})
+    by_image: dict[int, list[dict[str, Any]]] = {}
+    for a in coco["annotations"]:
+        by_image.setdefault(a["image_id"], []).append(a)
+    out: dict[str, list[float]] = {"true": [], "false": [], "crowd": []}
+    for img in coco["images"]:
+        rgb = cv2.cvtColor(cv2.imread(str(dataset / img["file_name"])), cv2.COLOR_BGR2RGB)
+        depth = cv2.imread(str(dataset / img["depth_file_name"]), cv2.IMREAD_UNCHANGED)
+        anns = by_image.get(img["id"], [])
+        for d in detect_holes(rgb, depth, camera):
+            best, crowd = 0.0, False
+            for a in anns:
+                iou = box_iou(d.box, tuple(round(v) for v in a["bbox"]))
+                if iou > best:
+                    best, crowd = iou, bool(a.get("iscrowd", 0))
+            kind = "crowd" if best > 0.5 and crowd else "true" if best > 0.5 else "false"
+            out[kind].append(d.score)
+    return out
+
+
+def _seeds(text: str) -> list[int]:
+    if "-" in text:
+        a, b = text.split("-")
+        return list(range(int(a), int(b) + 1))
+    return [int(v) for v in text.split(",")]
+
+
+def _pct(v: list[float]) -> str:
+    if not v:
+        return "-"
+    q = np.percentile(v, [0, 10, 50, 90, 100])
+    return " / ".join(f"{x:.2f}" for x in q)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
+    ap.add_argument("--seeds", default="1-10", help="world seeds, e.g. 1-10 or 3,5,8")
+    ap.add_argument("--fps", type=float, default=15.0)
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--json", type=Path, help="write the histories here")
+    ap.add_argument("--load", type=Path, help="replay histories from an earlier --json")
+    ap.add_argument("--alien", type=Path, help="alien_scenes.py dataset for per-detection scores")
+    args = ap.parse_args(argv)
+    if args.load:
+        worlds = json.loads(args.load.read_text())["worlds"]
+    else:
+        seeds = _seeds(args.seeds)
+        with concurrent.futures.ProcessPoolExecutor(max_workers=args.jobs) as pool:
+            worlds = list(pool.map(fly_world, seeds, [args.fps] * len(seeds)))
+        if args.json:
+            args.json.write_text(json.dumps({"fps": args.fps, "worlds": worlds}))
+    tru = [h for w in worlds for h in w["holes"] if h["true"]]
+    fal = [h for w in worlds for h in w["holes"] if not h["true"]]
+    print(f"{len(worlds)} worlds, {sum(w['frames'] for w in worlds)} frames")
+    print("final holes (percentiles 0/10/50/90/100):")
+    for name, hs in (("true", tru), ("false", fal)):
+        print(
+            f"  {name:5} n={len(hs):3}  score {_pct([h['history'][-1][1] for h in hs])}"
+            f"  sightings {_pct([h['history'][-1][2] for h in hs])}"
+            f"  span s {_pct([h['history'][-1][3] for h in hs])}"
+        )
+    kinds: dict[str, int] = {}
+    for h in fal:
+        kinds[h["nearest"]] = kinds.get(h["nearest"], 0) + 1
+    print("  false holes by nearest feature:", kinds)
+    fal3 = [h for h in fal if h["history"][-1][2] >= 3]
+    print(
+        f"  false with >= 3 sightings: n={len(fal3)} "
+        f"score {_pct([h['history'][-1][1] for h in fal3])}"
+    )
+    print("gate                         delivered precision recall  latency median/max s")
+    for s in (0.3, 0.4, 0.5, 0.55, 0.6, 0.65, 0.7, 0.75):
+        for n in (2, 3, 5):
+            for span in (0.0, 0.3, 0.6):
+                r = replay(worlds, s, n, span)
+                print(
+                    f"  score>={s:.2f} n>={n} span>={span:.1f}  {r['delivered']:4d}  "
+                    f"{r['precision']:.3f}  {r['recall']:.3f} ({r['in_view']})  "
+                    f"{r['latency_median_s']:.2f} / {r['latency_max_s']:.2f}"
+                )
+    if args.alien:
+        a = alien_scores(args.alien)
+        print(f"alien scenes {args.alien}: per-detection scores (percentiles 0/10/50/90/100)")
+        for k, v in a.items():
+            print(f"  {k:5} n={len(v):4}  {_pct(v)}")
+        for s in (0.3, 0.4, 0.5, 0.6, 0.7):
+            tp = sum(v >= s for v in a["true"])
+            fp = sum(v >= s for v in a["false"])
+            print(
+                f"  score>={s:.1f}: true kept {tp}/{len(a['true'])}, "
+                f"false kept {fp}/{len(a['false'])}"
+            )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,81 @@
+"""``holescan ground``: the ground station app (holes -> live page, TAK, map files)."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import threading
+from pathlib import Path
+from types import FrameType
+
+
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = sub.add_parser(
+        "ground",
+        help="ground station: collect the vehicle's holes, live map page, TAK, KML/GeoJSON/GPX",
+        description="Run beside QGroundControl / Mission Planner on the vehicle's MAVLink "
+        "stream (e.g. MAVProxy --out udpout:127.0.0.1:14551, then --mavlink "
+        "udpin:0.0.0.0:14551). Collects every announced hole (STATUSTEXT, its picture and "
+        "facts, the hole mission of component 191) into DIR/station.json, serves a live map "
+        "page, publishes the holes to TAK as Cursor-on-Target, and keeps holes.kml, "
+        "holes_live.kml (Google Earth), holes.geojson (CalTopo) and holes.gpx current. "
+        "Ctrl-C stops it; a restart resumes from DIR.",
+    )
+    p.add_argument(
+        "--mavlink",
+        required=True,
+        help="the vehicle's stream: udpin:0.0.0.0:PORT, udpout:HOST:PORT, tcp:HOST:PORT, "
+        "or a serial device",
+    )
+    p.add_argument("--baud", type=int, default=57600, help="serial links only (default 57600)")
+    p.add_argument("-o", "--out", type=Path, required=True, help="station folder")
+    p.add_argument("--sysid", type=int, help="the vehicle's system id (default: first heard)")
+    p.add_argument("--http", default="127.0.0.1:8080", help="live page HOST:PORT, or 'off'")
+    p.add_argument(
+        "--cot",
+        default="udp+wo://239.2.3.1:6969",
+        help="TAK: pytak COT_URL (default mesh multicast udp+wo://239.2.3.1:6969; "
+        "tcp://HOST:8087, tls://HOST:8089), or 'off'",
+    )
+    p.add_argument(
+        "--cot-proto",
+        type=int,
+        choices=(0, 1),
+        default=0,
+        help="0: CoT XML (default), 1: TAK protocol v1 protobuf (needs takproto)",
+    )
+    p.add_argument("--station", default="ground", help="name used in the CoT uids")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ground import GroundOptions, run_ground
+    from holescan_errors import InputError
+
+    host, port = "127.0.0.1", None
+    if args.http != "off":
+        host, _, port_text = args.http.rpartition(":")
+        try:
+            port = int(port_text)
+        except ValueError as err:
+            raise InputError(f"--http wants HOST:PORT or 'off', got {args.http!r}") from err
+    opts = GroundOptions(
+        mavlink=args.mavlink,
+        out=args.out,
+        sysid=args.sysid,
+        baud=args.baud,
+        http_host=host or "127.0.0.1",
+        http_port=port,
+        cot_url=None if args.cot == "off" else args.cot,
+        cot_proto=args.cot_proto,
+        station=args.station,
+    )
+    stop = threading.Event()
+
+    def on_signal(signum: int, _frame: FrameType | None) -> None:
+        stop.set()
+
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
+    run_ground(opts, stop)
+    return 0

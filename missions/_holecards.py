@@ -1,0 +1,245 @@
+"""Hole cards: each announced hole's best view and facts, sent over MAVLink alone.
+
+A *card* is a small JPEG (the best view of the hole, ~2-3 kB) whose JPEG comment (COM
+segment) carries the hole's facts as compact JSON: id, revision, position, uncertainty,
+score, size, depth, sightings and the detector's "why" line. A ground station that gets
+the picture gets everything it shows with it, and any JPEG viewer still opens the file.
+
+Transport: the MAVLink **image transmission protocol** (DATA_TRANSMISSION_HANDSHAKE, then
+ENCAPSULATED_DATA packets of 253 bytes, ``seqnr`` from 0), from component 191. Chosen over
+MAVLink FTP because (1) it is a push: the picture reaches the ground when the hole is
+announced, without a client polling a directory over a lossy radio; (2) it is two
+messages, so the vehicle side stays ~100 lines and a ground station needs no FTP session
+state; (3) every card is self-contained (the JPEG carries the facts), so a lost card is
+simply sent again. Its weaknesses and what is done about them: no acknowledgement (a card
+is repeated after ``repeat_s`` while the budget allows, and a ground station can ask for
+all cards again by sending DATA_TRANSMISSION_HANDSHAKE with ``size = 0`` to component
+191, e.g. after a link drop), and one picture at a time (cards are queued).
+
+Byte budget: :class:`CardSender` paces packets with a token bucket of ``bytes_per_s``
+(default 1,000 B/s, counting whole MAVLink 2 frames: 12 bytes of header and CRC plus the
+payload), so telemetry on the same radio is never starved.
+"""
+
+from __future__ import annotations
+
+import collections
+import functools
+import json
+import math
+import struct
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from holescan_errors import InputError
+from missions._link import mavlink
+
+__all__ = [
+    "CARD_PAYLOAD",
+    "CardAssembler",
+    "CardSender",
+    "card_facts",
+    "make_card",
+    "read_card",
+]
+
+CARD_PAYLOAD = 253
+"""Bytes of picture per ENCAPSULATED_DATA packet (the message's data field)."""
+_FRAME_OVERHEAD = 12  # MAVLink 2: 10 header bytes + 2 CRC (unsigned)
+_HANDSHAKE_BYTES = _FRAME_OVERHEAD + 13
+_PACKET_BYTES = _FRAME_OVERHEAD + 2 + CARD_PAYLOAD
+_JPEG = mavlink.MAVLINK_DATA_STREAM_IMG_JPEG
+
+
+def make_card(jpeg: bytes, facts: Mapping[str, Any]) -> bytes:
+    """``jpeg`` with ``facts`` (JSON-able) in a COM segment right after its SOI marker.
+
+    >>> card = make_card(b"\\xff\\xd8\\xff\\xd9", {"id": 3})
+    >>> read_card(card)
+    {'id': 3}
+    """
+    if jpeg[:2] != b"\xff\xd8":
+        raise InputError("not a JPEG (no SOI marker)")
+    text = json.dumps(dict(facts), separators=(",", ":"), allow_nan=False).encode("utf-8")
+    if len(text) > 65533:
+        raise InputError("hole facts too long for a JPEG comment")
+    return jpeg[:2] + b"\xff\xfe" + struct.pack(">H", len(text) + 2) + text + jpeg[2:]
+
+
+def read_card(card: bytes) -> dict[str, Any] | None:
+    """The facts of a card (None when the JPEG has no JSON comment right after SOI)."""
+    if card[:4] != b"\xff\xd8\xff\xfe" or len(card) < 6:
+        return None
+    (n,) = struct.unpack(">H", card[4:6])
+    try:
+        facts = json.loads(card[6 : 4 + n].decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError):
+        return None
+    return facts if isinstance(facts, dict) else None
+
+
+def card_facts(hole: Any, why: str, revision: int) -> dict[str, Any]:
+    """The facts a card carries for a :class:`geotag.Hole` (7 decimals: 1 cm)."""
+
+    def r(v: float, nd: int) -> float | None:
+        return round(float(v), nd) if math.isfinite(v) else None
+
+    return {
+        "id": hole.id,
+        "rev": revision,
+        "lat": round(hole.lat_deg, 7),
+        "lon": round(hole.lon_deg, 7),
+        "alt": r(hole.alt_m, 2),
+        "sigma": r(hole.sigma_h_m, 2),
+        "score": r(hole.score, 3),
+        "n": hole.sightings,
+        "major": r(hole.major_m, 2),
+        "minor": r(hole.minor_m, 2),
+        "t0": hole.t_first_boot_ns // 1_000_000,
+        "t1": hole.t_last_boot_ns // 1_000_000,
+        "why": why,
+    }
+
+
+def _handshake(size: int, packets: int, mav: Any) -> None:
+    mav.data_transmission_handshake_send(_JPEG, size, 0, 0, packets, CARD_PAYLOAD, 0)
+
+
+def _packet(seqnr: int, data: bytes, mav: Any) -> None:
+    mav.encapsulated_data_send(seqnr, data)
+
+
+@dataclass
+class _Outgoing:
+    key: int
+    card: bytes
+    sent: int = -1  # -1: handshake not sent yet; else packets sent
+
+
+@dataclass
+class CardSender:
+    """Queue of cards paced into MAVLink messages under a byte budget.
+
+    ``send(fn)`` is called with a function of the link's ``mav`` (as
+    :meth:`missions.HoleMissionServer._send` takes it). Call :meth:`pump` often (the
+    server's loop does, every 0.1 s); it sends what the budget allows.
+
+    bytes_per_s : the budget (MAVLink frames of this protocol, bytes per second).
+    burst_bytes : most the bucket holds (a pause does not allow a flood afterwards).
+    repeat_s : a card sent whole is queued again after this long (None: never), the newest
+        revision; at most ``repeats`` times.
+    """
+
+    bytes_per_s: float = 1000.0
+    burst_bytes: float = 600.0
+    repeat_s: float | None = 60.0
+    repeats: int = 2
+    clock: Callable[[], float] = time.monotonic
+    bytes_sent: int = 0
+    cards_sent: int = 0
+    _queue: collections.deque[_Outgoing] = field(default_factory=collections.deque)
+    _latest: dict[int, bytes] = field(default_factory=dict)
+    _repeat_at: dict[int, tuple[float, int]] = field(default_factory=dict)
+    _tokens: float = 0.0
+    _t_last: float | None = None
+
+    def __post_init__(self) -> None:
+        if not self.bytes_per_s >= _PACKET_BYTES / 10.0:
+            raise InputError(f"card byte budget must be >= 27 B/s, got {self.bytes_per_s}")
+
+    def put(self, key: int, card: bytes) -> None:
+        """Queue ``card`` for hole ``key``; an unsent older card of the same hole is dropped."""
+        self._latest[key] = card
+        for item in self._queue:
+            if item.key == key and item.sent < 0:
+                item.card = card
+                return
+        self._queue.append(_Outgoing(key, card))
+        self._repeat_at[key] = (math.inf, 0)
+
+    def resend_all(self) -> None:
+        """Queue every hole's newest card again (a ground station asked for them)."""
+        queued = {item.key for item in self._queue if item.sent < 0}  # not started yet
+        for key, card in sorted(self._latest.items()):
+            if key not in queued:
+                self._queue.append(_Outgoing(key, card))
+
+    @property
+    def pending(self) -> int:
+        return len(self._queue)
+
+    def pump(self, send: Callable[[Callable[[Any], None]], None]) -> None:
+        """Send handshakes and packets while the budget has tokens for them."""
+        now = self.clock()
+        if self._t_last is not None:
+            self._tokens = min(
+                self.burst_bytes, self._tokens + (now - self._t_last) * self.bytes_per_s
+            )
+        self._t_last = now
+        if self.repeat_s is not None:
+            for key, (t, n) in list(self._repeat_at.items()):
+                if now >= t and all(item.key != key for item in self._queue):
+                    self._queue.append(_Outgoing(key, self._latest[key]))
+                    self._repeat_at[key] = (math.inf, n)
+        while self._queue:
+            item = self._queue[0]
+            cost = _HANDSHAKE_BYTES if item.sent < 0 else _PACKET_BYTES
+            if self._tokens < cost:
+                return
+            self._tokens -= cost
+            self.bytes_sent += cost
+            card = item.card
+            n_packets = -(-len(card) // CARD_PAYLOAD)
+            if item.sent < 0:
+                send(functools.partial(_handshake, len(card), n_packets))
+            else:
+                chunk = card[item.sent * CARD_PAYLOAD : (item.sent + 1) * CARD_PAYLOAD]
+                send(functools.partial(_packet, item.sent, chunk.ljust(CARD_PAYLOAD, b"\x00")))
+            item.sent += 1
+            if item.sent >= n_packets:
+                self._queue.popleft()
+                self.cards_sent += 1
+                _, n = self._repeat_at.get(item.key, (math.inf, 0))
+                if self.repeat_s is not None and n < self.repeats:
+                    self._repeat_at[item.key] = (now + self.repeat_s, n + 1)
+
+
+class CardAssembler:
+    """Ground side: DATA_TRANSMISSION_HANDSHAKE + ENCAPSULATED_DATA -> whole cards.
+
+    Feed every such message of one sender to :meth:`add`; it returns a card when its last
+    packet arrived, else None. Packets before a handshake, of a different image, or a card
+    with packets missing when the next handshake comes are dropped (counted).
+    """
+
+    def __init__(self) -> None:
+        self._size = 0
+        self._packets: dict[int, bytes] = {}
+        self._n = 0
+        self.dropped = 0
+        self.completed = 0
+
+    def add(self, msg: Any) -> bytes | None:
+        kind = msg.get_type()
+        if kind == "DATA_TRANSMISSION_HANDSHAKE":
+            if msg.size == 0 or msg.packets == 0:
+                return None  # a request, not an image
+            if self._n and len(self._packets) < self._n:
+                self.dropped += 1
+            self._size, self._n, self._packets = int(msg.size), int(msg.packets), {}
+            return None
+        if kind != "ENCAPSULATED_DATA" or not self._n:
+            return None
+        seq = int(msg.seqnr)
+        if seq >= self._n:
+            return None
+        data = msg.data
+        self._packets[seq] = bytes(data) if not isinstance(data, bytes) else data
+        if len(self._packets) < self._n:
+            return None
+        card = b"".join(self._packets[i] for i in range(self._n))[: self._size]
+        self._n, self._packets = 0, {}
+        self.completed += 1
+        return card

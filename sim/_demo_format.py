@@ -1,0 +1,84 @@
+"""What ``holescan demo`` prints at the end: the truth table, the ground station, the files."""
+
+from __future__ import annotations
+
+import statistics
+
+import numpy as np
+
+from sim._demo import DemoResult
+
+__all__ = ["format_result"]
+
+
+def format_result(r: DemoResult) -> list[str]:
+    """What the demo prints at the end."""
+    c = r.summary.counters
+    n_access = r.world_features.get("access", 0)
+    distractors = sum(r.world_features.values()) - n_access
+    cut = " (stopped early)" if r.interrupted else ""
+    lines = [
+        f"holescan demo: {r.capture_s:.0f} s of a simulated dawn survey{cut}, "
+        f"{n_access} access holes and {distractors} distractors in the field",
+        f"frames: {c.frames_captured} captured ({c.frames_captured / max(r.capture_s, 1e-9):.1f}"
+        f"/s), {c.frames_detected} detected, {c.frames_unposed} not posed at capture",
+        f"holes against the simulator's truth (an announced hole: score >= "
+        f"{r.gate.min_score:g}, >= {r.gate.min_sightings} sightings over >= "
+        f"{r.gate.min_span_s:g} s; inside a true opening or within {r.match_m:g} m of its "
+        f"centre finds it; {r.candidates} weaker candidates not announced):",
+    ]
+    for row in r.truth:
+        t = row.truth
+        where = f"true hole {t.id} at ({t.x_m:.1f}, {t.y_m:.1f}) m, {t.major_m:.2f} m wide"
+        if row.status == "found":
+            score = next(h.score for h in r.confirmed if h.id == row.hole_id)
+            lines.append(
+                f"  {where}: FOUND as hole {row.hole_id} (score {score:.2f}), "
+                f"{100 * row.error_m:.0f} cm off, {row.sightings} sightings"
+            )
+        elif row.status == "missed":
+            lines.append(f"  {where}: MISSED (whole in view in {row.frames_in_view} frames)")
+        else:
+            lines.append(f"  {where}: not in view (outside what the survey saw)")
+    for f in r.false:
+        lines.append(
+            f"  hole {f.hole.id}: FALSE (score {f.hole.score:.2f}, {f.hole.sightings} sightings;"
+            f" nearest feature: {f.nearest}, {f.distance_m:.2f} m)"
+        )
+    errors = [row.error_m for row in r.truth if row.status == "found"]
+    in_view = sum(row.status != "not in view" for row in r.truth)
+    err = (
+        f"; position error mean {100 * float(np.mean(errors)):.0f} cm, max "
+        f"{100 * max(errors):.0f} cm"
+        if errors
+        else ""
+    )
+    lines.append(
+        f"  => found {r.found} of {in_view} in view, missed {r.missed}, false {len(r.false)}" + err
+    )
+    if r.latency_s:
+        lines.append(
+            f"  first sighting -> announcement: median {statistics.median(r.latency_s):.1f} s, "
+            f"max {max(r.latency_s):.1f} s (autopilot clock)"
+        )
+    gcs = f"ground station: {len(r.announcements)} STATUSTEXT announcements"
+    if r.capture_s > 0:
+        gcs += (
+            f", {r.cards_sent} hole pictures sent ({r.card_bytes} B, "
+            f"{r.card_bytes / r.capture_s:.0f} B/s over the flight), "
+            f"{r.pictures_at_ground} of {len(r.confirmed)} announced holes have theirs"
+        )
+    if r.mission_items is not None:
+        gcs += f", downloaded a mission of {r.mission_items} hole waypoints (component 191)"
+    if r.mission_error is not None:
+        gcs += f"; {r.mission_error}"
+    lines.append(gcs)
+    lines.append(f"files in {r.out}:")
+    lines += [f"  flight log  {p}" for p in r.log_files]
+    lines += [f"  {kind:<11} {p}" for kind, p in r.files]
+    lines.append(
+        f"reprocess it: holescan reprocess {' '.join(str(p) for p in r.log_files)} "
+        f"--out {r.out / 'reprocessed'}"
+    )
+    lines.append(f"({r.elapsed_s:.0f} s in all)")
+    return lines

@@ -1,0 +1,46 @@
+"""The announce gate: what is worth a rescuer's look."""
+
+from __future__ import annotations
+
+import pytest
+
+from geotag import AnnounceGate, Hole
+from holescan_errors import InputError
+
+S = 1_000_000_000
+
+
+def hole(hid: int, score: float, n: int, span_s: float, north_m: float = 0.0) -> Hole:
+    lat = 45.0 + north_m / 111_132.0
+    return Hole(hid, lat, 7.0, 100.0, 0.3, score, n, 5 * S, 5 * S + round(span_s * S), 1,
+                (0, 0, 10, 10), 1.0, 0.6)  # fmt: skip
+
+
+def test_each_condition_is_needed() -> None:
+    gate = AnnounceGate(min_score=0.6, min_sightings=3, min_span_s=0.3)
+    assert gate.passes(hole(1, 0.6, 3, 0.3))
+    assert not gate.passes(hole(1, 0.59, 30, 5.0))  # a crack seen often: still a candidate
+    assert not gate.passes(hole(1, 0.95, 2, 5.0))
+    assert not gate.passes(hole(1, 0.95, 10, 0.2))  # ten frames of one instant
+
+
+def test_select_drops_a_second_hole_at_the_same_place_keeps_neighbours() -> None:
+    gate = AnnounceGate()
+    holes = [
+        hole(1, 0.85, 8, 2.0),
+        hole(2, 0.2, 8, 2.0, north_m=3.0),  # weak: candidate
+        hole(3, 0.83, 10, 2.0, north_m=0.2),  # the same opening boxed twice
+        hole(4, 0.80, 5, 1.0, north_m=1.2),  # a real neighbour 1.2 m away
+    ]
+    assert [h.id for h in gate.select(holes)] == [1, 4]
+    # already announced holes stay, whatever came later
+    assert [h.id for h in gate.select(holes, announced={3})] == [3, 4]
+    assert [h.id for h in gate.select(holes, announced={1, 3})] == [1, 3, 4]
+
+
+@pytest.mark.parametrize(
+    "kw", [{"min_score": 1.5}, {"min_score": -0.1}, {"min_sightings": 0}, {"min_span_s": -1.0}]
+)
+def test_bad_settings_are_input_errors(kw: dict[str, float]) -> None:
+    with pytest.raises(InputError):
+        AnnounceGate(**kw)  # type: ignore[arg-type]
