@@ -1,8 +1,9 @@
 """The flight side: frame sources, telemetry, the MCAP flight log and the capture daemon."""
 
 from capture._clock import ClockEstimate, ClockSync, ClockUnavailable
-from capture._daemon import Flight, FlightConfig, FlightCounters, FlightSummary
+from capture._daemon import Flight
 from capture._errors import CaptureError, SensorError
+from capture._flightrecords import FlightConfig, FlightCounters, FlightSummary
 from capture._fly import FlyReport, fly, format_report
 from capture._flyconfig import (
     FlyConfig,

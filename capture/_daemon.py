@@ -23,26 +23,31 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import queue
 import threading
 import time
-from collections.abc import Callable, Iterator, Mapping
-from dataclasses import dataclass, field, replace
-from pathlib import Path
+from collections.abc import Callable, Mapping
+from dataclasses import replace
 from typing import Any
 
 import pymap3d
 
 from capture._clock import ClockUnavailable
 from capture._errors import SensorError
+from capture._flightrecords import (
+    FlightConfig,
+    FlightCounters,
+    FlightSummary,
+    _close_quietly,
+    frames_with_timeout,
+)
 from capture._frame import Frame, FrameSource
 from capture._holepipeline import BestViews, HolePipeline, HoleView
 from capture._mavlink import Telemetry, TelemetryTimeoutError
-from capture._mcaplog import FlightLogError, FlightLogWriter, LogOptions, WriterStats
+from capture._mcaplog import FlightLogError, FlightLogWriter
 from capture._posebuffer import PoseUnavailable
 from capture._worker import DetectionWorker, WorkerResult
-from detect import DEFAULT, CameraIntrinsics, DetectParams
-from geotag import AnnounceGate, CameraMount, Hole, VehiclePose
+from detect import CameraIntrinsics
+from geotag import Hole, VehiclePose
 
 log = logging.getLogger(__name__)
 
@@ -51,140 +56,6 @@ HoleListener = Callable[[list[Hole], list[Hole], Mapping[int, HoleView]], None]
 """``on_holes(served, news, views)``: every hole that passes the announce gate (the
 waypoints), those new or changed enough to announce now, and the best view of each hole
 in ``news`` whose best view is known (hole id -> :class:`HoleView`)."""
-
-
-@dataclass(frozen=True)
-class FlightConfig:
-    """How one flight is captured.
-
-    log_prefix : path prefix of the MCAP files (``PREFIX_0000.mcap`` ...).
-    params : detector parameters. mount : camera mount on the vehicle.
-    frame_timeout_s : no frame for this long = the sensor stalled.
-    retry_backoff_s : waits between sensor reopen attempts (the last one repeats).
-    announce_min_score, announce_min_sightings, announce_min_span_s : the announce gate
-        (:class:`geotag.AnnounceGate`): a hole is announced, served as a waypoint and its
-        view sent only when its score, sightings and time span reach these. Weaker holes
-        stay candidates (logged, never a waypoint).
-    pose_wait_s : how long the results thread waits for telemetry after a frame's time.
-    startup_sync_s : at start, wait up to this long for the clock sync and a first pose
-        (the sensor opens only then; a silent autopilot just delays the start).
-    max_frames, max_duration_s : stop after this many frames / seconds (None: until the
-        source ends or a stop is requested).
-    """
-
-    log_prefix: Path
-    params: DetectParams = DEFAULT
-    mount: CameraMount = field(default_factory=CameraMount)
-    log_options: LogOptions = field(default_factory=LogOptions)
-    frame_timeout_s: float = 3.0
-    retry_backoff_s: tuple[float, ...] = (0.5, 1.0, 2.0, 4.0, 8.0)
-    announce_min_score: float = AnnounceGate.min_score
-    announce_min_sightings: int = AnnounceGate.min_sightings
-    announce_min_span_s: float = AnnounceGate.min_span_s
-    health_period_s: float = 1.0
-    pose_wait_s: float = 0.15
-    max_frames: int | None = None
-    max_duration_s: float | None = None
-    startup_sync_s: float = 3.0
-    config_record: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def gate(self) -> AnnounceGate:
-        """The announce gate these settings make."""
-        return AnnounceGate(
-            self.announce_min_score, self.announce_min_sightings, self.announce_min_span_s
-        )
-
-
-@dataclass
-class FlightCounters:
-    frames_captured: int = 0
-    frames_log_dropped: int = 0
-    frames_unposed: int = 0
-    frames_detected: int = 0
-    detections: int = 0
-    detect_ms_total: float = 0.0
-    detect_errors: int = 0
-    pose_refusals: int = 0
-    sensor_failures: int = 0
-    sensor_reopens: int = 0
-    announcements: int = 0
-
-
-@dataclass(frozen=True)
-class FlightSummary:
-    counters: FlightCounters
-    log: WriterStats
-    holes: tuple[Hole, ...]
-    detect_offered: int
-    detect_skipped: int
-    duration_s: float
-    telemetry: dict[str, Any]
-
-    @property
-    def frames_logged(self) -> int:
-        return int(self.log.written.get("frames", 0))
-
-
-_END = object()
-
-
-def frames_with_timeout(
-    source: FrameSource, timeout_s: float, stop: threading.Event
-) -> Iterator[Frame]:
-    """Iterate ``source`` in a pump thread; raise :class:`SensorError` on a stall or fault."""
-    q: queue.Queue[Any] = queue.Queue(maxsize=8)
-
-    def pump() -> None:
-        try:
-            for frame in source:
-                while not stop.is_set():
-                    try:
-                        q.put(frame, timeout=0.1)
-                        break
-                    except queue.Full:
-                        continue
-                if stop.is_set():
-                    return
-            q.put(_END)
-        except BaseException as exc:  # handed to the capture thread, which decides
-            q.put(exc)
-
-    threading.Thread(target=pump, name="frame-pump", daemon=True).start()
-    last = time.monotonic()
-    while not stop.is_set():
-        try:
-            item = q.get(timeout=0.1)
-        except queue.Empty:
-            if time.monotonic() - last > timeout_s:
-                raise SensorError(f"no frame from the sensor for {timeout_s:.1f} s") from None
-            continue
-        last = time.monotonic()
-        if item is _END:
-            return
-        if isinstance(item, SensorError):
-            raise item
-        if isinstance(item, Exception) and not isinstance(item, ValueError):
-            raise SensorError(f"sensor failed: {type(item).__name__}: {item}") from item
-        if isinstance(item, BaseException):
-            raise item
-        yield item
-
-
-def _close_quietly(source: FrameSource, timeout_s: float = 3.0) -> None:
-    """Close a (possibly hung) source without letting it hang the flight."""
-
-    def close() -> None:
-        try:
-            source.__exit__(None, None, None)
-        except Exception as err:
-            log.warning("closing the sensor failed: %s", err)
-
-    t = threading.Thread(target=close, name="sensor-close", daemon=True)
-    t.start()
-    t.join(timeout_s)
-    if t.is_alive():
-        log.warning("sensor did not close in %.0f s; abandoning it", timeout_s)
 
 
 class Flight:

@@ -18,7 +18,8 @@ import threading
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from capture._daemon import Flight, FlightSummary
+from capture._daemon import Flight
+from capture._flightrecords import FlightSummary
 from capture._flyconfig import FlyConfig, SensorSetup, open_sensor
 from capture._holepipeline import HoleView
 from capture._mavlink import Telemetry

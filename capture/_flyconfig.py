@@ -39,8 +39,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from capture._daemon import FlightConfig
 from capture._errors import SensorError
+from capture._flightrecords import FlightConfig
 from capture._frame import Frame, FrameSource
 from capture._mcaplog import LogOptions
 from detect import DEFAULT, PAPER, SEARCHERS, CameraIntrinsics, DetectParams

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from capture._daemon import Flight, FlightConfig
+from capture import Flight, FlightConfig
 from capture._frame import Frame
 from capture._mcapread import read_flight_log
 from detect import CameraIntrinsics

@@ -17,8 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from capture import LoggedFrame, log_info, read_flight_log, recover_log
-from capture._daemon import Flight, FlightConfig
+from capture import Flight, FlightConfig, LoggedFrame, log_info, read_flight_log, recover_log
 from capture._frame import Frame
 from capture._mavlink import Telemetry
 from detect import CameraIntrinsics

@@ -19,8 +19,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from capture import write_oni
-from capture._daemon import Flight, FlightConfig
+from capture import Flight, FlightConfig, write_oni
 from capture._flyconfig import FlyConfig, SensorSpec, load_fly_config, parse_fly_config
 from capture._frame import Frame
 from capture._mcapread import LoggedFrame, LoggedHealth, LoggedHoles, read_flight_log

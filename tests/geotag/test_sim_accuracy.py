@@ -28,7 +28,7 @@ import numpy as np
 import pymap3d
 import pytest
 
-from capture._daemon import Flight, FlightConfig
+from capture import Flight, FlightConfig
 from capture._mcapread import LoggedDetections, read_flight_log
 from geotag import HoleSighting, geotag_frame
 from sim._sortie import SimSortie, SortieParams, TrueHole

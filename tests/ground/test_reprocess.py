@@ -23,8 +23,7 @@ import pymap3d
 import pytest
 from mcap.reader import make_reader
 
-from capture import LogOptions, log_info
-from capture._daemon import Flight, FlightConfig, FlightSummary
+from capture import Flight, FlightConfig, FlightSummary, LogOptions, log_info
 from capture._mcapread import scan_records
 from detect import CameraIntrinsics
 from geotag import Hole
