@@ -5,17 +5,20 @@
 * :func:`export_flight_holes` / :func:`read_flight_holes` - the holes of a flight log as
   the ground crew's files (GPX, KML/KMZ with thumbnails, GeoJSON, QGC ``.plan``, WPL).
 * :func:`write_report` - a flight's self-contained HTML report.
+* :func:`import_csv_dataset` - real frames and a ``file,x,y,w,h`` CSV as a dataset.
 * :func:`load_dataset` / :func:`write_dataset` and :func:`evaluate_dataset` - annotated
   RGB-D datasets (COCO layout) and the detector's AP on them.
 * :func:`read_rgb` / :func:`read_depth` / :func:`read_camera` and :func:`draw_detections` -
   image files and overlays for ``holescan detect``.
 """
 
+from ground._csvimport import FramePair, find_pairs, import_csv_dataset, read_box_csv
 from ground._datasets import (
     CATEGORY,
     Dataset,
     DatasetImage,
     Sample,
+    check_box,
     load_dataset,
     load_image_pair,
     write_dataset,
@@ -66,6 +69,7 @@ __all__ = [
     "ExportReport",
     "FlightHoles",
     "FlightResult",
+    "FramePair",
     "HoleMatch",
     "HoleThumbnail",
     "Progress",
@@ -73,21 +77,25 @@ __all__ = [
     "ReprocessResult",
     "Sample",
     "ScoreBand",
+    "check_box",
     "default_out_path",
     "depth_colour",
     "detect_image",
     "draw_detections",
     "evaluate_dataset",
     "export_flight_holes",
+    "find_pairs",
     "flight_log_files",
     "format_table",
     "ground_truth",
     "group_flights",
+    "import_csv_dataset",
     "load_dataset",
     "load_image_pair",
     "log_stem",
     "match_points",
     "plot_pr",
+    "read_box_csv",
     "read_camera",
     "read_depth",
     "read_flight_holes",
