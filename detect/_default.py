@@ -28,25 +28,35 @@ the *basins* of the depth image instead, found at every scale at once:
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 import numpy.typing as npt
-from skimage.morphology import reconstruction
 
 from detect._evaluate import overlap
+from detect._geometry import GROW_PX, grow_walls, opening_axes
+from detect._regions import (
+    SHALLOW_M,
+    Candidate,
+    basin_depth,
+    basin_regions,
+    block_depth,
+    no_reading_regions,
+)
 from detect._scores import contrast_score, darkness_score, ramp, width_score
 from detect._types import CameraIntrinsics, Detection, DetectParams, FeatureScores
 from detect._validate import check_frame
 
-# Region thresholds (metres below the spill level). SHALLOW is a few block-averaged noise
-# sigmas at 4 m (Xtion: 1.425e-6 Z^2 mm per pixel -> 23 mm, /4 after 4x4 averaging).
-SHALLOW_M = 0.05
-DEEP_M = 0.25
-# Radii (work pixels) at which necks between no-reading blobs are cut.
-NECK_RADII_PX = (0, 3, 6)
+__all__ = [
+    "basin_depth",
+    "basin_labels",
+    "block_depth",
+    "box_iou",
+    "detect_default",
+    "opening_axes",
+]
+
 # A candidate needs this fraction of its rim to be valid readings (not border, not no-reading).
 MIN_RIM_VALID = 0.6
 # Switches for the ablation study (benchmarks/ablation.py); all on in holescan.
@@ -54,191 +64,10 @@ PASSABLE_WIDTH = True  # minor axis = min(ellipse axis, largest inscribed disk)
 RANGE_LIMIT_LIGHT = True  # no-reading regions at the range limit: darkness as depth evidence
 # Score = Sd^DEPTH_EXPONENT * Sw * shape * light (see the module docstring).
 DEPTH_EXPONENT = 0.5
-# Walls: grow regions by up to this many work pixels into readings this far below the
-# opening plane.
-GROW_PX = 4
-WALL_MARGIN_M = 0.06
-# A block counts as read when at least this fraction of its pixels have a reading.
-MIN_VALID_FRACTION = 0.05
 # Openings larger than this (major axis, m) are broad terrain, not holes: width score fades.
 OVERSIZE_START_M = 3.5
 OVERSIZE_END_M = 6.0
 RING_PX = 2
-
-
-def block_depth(
-    depth: npt.NDArray[np.uint16], factor: int, unit_m: float
-) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]:
-    """Mean of the valid readings in each ``factor`` x ``factor`` block.
-
-    Returns ``(z, valid_fraction)``: z (h, w) float32 metres, NaN where fewer than
-    :data:`MIN_VALID_FRACTION` of the block's pixels had a reading.
-    """
-    size = (depth.shape[1] // factor, depth.shape[0] // factor)
-    total = cv2.resize(depth.astype(np.float32), size, interpolation=cv2.INTER_AREA)
-    frac = cv2.resize((depth > 0).astype(np.float32), size, interpolation=cv2.INTER_AREA)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        z = total / frac * np.float32(unit_m)
-    z[frac < MIN_VALID_FRACTION] = np.nan
-    return z, frac
-
-
-def basin_depth(
-    z: npt.NDArray[np.float32],
-) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_], float]:
-    """Depth of every pixel below the spill level of its basin (metres; inf for no reading).
-
-    Returns ``(pit, invalid, z_far)`` where ``z_far`` is the farthest reading in the image.
-    """
-    invalid = np.isnan(z)
-    z_far = float(np.nanpercentile(z, 99.5))  # robust to a few outliers
-    height = -z.astype(np.float64)
-    floor = -(float(np.nanmax(z)) + 1.0)
-    height[invalid] = floor
-    seed = height.copy()
-    seed[1:-1, 1:-1] = height.max()
-    filled = reconstruction(seed, height, method="erosion")
-    pit = filled - height
-    pit[invalid & (pit > 0)] = np.inf
-    return pit, invalid, z_far
-
-
-Region = tuple[npt.NDArray[np.bool_], tuple[int, int, int, int]]
-# (mask, box, enclosed): enclosed = a pit of the basin analysis; else a no-reading blob.
-Candidate = tuple[npt.NDArray[np.bool_], tuple[int, int, int, int], bool]
-
-
-def _crop(lab: npt.NDArray[np.int32], stats: npt.NDArray[np.int32], i: int) -> Region:
-    x, y = int(stats[i, cv2.CC_STAT_LEFT]), int(stats[i, cv2.CC_STAT_TOP])
-    w, h = int(stats[i, cv2.CC_STAT_WIDTH]), int(stats[i, cv2.CC_STAT_HEIGHT])
-    return lab[y : y + h, x : x + w] == i, (x, y, w, h)
-
-
-def basin_regions(pit: npt.NDArray[np.float64], min_px: int) -> list[Candidate]:
-    """Regions around each deep core, cut from its basin at a depth that suits the core.
-
-    A core is a component of ``pit > DEEP_M``. Its region is the connected part of its basin
-    lying more than ``tau = clip(0.25 * D, SHALLOW_M, DEEP_M)`` below the spill level, D
-    being the core's depth (1 m for a core without readings). The shallow skirt of a broad
-    depression holding a hole is left out; the walls of a clean hole stay in.
-    """
-    n_b, lab_b, stats_b, _ = cv2.connectedComponentsWithStats(
-        (pit > DEEP_M).astype(np.uint8), connectivity=8
-    )
-    regions: list[Candidate] = []
-    seen: set[tuple[int, int, int, int]] = set()
-    for b in range(1, n_b):
-        if stats_b[b, cv2.CC_STAT_AREA] < min_px:
-            continue
-        core, (x, y, w, h) = _crop(lab_b, stats_b, b)
-        depths = pit[y : y + h, x : x + w][core]
-        finite = depths[np.isfinite(depths)]
-        d = float(np.percentile(finite, 90)) if finite.size > 0.5 * depths.size else 1.0
-        tau = min(DEEP_M, max(SHALLOW_M, 0.25 * d))
-        _, lab, stats, _ = cv2.connectedComponentsWithStats(
-            (pit > tau).astype(np.uint8), connectivity=8
-        )
-        labels = lab[y : y + h, x : x + w][core]
-        i = int(np.bincount(labels[labels > 0]).argmax())  # core pixels are all > tau
-        mask, box = _crop(lab, stats, i)
-        if box not in seen:
-            seen.add(box)
-            regions.append((mask, box, True))
-    return regions
-
-
-def no_reading_regions(
-    invalid: npt.NDArray[np.bool_], pit: npt.NDArray[np.float64], min_px: int
-) -> list[Candidate]:
-    """Blobs of no reading that the basin analysis cannot see as pits.
-
-    A hole whose floor gives no reading can touch another no-reading area (ground beyond
-    the sensor's range, a neighbouring hole) or the image border; then it spills and is no
-    pit. Opening the no-reading mask with disks of growing radius cuts such necks; each
-    blob that appears (grown back inside the mask) is a candidate. Whether it is a hole is
-    decided later from its rim (enough valid readings around it, well inside the range).
-    """
-    regions: list[Candidate] = []
-    spilled = invalid & ~np.isinf(pit)
-    if spilled.sum() < min_px:
-        return regions
-    inv_u8 = invalid.astype(np.uint8)
-    for r in NECK_RADII_PX:
-        if r:
-            k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
-            opened = cv2.morphologyEx(inv_u8, cv2.MORPH_OPEN, k)
-        else:
-            opened = inv_u8
-        n, lab, stats, _ = cv2.connectedComponentsWithStats(opened, connectivity=8)
-        for i in range(1, n):
-            if stats[i, cv2.CC_STAT_AREA] < min_px:
-                continue
-            blob = (lab == i).astype(np.uint8)
-            if r:
-                blob = cv2.dilate(blob, k) & inv_u8
-            if not (blob.astype(bool) & spilled).any():
-                continue  # an enclosed pit: basin_regions has it
-            _, lab2, stats2, _ = cv2.connectedComponentsWithStats(blob, connectivity=8)
-            j = int(np.argmax(stats2[1:, cv2.CC_STAT_AREA])) + 1
-            regions.append((*_crop(lab2, stats2, j), False))
-    return regions
-
-
-def _rays(
-    us: npt.NDArray[np.float64], vs: npt.NDArray[np.float64], cam: CameraIntrinsics
-) -> npt.NDArray[np.float64]:
-    return np.stack([(us - cam.cx) / cam.fx, (vs - cam.cy) / cam.fy, np.ones_like(us)], axis=1)
-
-
-def fit_plane(
-    points: npt.NDArray[np.float64],
-) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-    """Least-squares plane ``(unit normal, centroid)`` of (N, 3) camera-frame points.
-
-    Falls back to a fronto-parallel plane when the points are too few, collinear, or the
-    plane would be seen edge-on (normal more than ~72 deg from the optical axis).
-    """
-    centre = points.mean(axis=0)
-    normal = np.array([0.0, 0.0, 1.0])
-    if len(points) >= 6:
-        _, sv, vt = np.linalg.svd(points - centre, full_matrices=False)
-        if sv[1] > 1e-6 and abs(vt[2][2]) > 0.3:
-            normal = vt[2] / np.linalg.norm(vt[2])
-    return normal, centre
-
-
-def opening_axes(
-    region_uv: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]],
-    rim_uvz: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]],
-    cam: CameraIntrinsics,
-) -> tuple[float, float, float, float]:
-    """Metric size of an opening: ``(major_m, minor_m, area_m2, rim_depth_m)``.
-
-    region_uv : pixel coordinates of the region; rim_uvz : pixel coordinates and depth (m)
-    of the valid ring around it. The rim's 3-D points define the opening plane (least
-    squares); the region's rays meet that plane; their second moments (plus each pixel's own
-    footprint) give the axes of the ellipse with the same moments.
-    """
-    ru, rv, rz = rim_uvz
-    normal, centre = fit_plane(_rays(ru, rv, cam) * rz[:, None])
-    rays = _rays(region_uv[0], region_uv[1], cam)
-    t = (centre @ normal) / (rays @ normal)
-    pts = rays * t[:, None]
-    # In-plane basis.
-    e1 = np.cross(normal, [0.0, 1.0, 0.0])
-    if np.linalg.norm(e1) < 1e-6:
-        e1 = np.cross(normal, [1.0, 0.0, 0.0])
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(normal, e1)
-    p2 = np.stack([pts @ e1, pts @ e2], axis=1)
-    cos_incidence = np.abs(rays @ normal) / np.linalg.norm(rays, axis=1)
-    pix_area = (t**2) / (cam.fx * cam.fy) / np.maximum(cos_incidence, 0.2)
-    area = float(pix_area.sum())
-    cov = np.cov(p2.T) if len(p2) > 1 else np.zeros((2, 2))
-    cov = cov + np.eye(2) * float(np.mean(pix_area)) / 12.0
-    lam = np.sort(np.linalg.eigvalsh(cov))[::-1]
-    major, minor = 4.0 * math.sqrt(max(lam[0], 0.0)), 4.0 * math.sqrt(max(lam[1], 0.0))
-    return major, minor, area, float(np.median(rz))
 
 
 def _nms(dets: list[Detection], iou_max: float) -> list[Detection]:
@@ -268,47 +97,6 @@ class _FrameData:
 _RING_KERNEL = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * RING_PX + 1, 2 * RING_PX + 1))
 
 
-def _disk(r: int) -> npt.NDArray[np.uint8]:
-    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
-
-
-def _grow_walls(
-    inside: npt.NDArray[np.bool_],
-    zc: npt.NDArray[np.float32],
-    valid: npt.NDArray[np.bool_],
-    uv0: tuple[int, int],
-    cam: CameraIntrinsics,
-) -> npt.NDArray[np.bool_]:
-    """Add the hole's walls: readings next to the region that lie below the opening plane.
-
-    The plane is fitted to the readings of a ring a few pixels out (the surrounding
-    terrain); pixels connected to the region and deeper than the plane by ``WALL_MARGIN_M``
-    are wall or floor. Up to ``GROW_PX`` pixels of growth, so a tilted view's visible far
-    wall joins the opening (its box is the rim's).
-    """
-    u8 = inside.astype(np.uint8)
-    outer = (cv2.dilate(u8, _disk(RING_PX + 3)) > 0) & ~(cv2.dilate(u8, _disk(RING_PX)) > 0)
-    outer &= valid
-    if outer.sum() < 6:
-        return inside
-    ov, ou = np.nonzero(outer)
-    normal, centre = fit_plane(
-        _rays(ou + float(uv0[0]), ov + float(uv0[1]), cam) * zc[outer].astype(np.float64)[:, None]
-    )
-    vv, uu = np.mgrid[0 : zc.shape[0], 0 : zc.shape[1]]
-    rays = _rays(uu.ravel() + float(uv0[0]), vv.ravel() + float(uv0[1]), cam)
-    z_plane = ((centre @ normal) / (rays @ normal)).reshape(zc.shape)
-    below = valid & (zc > z_plane + WALL_MARGIN_M)
-    region = inside.copy()
-    k3 = np.ones((3, 3), np.uint8)
-    for _ in range(GROW_PX):
-        add = (cv2.dilate(region.astype(np.uint8), k3) > 0) & below & ~region
-        if not add.any():
-            break
-        region |= add
-    return region
-
-
 def _measure(region: Candidate, f: _FrameData, params: DetectParams) -> Detection | None:
     """Measure one candidate region and score it; None when it cannot be a hole.
 
@@ -323,7 +111,7 @@ def _measure(region: Candidate, f: _FrameData, params: DetectParams) -> Detectio
     zc, inv_c = f.z[y0:y1, x0:x1], f.invalid[y0:y1, x0:x1]
     inside = np.zeros((y1 - y0, x1 - x0), bool)
     inside[y - y0 : y - y0 + h, x - x0 : x - x0 + w] = mask
-    inside = _grow_walls(inside, zc, ~inv_c, (x0, y0), f.cam)
+    inside = grow_walls(inside, zc, ~inv_c, (x0, y0), f.cam, RING_PX)
     big = inside.astype(np.uint8)
     vs, us = np.nonzero(inside)
     bx0, by0, bx1, by1 = int(us.min()), int(vs.min()), int(us.max()) + 1, int(vs.max()) + 1
