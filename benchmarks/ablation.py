@@ -27,10 +27,19 @@ VARIANTS: dict[str, dict[str, Any]] = {
 
 
 def _init(overrides: dict[str, Any]) -> None:
-    import detect._default as d  # the ablation switches are private on purpose
+    import detect._default
+    import detect._geometry
+    import detect._photometry
+    import detect._regions
 
+    # The ablation switches are private module constants on purpose; set each where it lives.
+    modules = (detect._default, detect._geometry, detect._photometry, detect._regions)
     for k, v in overrides.items():
-        setattr(d, k, v)
+        homes = [m for m in modules if hasattr(m, k)]
+        if not homes:
+            raise AttributeError(f"no detector module has the switch {k}")
+        for m in homes:
+            setattr(m, k, v)
 
 
 def _one(job: tuple[Path, int]) -> tuple[int, list[tuple[int, tuple[float, ...], float]]]:

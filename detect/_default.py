@@ -36,6 +36,7 @@ import numpy.typing as npt
 
 from detect._evaluate import overlap
 from detect._geometry import GROW_PX, grow_walls, opening_axes
+from detect._photometry import VOID_DARK, relative_luminance, void_evidence
 from detect._regions import (
     SHALLOW_M,
     Candidate,
@@ -68,14 +69,32 @@ DEPTH_EXPONENT = 0.5
 OVERSIZE_START_M = 3.5
 OVERSIZE_END_M = 6.0
 RING_PX = 2
+# NMS: a detection is dropped when this much of a better one's box lies inside its box.
+CONTAINED = 0.8
+# Also measure no-reading blobs that are pits on their own (a hole in a broad depression).
+ENCLOSED_BLOBS = False
 
 
 def _nms(dets: list[Detection], iou_max: float) -> list[Detection]:
+    """Suppress overlaps (IoU > ``iou_max``) and containers of a better detection.
+
+    A region that holds a higher-scoring one (most of it inside) is a depression or a
+    no-reading area around that hole, not a second hole.
+    """
     keep: list[Detection] = []
     for d in sorted(dets, key=lambda d: -d.score):
-        if all(box_iou(d.box, k.box) <= iou_max for k in keep):
+        if all(box_iou(d.box, k.box) <= iou_max for k in keep) and not any(
+            _inside(k.box, d.box) > CONTAINED for k in keep
+        ):
             keep.append(d)
     return keep
+
+
+def _inside(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> float:
+    """Fraction of box ``a`` that lies inside box ``b``."""
+    ix = max(0, min(a[0] + a[2], b[0] + b[2]) - max(a[0], b[0]))
+    iy = max(0, min(a[1] + a[3], b[1] + b[3]) - max(a[1], b[1]))
+    return ix * iy / max(a[2] * a[3], 1)
 
 
 def box_iou(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> float:
@@ -88,6 +107,7 @@ class _FrameData:
     z: npt.NDArray[np.float32]
     invalid: npt.NDArray[np.bool_]
     y_img: npt.NDArray[np.float64]
+    rel: npt.NDArray[np.float64]
     cam: CameraIntrinsics
     z_far: float
     range_m: float
@@ -147,6 +167,7 @@ def _measure(region: Candidate, f: _FrameData, params: DetectParams) -> Detectio
     sc = contrast_score(y_in, y_ring, params.contrast_threshold)
     s = params.searcher
     beyond = no_read > 0.3
+    rel_in = float(np.median(f.rel[y0:y1, x0:x1][inside & inv_c])) if beyond else 0.0
     if beyond:
         # The floor gave no reading. It lies at least as far as the sensor's range; and the
         # nearer the rim is than the farthest reading of the frame, the surer it is that a
@@ -164,6 +185,9 @@ def _measure(region: Candidate, f: _FrameData, params: DetectParams) -> Detectio
     fill = area / (major * minor_pca) if major * minor_pca > 0 else 0.0
     sr = ramp(fill, 0.3, 0.7)
     score = sd**DEPTH_EXPONENT * sw * (0.35 + 0.65 * sr) * (0.85 + 0.15 * max(sb, sc))
+    if beyond:
+        # No reading: a void only if it looks like one (dark against the rubble around it).
+        score *= 0.2 + 0.8 * void_evidence(rel_in)
     if score < params.min_score:
         return None
     k = f.factor
@@ -176,6 +200,7 @@ def _measure(region: Candidate, f: _FrameData, params: DetectParams) -> Detectio
         minor_m=minor,
         rim_depth_m=rim_z,
         beyond_range=beyond,
+        relative_brightness=round(rel_in, 3) if beyond else None,
     )
 
 
@@ -207,14 +232,16 @@ def detect_default(
     grey = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)  # BT.601 Y, as the paper's YUV
     y_img = cv2.resize(grey, (z.shape[1], z.shape[0]), interpolation=cv2.INTER_AREA) / 255.0
     pit, invalid, z_far = basin_depth(z)
+    rel = relative_luminance(y_img, ~invalid)
     range_m = max(params.max_range_m, z_far)
     s = params.searcher
     # Smallest region worth measuring: a quarter of the searcher's minimum opening at the
     # farthest depth in view, in work pixels.
     min_side_px = s.min_fraction * s.minor_m * cam.fx / max(z_far, 0.5)
     min_px = max(2, int(0.25 * min_side_px**2))
-    regions = basin_regions(pit, min_px) + no_reading_regions(invalid, pit, min_px)
-    frame = _FrameData(z, invalid, y_img, cam, z_far, range_m, factor)
+    regions = basin_regions(pit, min_px) + no_reading_regions(invalid, pit, min_px, ENCLOSED_BLOBS)
+    regions += no_reading_regions(invalid & (rel < VOID_DARK), pit, min_px, enclosed_too=False)
+    frame = _FrameData(z, invalid, y_img, rel, cam, z_far, range_m, factor)
     dets = [d for r in regions if (d := _measure(r, frame, params)) is not None]
     return _nms(dets, params.nms_iou)
 

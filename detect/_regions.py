@@ -18,6 +18,8 @@ DEEP_M = 0.25
 NECK_RADII_PX = (0, 3, 6)
 # A block counts as read when at least this fraction of its pixels have a reading.
 MIN_VALID_FRACTION = 0.05
+# A basin this many times larger than its no-reading part is a depression holding holes.
+DEPRESSION_RATIO = 5.0
 
 
 def block_depth(
@@ -98,11 +100,40 @@ def basin_regions(pit: npt.NDArray[np.float64], min_px: int) -> list[Candidate]:
         if box not in seen:
             seen.add(box)
             regions.append((mask, box, True))
+            regions += _voids_in_depression(mask, box, pit, min_px)
     return regions
 
 
+def _voids_in_depression(
+    mask: npt.NDArray[np.bool_],
+    box: tuple[int, int, int, int],
+    pit: npt.NDArray[np.float64],
+    min_px: int,
+) -> list[Candidate]:
+    """The no-reading blobs of a basin much larger than them: holes in a broad depression.
+
+    Each blob is a candidate of its own (its walls are added when it is measured); the
+    basin stays a candidate too, and the better-scoring one wins (NMS by containment).
+    """
+    x, y, w, h = box
+    void = mask & np.isinf(pit[y : y + h, x : x + w])
+    n_void = int(void.sum())
+    if n_void < min_px or mask.sum() <= DEPRESSION_RATIO * n_void:
+        return []
+    n, lab, stats, _ = cv2.connectedComponentsWithStats(void.astype(np.uint8), connectivity=8)
+    out: list[Candidate] = []
+    for i in range(1, n):
+        if stats[i, cv2.CC_STAT_AREA] >= min_px:
+            m, (bx, by, bw, bh) = _crop(lab, stats, i)
+            out.append((m, (bx + x, by + y, bw, bh), True))
+    return out
+
+
 def no_reading_regions(
-    invalid: npt.NDArray[np.bool_], pit: npt.NDArray[np.float64], min_px: int
+    invalid: npt.NDArray[np.bool_],
+    pit: npt.NDArray[np.float64],
+    min_px: int,
+    enclosed_too: bool = False,
 ) -> list[Candidate]:
     """Blobs of no reading that the basin analysis cannot see as pits.
 
@@ -111,10 +142,13 @@ def no_reading_regions(
     pit. Opening the no-reading mask with disks of growing radius cuts such necks; each
     blob that appears (grown back inside the mask) is a candidate. Whether it is a hole is
     decided later from its rim (enough valid readings around it, well inside the range).
+
+    ``invalid`` may be a part of the no-reading mask (its dark pixels); ``enclosed_too``
+    then also returns blobs that are pits (a dark part of a larger basin).
     """
     regions: list[Candidate] = []
     spilled = invalid & ~np.isinf(pit)
-    if spilled.sum() < min_px:
+    if spilled.sum() < min_px and not enclosed_too:
         return regions
     inv_u8 = invalid.astype(np.uint8)
     for r in NECK_RADII_PX:
@@ -130,9 +164,10 @@ def no_reading_regions(
             blob = (lab == i).astype(np.uint8)
             if r:
                 blob = cv2.dilate(blob, k) & inv_u8
-            if not (blob.astype(bool) & spilled).any():
+            is_pit = not (blob.astype(bool) & spilled).any()
+            if is_pit and not enclosed_too:
                 continue  # an enclosed pit: basin_regions has it
             _, lab2, stats2, _ = cv2.connectedComponentsWithStats(blob, connectivity=8)
             j = int(np.argmax(stats2[1:, cv2.CC_STAT_AREA])) + 1
-            regions.append((*_crop(lab2, stats2, j), False))
+            regions.append((*_crop(lab2, stats2, j), is_pit))
     return regions

@@ -30,6 +30,7 @@ from ground._evaluation import (
     format_table,
     ground_truth,
     plot_pr,
+    plot_reliability,
     run_detector,
     write_coco_results,
 )
@@ -95,6 +96,7 @@ __all__ = [
     "log_stem",
     "match_points",
     "plot_pr",
+    "plot_reliability",
     "read_box_csv",
     "read_camera",
     "read_depth",

@@ -182,3 +182,57 @@ def plot_pr(path: Path, reports: Sequence[EvalReport], title: str) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def plot_reliability(
+    path: Path,
+    p: npt.NDArray[np.float64],
+    label: npt.NDArray[np.float64],
+    title: str,
+    bins: int = 10,
+) -> None:
+    """Reliability diagram: observed frequency of true holes per bin of predicted ``p``.
+
+    Bars show how many detections fall in each bin; bins with >= 20 detections are drawn
+    solid, fewer hollow (too few to judge).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    edges = np.linspace(0.0, 1.0, bins + 1)
+    idx = np.clip(np.digitize(p, edges[1:-1]), 0, bins - 1)
+    fig, (ax, axn) = plt.subplots(
+        2, 1, figsize=(5.5, 6.4), sharex=True, gridspec_kw={"height_ratios": [3, 1]}
+    )
+    ax.plot([0, 1], [0, 1], color="grey", lw=1, label="perfect calibration")
+    ax.fill_between([0, 1], [-0.1, 0.9], [0.1, 1.1], color="grey", alpha=0.12, label="+-0.1")
+    counts = []
+    for b in range(bins):
+        m = idx == b
+        counts.append(int(m.sum()))
+        if not m.any():
+            continue
+        solid = m.sum() >= 20
+        ax.plot(
+            p[m].mean(),
+            label[m].mean(),
+            "o",
+            color="C0",
+            mfc="C0" if solid else "white",
+            ms=7,
+        )
+    ax.plot([], [], "o", color="C0", label=">= 20 detections (hollow: fewer)")
+    ax.set_ylabel("observed fraction of true holes")
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper left", fontsize=8)
+    ax.set_title(title, fontsize=9)
+    axn.bar(edges[:-1] + 0.05, counts, width=0.09, color="C1")
+    axn.set_xlabel("p_hole (predicted)")
+    axn.set_ylabel("detections")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
