@@ -25,6 +25,6 @@ def apply_table(table: Sequence[tuple[float, float]], score: float) -> float:
     return float(np.clip(np.interp(score, xs, ps), 0.0, 1.0))
 
 
-def p_hole(score: float) -> float:
+def p_hole_of_score(score: float) -> float:
     """Probability that a default-mode detection with raw ``score`` is a true access hole."""
     return apply_table(P_HOLE_TABLE, score)

@@ -28,12 +28,13 @@ the *basins* of the depth image instead, found at every scale at once:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
 import numpy.typing as npt
 
+from detect._calibration import p_hole_of_score
 from detect._evaluate import overlap
 from detect._geometry import GROW_PX, grow_walls, opening_axes
 from detect._photometry import VOID_DARK, relative_luminance, void_evidence
@@ -243,7 +244,7 @@ def detect_default(
     regions += no_reading_regions(invalid & (rel < VOID_DARK), pit, min_px, enclosed_too=False)
     frame = _FrameData(z, invalid, y_img, rel, cam, z_far, range_m, factor)
     dets = [d for r in regions if (d := _measure(r, frame, params)) is not None]
-    return _nms(dets, params.nms_iou)
+    return [replace(d, p_hole=p_hole_of_score(d.score)) for d in _nms(dets, params.nms_iou)]
 
 
 def basin_labels(

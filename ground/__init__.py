@@ -25,6 +25,8 @@ from ground._datasets import (
 )
 from ground._evaluation import (
     EvalReport,
+    brier_score,
+    calibration_outcomes,
     detect_image,
     evaluate_dataset,
     format_table,
@@ -78,6 +80,8 @@ __all__ = [
     "ReprocessResult",
     "Sample",
     "ScoreBand",
+    "brier_score",
+    "calibration_outcomes",
     "check_box",
     "default_out_path",
     "depth_colour",

@@ -23,6 +23,7 @@ from detect import (
     detect_baseline,
     detect_holes,
     evaluate_detections,
+    p_hole_of_score,
 )
 from ground._datasets import Dataset, DatasetImage, load_dataset, load_image_pair
 from holescan_errors import InputError
@@ -184,6 +185,25 @@ def plot_pr(path: Path, reports: Sequence[EvalReport], title: str) -> None:
     plt.close(fig)
 
 
+def calibration_outcomes(
+    result: PRResult,
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """``(p_hole, is_true)`` of every scored detection of a default-mode run.
+
+    p_hole comes from the raw score (:func:`detect.p_hole_of_score`); is_true is 1 for a
+    detection matched to an access hole, 0 otherwise (crowd matches are already left out).
+    """
+    tp = np.rint(np.array(result.recall_curve) * result.n_gt)
+    is_true = np.diff(np.concatenate([[0.0], tp])).clip(0, 1)
+    p = np.array([p_hole_of_score(s) for s in result.scores], dtype=np.float64)
+    return p, is_true.astype(np.float64)
+
+
+def brier_score(p: npt.NDArray[np.float64], is_true: npt.NDArray[np.float64]) -> float:
+    """Mean squared difference between predicted probability and outcome (0 = perfect)."""
+    return float(np.mean((p - is_true) ** 2)) if len(p) else float("nan")
+
+
 def plot_reliability(
     path: Path,
     p: npt.NDArray[np.float64],
@@ -225,8 +245,8 @@ def plot_reliability(
         )
     ax.plot([], [], "o", color="C0", label=">= 20 detections (hollow: fewer)")
     ax.set_ylabel("observed fraction of true holes")
-    ax.set_xlim(0, 1)
-    ax.set_ylim(0, 1)
+    ax.set_xlim(-0.02, 1.02)
+    ax.set_ylim(-0.03, 1.03)
     ax.grid(alpha=0.3)
     ax.legend(loc="upper left", fontsize=8)
     ax.set_title(title, fontsize=9)

@@ -10,9 +10,12 @@ from pathlib import Path
 
 from ground import (
     EvalReport,
+    brier_score,
+    calibration_outcomes,
     format_table,
     load_dataset,
     plot_pr,
+    plot_reliability,
     run_detector,
     write_coco_results,
 )
@@ -51,6 +54,14 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     p.add_argument("--detections", type=Path, help="write COCO results JSON (the first run)")
     p.add_argument("--plot", type=Path, help="write a precision-recall PNG")
+    p.add_argument(
+        "--reliability",
+        type=Path,
+        metavar="PNG",
+        help="write the reliability diagram of default mode's p_hole on this dataset and "
+        "print its Brier score (with --plot and no --reliability: PR.png and "
+        "PR-reliability.png)",
+    )
     p.add_argument(
         "--workers",
         type=int,
@@ -128,4 +139,16 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         plot_pr(args.plot, reports, f"{args.dataset.name}: {n} images, {n_gt} holes")
         print(f"precision-recall plot: {args.plot}")
+    reliability = args.reliability
+    if reliability is None and args.plot:
+        reliability = args.plot.with_name(f"{args.plot.stem}-reliability{args.plot.suffix}")
+    default = next((r for r in reports if r.name == "default"), None)
+    if default is not None and (reliability is not None or args.plot):
+        p, is_true = calibration_outcomes(default.iou)
+        brier = brier_score(p, is_true)
+        print(f"default mode p_hole: Brier score {brier:.4f} over {len(p)} detections")
+        if reliability is not None:
+            title = f"{args.dataset.name}: {len(p)} detections, Brier {brier:.3f}"
+            plot_reliability(reliability, p, is_true, title)
+            print(f"reliability diagram (p_hole): {reliability}")
     return 0
