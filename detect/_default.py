@@ -74,6 +74,8 @@ RING_PX = 2
 CONTAINED = 0.8
 # Also measure no-reading blobs that are pits on their own (a hole in a broad depression).
 ENCLOSED_BLOBS = False
+# Also measure the dark part of spilled no-reading blobs (see detect_default).
+DARK_SPLIT = True
 
 
 def _nms(dets: list[Detection], iou_max: float) -> list[Detection]:
@@ -118,7 +120,9 @@ class _FrameData:
 _RING_KERNEL = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * RING_PX + 1, 2 * RING_PX + 1))
 
 
-def _measure(region: Candidate, f: _FrameData, params: DetectParams) -> Detection | None:
+def _measure(
+    region: Candidate, f: _FrameData, params: DetectParams, dark_cut: bool = False
+) -> Detection | None:
     """Measure one candidate region and score it; None when it cannot be a hole.
 
     A no-reading blob (not enclosed) must show enough valid rim (not border, not more
@@ -147,7 +151,10 @@ def _measure(region: Candidate, f: _FrameData, params: DetectParams) -> Detectio
     n_ring = int(ring.sum())
     if n_ring < 3:
         return None
-    if not enclosed and n_ring < MIN_RIM_VALID * (int(ring_all.sum()) + RING_PX * open_px):
+    n_rim = n_ring
+    if dark_cut:  # cut from bright unread pixels by colour: those are seen rim too
+        n_rim += int((ring_all & inv_c & (f.rel[y0:y1, x0:x1] >= VOID_DARK)).sum())
+    if not enclosed and n_rim < MIN_RIM_VALID * (int(ring_all.sum()) + RING_PX * open_px):
         return None
     rv, ru = np.nonzero(ring)
     major, minor_pca, area, rim_z = opening_axes(
@@ -241,9 +248,13 @@ def detect_default(
     min_side_px = s.min_fraction * s.minor_m * cam.fx / max(z_far, 0.5)
     min_px = max(2, int(0.25 * min_side_px**2))
     regions = basin_regions(pit, min_px) + no_reading_regions(invalid, pit, min_px, ENCLOSED_BLOBS)
-    regions += no_reading_regions(invalid & (rel < VOID_DARK), pit, min_px, enclosed_too=False)
+    # The dark part of each spilled no-reading blob: a hole's interior cut from the bright
+    # terrain beyond range (or a bright no-return surface) it runs into.
+    dark = no_reading_regions(invalid & (rel < VOID_DARK), pit, min_px) if DARK_SPLIT else []
+
     frame = _FrameData(z, invalid, y_img, rel, cam, z_far, range_m, factor)
     dets = [d for r in regions if (d := _measure(r, frame, params)) is not None]
+    dets += [d for r in dark if (d := _measure(r, frame, params, dark_cut=True)) is not None]
     return [replace(d, p_hole=p_hole_of_score(d.score)) for d in _nms(dets, params.nms_iou)]
 
 
