@@ -17,6 +17,8 @@ wrong (see :mod:`detect._evaluate`).
 from __future__ import annotations
 
 import json
+import logging
+import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,6 +30,8 @@ import numpy.typing as npt
 from detect import CameraIntrinsics
 from ground._images import read_camera, read_depth, read_rgb, write_depth, write_rgb
 from holescan_errors import InputError
+
+log = logging.getLogger(__name__)
 
 CATEGORY_ID = 1
 CATEGORY = {"id": CATEGORY_ID, "name": "access_hole"}
@@ -107,6 +111,15 @@ def check_box(box: Sequence[Any], width: int, height: int, where: str) -> Box:
     return (x, y, w, h)
 
 
+def _zero_sized(bbox: Any) -> bool:
+    return (
+        isinstance(bbox, list)
+        and len(bbox) == 4
+        and all(isinstance(v, int | float) and math.isfinite(v) for v in bbox)
+        and (bbox[2] == 0 or bbox[3] == 0)
+    )
+
+
 def _category_ids(coco: dict[str, Any], where: str) -> set[int]:
     cats = coco.get("categories")
     if cats is None:
@@ -168,8 +181,15 @@ def load_dataset(path: Path | str) -> Dataset:
             raise InputError(
                 f"{where}: unknown category_id {category} (declared: {sorted(categories)})"
             )
-        box = check_box(_field(a, "bbox", where), camera.width, camera.height, where)
-        anns.setdefault(image_id, []).append((box, bool(a.get("iscrowd", 0))))
+        crowd = bool(a.get("iscrowd", 0))
+        bbox = _field(a, "bbox", where)
+        if crowd and _zero_sized(bbox):
+            # A sliver of a hole at the border rounded to nothing (older synthetic sets):
+            # an ignore region of no area ignores nothing.
+            log.warning("%s: zero-size crowd box %s skipped", where, bbox)
+            continue
+        box = check_box(bbox, camera.width, camera.height, where)
+        anns.setdefault(image_id, []).append((box, crowd))
     images = []
     for i, im in enumerate(coco["images"]):
         where = f"{ann_path}: image {i}"
@@ -235,6 +255,8 @@ def write_dataset(root: Path | str, camera: CameraIntrinsics, samples: Iterable[
             }
         )
         for box, crowd in zip(s.boxes, s.crowd, strict=True):
+            if crowd and min(round(float(box[2]), 2), round(float(box[3]), 2)) <= 0:
+                continue  # a sliver at the border, nothing to ignore
             annotations.append(
                 {
                     "id": len(annotations) + 1,

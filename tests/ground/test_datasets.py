@@ -241,3 +241,16 @@ def test_import_csv_refuses_existing_output_and_unpaired_rgb(tmp_path: Path, cap
     (src / "depth_11_000060.png").unlink()
     assert main(["dataset", "import-csv", str(src), str(csv), str(tmp_path / "ds2")]) == 2
     assert "rgb_11_000060.png: no depth image" in capsys.readouterr().err
+
+
+def test_zero_size_crowd_sliver_is_skipped_not_fatal(tmp_path: Path) -> None:
+    samples = _samples(2)
+    samples.append(
+        Sample("sliver", samples[0].rgb, samples[0].depth, [(220.19, 0.0, 0.05, 0.001)], [True])
+    )
+    write_dataset(tmp_path / "ds", CAM, samples)  # not written: it rounds to no area
+    assert load_dataset(tmp_path / "ds").images[2].boxes == ()
+    root, coco = _coco(tmp_path)
+    coco["annotations"][1]["bbox"] = [220.19, 0.0, 0.05, 0.0]  # written by an older version
+    (root / "annotations.json").write_text(json.dumps(coco))
+    assert load_dataset(root).n_crowd == 0
