@@ -36,7 +36,7 @@ import numpy.typing as npt
 
 from detect._calibration import p_hole_of_score
 from detect._evaluate import overlap
-from detect._geometry import GROW_PX, grow_walls, opening_axes
+from detect._geometry import GROW_PX, grow_walls, occluders, opening_axes
 from detect._photometry import VOID_DARK, relative_luminance, void_evidence
 from detect._regions import (
     SHALLOW_M,
@@ -74,6 +74,10 @@ RING_PX = 2
 CONTAINED = 0.8
 # Also measure no-reading blobs that are pits on their own (a hole in a broad depression).
 ENCLOSED_BLOBS = False
+# Occlusion: when more than OCCLUDED_MIN of the ring is a nearer edge, the box is extended
+# under it by OCCLUSION_EXTEND of its size on that side.
+OCCLUDED_MIN = 0.2
+OCCLUSION_EXTEND = 0.25
 # Also measure the dark part of spilled no-reading blobs (see detect_default).
 DARK_SPLIT = True
 
@@ -157,10 +161,12 @@ def _measure(
     if not enclosed and n_rim < MIN_RIM_VALID * (int(ring_all.sum()) + RING_PX * open_px):
         return None
     rv, ru = np.nonzero(ring)
+    rim_u, rim_v, rim_zs = ru + float(x0), rv + float(y0), zc[ring].astype(np.float64)
+    occ = occluders(rim_u, rim_v, rim_zs, f.cam)
+    if occ.any() and (~occ).sum() >= 3:
+        rim_u, rim_v, rim_zs = rim_u[~occ], rim_v[~occ], rim_zs[~occ]
     major, minor_pca, area, rim_z = opening_axes(
-        (us + float(x0), vs + float(y0)),
-        (ru + float(x0), rv + float(y0), zc[ring].astype(np.float64)),
-        f.cam,
+        (us + float(x0), vs + float(y0)), (rim_u, rim_v, rim_zs), f.cam
     )
     # Passable width: diameter of the largest disk inside the region (metres at the rim).
     dist = cv2.distanceTransform(np.pad(big, 1), cv2.DIST_L2, 5)
@@ -199,6 +205,16 @@ def _measure(
     if score < params.min_score:
         return None
     k = f.factor
+    if OCCLUSION_EXTEND > 0 and occ.sum() > OCCLUDED_MIN * ring_all.sum():
+        # Part of the opening lies behind a nearer edge: the box reaches under it.
+        du = float(ru[occ].mean()) - float(us.mean())
+        dv = float(rv[occ].mean()) - float(vs.mean())
+        if abs(du) >= abs(dv):
+            ext = round(OCCLUSION_EXTEND * (gx1 - gx0))
+            gx0, gx1 = (gx0, min(ww, gx1 + ext)) if du > 0 else (max(0, gx0 - ext), gx1)
+        else:
+            ext = round(OCCLUSION_EXTEND * (gy1 - gy0))
+            gy0, gy1 = (gy0, min(hh, gy1 + ext)) if dv > 0 else (max(0, gy0 - ext), gy1)
     return Detection(
         box=(gx0 * k, gy0 * k, (gx1 - gx0) * k, (gy1 - gy0) * k),
         score=float(score),

@@ -14,6 +14,8 @@ from detect._types import CameraIntrinsics
 # opening plane.
 GROW_PX = 4
 WALL_MARGIN_M = 0.06
+# A rim reading this much nearer than the rim's plane is an occluding edge, not rim.
+OCCLUDER_STEP_M = 0.25
 
 
 def rays_of(
@@ -113,3 +115,28 @@ def grow_walls(
             break
         region |= add
     return region
+
+
+def occluders(
+    ru: npt.NDArray[np.float64],
+    rv: npt.NDArray[np.float64],
+    rz: npt.NDArray[np.float64],
+    cam: CameraIntrinsics,
+) -> npt.NDArray[np.bool_]:
+    """Rim points that stand well in front of the plane of the others: a nearer edge.
+
+    ru, rv : pixel coordinates of the rim; rz : their depth (m). A slab lying across the
+    opening hides its near part; its edge borders the visible part of the hole and is no
+    rim. Points more than ``OCCLUDER_STEP_M`` nearer than the plane fitted to the rim
+    (refitted once without them) are flagged.
+    """
+    near = np.zeros(len(rz), bool)
+    for _ in range(2):
+        keep = ~near
+        if keep.sum() < 6:
+            break
+        rays = rays_of(ru, rv, cam)
+        normal, centre = fit_plane(rays[keep] * rz[keep, None])
+        z_plane = (centre @ normal) / (rays @ normal)
+        near = rz < z_plane - OCCLUDER_STEP_M
+    return near
