@@ -2,7 +2,8 @@
 
     python benchmarks/ablation.py DATASET [DATASET ...] [--workers N]
 
-Each row switches one design choice of ``detect/_default.py`` back to the simpler option
+Each row switches one design choice of the default detector (``detect/_default.py``,
+``_regions.py``, ``_geometry.py``, ``_photometry.py``) back to the simpler option
 (module constants, set in the worker processes) and evaluates every dataset.
 """
 
@@ -23,6 +24,12 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "minor axis = ellipse axis (no passable width)": {"PASSABLE_WIDTH": False},
     "no light evidence at the range limit": {"RANGE_LIMIT_LIGHT": False},
     "linear depth score (not sqrt)": {"DEPTH_EXPONENT": 1.0},
+    "no photometric evidence for no-reading regions": {"PHOTOMETRIC_EVIDENCE": False},
+    "no dark cut of spilled no-reading blobs": {"DARK_SPLIT": False},
+    "no hole-in-depression candidates": {"DEPRESSION_RATIO": 1e9},
+    "NMS without containment": {"CONTAINED": 9.0},
+    "no box extension under an occluding edge": {"OCCLUSION_EXTEND": 0.0},
+    "occluding edges kept as rim": {"OCCLUDER_STEP_M": 1e9},
 }
 
 
@@ -42,12 +49,17 @@ def _init(overrides: dict[str, Any]) -> None:
             setattr(m, k, v)
 
 
+_DATASETS: dict[Path, Any] = {}
+
+
 def _one(job: tuple[Path, int]) -> tuple[int, list[tuple[int, tuple[float, ...], float]]]:
     from detect import DEFAULT, detect_holes
     from ground import load_dataset, load_image_pair
 
     root, i = job
-    ds = load_dataset(root)
+    if root not in _DATASETS:
+        _DATASETS[root] = load_dataset(root)
+    ds = _DATASETS[root]
     img = ds.images[i]
     rgb, depth = load_image_pair(ds, img)
     dets = detect_holes(rgb, depth, ds.camera, DEFAULT)
@@ -72,7 +84,8 @@ def main(argv: list[str] | None = None) -> int:
         with ctx.Pool(args.workers, initializer=_init, initargs=(overrides,)) as pool:
             for root, ds in sets:
                 jobs = [(root, i) for i in range(len(ds.images))]
-                dets = [ScoredBox(i, b, s) for _, rows in pool.map(_one, jobs) for i, b, s in rows]
+                rows_all = pool.map(_one, jobs, chunksize=4)
+                dets = [ScoredBox(i, b, s) for _, rows in rows_all for i, b, s in rows]
                 gt = ground_truth(ds)
                 iou = evaluate_detections(dets, gt, "iou")
                 auth = evaluate_detections(dets, gt, "authors")
