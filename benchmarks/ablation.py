@@ -28,7 +28,6 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "no dark cut of spilled no-reading blobs": {"DARK_SPLIT": False},
     "no hole-in-depression candidates": {"DEPRESSION_RATIO": 1e9},
     "NMS without containment": {"CONTAINED": 9.0},
-    "no box extension under an occluding edge": {"OCCLUSION_EXTEND": 0.0},
     "occluding edges kept as rim": {"OCCLUDER_STEP_M": 1e9},
 }
 

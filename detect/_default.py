@@ -37,7 +37,7 @@ import numpy.typing as npt
 from detect._calibration import p_hole_of_score
 from detect._evaluate import overlap
 from detect._geometry import GROW_PX, grow_walls, occluders, opening_axes
-from detect._photometry import VOID_DARK, relative_luminance, void_evidence
+from detect._photometry import relative_luminance, void_evidence
 from detect._regions import (
     SHALLOW_M,
     Candidate,
@@ -74,12 +74,12 @@ RING_PX = 2
 CONTAINED = 0.8
 # Also measure no-reading blobs that are pits on their own (a hole in a broad depression).
 ENCLOSED_BLOBS = False
-# Occlusion: when more than OCCLUDED_MIN of the ring is a nearer edge, the box is extended
-# under it by OCCLUSION_EXTEND of its size on that side.
-OCCLUDED_MIN = 0.2
-OCCLUSION_EXTEND = 0.25
 # Also measure the dark part of spilled no-reading blobs (see detect_default).
 DARK_SPLIT = True
+# The cut: relative luminance (box-averaged over DARK_SMOOTH_PX work pixels against shot
+# noise in dark frames) below DARK_CUT.
+DARK_CUT = 0.75
+DARK_SMOOTH_PX = 5
 
 
 def _nms(dets: list[Detection], iou_max: float) -> list[Detection]:
@@ -157,7 +157,7 @@ def _measure(
         return None
     n_rim = n_ring
     if dark_cut:  # cut from bright unread pixels by colour: those are seen rim too
-        n_rim += int((ring_all & inv_c & (f.rel[y0:y1, x0:x1] >= VOID_DARK)).sum())
+        n_rim += int((ring_all & inv_c & (f.rel[y0:y1, x0:x1] >= DARK_CUT)).sum())
     if not enclosed and n_rim < MIN_RIM_VALID * (int(ring_all.sum()) + RING_PX * open_px):
         return None
     rv, ru = np.nonzero(ring)
@@ -205,16 +205,6 @@ def _measure(
     if score < params.min_score:
         return None
     k = f.factor
-    if OCCLUSION_EXTEND > 0 and occ.sum() > OCCLUDED_MIN * ring_all.sum():
-        # Part of the opening lies behind a nearer edge: the box reaches under it.
-        du = float(ru[occ].mean()) - float(us.mean())
-        dv = float(rv[occ].mean()) - float(vs.mean())
-        if abs(du) >= abs(dv):
-            ext = round(OCCLUSION_EXTEND * (gx1 - gx0))
-            gx0, gx1 = (gx0, min(ww, gx1 + ext)) if du > 0 else (max(0, gx0 - ext), gx1)
-        else:
-            ext = round(OCCLUSION_EXTEND * (gy1 - gy0))
-            gy0, gy1 = (gy0, min(hh, gy1 + ext)) if dv > 0 else (max(0, gy0 - ext), gy1)
     return Detection(
         box=(gx0 * k, gy0 * k, (gx1 - gx0) * k, (gy1 - gy0) * k),
         score=float(score),
@@ -266,7 +256,10 @@ def detect_default(
     regions = basin_regions(pit, min_px) + no_reading_regions(invalid, pit, min_px, ENCLOSED_BLOBS)
     # The dark part of each spilled no-reading blob: a hole's interior cut from the bright
     # terrain beyond range (or a bright no-return surface) it runs into.
-    dark = no_reading_regions(invalid & (rel < VOID_DARK), pit, min_px) if DARK_SPLIT else []
+    dark: list[Candidate] = []
+    if DARK_SPLIT:
+        rel_smooth = cv2.blur(rel.astype(np.float32), (DARK_SMOOTH_PX, DARK_SMOOTH_PX))
+        dark = no_reading_regions(invalid & (rel_smooth < DARK_CUT), pit, min_px)
 
     frame = _FrameData(z, invalid, y_img, rel, cam, z_far, range_m, factor)
     dets = [d for r in regions if (d := _measure(r, frame, params)) is not None]

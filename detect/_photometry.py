@@ -28,10 +28,6 @@ from detect._scores import ramp
 # Reference: Gaussian over readable pixels, sigma in work pixels (x4 at full resolution),
 # wide enough to reach across the largest hole to its rim.
 REFERENCE_SIGMA_PX = 12.0
-# A no-reading pixel darker than this fraction of its reference is "void-dark"; no-reading
-# blobs are also cut along this line (a hole's dark interior from bright terrain beyond
-# range that it touches).
-VOID_DARK = 0.55
 # Evidence ramps from 1 (a void) at VOID_RATIO to 0 (a surface) at SURFACE_RATIO.
 VOID_RATIO = 0.6
 SURFACE_RATIO = 1.0
