@@ -126,9 +126,14 @@ def isotonic(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.n
     return bx, bp, bn
 
 
+# No detection is certain either way: probabilities are kept within [P_MIN, 1 - P_MIN].
+P_MIN = 0.01
+
+
 def table_from_fit(bx: np.ndarray, bp: np.ndarray) -> list[tuple[float, float]]:
     """Knots ``(score, p)`` for linear interpolation, anchored at score 0 and 1."""
-    knots = [(0.0, float(min(bp[0], 0.0 if bx[0] > 0 else bp[0])))]
+    bp = np.clip(bp, P_MIN, 1.0 - P_MIN)
+    knots = [(0.0, float(min(bp[0], P_MIN if bx[0] > 0 else bp[0])))]
     knots += [(round(float(x), 4), round(float(p), 4)) for x, p in zip(bx, bp, strict=True)]
     knots.append((1.0, float(max(bp[-1], knots[-1][1]))))
     out: list[tuple[float, float]] = []
@@ -218,8 +223,8 @@ def main(argv: list[str] | None = None) -> int:
         names = ", ".join(p.name for p in args.datasets)
         path.write_text(
             '"""Fitted by ``python benchmarks/calibrate.py`` (do not edit by hand).\n\n'
-            f"Data: {names}; calibration split seed {args.seed}, {len(cal)} detections; "
-            f"held-out Brier {brier:.4f}.\n"
+            f"Data: {names}.\nCalibration split (seed {args.seed}): {len(cal)} detections; "
+            f"held-out Brier score {brier:.4f}.\n"
             '"""\n\n'
             "# (raw default-mode score, probability of a true access hole); linear between.\n"
             f"P_HOLE_TABLE: tuple[tuple[float, float], ...] = (\n    {body},\n)\n"
