@@ -161,12 +161,13 @@ def _measure(
     if not enclosed and n_rim < MIN_RIM_VALID * (int(ring_all.sum()) + RING_PX * open_px):
         return None
     rv, ru = np.nonzero(ring)
-    rim_u, rim_v, rim_zs = ru + float(x0), rv + float(y0), zc[ring].astype(np.float64)
+    rim_u, rim_v = ru.astype(np.float64) + x0, rv.astype(np.float64) + y0
+    rim_zs = zc[ring].astype(np.float64)
     occ = occluders(rim_u, rim_v, rim_zs, f.cam)
     if occ.any() and (~occ).sum() >= 3:
         rim_u, rim_v, rim_zs = rim_u[~occ], rim_v[~occ], rim_zs[~occ]
     major, minor_pca, area, rim_z = opening_axes(
-        (us + float(x0), vs + float(y0)), (rim_u, rim_v, rim_zs), f.cam
+        (us.astype(np.float64) + x0, vs.astype(np.float64) + y0), (rim_u, rim_v, rim_zs), f.cam
     )
     # Passable width: diameter of the largest disk inside the region (metres at the rim).
     dist = cv2.distanceTransform(np.pad(big, 1), cv2.DIST_L2, 5)
@@ -244,7 +245,8 @@ def detect_default(
         return []
     cam = camera.scaled(1.0 / factor)
     grey = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)  # BT.601 Y, as the paper's YUV
-    y_img = cv2.resize(grey, (z.shape[1], z.shape[0]), interpolation=cv2.INTER_AREA) / 255.0
+    small = cv2.resize(grey, (z.shape[1], z.shape[0]), interpolation=cv2.INTER_AREA)
+    y_img = np.asarray(small, np.float64) / 255.0
     pit, invalid, z_far = basin_depth(z)
     rel = relative_luminance(y_img, ~invalid)
     range_m = max(params.max_range_m, z_far)

@@ -76,7 +76,9 @@ def opening_axes(
 
 
 def disk(r: int) -> npt.NDArray[np.uint8]:
-    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+    return np.asarray(
+        cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1)), np.uint8
+    )
 
 
 def grow_walls(
@@ -101,7 +103,8 @@ def grow_walls(
         return inside
     ov, ou = np.nonzero(outer)
     normal, centre = fit_plane(
-        rays_of(ou + float(uv0[0]), ov + float(uv0[1]), cam) * zc[outer].astype(np.float64)[:, None]
+        rays_of(ou.astype(np.float64) + uv0[0], ov.astype(np.float64) + uv0[1], cam)
+        * zc[outer].astype(np.float64)[:, None]
     )
     vv, uu = np.mgrid[0 : zc.shape[0], 0 : zc.shape[1]]
     rays = rays_of(uu.ravel() + float(uv0[0]), vv.ravel() + float(uv0[1]), cam)

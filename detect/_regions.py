@@ -32,9 +32,11 @@ def block_depth(
     """
     size = (depth.shape[1] // factor, depth.shape[0] // factor)
     total = cv2.resize(depth.astype(np.float32), size, interpolation=cv2.INTER_AREA)
-    frac = cv2.resize((depth > 0).astype(np.float32), size, interpolation=cv2.INTER_AREA)
+    frac = np.asarray(
+        cv2.resize((depth > 0).astype(np.float32), size, interpolation=cv2.INTER_AREA), np.float32
+    )
     with np.errstate(invalid="ignore", divide="ignore"):
-        z = total / frac * np.float32(unit_m)
+        z = np.asarray(total / frac * np.float32(unit_m), np.float32)
     z[frac < MIN_VALID_FRACTION] = np.nan
     return z, frac
 
@@ -53,7 +55,7 @@ def basin_depth(
     height[invalid] = floor
     seed = height.copy()
     seed[1:-1, 1:-1] = height.max()
-    filled = reconstruction(seed, height, method="erosion")
+    filled = np.asarray(reconstruction(seed, height, method="erosion"), np.float64)  # type: ignore[no-untyped-call]
     pit = filled - height
     pit[invalid & (pit > 0)] = np.inf
     return pit, invalid, z_far
@@ -62,6 +64,14 @@ def basin_depth(
 Region = tuple[npt.NDArray[np.bool_], tuple[int, int, int, int]]
 # (mask, box, enclosed): enclosed = a pit of the basin analysis; else a no-reading blob.
 Candidate = tuple[npt.NDArray[np.bool_], tuple[int, int, int, int], bool]
+
+
+def components(
+    mask: npt.NDArray[np.bool_] | npt.NDArray[np.uint8],
+) -> tuple[int, npt.NDArray[np.int32], npt.NDArray[np.int32]]:
+    """8-connected components of ``mask``: ``(count incl. background, labels, stats)``."""
+    n, lab, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
+    return int(n), np.asarray(lab, np.int32), np.asarray(stats, np.int32)
 
 
 def _crop(lab: npt.NDArray[np.int32], stats: npt.NDArray[np.int32], i: int) -> Region:
@@ -78,9 +88,7 @@ def basin_regions(pit: npt.NDArray[np.float64], min_px: int) -> list[Candidate]:
     being the core's depth (1 m for a core without readings). The shallow skirt of a broad
     depression holding a hole is left out; the walls of a clean hole stay in.
     """
-    n_b, lab_b, stats_b, _ = cv2.connectedComponentsWithStats(
-        (pit > DEEP_M).astype(np.uint8), connectivity=8
-    )
+    n_b, lab_b, stats_b = components(pit > DEEP_M)
     regions: list[Candidate] = []
     seen: set[tuple[int, int, int, int]] = set()
     for b in range(1, n_b):
@@ -91,9 +99,7 @@ def basin_regions(pit: npt.NDArray[np.float64], min_px: int) -> list[Candidate]:
         finite = depths[np.isfinite(depths)]
         d = float(np.percentile(finite, 90)) if finite.size > 0.5 * depths.size else 1.0
         tau = min(DEEP_M, max(SHALLOW_M, 0.25 * d))
-        _, lab, stats, _ = cv2.connectedComponentsWithStats(
-            (pit > tau).astype(np.uint8), connectivity=8
-        )
+        _, lab, stats = components(pit > tau)
         labels = lab[y : y + h, x : x + w][core]
         i = int(np.bincount(labels[labels > 0]).argmax())  # core pixels are all > tau
         mask, box = _crop(lab, stats, i)
@@ -120,7 +126,7 @@ def _voids_in_depression(
     n_void = int(void.sum())
     if n_void < min_px or mask.sum() <= DEPRESSION_RATIO * n_void:
         return []
-    n, lab, stats, _ = cv2.connectedComponentsWithStats(void.astype(np.uint8), connectivity=8)
+    n, lab, stats = components(void)
     out: list[Candidate] = []
     for i in range(1, n):
         if stats[i, cv2.CC_STAT_AREA] >= min_px:
@@ -154,20 +160,20 @@ def no_reading_regions(
     for r in NECK_RADII_PX:
         if r:
             k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
-            opened = cv2.morphologyEx(inv_u8, cv2.MORPH_OPEN, k)
+            opened = np.asarray(cv2.morphologyEx(inv_u8, cv2.MORPH_OPEN, k), np.uint8)
         else:
             opened = inv_u8
-        n, lab, stats, _ = cv2.connectedComponentsWithStats(opened, connectivity=8)
+        n, lab, stats = components(opened)
         for i in range(1, n):
             if stats[i, cv2.CC_STAT_AREA] < min_px:
                 continue
             blob = (lab == i).astype(np.uint8)
             if r:
-                blob = cv2.dilate(blob, k) & inv_u8
+                blob = np.asarray(cv2.dilate(blob, k), np.uint8) & inv_u8
             is_pit = not (blob.astype(bool) & spilled).any()
             if is_pit and not enclosed_too:
                 continue  # an enclosed pit: basin_regions has it
-            _, lab2, stats2, _ = cv2.connectedComponentsWithStats(blob, connectivity=8)
+            _, lab2, stats2 = components(blob)
             j = int(np.argmax(stats2[1:, cv2.CC_STAT_AREA])) + 1
             regions.append((*_crop(lab2, stats2, j), is_pit))
     return regions

@@ -93,10 +93,10 @@ def run(args: argparse.Namespace) -> int:
         if not (args.dataset / "annotations.json").is_file():
             print(f"rendering {args.synthetic} synthetic frames into {args.dataset}/ ...")
 
-            def progress(i: int, n: int) -> None:
+            def render_progress(i: int, n: int) -> None:
                 print(f"\rrendering {i}/{n}", end="", file=sys.stderr, flush=True)
 
-            synth_dataset(args.dataset, args.synthetic, seed=1, progress=progress)
+            synth_dataset(args.dataset, args.synthetic, seed=1, progress=render_progress)
             print(file=sys.stderr)
     if args.dataset is None:
         raise InputError("give a DATASET folder or --synthetic")
