@@ -72,8 +72,6 @@ OVERSIZE_END_M = 6.0
 RING_PX = 2
 # NMS: a detection is dropped when this much of a better one's box lies inside its box.
 CONTAINED = 0.8
-# Also measure no-reading blobs that are pits on their own (a hole in a broad depression).
-ENCLOSED_BLOBS = False
 # Also measure the dark part of spilled no-reading blobs (see detect_default).
 DARK_SPLIT = True
 # The cut: relative luminance (box-averaged over DARK_SMOOTH_PX work pixels against shot
@@ -102,6 +100,18 @@ def _inside(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> float
     ix = max(0, min(a[0] + a[2], b[0] + b[2]) - max(a[0], b[0]))
     iy = max(0, min(a[1] + a[3], b[1] + b[3]) - max(a[1], b[1]))
     return ix * iy / max(a[2] * a[3], 1)
+
+
+def _unique(regions: list[Candidate]) -> list[Candidate]:
+    """Candidates without repeats (neck cuts at several radii often yield the same blob)."""
+    seen: set[tuple[tuple[int, int, int, int], int, bool]] = set()
+    out: list[Candidate] = []
+    for r in regions:
+        key = (r[1], int(r[0].sum()), r[2])
+        if key not in seen:
+            seen.add(key)
+            out.append(r)
+    return out
 
 
 def box_iou(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> float:
@@ -255,13 +265,13 @@ def detect_default(
     # farthest depth in view, in work pixels.
     min_side_px = s.min_fraction * s.minor_m * cam.fx / max(z_far, 0.5)
     min_px = max(2, int(0.25 * min_side_px**2))
-    regions = basin_regions(pit, min_px) + no_reading_regions(invalid, pit, min_px, ENCLOSED_BLOBS)
+    regions = _unique(basin_regions(pit, min_px) + no_reading_regions(invalid, pit, min_px))
     # The dark part of each spilled no-reading blob: a hole's interior cut from the bright
     # terrain beyond range (or a bright no-return surface) it runs into.
     dark: list[Candidate] = []
     if DARK_SPLIT:
         rel_smooth = cv2.blur(rel.astype(np.float32), (DARK_SMOOTH_PX, DARK_SMOOTH_PX))
-        dark = no_reading_regions(invalid & (rel_smooth < DARK_CUT), pit, min_px)
+        dark = _unique(no_reading_regions(invalid & (rel_smooth < DARK_CUT), pit, min_px))
 
     frame = _FrameData(z, invalid, y_img, rel, cam, z_far, range_m, factor)
     dets = [d for r in regions if (d := _measure(r, frame, params)) is not None]

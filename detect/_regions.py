@@ -91,6 +91,7 @@ def basin_regions(pit: npt.NDArray[np.float64], min_px: int) -> list[Candidate]:
     n_b, lab_b, stats_b = components(pit > DEEP_M)
     regions: list[Candidate] = []
     seen: set[tuple[int, int, int, int]] = set()
+    levels: dict[float, tuple[int, npt.NDArray[np.int32], npt.NDArray[np.int32]]] = {}
     for b in range(1, n_b):
         if stats_b[b, cv2.CC_STAT_AREA] < min_px:
             continue
@@ -99,7 +100,9 @@ def basin_regions(pit: npt.NDArray[np.float64], min_px: int) -> list[Candidate]:
         finite = depths[np.isfinite(depths)]
         d = float(np.percentile(finite, 90)) if finite.size > 0.5 * depths.size else 1.0
         tau = min(DEEP_M, max(SHALLOW_M, 0.25 * d))
-        _, lab, stats = components(pit > tau)
+        if tau not in levels:
+            levels[tau] = components(pit > tau)
+        _, lab, stats = levels[tau]
         labels = lab[y : y + h, x : x + w][core]
         i = int(np.bincount(labels[labels > 0]).argmax())  # core pixels are all > tau
         mask, box = _crop(lab, stats, i)
@@ -139,7 +142,6 @@ def no_reading_regions(
     invalid: npt.NDArray[np.bool_],
     pit: npt.NDArray[np.float64],
     min_px: int,
-    enclosed_too: bool = False,
 ) -> list[Candidate]:
     """Blobs of no reading that the basin analysis cannot see as pits.
 
@@ -149,12 +151,11 @@ def no_reading_regions(
     blob that appears (grown back inside the mask) is a candidate. Whether it is a hole is
     decided later from its rim (enough valid readings around it, well inside the range).
 
-    ``invalid`` may be a part of the no-reading mask (its dark pixels); ``enclosed_too``
-    then also returns blobs that are pits (a dark part of a larger basin).
+    ``invalid`` may also be a part of the no-reading mask (its dark pixels).
     """
     regions: list[Candidate] = []
     spilled = invalid & ~np.isinf(pit)
-    if spilled.sum() < min_px and not enclosed_too:
+    if spilled.sum() < min_px:
         return regions
     inv_u8 = invalid.astype(np.uint8)
     for r in NECK_RADII_PX:
@@ -170,10 +171,9 @@ def no_reading_regions(
             blob = (lab == i).astype(np.uint8)
             if r:
                 blob = np.asarray(cv2.dilate(blob, k), np.uint8) & inv_u8
-            is_pit = not (blob.astype(bool) & spilled).any()
-            if is_pit and not enclosed_too:
+            if not (blob.astype(bool) & spilled).any():
                 continue  # an enclosed pit: basin_regions has it
             _, lab2, stats2 = components(blob)
             j = int(np.argmax(stats2[1:, cv2.CC_STAT_AREA])) + 1
-            regions.append((*_crop(lab2, stats2, j), is_pit))
+            regions.append((*_crop(lab2, stats2, j), False))
     return regions
