@@ -15,6 +15,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
+# Measure the checkout this script lives in, not whichever copy is installed.
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
 VARIANTS: dict[str, dict[str, Any]] = {
     "holescan default": {},
     "no wall growing (box = deep region only)": {"GROW_PX": 0},

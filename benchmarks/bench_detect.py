@@ -20,6 +20,9 @@ import tempfile
 import time
 from pathlib import Path
 
+# Measure the checkout this script lives in, not whichever copy is installed.
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
 for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
     os.environ[var] = "1"
 
@@ -57,11 +60,14 @@ def main(argv: list[str] | None = None) -> int:
     }
     for k in (9, 20):
         runners[f"paper K={k}"] = lambda r, d, k=k: detect_holes(
-            r, d, cam, replace(PAPER, superpixels=k))
+            r, d, cam, replace(PAPER, superpixels=k)
+        )
     wanted = args.modes.split(",")
-    print(f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
-          f"Python {platform.python_version()}; one core, {len(frames)} frames "
-          f"{cam.width}x{cam.height}")
+    print(
+        f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
+        f"Python {platform.python_version()}; one core, {len(frames)} frames "
+        f"{cam.width}x{cam.height}"
+    )
     print("| mode | median ms | p90 ms | mean ms | frames/s (median) | median CPU ms |")
     print("|---|---|---|---|---|---|")
     for name, run in runners.items():
@@ -77,8 +83,11 @@ def main(argv: list[str] | None = None) -> int:
         times.sort()
         med = statistics.median(times)
         p90 = times[int(0.9 * (len(times) - 1))]
-        print(f"| {name} | {med:.1f} | {p90:.1f} | {statistics.fmean(times):.1f} | "
-              f"{1000.0 / med:.0f} | {statistics.median(cpu):.1f} |", flush=True)
+        print(
+            f"| {name} | {med:.1f} | {p90:.1f} | {statistics.fmean(times):.1f} | "
+            f"{1000.0 / med:.0f} | {statistics.median(cpu):.1f} |",
+            flush=True,
+        )
     return 0
 
 

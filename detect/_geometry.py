@@ -141,5 +141,8 @@ def occluders(
         rays = rays_of(ru, rv, cam)
         normal, centre = fit_plane(rays[keep] * rz[keep, None])
         z_plane = (centre @ normal) / (rays @ normal)
-        near = rz < z_plane - OCCLUDER_STEP_M
+        now = rz < z_plane - OCCLUDER_STEP_M
+        if not now.any() or np.array_equal(now, near):
+            return now
+        near = now
     return near
