@@ -13,17 +13,29 @@ the *basins* of the depth image instead, found at every scale at once:
    the lowest point of the rim around it. A tilted plane has no basin; a basin open to the
    image border spills there, so holes cut by the border are not reported (the dataset marks
    those ``iscrowd``).
-3. Candidates are connected components of ``pit > deep_m`` (or no reading); each candidate's
-   region is its whole basin (``pit > shallow_m``) unless that basin is much larger than the
-   deep core (a hole at the bottom of a broad depression): then the core alone.
-4. Each region is measured in metres: the rim is the ring of valid pixels around it; a plane
-   fitted to the rim's 3-D points is the opening, and the region's pixel rays meet it in
-   points whose principal axes give the opening's major/minor axes (``4 sqrt(lambda)``, the
-   ellipse of equal second moments, as the paper's ellipse fit).
+3. Candidates are connected components of ``pit > deep_m``, each with the connected part of
+   its basin deeper than a cut suited to the core (:func:`detect._regions.basin_regions`);
+   when that basin is much larger than its no-reading part (a hole in a broad depression),
+   each no-reading blob is a candidate too. No-reading blobs that spill (they touch the
+   border or the unread band at the range limit) are cut at their necks
+   (:func:`detect._regions.no_reading_regions`) and, second, along their *dark* part: a
+   hole's unread interior is dark against the rubble, the terrain beyond range it runs into
+   is lit (:mod:`detect._photometry`, relative luminance, so dawn exposure and tint do not
+   matter).
+4. Each region is measured in metres: the rim is the ring of valid pixels around it, minus
+   readings standing well in front of the rest (a nearer slab edge hiding part of the
+   opening is not rim); a plane fitted to the rim's 3-D points is the opening, and the
+   region's pixel rays meet it in points whose principal axes give the opening's major/minor
+   axes (``4 sqrt(lambda)``, the ellipse of equal second moments, as the paper's ellipse
+   fit); the passable width is the largest inscribed disk.
 5. The five attribute scores of the paper are kept (so a rescuer sees *why*), but combined so
-   that geometry is necessary: ``score = sqrt(Sd) * Sw * (0.6 + 0.25 Sr + 0.15 max(Sb, Sc))``.
-   A dark stain or a shadow has no depth and never becomes a candidate; a shallow dip scores
-   low on Sd, a crack or a small hole low on Sw. Overlapping boxes are suppressed (NMS).
+   that geometry is necessary: ``score = sqrt(Sd) * Sw * (0.35 + 0.65 Sr) * (0.85 + 0.15
+   max(Sb, Sc))``, times ``0.2 + 0.8 V`` for a region without floor readings, V the
+   photometric void evidence (1 when its unread pixels are much darker than the rubble
+   around them, 0 when as bright or brighter: sheet metal, a puddle, a tarp). A dark stain or
+   a shadow has no depth and never becomes a candidate; a shallow dip scores low on Sd, a
+   crack or a small hole low on Sw. Overlapping boxes, and boxes holding a better one, are
+   suppressed (NMS). ``p_hole`` maps the score to a probability (:mod:`detect._calibration`).
 """
 
 from __future__ import annotations
