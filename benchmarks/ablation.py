@@ -2,7 +2,8 @@
 
     python benchmarks/ablation.py DATASET [DATASET ...] [--workers N]
 
-Each row switches one design choice of ``detect/_default.py`` back to the simpler option
+Each row switches one design choice of the default detector (``detect/_default.py``,
+``_regions.py``, ``_geometry.py``, ``_photometry.py``) back to the simpler option
 (module constants, set in the worker processes) and evaluates every dataset.
 """
 
@@ -14,6 +15,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
+# Measure the checkout this script lives in, not whichever copy is installed.
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
 VARIANTS: dict[str, dict[str, Any]] = {
     "holescan default": {},
     "no wall growing (box = deep region only)": {"GROW_PX": 0},
@@ -23,14 +27,31 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "minor axis = ellipse axis (no passable width)": {"PASSABLE_WIDTH": False},
     "no light evidence at the range limit": {"RANGE_LIMIT_LIGHT": False},
     "linear depth score (not sqrt)": {"DEPTH_EXPONENT": 1.0},
+    "no photometric evidence for no-reading regions": {"PHOTOMETRIC_EVIDENCE": False},
+    "no dark cut of spilled no-reading blobs": {"DARK_SPLIT": False},
+    "no hole-in-depression candidates": {"DEPRESSION_RATIO": 1e9},
+    "NMS without containment": {"CONTAINED": 9.0},
+    "occluding edges kept as rim": {"OCCLUDER_STEP_M": 1e9},
 }
 
 
 def _init(overrides: dict[str, Any]) -> None:
-    import detect._default as d  # the ablation switches are private on purpose
+    import detect._default
+    import detect._geometry
+    import detect._photometry
+    import detect._regions
 
+    # The ablation switches are private module constants on purpose; set each where it lives.
+    modules = (detect._default, detect._geometry, detect._photometry, detect._regions)
     for k, v in overrides.items():
-        setattr(d, k, v)
+        homes = [m for m in modules if hasattr(m, k)]
+        if not homes:
+            raise AttributeError(f"no detector module has the switch {k}")
+        for m in homes:
+            setattr(m, k, v)
+
+
+_DATASETS: dict[Path, Any] = {}
 
 
 def _one(job: tuple[Path, int]) -> tuple[int, list[tuple[int, tuple[float, ...], float]]]:
@@ -38,7 +59,9 @@ def _one(job: tuple[Path, int]) -> tuple[int, list[tuple[int, tuple[float, ...],
     from ground import load_dataset, load_image_pair
 
     root, i = job
-    ds = load_dataset(root)
+    if root not in _DATASETS:
+        _DATASETS[root] = load_dataset(root)
+    ds = _DATASETS[root]
     img = ds.images[i]
     rgb, depth = load_image_pair(ds, img)
     dets = detect_holes(rgb, depth, ds.camera, DEFAULT)
@@ -63,7 +86,8 @@ def main(argv: list[str] | None = None) -> int:
         with ctx.Pool(args.workers, initializer=_init, initargs=(overrides,)) as pool:
             for root, ds in sets:
                 jobs = [(root, i) for i in range(len(ds.images))]
-                dets = [ScoredBox(i, b, s) for _, rows in pool.map(_one, jobs) for i, b, s in rows]
+                rows_all = pool.map(_one, jobs, chunksize=4)
+                dets = [ScoredBox(i, b, s) for _, rows in rows_all for i, b, s in rows]
                 gt = ground_truth(ds)
                 iou = evaluate_detections(dets, gt, "iou")
                 auth = evaluate_detections(dets, gt, "authors")

@@ -6,6 +6,7 @@ accurate detector.
 """
 
 from detect._baseline import detect_baseline
+from detect._calibration import p_hole_of_score
 from detect._default import basin_labels, box_iou
 from detect._detector import detect_holes
 from detect._ers import ers_superpixels
@@ -51,6 +52,7 @@ __all__ = [
     "ers_superpixels",
     "evaluate_detections",
     "luminance",
+    "p_hole_of_score",
     "paper_superpixels",
     "ramp",
 ]

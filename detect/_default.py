@@ -13,40 +13,64 @@ the *basins* of the depth image instead, found at every scale at once:
    the lowest point of the rim around it. A tilted plane has no basin; a basin open to the
    image border spills there, so holes cut by the border are not reported (the dataset marks
    those ``iscrowd``).
-3. Candidates are connected components of ``pit > deep_m`` (or no reading); each candidate's
-   region is its whole basin (``pit > shallow_m``) unless that basin is much larger than the
-   deep core (a hole at the bottom of a broad depression): then the core alone.
-4. Each region is measured in metres: the rim is the ring of valid pixels around it; a plane
-   fitted to the rim's 3-D points is the opening, and the region's pixel rays meet it in
-   points whose principal axes give the opening's major/minor axes (``4 sqrt(lambda)``, the
-   ellipse of equal second moments, as the paper's ellipse fit).
+3. Candidates are connected components of ``pit > deep_m``, each with the connected part of
+   its basin deeper than a cut suited to the core (:func:`detect._regions.basin_regions`);
+   when that basin is much larger than its no-reading part (a hole in a broad depression),
+   each no-reading blob is a candidate too. No-reading blobs that spill (they touch the
+   border or the unread band at the range limit) are cut at their necks
+   (:func:`detect._regions.no_reading_regions`) and, second, along their *dark* part: a
+   hole's unread interior is dark against the rubble, the terrain beyond range it runs into
+   is lit (:mod:`detect._photometry`, relative luminance, so dawn exposure and tint do not
+   matter).
+4. Each region is measured in metres: the rim is the ring of valid pixels around it, minus
+   readings standing well in front of the rest (a nearer slab edge hiding part of the
+   opening is not rim); a plane fitted to the rim's 3-D points is the opening, and the
+   region's pixel rays meet it in points whose principal axes give the opening's major/minor
+   axes (``4 sqrt(lambda)``, the ellipse of equal second moments, as the paper's ellipse
+   fit); the passable width is the largest inscribed disk.
 5. The five attribute scores of the paper are kept (so a rescuer sees *why*), but combined so
-   that geometry is necessary: ``score = sqrt(Sd) * Sw * (0.6 + 0.25 Sr + 0.15 max(Sb, Sc))``.
-   A dark stain or a shadow has no depth and never becomes a candidate; a shallow dip scores
-   low on Sd, a crack or a small hole low on Sw. Overlapping boxes are suppressed (NMS).
+   that geometry is necessary: ``score = sqrt(Sd) * Sw * (0.35 + 0.65 Sr) * (0.85 + 0.15
+   max(Sb, Sc))``, times ``0.2 + 0.8 V`` for a region without floor readings, V the
+   photometric void evidence (1 when its unread pixels are much darker than the rubble
+   around them, 0 when as bright or brighter: sheet metal, a puddle, a tarp). A dark stain or
+   a shadow has no depth and never becomes a candidate; a shallow dip scores low on Sd, a
+   crack or a small hole low on Sw. Overlapping boxes, and boxes holding a better one, are
+   suppressed (NMS). ``p_hole`` maps the score to a probability (:mod:`detect._calibration`).
 """
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
 import numpy.typing as npt
-from skimage.morphology import reconstruction
 
+from detect._calibration import p_hole_of_score
 from detect._evaluate import overlap
+from detect._geometry import GROW_PX, grow_walls, occluders, opening_axes
+from detect._photometry import relative_luminance, void_evidence
+from detect._regions import (
+    SHALLOW_M,
+    Candidate,
+    basin_depth,
+    basin_regions,
+    block_depth,
+    no_reading_regions,
+)
 from detect._scores import contrast_score, darkness_score, ramp, width_score
 from detect._types import CameraIntrinsics, Detection, DetectParams, FeatureScores
 from detect._validate import check_frame
 
-# Region thresholds (metres below the spill level). SHALLOW is a few block-averaged noise
-# sigmas at 4 m (Xtion: 1.425e-6 Z^2 mm per pixel -> 23 mm, /4 after 4x4 averaging).
-SHALLOW_M = 0.05
-DEEP_M = 0.25
-# Radii (work pixels) at which necks between no-reading blobs are cut.
-NECK_RADII_PX = (0, 3, 6)
+__all__ = [
+    "basin_depth",
+    "basin_labels",
+    "block_depth",
+    "box_iou",
+    "detect_default",
+    "opening_axes",
+]
+
 # A candidate needs this fraction of its rim to be valid readings (not border, not no-reading).
 MIN_RIM_VALID = 0.6
 # Switches for the ablation study (benchmarks/ablation.py); all on in holescan.
@@ -54,199 +78,52 @@ PASSABLE_WIDTH = True  # minor axis = min(ellipse axis, largest inscribed disk)
 RANGE_LIMIT_LIGHT = True  # no-reading regions at the range limit: darkness as depth evidence
 # Score = Sd^DEPTH_EXPONENT * Sw * shape * light (see the module docstring).
 DEPTH_EXPONENT = 0.5
-# Walls: grow regions by up to this many work pixels into readings this far below the
-# opening plane.
-GROW_PX = 4
-WALL_MARGIN_M = 0.06
-# A block counts as read when at least this fraction of its pixels have a reading.
-MIN_VALID_FRACTION = 0.05
 # Openings larger than this (major axis, m) are broad terrain, not holes: width score fades.
 OVERSIZE_START_M = 3.5
 OVERSIZE_END_M = 6.0
 RING_PX = 2
-
-
-def block_depth(
-    depth: npt.NDArray[np.uint16], factor: int, unit_m: float
-) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]:
-    """Mean of the valid readings in each ``factor`` x ``factor`` block.
-
-    Returns ``(z, valid_fraction)``: z (h, w) float32 metres, NaN where fewer than
-    :data:`MIN_VALID_FRACTION` of the block's pixels had a reading.
-    """
-    size = (depth.shape[1] // factor, depth.shape[0] // factor)
-    total = cv2.resize(depth.astype(np.float32), size, interpolation=cv2.INTER_AREA)
-    frac = cv2.resize((depth > 0).astype(np.float32), size, interpolation=cv2.INTER_AREA)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        z = total / frac * np.float32(unit_m)
-    z[frac < MIN_VALID_FRACTION] = np.nan
-    return z, frac
-
-
-def basin_depth(
-    z: npt.NDArray[np.float32],
-) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_], float]:
-    """Depth of every pixel below the spill level of its basin (metres; inf for no reading).
-
-    Returns ``(pit, invalid, z_far)`` where ``z_far`` is the farthest reading in the image.
-    """
-    invalid = np.isnan(z)
-    z_far = float(np.nanpercentile(z, 99.5))  # robust to a few outliers
-    height = -z.astype(np.float64)
-    floor = -(float(np.nanmax(z)) + 1.0)
-    height[invalid] = floor
-    seed = height.copy()
-    seed[1:-1, 1:-1] = height.max()
-    filled = reconstruction(seed, height, method="erosion")
-    pit = filled - height
-    pit[invalid & (pit > 0)] = np.inf
-    return pit, invalid, z_far
-
-
-Region = tuple[npt.NDArray[np.bool_], tuple[int, int, int, int]]
-# (mask, box, enclosed): enclosed = a pit of the basin analysis; else a no-reading blob.
-Candidate = tuple[npt.NDArray[np.bool_], tuple[int, int, int, int], bool]
-
-
-def _crop(lab: npt.NDArray[np.int32], stats: npt.NDArray[np.int32], i: int) -> Region:
-    x, y = int(stats[i, cv2.CC_STAT_LEFT]), int(stats[i, cv2.CC_STAT_TOP])
-    w, h = int(stats[i, cv2.CC_STAT_WIDTH]), int(stats[i, cv2.CC_STAT_HEIGHT])
-    return lab[y : y + h, x : x + w] == i, (x, y, w, h)
-
-
-def basin_regions(pit: npt.NDArray[np.float64], min_px: int) -> list[Candidate]:
-    """Regions around each deep core, cut from its basin at a depth that suits the core.
-
-    A core is a component of ``pit > DEEP_M``. Its region is the connected part of its basin
-    lying more than ``tau = clip(0.25 * D, SHALLOW_M, DEEP_M)`` below the spill level, D
-    being the core's depth (1 m for a core without readings). The shallow skirt of a broad
-    depression holding a hole is left out; the walls of a clean hole stay in.
-    """
-    n_b, lab_b, stats_b, _ = cv2.connectedComponentsWithStats(
-        (pit > DEEP_M).astype(np.uint8), connectivity=8
-    )
-    regions: list[Candidate] = []
-    seen: set[tuple[int, int, int, int]] = set()
-    for b in range(1, n_b):
-        if stats_b[b, cv2.CC_STAT_AREA] < min_px:
-            continue
-        core, (x, y, w, h) = _crop(lab_b, stats_b, b)
-        depths = pit[y : y + h, x : x + w][core]
-        finite = depths[np.isfinite(depths)]
-        d = float(np.percentile(finite, 90)) if finite.size > 0.5 * depths.size else 1.0
-        tau = min(DEEP_M, max(SHALLOW_M, 0.25 * d))
-        _, lab, stats, _ = cv2.connectedComponentsWithStats(
-            (pit > tau).astype(np.uint8), connectivity=8
-        )
-        labels = lab[y : y + h, x : x + w][core]
-        i = int(np.bincount(labels[labels > 0]).argmax())  # core pixels are all > tau
-        mask, box = _crop(lab, stats, i)
-        if box not in seen:
-            seen.add(box)
-            regions.append((mask, box, True))
-    return regions
-
-
-def no_reading_regions(
-    invalid: npt.NDArray[np.bool_], pit: npt.NDArray[np.float64], min_px: int
-) -> list[Candidate]:
-    """Blobs of no reading that the basin analysis cannot see as pits.
-
-    A hole whose floor gives no reading can touch another no-reading area (ground beyond
-    the sensor's range, a neighbouring hole) or the image border; then it spills and is no
-    pit. Opening the no-reading mask with disks of growing radius cuts such necks; each
-    blob that appears (grown back inside the mask) is a candidate. Whether it is a hole is
-    decided later from its rim (enough valid readings around it, well inside the range).
-    """
-    regions: list[Candidate] = []
-    spilled = invalid & ~np.isinf(pit)
-    if spilled.sum() < min_px:
-        return regions
-    inv_u8 = invalid.astype(np.uint8)
-    for r in NECK_RADII_PX:
-        if r:
-            k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
-            opened = cv2.morphologyEx(inv_u8, cv2.MORPH_OPEN, k)
-        else:
-            opened = inv_u8
-        n, lab, stats, _ = cv2.connectedComponentsWithStats(opened, connectivity=8)
-        for i in range(1, n):
-            if stats[i, cv2.CC_STAT_AREA] < min_px:
-                continue
-            blob = (lab == i).astype(np.uint8)
-            if r:
-                blob = cv2.dilate(blob, k) & inv_u8
-            if not (blob.astype(bool) & spilled).any():
-                continue  # an enclosed pit: basin_regions has it
-            _, lab2, stats2, _ = cv2.connectedComponentsWithStats(blob, connectivity=8)
-            j = int(np.argmax(stats2[1:, cv2.CC_STAT_AREA])) + 1
-            regions.append((*_crop(lab2, stats2, j), False))
-    return regions
-
-
-def _rays(
-    us: npt.NDArray[np.float64], vs: npt.NDArray[np.float64], cam: CameraIntrinsics
-) -> npt.NDArray[np.float64]:
-    return np.stack([(us - cam.cx) / cam.fx, (vs - cam.cy) / cam.fy, np.ones_like(us)], axis=1)
-
-
-def fit_plane(
-    points: npt.NDArray[np.float64],
-) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-    """Least-squares plane ``(unit normal, centroid)`` of (N, 3) camera-frame points.
-
-    Falls back to a fronto-parallel plane when the points are too few, collinear, or the
-    plane would be seen edge-on (normal more than ~72 deg from the optical axis).
-    """
-    centre = points.mean(axis=0)
-    normal = np.array([0.0, 0.0, 1.0])
-    if len(points) >= 6:
-        _, sv, vt = np.linalg.svd(points - centre, full_matrices=False)
-        if sv[1] > 1e-6 and abs(vt[2][2]) > 0.3:
-            normal = vt[2] / np.linalg.norm(vt[2])
-    return normal, centre
-
-
-def opening_axes(
-    region_uv: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]],
-    rim_uvz: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]],
-    cam: CameraIntrinsics,
-) -> tuple[float, float, float, float]:
-    """Metric size of an opening: ``(major_m, minor_m, area_m2, rim_depth_m)``.
-
-    region_uv : pixel coordinates of the region; rim_uvz : pixel coordinates and depth (m)
-    of the valid ring around it. The rim's 3-D points define the opening plane (least
-    squares); the region's rays meet that plane; their second moments (plus each pixel's own
-    footprint) give the axes of the ellipse with the same moments.
-    """
-    ru, rv, rz = rim_uvz
-    normal, centre = fit_plane(_rays(ru, rv, cam) * rz[:, None])
-    rays = _rays(region_uv[0], region_uv[1], cam)
-    t = (centre @ normal) / (rays @ normal)
-    pts = rays * t[:, None]
-    # In-plane basis.
-    e1 = np.cross(normal, [0.0, 1.0, 0.0])
-    if np.linalg.norm(e1) < 1e-6:
-        e1 = np.cross(normal, [1.0, 0.0, 0.0])
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(normal, e1)
-    p2 = np.stack([pts @ e1, pts @ e2], axis=1)
-    cos_incidence = np.abs(rays @ normal) / np.linalg.norm(rays, axis=1)
-    pix_area = (t**2) / (cam.fx * cam.fy) / np.maximum(cos_incidence, 0.2)
-    area = float(pix_area.sum())
-    cov = np.cov(p2.T) if len(p2) > 1 else np.zeros((2, 2))
-    cov = cov + np.eye(2) * float(np.mean(pix_area)) / 12.0
-    lam = np.sort(np.linalg.eigvalsh(cov))[::-1]
-    major, minor = 4.0 * math.sqrt(max(lam[0], 0.0)), 4.0 * math.sqrt(max(lam[1], 0.0))
-    return major, minor, area, float(np.median(rz))
+# NMS: a detection is dropped when this much of a better one's box lies inside its box.
+CONTAINED = 0.8
+# Also measure the dark part of spilled no-reading blobs (see detect_default).
+DARK_SPLIT = True
+# The cut: relative luminance (box-averaged over DARK_SMOOTH_PX work pixels against shot
+# noise in dark frames) below DARK_CUT.
+DARK_CUT = 0.75
+DARK_SMOOTH_PX = 5
 
 
 def _nms(dets: list[Detection], iou_max: float) -> list[Detection]:
+    """Suppress overlaps (IoU > ``iou_max``) and containers of a better detection.
+
+    A region that holds a higher-scoring one (most of it inside) is a depression or a
+    no-reading area around that hole, not a second hole.
+    """
     keep: list[Detection] = []
     for d in sorted(dets, key=lambda d: -d.score):
-        if all(box_iou(d.box, k.box) <= iou_max for k in keep):
+        if all(box_iou(d.box, k.box) <= iou_max for k in keep) and not any(
+            _inside(k.box, d.box) > CONTAINED for k in keep
+        ):
             keep.append(d)
     return keep
+
+
+def _inside(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> float:
+    """Fraction of box ``a`` that lies inside box ``b``."""
+    ix = max(0, min(a[0] + a[2], b[0] + b[2]) - max(a[0], b[0]))
+    iy = max(0, min(a[1] + a[3], b[1] + b[3]) - max(a[1], b[1]))
+    return ix * iy / max(a[2] * a[3], 1)
+
+
+def _unique(regions: list[Candidate]) -> list[Candidate]:
+    """Candidates without repeats (neck cuts at several radii often yield the same blob)."""
+    seen: set[tuple[tuple[int, int, int, int], int, bool]] = set()
+    out: list[Candidate] = []
+    for r in regions:
+        key = (r[1], int(r[0].sum()), r[2])
+        if key not in seen:
+            seen.add(key)
+            out.append(r)
+    return out
 
 
 def box_iou(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> float:
@@ -259,6 +136,7 @@ class _FrameData:
     z: npt.NDArray[np.float32]
     invalid: npt.NDArray[np.bool_]
     y_img: npt.NDArray[np.float64]
+    rel: npt.NDArray[np.float64]
     cam: CameraIntrinsics
     z_far: float
     range_m: float
@@ -268,48 +146,9 @@ class _FrameData:
 _RING_KERNEL = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * RING_PX + 1, 2 * RING_PX + 1))
 
 
-def _disk(r: int) -> npt.NDArray[np.uint8]:
-    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
-
-
-def _grow_walls(
-    inside: npt.NDArray[np.bool_],
-    zc: npt.NDArray[np.float32],
-    valid: npt.NDArray[np.bool_],
-    uv0: tuple[int, int],
-    cam: CameraIntrinsics,
-) -> npt.NDArray[np.bool_]:
-    """Add the hole's walls: readings next to the region that lie below the opening plane.
-
-    The plane is fitted to the readings of a ring a few pixels out (the surrounding
-    terrain); pixels connected to the region and deeper than the plane by ``WALL_MARGIN_M``
-    are wall or floor. Up to ``GROW_PX`` pixels of growth, so a tilted view's visible far
-    wall joins the opening (its box is the rim's).
-    """
-    u8 = inside.astype(np.uint8)
-    outer = (cv2.dilate(u8, _disk(RING_PX + 3)) > 0) & ~(cv2.dilate(u8, _disk(RING_PX)) > 0)
-    outer &= valid
-    if outer.sum() < 6:
-        return inside
-    ov, ou = np.nonzero(outer)
-    normal, centre = fit_plane(
-        _rays(ou + float(uv0[0]), ov + float(uv0[1]), cam) * zc[outer].astype(np.float64)[:, None]
-    )
-    vv, uu = np.mgrid[0 : zc.shape[0], 0 : zc.shape[1]]
-    rays = _rays(uu.ravel() + float(uv0[0]), vv.ravel() + float(uv0[1]), cam)
-    z_plane = ((centre @ normal) / (rays @ normal)).reshape(zc.shape)
-    below = valid & (zc > z_plane + WALL_MARGIN_M)
-    region = inside.copy()
-    k3 = np.ones((3, 3), np.uint8)
-    for _ in range(GROW_PX):
-        add = (cv2.dilate(region.astype(np.uint8), k3) > 0) & below & ~region
-        if not add.any():
-            break
-        region |= add
-    return region
-
-
-def _measure(region: Candidate, f: _FrameData, params: DetectParams) -> Detection | None:
+def _measure(
+    region: Candidate, f: _FrameData, params: DetectParams, dark_cut: bool = False
+) -> Detection | None:
     """Measure one candidate region and score it; None when it cannot be a hole.
 
     A no-reading blob (not enclosed) must show enough valid rim (not border, not more
@@ -323,7 +162,7 @@ def _measure(region: Candidate, f: _FrameData, params: DetectParams) -> Detectio
     zc, inv_c = f.z[y0:y1, x0:x1], f.invalid[y0:y1, x0:x1]
     inside = np.zeros((y1 - y0, x1 - x0), bool)
     inside[y - y0 : y - y0 + h, x - x0 : x - x0 + w] = mask
-    inside = _grow_walls(inside, zc, ~inv_c, (x0, y0), f.cam)
+    inside = grow_walls(inside, zc, ~inv_c, (x0, y0), f.cam, RING_PX)
     big = inside.astype(np.uint8)
     vs, us = np.nonzero(inside)
     bx0, by0, bx1, by1 = int(us.min()), int(vs.min()), int(us.max()) + 1, int(vs.max()) + 1
@@ -338,13 +177,19 @@ def _measure(region: Candidate, f: _FrameData, params: DetectParams) -> Detectio
     n_ring = int(ring.sum())
     if n_ring < 3:
         return None
-    if not enclosed and n_ring < MIN_RIM_VALID * (int(ring_all.sum()) + RING_PX * open_px):
+    n_rim = n_ring
+    if dark_cut:  # cut from bright unread pixels by colour: those are seen rim too
+        n_rim += int((ring_all & inv_c & (f.rel[y0:y1, x0:x1] >= DARK_CUT)).sum())
+    if not enclosed and n_rim < MIN_RIM_VALID * (int(ring_all.sum()) + RING_PX * open_px):
         return None
     rv, ru = np.nonzero(ring)
+    rim_u, rim_v = ru.astype(np.float64) + x0, rv.astype(np.float64) + y0
+    rim_zs = zc[ring].astype(np.float64)
+    occ = occluders(rim_u, rim_v, rim_zs, f.cam)
+    if occ.any() and (~occ).sum() >= 3:
+        rim_u, rim_v, rim_zs = rim_u[~occ], rim_v[~occ], rim_zs[~occ]
     major, minor_pca, area, rim_z = opening_axes(
-        (us + float(x0), vs + float(y0)),
-        (ru + float(x0), rv + float(y0), zc[ring].astype(np.float64)),
-        f.cam,
+        (us.astype(np.float64) + x0, vs.astype(np.float64) + y0), (rim_u, rim_v, rim_zs), f.cam
     )
     # Passable width: diameter of the largest disk inside the region (metres at the rim).
     dist = cv2.distanceTransform(np.pad(big, 1), cv2.DIST_L2, 5)
@@ -359,6 +204,7 @@ def _measure(region: Candidate, f: _FrameData, params: DetectParams) -> Detectio
     sc = contrast_score(y_in, y_ring, params.contrast_threshold)
     s = params.searcher
     beyond = no_read > 0.3
+    rel_in = float(np.median(f.rel[y0:y1, x0:x1][inside & inv_c])) if beyond else 0.0
     if beyond:
         # The floor gave no reading. It lies at least as far as the sensor's range; and the
         # nearer the rim is than the farthest reading of the frame, the surer it is that a
@@ -376,6 +222,9 @@ def _measure(region: Candidate, f: _FrameData, params: DetectParams) -> Detectio
     fill = area / (major * minor_pca) if major * minor_pca > 0 else 0.0
     sr = ramp(fill, 0.3, 0.7)
     score = sd**DEPTH_EXPONENT * sw * (0.35 + 0.65 * sr) * (0.85 + 0.15 * max(sb, sc))
+    if beyond:
+        # No reading: a void only if it looks like one (dark against the rubble around it).
+        score *= 0.2 + 0.8 * void_evidence(rel_in)
     if score < params.min_score:
         return None
     k = f.factor
@@ -388,6 +237,7 @@ def _measure(region: Candidate, f: _FrameData, params: DetectParams) -> Detectio
         minor_m=minor,
         rim_depth_m=rim_z,
         beyond_range=beyond,
+        relative_brightness=round(rel_in, 3) if beyond else None,
     )
 
 
@@ -417,18 +267,28 @@ def detect_default(
         return []
     cam = camera.scaled(1.0 / factor)
     grey = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)  # BT.601 Y, as the paper's YUV
-    y_img = cv2.resize(grey, (z.shape[1], z.shape[0]), interpolation=cv2.INTER_AREA) / 255.0
+    small = cv2.resize(grey, (z.shape[1], z.shape[0]), interpolation=cv2.INTER_AREA)
+    y_img = np.asarray(small, np.float64) / 255.0
     pit, invalid, z_far = basin_depth(z)
+    rel = relative_luminance(y_img, ~invalid)
     range_m = max(params.max_range_m, z_far)
     s = params.searcher
     # Smallest region worth measuring: a quarter of the searcher's minimum opening at the
     # farthest depth in view, in work pixels.
     min_side_px = s.min_fraction * s.minor_m * cam.fx / max(z_far, 0.5)
     min_px = max(2, int(0.25 * min_side_px**2))
-    regions = basin_regions(pit, min_px) + no_reading_regions(invalid, pit, min_px)
-    frame = _FrameData(z, invalid, y_img, cam, z_far, range_m, factor)
+    regions = _unique(basin_regions(pit, min_px) + no_reading_regions(invalid, pit, min_px))
+    # The dark part of each spilled no-reading blob: a hole's interior cut from the bright
+    # terrain beyond range (or a bright no-return surface) it runs into.
+    dark: list[Candidate] = []
+    if DARK_SPLIT:
+        rel_smooth = cv2.blur(rel.astype(np.float32), (DARK_SMOOTH_PX, DARK_SMOOTH_PX))
+        dark = _unique(no_reading_regions(invalid & (rel_smooth < DARK_CUT), pit, min_px))
+
+    frame = _FrameData(z, invalid, y_img, rel, cam, z_far, range_m, factor)
     dets = [d for r in regions if (d := _measure(r, frame, params)) is not None]
-    return _nms(dets, params.nms_iou)
+    dets += [d for r in dark if (d := _measure(r, frame, params, dark_cut=True)) is not None]
+    return [replace(d, p_hole=p_hole_of_score(d.score)) for d in _nms(dets, params.nms_iou)]
 
 
 def basin_labels(

@@ -17,7 +17,8 @@ def luminance(rgb: npt.NDArray[np.uint8]) -> npt.NDArray[np.float32]:
     """Y of YUV (BT.601) in [0, 1] for an (H, W, 3) uint8 RGB image."""
     f = rgb.astype(np.float32)
     y = 0.299 * f[..., 0] + 0.587 * f[..., 1] + 0.114 * f[..., 2]
-    return (y / 255.0).astype(np.float32)
+    out: npt.NDArray[np.float32] = (y / 255.0).astype(np.float32)
+    return out
 
 
 def darkness_score(mean_y: float, threshold: float) -> float:

@@ -181,6 +181,13 @@ class Detection:
     rim_depth_m : camera depth of the opening's rim (the surrounding terrain), used to
         geotag the hole; the floor is deeper or unread.
     beyond_range : the floor gave no depth reading (deeper than the sensor's range).
+    relative_brightness : for a region without readings, the median luminance of its
+        no-reading pixels over that of the readable rubble around it (a void at dawn is
+        darker, ~0.1-0.5; a surface the sensor does not return from, ~1 or more);
+        None when the region has readings.
+    p_hole : probability that this is a true access hole (default mode, calibrated on
+        independent scene sets, see :mod:`detect._calibration`); None in paper mode,
+        whose score is the published method's own.
     """
 
     box: tuple[int, int, int, int]
@@ -191,6 +198,8 @@ class Detection:
     minor_m: float
     rim_depth_m: float
     beyond_range: bool = False
+    relative_brightness: float | None = None
+    p_hole: float | None = None
 
     @property
     def centre_px(self) -> tuple[float, float]:
@@ -205,8 +214,14 @@ class Detection:
             if self.beyond_range
             else (f"{self.depth_rel_m:.2f} m")
         )
+        prob = "" if self.p_hole is None else f"p(hole) {self.p_hole:.2f}, "
+        light = (
+            ""
+            if self.relative_brightness is None
+            else f"; inside {self.relative_brightness:.2f}x as bright as the rubble around"
+        )
         return (
-            f"score {self.score:.2f}: {self.major_m:.2f} x {self.minor_m:.2f} m opening, "
+            f"{prob}score {self.score:.2f}: {self.major_m:.2f} x {self.minor_m:.2f} m opening, "
             f"{depth} deep; depth {f.depth:.2f} width {f.width:.2f} fill {f.fill:.2f} "
-            f"dark {f.darkness:.2f} contrast {f.contrast:.2f}"
+            f"dark {f.darkness:.2f} contrast {f.contrast:.2f}{light}"
         )

@@ -5,6 +5,7 @@
 * :func:`export_flight_holes` / :func:`read_flight_holes` - the holes of a flight log as
   the ground crew's files (GPX, KML/KMZ with thumbnails, GeoJSON, QGC ``.plan``, WPL).
 * :func:`write_report` - a flight's self-contained HTML report.
+* :func:`import_csv_dataset` - real frames and a ``file,x,y,w,h`` CSV as a dataset.
 * :func:`load_dataset` / :func:`write_dataset` and :func:`evaluate_dataset` - annotated
   RGB-D datasets (COCO layout) and the detector's AP on them.
 * :func:`run_ground` / :class:`GroundStation` - ``holescan ground``: the live ground
@@ -15,22 +16,27 @@
 """
 
 from ground._cot import COT_TYPE, DEFAULT_COT_URL, CotError, CotPublisher, hole_cot, withdraw_cot
+from ground._csvimport import FramePair, find_pairs, import_csv_dataset, read_box_csv
 from ground._datasets import (
     CATEGORY,
     Dataset,
     DatasetImage,
     Sample,
+    check_box,
     load_dataset,
     load_image_pair,
     write_dataset,
 )
 from ground._evaluation import (
     EvalReport,
+    brier_score,
+    calibration_outcomes,
     detect_image,
     evaluate_dataset,
     format_table,
     ground_truth,
     plot_pr,
+    plot_reliability,
     run_detector,
     write_coco_results,
 )
@@ -88,6 +94,7 @@ __all__ = [
     "ExportReport",
     "FlightHoles",
     "FlightResult",
+    "FramePair",
     "GroundHole",
     "GroundOptions",
     "GroundStation",
@@ -103,12 +110,16 @@ __all__ = [
     "TrackPoint",
     "VehicleLink",
     "atomic_write",
+    "brier_score",
+    "calibration_outcomes",
+    "check_box",
     "default_out_path",
     "depth_colour",
     "detect_image",
     "draw_detections",
     "evaluate_dataset",
     "export_flight_holes",
+    "find_pairs",
     "flight_log_files",
     "format_table",
     "ground_truth",
@@ -116,12 +127,15 @@ __all__ = [
     "hole_cot",
     "hole_summary",
     "hole_waypoint",
+    "import_csv_dataset",
     "load_dataset",
     "load_image_pair",
     "log_stem",
     "match_points",
     "parse_hole_statustext",
     "plot_pr",
+    "plot_reliability",
+    "read_box_csv",
     "read_camera",
     "read_depth",
     "read_flight_holes",

@@ -23,6 +23,7 @@ from detect import (
     detect_baseline,
     detect_holes,
     evaluate_detections,
+    p_hole_of_score,
 )
 from ground._datasets import Dataset, DatasetImage, load_dataset, load_image_pair
 from holescan_errors import InputError
@@ -179,6 +180,79 @@ def plot_pr(path: Path, reports: Sequence[EvalReport], title: str) -> None:
         ax.legend(loc="lower left", fontsize=8)
     axes[0].set_ylabel("precision")
     fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def calibration_outcomes(
+    result: PRResult,
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """``(p_hole, is_true)`` of every scored detection of a default-mode run.
+
+    p_hole comes from the raw score (:func:`detect.p_hole_of_score`); is_true is 1 for a
+    detection matched to an access hole, 0 otherwise (crowd matches are already left out).
+    """
+    tp = np.rint(np.array(result.recall_curve) * result.n_gt)
+    is_true = np.diff(np.concatenate([[0.0], tp])).clip(0, 1)
+    p = np.array([p_hole_of_score(s) for s in result.scores], dtype=np.float64)
+    return p, is_true.astype(np.float64)
+
+
+def brier_score(p: npt.NDArray[np.float64], is_true: npt.NDArray[np.float64]) -> float:
+    """Mean squared difference between predicted probability and outcome (0 = perfect)."""
+    return float(np.mean((p - is_true) ** 2)) if len(p) else float("nan")
+
+
+def plot_reliability(
+    path: Path,
+    p: npt.NDArray[np.float64],
+    label: npt.NDArray[np.float64],
+    title: str,
+    bins: int = 10,
+) -> None:
+    """Reliability diagram: observed frequency of true holes per bin of predicted ``p``.
+
+    Bars show how many detections fall in each bin; bins with >= 20 detections are drawn
+    solid, fewer hollow (too few to judge).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    edges = np.linspace(0.0, 1.0, bins + 1)
+    idx = np.clip(np.digitize(p, edges[1:-1]), 0, bins - 1)
+    fig, (ax, axn) = plt.subplots(
+        2, 1, figsize=(5.5, 6.4), sharex=True, gridspec_kw={"height_ratios": [3, 1]}
+    )
+    ax.plot([0, 1], [0, 1], color="grey", lw=1, label="perfect calibration")
+    ax.fill_between([0, 1], [-0.1, 0.9], [0.1, 1.1], color="grey", alpha=0.12, label="+-0.1")
+    counts = []
+    for b in range(bins):
+        m = idx == b
+        counts.append(int(m.sum()))
+        if not m.any():
+            continue
+        solid = m.sum() >= 20
+        ax.plot(
+            p[m].mean(),
+            label[m].mean(),
+            "o",
+            color="C0",
+            mfc="C0" if solid else "white",
+            ms=7,
+        )
+    ax.plot([], [], "o", color="C0", label=">= 20 detections (hollow: fewer)")
+    ax.set_ylabel("observed fraction of true holes")
+    ax.set_xlim(-0.02, 1.02)
+    ax.set_ylim(-0.03, 1.03)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper left", fontsize=8)
+    ax.set_title(title, fontsize=9)
+    axn.bar(edges[:-1] + 0.05, counts, width=0.09, color="C1")
+    axn.set_xlabel("p_hole (predicted)")
+    axn.set_ylabel("detections")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -1,4 +1,4 @@
-"""``holescan dataset synth|info``: make and inspect COCO-style RGB-D hole datasets."""
+"""``holescan dataset synth|import-csv|info``: make, import and inspect RGB-D hole datasets."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from capture import check_folder
-from ground import load_dataset
+from ground import import_csv_dataset, load_dataset, read_camera
 from holescan._args import Progress
 
 
@@ -18,6 +18,24 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     s.add_argument("--n", type=int, default=60, help="number of images (default 60)")
     s.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
     s.set_defaults(func=run_synth)
+    c = verbs.add_parser(
+        "import-csv",
+        help="import real RGB-D PNG pairs and a file,x,y,w,h CSV of hole boxes",
+        description="Pairs rgb/NAME.png with depth/NAME.png, or rgb_ID.png with depth_ID.png "
+        "in one folder; every pair is imported (frames the CSV does not name have no hole). "
+        "CSV rows: file,x,y,w,h (an optional header row), x, y the top-left pixel, 1-based "
+        "as in MATLAB and the authors' groundTruth.csv. OUT must not exist.",
+    )
+    c.add_argument("folder", type=Path, help="folder of colour and depth PNGs")
+    c.add_argument("csv", type=Path, help="CSV of hole boxes: file,x,y,w,h per row")
+    c.add_argument("out", type=Path, help="dataset folder to create (must not exist)")
+    c.add_argument(
+        "--camera", type=Path, help="camera.json of the frames (default: Xtion at their size)"
+    )
+    c.add_argument(
+        "--zero-based", action="store_true", help="x, y in the CSV count from 0, not from 1"
+    )
+    c.set_defaults(func=run_import_csv)
     i = verbs.add_parser("info", help="count images and holes of a dataset")
     i.add_argument("dataset", type=Path)
     i.set_defaults(func=run_info)
@@ -33,6 +51,14 @@ def run_synth(args: argparse.Namespace) -> int:
     bar = Progress()
     out = synth_dataset(args.out, args.n, args.seed, lambda i, n: bar(i, n, "rendering "))
     bar.done()
+    return run_info(argparse.Namespace(dataset=out))
+
+
+def run_import_csv(args: argparse.Namespace) -> int:
+    camera = read_camera(args.camera) if args.camera else None
+    out = import_csv_dataset(
+        args.folder, args.csv, args.out, camera, origin=0 if args.zero_based else 1
+    )
     return run_info(argparse.Namespace(dataset=out))
 
 

@@ -10,9 +10,12 @@ from pathlib import Path
 from capture import check_output, output_via_part
 from ground import (
     EvalReport,
+    brier_score,
+    calibration_outcomes,
     format_table,
     load_dataset,
     plot_pr,
+    plot_reliability,
     run_detector,
     write_coco_results,
 )
@@ -56,6 +59,14 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "--overwrite", action="store_true", help="replace existing --detections/--plot files"
     )
     p.add_argument(
+        "--reliability",
+        type=Path,
+        metavar="PNG",
+        help="write the reliability diagram of default mode's p_hole on this dataset and "
+        "print its Brier score (with --plot and no --reliability: PR.png and "
+        "PR-reliability.png)",
+    )
+    p.add_argument(
         "--workers",
         type=int,
         default=os.cpu_count() or 1,
@@ -79,7 +90,13 @@ _PLOT_SUFFIXES = {".png", ".pdf", ".svg"}
 
 
 def run(args: argparse.Namespace) -> int:
-    outputs = {"detections": ({".json"}, args.detections), "plot": (_PLOT_SUFFIXES, args.plot)}
+    if args.reliability is None and args.plot:
+        args.reliability = args.plot.with_name(f"{args.plot.stem}-reliability{args.plot.suffix}")
+    outputs = {
+        "detections": ({".json"}, args.detections),
+        "plot": (_PLOT_SUFFIXES, args.plot),
+        "reliability": (_PLOT_SUFFIXES, args.reliability),
+    }
     for suffixes, path in outputs.values():  # before minutes of detection
         if path is not None:
             check_output(path, suffixes=suffixes, force=args.overwrite)
@@ -142,4 +159,14 @@ def run(args: argparse.Namespace) -> int:
         with output_via_part(args.plot, suffixes=_PLOT_SUFFIXES, force=args.overwrite) as tmp:
             plot_pr(tmp, reports, f"{args.dataset.name}: {n} images, {n_gt} holes")
         print(f"precision-recall plot: {args.plot}")
+    reliability = args.reliability
+    default = next((r for r in reports if r.name == "default"), None)
+    if default is not None and reliability is not None:
+        p, is_true = calibration_outcomes(default.iou)
+        brier = brier_score(p, is_true)
+        print(f"default mode p_hole: Brier score {brier:.4f} over {len(p)} detections")
+        title = f"{args.dataset.name}: {len(p)} detections, Brier {brier:.3f}"
+        with output_via_part(reliability, suffixes=_PLOT_SUFFIXES, force=args.overwrite) as tmp:
+            plot_reliability(tmp, p, is_true, title)
+        print(f"reliability diagram (p_hole): {reliability}")
     return 0

@@ -20,21 +20,26 @@ def scene(
     noise: bool = True,
     range_m: float = 4.0,
 ) -> tuple[np.ndarray, np.ndarray, list[tuple[float, float, float, float]]]:
-    """Flat floor at ``z0`` with rectangular holes (u, v centre px, w, h metres, floor z m)."""
+    """Flat floor at ``z0`` with rectangular holes (u, v centre px, w, h metres, floor z m).
+
+    Holes whose floor is beyond ``range_m`` are dark inside (a void at dawn).
+    """
     rng = np.random.default_rng(seed)
     v, u = np.mgrid[0:480, 0:640].astype(np.float64)
     z = np.full((480, 640), z0)
     boxes = []
+    rgb = np.full((480, 640, 3), 100, np.uint8)
     for cu, cv, wm, hm, zf in holes:
         w, h = wm * F / z0, hm * F / z0
         m = (np.abs(u - cu) < w / 2) & (np.abs(v - cv) < h / 2)
         z[m] = zf
+        if zf > range_m:
+            rgb[m] = 25
         boxes.append((cu - w / 2, cv - h / 2, w, h))
     if noise:
         z = z + rng.normal(0, 1, z.shape) * 1.425e-6 * (z * 1000) ** 2 / 1000
     depth = np.round(z * 1000).astype(np.uint16)
     depth[z > range_m] = 0
-    rgb = np.full((480, 640, 3), 100, np.uint8)
     return rgb, depth, boxes
 
 

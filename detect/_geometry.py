@@ -1,0 +1,148 @@
+"""Metric geometry of an opening: rays, the rim plane, axes, and the hole's walls."""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+from detect._types import CameraIntrinsics
+
+# Walls: grow regions by up to this many work pixels into readings this far below the
+# opening plane.
+GROW_PX = 4
+WALL_MARGIN_M = 0.06
+# A rim reading this much nearer than the rim's plane is an occluding edge, not rim.
+OCCLUDER_STEP_M = 0.25
+
+
+def rays_of(
+    us: npt.NDArray[np.float64], vs: npt.NDArray[np.float64], cam: CameraIntrinsics
+) -> npt.NDArray[np.float64]:
+    return np.stack([(us - cam.cx) / cam.fx, (vs - cam.cy) / cam.fy, np.ones_like(us)], axis=1)
+
+
+def fit_plane(
+    points: npt.NDArray[np.float64],
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Least-squares plane ``(unit normal, centroid)`` of (N, 3) camera-frame points.
+
+    Falls back to a fronto-parallel plane when the points are too few, collinear, or the
+    plane would be seen edge-on (normal more than ~72 deg from the optical axis).
+    """
+    centre = points.mean(axis=0)
+    normal = np.array([0.0, 0.0, 1.0])
+    if len(points) >= 6:
+        _, sv, vt = np.linalg.svd(points - centre, full_matrices=False)
+        if sv[1] > 1e-6 and abs(vt[2][2]) > 0.3:
+            normal = vt[2] / np.linalg.norm(vt[2])
+    return normal, centre
+
+
+def opening_axes(
+    region_uv: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]],
+    rim_uvz: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]],
+    cam: CameraIntrinsics,
+) -> tuple[float, float, float, float]:
+    """Metric size of an opening: ``(major_m, minor_m, area_m2, rim_depth_m)``.
+
+    region_uv : pixel coordinates of the region; rim_uvz : pixel coordinates and depth (m)
+    of the valid ring around it. The rim's 3-D points define the opening plane (least
+    squares); the region's rays meet that plane; their second moments (plus each pixel's own
+    footprint) give the axes of the ellipse with the same moments.
+    """
+    ru, rv, rz = rim_uvz
+    normal, centre = fit_plane(rays_of(ru, rv, cam) * rz[:, None])
+    rays = rays_of(region_uv[0], region_uv[1], cam)
+    t = (centre @ normal) / (rays @ normal)
+    pts = rays * t[:, None]
+    # In-plane basis.
+    e1 = np.cross(normal, [0.0, 1.0, 0.0])
+    if np.linalg.norm(e1) < 1e-6:
+        e1 = np.cross(normal, [1.0, 0.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(normal, e1)
+    p2 = np.stack([pts @ e1, pts @ e2], axis=1)
+    cos_incidence = np.abs(rays @ normal) / np.linalg.norm(rays, axis=1)
+    pix_area = (t**2) / (cam.fx * cam.fy) / np.maximum(cos_incidence, 0.2)
+    area = float(pix_area.sum())
+    cov = np.cov(p2.T) if len(p2) > 1 else np.zeros((2, 2))
+    cov = cov + np.eye(2) * float(np.mean(pix_area)) / 12.0
+    lam = np.sort(np.linalg.eigvalsh(cov))[::-1]
+    major, minor = 4.0 * math.sqrt(max(lam[0], 0.0)), 4.0 * math.sqrt(max(lam[1], 0.0))
+    return major, minor, area, float(np.median(rz))
+
+
+def disk(r: int) -> npt.NDArray[np.uint8]:
+    return np.asarray(
+        cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1)), np.uint8
+    )
+
+
+def grow_walls(
+    inside: npt.NDArray[np.bool_],
+    zc: npt.NDArray[np.float32],
+    valid: npt.NDArray[np.bool_],
+    uv0: tuple[int, int],
+    cam: CameraIntrinsics,
+    ring_px: int,
+) -> npt.NDArray[np.bool_]:
+    """Add the hole's walls: readings next to the region that lie below the opening plane.
+
+    The plane is fitted to the readings of a ring a few pixels out (the surrounding
+    terrain); pixels connected to the region and deeper than the plane by ``WALL_MARGIN_M``
+    are wall or floor. Up to ``GROW_PX`` pixels of growth, so a tilted view's visible far
+    wall joins the opening (its box is the rim's).
+    """
+    u8 = inside.astype(np.uint8)
+    outer = (cv2.dilate(u8, disk(ring_px + 3)) > 0) & ~(cv2.dilate(u8, disk(ring_px)) > 0)
+    outer &= valid
+    if outer.sum() < 6:
+        return inside
+    ov, ou = np.nonzero(outer)
+    normal, centre = fit_plane(
+        rays_of(ou.astype(np.float64) + uv0[0], ov.astype(np.float64) + uv0[1], cam)
+        * zc[outer].astype(np.float64)[:, None]
+    )
+    vv, uu = np.mgrid[0 : zc.shape[0], 0 : zc.shape[1]]
+    rays = rays_of(uu.ravel() + float(uv0[0]), vv.ravel() + float(uv0[1]), cam)
+    z_plane = ((centre @ normal) / (rays @ normal)).reshape(zc.shape)
+    below = valid & (zc > z_plane + WALL_MARGIN_M)
+    region = inside.copy()
+    k3 = np.ones((3, 3), np.uint8)
+    for _ in range(GROW_PX):
+        add = (cv2.dilate(region.astype(np.uint8), k3) > 0) & below & ~region
+        if not add.any():
+            break
+        region |= add
+    return region
+
+
+def occluders(
+    ru: npt.NDArray[np.float64],
+    rv: npt.NDArray[np.float64],
+    rz: npt.NDArray[np.float64],
+    cam: CameraIntrinsics,
+) -> npt.NDArray[np.bool_]:
+    """Rim points that stand well in front of the plane of the others: a nearer edge.
+
+    ru, rv : pixel coordinates of the rim; rz : their depth (m). A slab lying across the
+    opening hides its near part; its edge borders the visible part of the hole and is no
+    rim. Points more than ``OCCLUDER_STEP_M`` nearer than the plane fitted to the rim
+    (refitted once without them) are flagged.
+    """
+    near = np.zeros(len(rz), bool)
+    for _ in range(2):
+        keep = ~near
+        if keep.sum() < 6:
+            break
+        rays = rays_of(ru, rv, cam)
+        normal, centre = fit_plane(rays[keep] * rz[keep, None])
+        z_plane = (centre @ normal) / (rays @ normal)
+        now = rz < z_plane - OCCLUDER_STEP_M
+        if not now.any() or np.array_equal(now, near):
+            return now
+        near = now
+    return near

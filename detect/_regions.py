@@ -1,0 +1,179 @@
+"""Candidate regions of the default detector: depth basins and no-reading blobs.
+
+See :mod:`detect._default` for the method. Pure: arrays in, masks and boxes out.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+from skimage.morphology import reconstruction
+
+# Region thresholds (metres below the spill level). SHALLOW is a few block-averaged noise
+# sigmas at 4 m (Xtion: 1.425e-6 Z^2 mm per pixel -> 23 mm, /4 after 4x4 averaging).
+SHALLOW_M = 0.05
+DEEP_M = 0.25
+# Radii (work pixels) at which necks between no-reading blobs are cut.
+NECK_RADII_PX = (0, 3, 6)
+# A block counts as read when at least this fraction of its pixels have a reading.
+MIN_VALID_FRACTION = 0.05
+# A basin this many times larger than its no-reading part is a depression holding holes.
+DEPRESSION_RATIO = 5.0
+
+
+def block_depth(
+    depth: npt.NDArray[np.uint16], factor: int, unit_m: float
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]:
+    """Mean of the valid readings in each ``factor`` x ``factor`` block.
+
+    Returns ``(z, valid_fraction)``: z (h, w) float32 metres, NaN where fewer than
+    :data:`MIN_VALID_FRACTION` of the block's pixels had a reading.
+    """
+    size = (depth.shape[1] // factor, depth.shape[0] // factor)
+    total = cv2.resize(depth.astype(np.float32), size, interpolation=cv2.INTER_AREA)
+    frac = np.asarray(
+        cv2.resize((depth > 0).astype(np.float32), size, interpolation=cv2.INTER_AREA), np.float32
+    )
+    with np.errstate(invalid="ignore", divide="ignore"):
+        z = np.asarray(total / frac * np.float32(unit_m), np.float32)
+    z[frac < MIN_VALID_FRACTION] = np.nan
+    return z, frac
+
+
+def basin_depth(
+    z: npt.NDArray[np.float32],
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_], float]:
+    """Depth of every pixel below the spill level of its basin (metres; inf for no reading).
+
+    Returns ``(pit, invalid, z_far)`` where ``z_far`` is the farthest reading in the image.
+    """
+    invalid = np.isnan(z)
+    z_far = float(np.nanpercentile(z, 99.5))  # robust to a few outliers
+    height = -z.astype(np.float64)
+    floor = -(float(np.nanmax(z)) + 1.0)
+    height[invalid] = floor
+    seed = height.copy()
+    seed[1:-1, 1:-1] = height.max()
+    filled = np.asarray(reconstruction(seed, height, method="erosion"), np.float64)  # type: ignore[no-untyped-call]
+    pit = filled - height
+    pit[invalid & (pit > 0)] = np.inf
+    return pit, invalid, z_far
+
+
+Region = tuple[npt.NDArray[np.bool_], tuple[int, int, int, int]]
+# (mask, box, enclosed): enclosed = a pit of the basin analysis; else a no-reading blob.
+Candidate = tuple[npt.NDArray[np.bool_], tuple[int, int, int, int], bool]
+
+
+def components(
+    mask: npt.NDArray[np.bool_] | npt.NDArray[np.uint8],
+) -> tuple[int, npt.NDArray[np.int32], npt.NDArray[np.int32]]:
+    """8-connected components of ``mask``: ``(count incl. background, labels, stats)``."""
+    n, lab, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
+    return int(n), np.asarray(lab, np.int32), np.asarray(stats, np.int32)
+
+
+def _crop(lab: npt.NDArray[np.int32], stats: npt.NDArray[np.int32], i: int) -> Region:
+    x, y = int(stats[i, cv2.CC_STAT_LEFT]), int(stats[i, cv2.CC_STAT_TOP])
+    w, h = int(stats[i, cv2.CC_STAT_WIDTH]), int(stats[i, cv2.CC_STAT_HEIGHT])
+    return lab[y : y + h, x : x + w] == i, (x, y, w, h)
+
+
+def basin_regions(pit: npt.NDArray[np.float64], min_px: int) -> list[Candidate]:
+    """Regions around each deep core, cut from its basin at a depth that suits the core.
+
+    A core is a component of ``pit > DEEP_M``. Its region is the connected part of its basin
+    lying more than ``tau = clip(0.25 * D, SHALLOW_M, DEEP_M)`` below the spill level, D
+    being the core's depth (1 m for a core without readings). The shallow skirt of a broad
+    depression holding a hole is left out; the walls of a clean hole stay in.
+    """
+    n_b, lab_b, stats_b = components(pit > DEEP_M)
+    regions: list[Candidate] = []
+    seen: set[tuple[int, int, int, int]] = set()
+    levels: dict[float, tuple[int, npt.NDArray[np.int32], npt.NDArray[np.int32]]] = {}
+    for b in range(1, n_b):
+        if stats_b[b, cv2.CC_STAT_AREA] < min_px:
+            continue
+        core, (x, y, w, h) = _crop(lab_b, stats_b, b)
+        depths = pit[y : y + h, x : x + w][core]
+        finite = depths[np.isfinite(depths)]
+        d = float(np.percentile(finite, 90)) if finite.size > 0.5 * depths.size else 1.0
+        tau = min(DEEP_M, max(SHALLOW_M, 0.25 * d))
+        if tau not in levels:
+            levels[tau] = components(pit > tau)
+        _, lab, stats = levels[tau]
+        labels = lab[y : y + h, x : x + w][core]
+        i = int(np.bincount(labels[labels > 0]).argmax())  # core pixels are all > tau
+        mask, box = _crop(lab, stats, i)
+        if box not in seen:
+            seen.add(box)
+            regions.append((mask, box, True))
+            regions += _voids_in_depression(mask, box, pit, min_px)
+    return regions
+
+
+def _voids_in_depression(
+    mask: npt.NDArray[np.bool_],
+    box: tuple[int, int, int, int],
+    pit: npt.NDArray[np.float64],
+    min_px: int,
+) -> list[Candidate]:
+    """The no-reading blobs of a basin much larger than them: holes in a broad depression.
+
+    Each blob is a candidate of its own (its walls are added when it is measured); the
+    basin stays a candidate too, and the better-scoring one wins (NMS by containment).
+    """
+    x, y, w, h = box
+    void = mask & np.isinf(pit[y : y + h, x : x + w])
+    n_void = int(void.sum())
+    if n_void < min_px or mask.sum() <= DEPRESSION_RATIO * n_void:
+        return []
+    n, lab, stats = components(void)
+    out: list[Candidate] = []
+    for i in range(1, n):
+        if stats[i, cv2.CC_STAT_AREA] >= min_px:
+            m, (bx, by, bw, bh) = _crop(lab, stats, i)
+            out.append((m, (bx + x, by + y, bw, bh), True))
+    return out
+
+
+def no_reading_regions(
+    invalid: npt.NDArray[np.bool_],
+    pit: npt.NDArray[np.float64],
+    min_px: int,
+) -> list[Candidate]:
+    """Blobs of no reading that the basin analysis cannot see as pits.
+
+    A hole whose floor gives no reading can touch another no-reading area (ground beyond
+    the sensor's range, a neighbouring hole) or the image border; then it spills and is no
+    pit. Opening the no-reading mask with disks of growing radius cuts such necks; each
+    blob that appears (grown back inside the mask) is a candidate. Whether it is a hole is
+    decided later from its rim (enough valid readings around it, well inside the range).
+
+    ``invalid`` may also be a part of the no-reading mask (its dark pixels).
+    """
+    regions: list[Candidate] = []
+    spilled = invalid & ~np.isinf(pit)
+    if spilled.sum() < min_px:
+        return regions
+    inv_u8 = invalid.astype(np.uint8)
+    for r in NECK_RADII_PX:
+        if r:
+            k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+            opened = np.asarray(cv2.morphologyEx(inv_u8, cv2.MORPH_OPEN, k), np.uint8)
+        else:
+            opened = inv_u8
+        n, lab, stats = components(opened)
+        for i in range(1, n):
+            if stats[i, cv2.CC_STAT_AREA] < min_px:
+                continue
+            blob = (lab == i).astype(np.uint8)
+            if r:
+                blob = np.asarray(cv2.dilate(blob, k), np.uint8) & inv_u8
+            if not (blob.astype(bool) & spilled).any():
+                continue  # an enclosed pit: basin_regions has it
+            _, lab2, stats2 = components(blob)
+            j = int(np.argmax(stats2[1:, cv2.CC_STAT_AREA])) + 1
+            regions.append((*_crop(lab2, stats2, j), False))
+    return regions
