@@ -66,19 +66,19 @@ def _client(opts: ReprocessOptions, stats: EngineStats) -> Iterator[Any]:
     dashboard = importlib.util.find_spec("bokeh") is not None
     if opts.scheduler is not None:
         try:
-            client = Client(opts.scheduler, timeout="20s")
+            client = Client(opts.scheduler, timeout="20s")  # type: ignore[no-untyped-call]
         except (OSError, TimeoutError) as err:
             raise EngineError(f"cannot reach the Dask scheduler {opts.scheduler}: {err}") from err
         cluster = None
     else:
-        cluster = LocalCluster(
+        cluster = LocalCluster(  # type: ignore[no-untyped-call]
             n_workers=opts.workers,
             threads_per_worker=1,
             processes=True,
             dashboard_address=":8787" if dashboard else None,
             silence_logs=logging.ERROR,
         )
-        client = Client(cluster)
+        client = Client(cluster)  # type: ignore[no-untyped-call]
     try:
         n = max(1, opts.workers) if cluster is not None else 1
         client.wait_for_workers(n, timeout=120)
@@ -87,7 +87,7 @@ def _client(opts: ReprocessOptions, stats: EngineStats) -> Iterator[Any]:
         stats.start_s = time.monotonic() - t0
         yield client
     finally:
-        client.close()
+        client.close()  # type: ignore[no-untyped-call]
         if cluster is not None:
             cluster.close()
 
@@ -165,7 +165,7 @@ def _run_on_cluster(
     }
     pending = set(futures)
     try:
-        for fut in as_completed(futures):
+        for fut in as_completed(futures):  # type: ignore[no-untyped-call]
             pending.discard(fut)
             i = futures[fut]
             if i in ready or any(r.key == tasks[i].key for r in stats.results):
