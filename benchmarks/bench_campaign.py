@@ -16,7 +16,7 @@ What runs:
 3. the scheduler's overhead per partition: (wall time x workers - the tasks' own time) /
    partitions in the 1-worker runs, and the round trip of 200 empty tasks;
 4. the client-side merge alone: the same run again with every partition from the cache;
-5. a campaign of ``--flights`` flights (the sorties, and copies of them under other names)
+5. a campaign of ``--flights`` flights (the sorties, and the same again under other names)
    end to end on 2 workers;
 6. a projection to N machines from the measured per-worker rate and overhead, against the
    two other limits: shared storage bandwidth and the client's merge rate.
@@ -59,18 +59,17 @@ def fly(work: Path, duration_s: float) -> list[list[Path]]:
 
 
 def copies(flights: list[list[Path]], n: int, work: Path) -> list[Path]:
-    """``n`` flights: the given ones, then copies of them under new names."""
+    """``n`` flights named ``flightK``: the given ones, then the same again (hard links)."""
     out: list[Path] = []
     for k in range(n):
-        src = flights[k % len(flights)]
-        if k < len(flights):
-            out += src
-            continue
-        folder = work / f"copy{k}"
+        folder = work / f"flight{k}"
         folder.mkdir(parents=True, exist_ok=True)
-        for i, p in enumerate(src):
+        for i, p in enumerate(flights[k % len(flights)]):
             dst = folder / f"flight{k}_{i:04d}.mcap"
-            shutil.copyfile(p, dst)
+            try:
+                os.link(p, dst)
+            except OSError:
+                shutil.copyfile(p, dst)
             out.append(dst)
     return out
 

@@ -11,14 +11,26 @@ autopilot boot clock is its own), and flights are merged in the order they start
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+import math
+from collections.abc import Mapping, Sequence
 from typing import Any
 
-from capture import FrameHoles
-from geotag import Hole, HoleTracker
-from ground._rptask import FrameResult, View
+import numpy as np
+import pymap3d
 
-__all__ = ["CampaignHole", "CampaignMerge", "FlightSightings", "campaign_summary"]
+from capture import FrameHoles
+from geotag import Hole, HoleTracker, VehiclePose
+from ground._rpmerge import box_of, read_views
+from ground._rpplan import PartitionTask
+from ground._rptask import Box, FrameResult, View
+
+__all__ = [
+    "CampaignHole",
+    "CampaignMerge",
+    "FlightSightings",
+    "campaign_summary",
+    "track_coverage",
+]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -67,10 +79,10 @@ class CampaignMerge:
 
     def __init__(self) -> None:
         self.tracker = HoleTracker()
-        self.views: dict[int, View] = {}
+        self.best: dict[int, tuple[PartitionTask, int, Box]] = {}
         self._seen: dict[int, dict[str, list[int]]] = {}  # id -> flight -> [n, first, last]
 
-    def on_frame(self, flight: str, fr: FrameResult, step: FrameHoles) -> None:
+    def on_frame(self, flight: str, fr: FrameResult, step: FrameHoles, task: PartitionTask) -> None:
         if not step.sightings:
             return
         t = fr.t_unix_ns
@@ -79,9 +91,12 @@ class CampaignMerge:
             stats = self._seen.setdefault(h.id, {}).setdefault(flight, [0, t, t])
             stats[0] += 1
             stats[1], stats[2] = min(stats[1], t), max(stats[2], t)
-            view = fr.views.get((h.best_box[0], h.best_box[1], h.best_box[2], h.best_box[3]))
-            if h.best_frame_index == fr.index and view is not None:
-                self.views[h.id] = view
+            if h.best_frame_index == fr.index:
+                self.best[h.id] = (task, fr.index, box_of(h.best_box))
+
+    def views(self, ids: set[int]) -> dict[int, View]:
+        """The best views of holes ``ids``, read again from the logs."""
+        return read_views({i: self.best[i] for i in ids if i in self.best})
 
     def holes(self, min_sightings: int = 1) -> list[CampaignHole]:
         """The campaign's holes seen at least ``min_sightings`` times, by id."""
@@ -98,18 +113,42 @@ class CampaignMerge:
         return out
 
 
-def campaign_summary(holes: Sequence[CampaignHole], flights: Sequence[str]) -> dict[str, Any]:
-    """The ``holes`` part of a campaign's ``summary.json``, and per flight how many holes
-    it saw and how many of those another flight saw too."""
-    per_flight = {
-        name: {
+def track_coverage(track: Sequence[VehiclePose]) -> tuple[float, float]:
+    """(length_m, duration_s) of a flight's track (horizontal, poses in time order).
+
+    Examples
+    --------
+    >>> track_coverage([])
+    (0.0, 0.0)
+    """
+    pts = [p for p in track if math.isfinite(p.lat_deg) and math.isfinite(p.lon_deg)]
+    if len(pts) < 2:
+        return 0.0, 0.0
+    lat0, lon0 = pts[0].lat_deg, pts[0].lon_deg
+    e, n, _ = pymap3d.geodetic2enu(
+        np.array([p.lat_deg for p in pts]), np.array([p.lon_deg for p in pts]), 0.0, lat0, lon0, 0.0
+    )
+    length = float(np.sum(np.hypot(np.diff(e), np.diff(n))))
+    return length, (pts[-1].t_boot_ns - pts[0].t_boot_ns) * 1e-9
+
+
+def campaign_summary(
+    holes: Sequence[CampaignHole], flights: Mapping[str, Sequence[VehiclePose]]
+) -> dict[str, Any]:
+    """The ``holes`` part of a campaign's ``summary.json``, and per flight its coverage
+    (track length and duration), how many holes it saw and how many of those another flight
+    saw too."""
+    per_flight = {}
+    for name, track in flights.items():
+        length, duration = track_coverage(track)
+        per_flight[name] = {
+            "track_length_m": round(length, 1),
+            "track_duration_s": round(duration, 1),
             "holes_seen": sum(any(f.flight == name for f in h.flights) for h in holes),
             "also_seen_by_another_flight": sum(
                 any(f.flight == name for f in h.flights) and len(h.flights) > 1 for h in holes
             ),
         }
-        for name in flights
-    }
     return {
         "holes": [h.summary() for h in holes],
         "holes_seen_by_several_flights": sum(len(h.flights) > 1 for h in holes),

@@ -32,7 +32,7 @@ from importlib.metadata import version as _dist_version
 from pathlib import Path
 from typing import Any
 
-from capture import to_json
+from capture import FlightLogError, read_log_layout, to_json
 from geotag import VehiclePose
 from ground._campaign import CampaignHole, CampaignMerge, campaign_summary
 from ground._rpcache import PartitionCache
@@ -42,6 +42,7 @@ from ground._rpoptions import Progress, ReprocessOptions, match_points, out_fold
 from ground._rpoutputs import FlightResult, write_hole_outputs
 from ground._rpplan import FlightPlan, PartitionTask, group_flights, partition_flight, plan_flight
 from ground._rpsidecar import Sidecar
+from holescan_errors import InputError
 
 __all__ = ["ReprocessResult", "reprocess", "run_campaign"]
 
@@ -103,11 +104,32 @@ class _Run:
         for task in self.tasks:
             self.left[task.flight] = self.left.get(task.flight, 0) + 1
 
-    def folder(self, plan: FlightPlan) -> Path:
+    def folder(self, plan: FlightPlan, create: bool = True) -> Path:
         single = len(self.plans) == 1 and self.campaign is None
         path = self.out if single else self.out / plan.name
-        path.mkdir(parents=True, exist_ok=True)
+        if create:
+            path.mkdir(parents=True, exist_ok=True)
         return path
+
+    def check_outputs(self) -> None:
+        """Never write over an input or a log: before any work, refuse an output folder
+        holding an input, or a sidecar path taken by a file reprocessing did not write."""
+        inputs = [p for plan in self.plans for p in plan.files]
+        for plan in self.plans:
+            folder = self.folder(plan, create=False)
+            for p in inputs:
+                if p.resolve().parent == folder.resolve():
+                    raise InputError(f"{p} is a source log in {folder}: choose another --out")
+            sidecar = folder / f"{plan.name}_reprocess.mcap"
+            if sidecar.exists():
+                try:
+                    ours = "ground.reprocess" in read_log_layout(sidecar).metadata
+                except FlightLogError:
+                    ours = False
+                if not ours:
+                    raise InputError(
+                        f"{sidecar} exists and is not a reprocessing sidecar: choose another --out"
+                    )
 
     def open(self, k: int) -> FlightMerger:
         if k in self.mergers:
@@ -125,13 +147,13 @@ class _Run:
         on_frame = None
         if self.campaign is not None:
             merge, name = self.campaign, plan.name
-            on_frame = lambda fr, step: merge.on_frame(name, fr, step)  # noqa: E731
+            on_frame = lambda fr, step, task: merge.on_frame(name, fr, step, task)  # noqa: E731
         self.sidecars[k] = sidecar
         self.mergers[k] = FlightMerger(plan, self.opts, sidecar.write, on_frame)
         return self.mergers[k]
 
     def on_result(self, task: PartitionTask, result: Any, cached: bool) -> None:
-        self.open(task.flight).add(result)
+        self.open(task.flight).add(task, result)
         self.cached[task.flight] = self.cached.get(task.flight, 0) + int(cached)
         self.left[task.flight] -= 1
         if self.left[task.flight] == 0:
@@ -224,7 +246,8 @@ def _flight_outputs(
         facts["cut off or damaged"] = "; ".join(problems)
     views = {}
     if fl is not None:
-        views = {hid: (v.rgb, v.depth, v.box_in_crop) for hid, v in fl.views.items()}
+        got = fl.views({h.id for h in confirmed})
+        views = {hid: (v.rgb, v.depth, v.box_in_crop) for hid, v in got.items()}
     files = write_hole_outputs(
         out,
         plan.name,
@@ -250,14 +273,18 @@ def _write_json(path: Path, doc: Any) -> None:
     os.replace(tmp, path)
 
 
+def _tracks(run: _Run) -> dict[str, list[VehiclePose]]:
+    return {
+        plan.name: run.mergers[k].track if k in run.mergers else []
+        for k, plan in enumerate(run.plans)
+    }
+
+
 def _campaign_outputs(run: _Run, holes: list[CampaignHole]) -> list[tuple[str, Path]]:
     assert run.campaign is not None
     confirmed = [h.hole for h in holes]
-    views = {
-        hid: (v.rgb, v.depth, v.box_in_crop)
-        for hid, v in run.campaign.views.items()
-        if any(h.id == hid for h in confirmed)
-    }
+    got = run.campaign.views({h.id for h in confirmed})
+    views = {hid: (v.rgb, v.depth, v.box_in_crop) for hid, v in got.items()}
     track: list[VehiclePose] = []
     for k in sorted(run.mergers):
         track += run.mergers[k].track
@@ -267,9 +294,14 @@ def _campaign_outputs(run: _Run, holes: list[CampaignHole]) -> list[tuple[str, P
         "frames": str(sum(r.frames_detected for r in run.results.values())),
         "holes seen by several flights": str(sum(len(h.flights) > 1 for h in holes)),
     }
-    for r in run.results.values():
-        seen = sum(any(f.flight == r.name for f in h.flights) for h in holes)
-        facts[f"flight {r.name}"] = f"{r.frames_detected} frames, {seen} campaign holes seen"
+    per = campaign_summary(holes, _tracks(run))["per_flight"]
+    for name, c in per.items():
+        r = next(r for r in run.results.values() if r.name == name)
+        facts[f"flight {name}"] = (
+            f"{r.frames_detected} frames, track {c['track_length_m']:.0f} m over "
+            f"{c['track_duration_s'] / 60:.1f} min; {c['holes_seen']} holes seen "
+            f"({c['also_seen_by_another_flight']} also by another flight)"
+        )
     return write_hole_outputs(
         run.out,
         "campaign",
@@ -297,6 +329,7 @@ def _execute(
     out_dir = out_folder(out, [p for g in groups for p in g])
     plans = sorted((plan_flight(g, opts) for g in groups), key=lambda p: (p.start_ns, p.name))
     run = _Run(plans, out_dir, opts, campaign)
+    run.check_outputs()
     cache = PartitionCache(out_dir / CACHE_FOLDER if opts.cache else None)
     t0 = time.monotonic()
 
@@ -344,7 +377,7 @@ def _execute(
     if run.campaign is not None:
         holes = run.campaign.holes(opts.min_sightings)
         files = _campaign_outputs(run, holes)
-        doc["campaign"] = campaign_summary(holes, [p.name for p in plans])
+        doc["campaign"] = campaign_summary(holes, _tracks(run))
     summary = out_dir / "summary.json"
     _write_json(summary, doc)
     return ReprocessResult(results, tuple(holes), summary, stats, elapsed, tuple(files))

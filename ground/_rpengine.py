@@ -29,20 +29,35 @@ from ground._rpplan import PartitionTask
 from ground._rptask import PartitionResult, run_partition
 from holescan_errors import HolescanError
 
-__all__ = ["EngineError", "EngineStats", "run_tasks"]
+__all__ = ["EngineError", "EngineStats", "TaskStats", "run_tasks"]
 
 _log = logging.getLogger(__name__)
+
+_POLL_S = 0.05
 
 
 class EngineError(HolescanError):
     """The cluster could not be reached, or a task failed for a reason retrying cannot fix."""
 
 
+@dataclasses.dataclass(frozen=True)
+class TaskStats:
+    """One partition's numbers (what it found went to ``on_result``)."""
+
+    key: str
+    frames: int
+    read_s: float
+    detect_s: float
+    worker: str
+    peak_rss_mib: float
+    cached: bool
+
+
 @dataclasses.dataclass
 class EngineStats:
     """What the engine did. dashboard : the Dask dashboard's address (None without one).
     start_s : cluster start-up (or connection). computed / cached : partitions.
-    workers : worker processes seen. results : every partition result, in task order."""
+    workers : worker processes seen. results : each partition's numbers, in task order."""
 
     dashboard: str | None = None
     start_s: float = 0.0
@@ -50,7 +65,8 @@ class EngineStats:
     cached: int = 0
     workers: int = 0
     stopped: bool = False
-    results: list[PartitionResult] = dataclasses.field(default_factory=list)
+    results: list[TaskStats] = dataclasses.field(default_factory=list)
+    taken: set[int] = dataclasses.field(default_factory=set)
 
 
 OnResult = Callable[[PartitionTask, PartitionResult, bool], None]
@@ -112,7 +128,17 @@ def run_tasks(
         while delivered[0] in ready:
             i = delivered[0]
             result, cached = ready.pop(i)
-            stats.results.append(result)
+            stats.results.append(
+                TaskStats(
+                    result.key,
+                    result.frames,
+                    result.read_s,
+                    result.detect_s,
+                    result.worker,
+                    result.peak_rss_mib,
+                    cached,
+                )
+            )
             on_result(tasks[i], result, cached)
             delivered[0] += 1
         if tick is not None:
@@ -164,28 +190,44 @@ def _run_on_cluster(
         for i in todo
     }
     pending = set(futures)
+    done = as_completed(futures)  # type: ignore[no-untyped-call]
     try:
-        for fut in as_completed(futures):  # type: ignore[no-untyped-call]
-            pending.discard(fut)
-            i = futures[fut]
-            if i in ready or any(r.key == tasks[i].key for r in stats.results):
-                continue  # used once, however often it was computed
-            try:
-                result: PartitionResult = fut.result()
-            except HolescanError:
-                raise
-            except Exception as err:
-                raise EngineError(
-                    f"partition {tasks[i].number} of {tasks[i].url} failed: "
-                    f"{type(err).__name__}: {err}"
-                ) from err
-            cache.put(result)
-            stats.computed += 1
-            ready[i] = (result, False)
-            deliver()
-            if stop.is_set():
+        while not done.is_empty():  # type: ignore[no-untyped-call]
+            if stop.is_set():  # also when no result comes (workers gone): poll, do not block
                 stats.stopped = True
                 break
+            batch = done.next_batch(block=False)  # type: ignore[no-untyped-call]
+            if not batch:
+                time.sleep(_POLL_S)
+                continue
+            for fut in batch:
+                pending.discard(fut)
+                _take(fut, futures[fut], tasks, cache, stats, ready)
+            deliver()
     finally:
         if pending:
             client.cancel(list(pending))
+
+
+def _take(
+    fut: Any,
+    i: int,
+    tasks: Sequence[PartitionTask],
+    cache: PartitionCache,
+    stats: EngineStats,
+    ready: dict[int, tuple[PartitionResult, bool]],
+) -> None:
+    if i in stats.taken:
+        return  # used once, however often it was computed
+    stats.taken.add(i)
+    try:
+        result: PartitionResult = fut.result()
+    except HolescanError:
+        raise
+    except Exception as err:
+        raise EngineError(
+            f"partition {tasks[i].number} of {tasks[i].url} failed: {type(err).__name__}: {err}"
+        ) from err
+    cache.put(result)
+    stats.computed += 1
+    ready[i] = (result, False)

@@ -35,10 +35,10 @@ from capture import (
 )
 from geotag import Hole, VehiclePose
 from ground._rpoptions import ReprocessOptions
-from ground._rpplan import FlightPlan
-from ground._rptask import FrameResult, PartitionResult, View
+from ground._rpplan import FlightPlan, PartitionTask
+from ground._rptask import Box, FrameResult, PartitionResult, View, best_view
 
-__all__ = ["FlightMerger"]
+__all__ = ["FlightMerger", "box_of", "read_views"]
 
 _log = logging.getLogger(__name__)
 
@@ -46,7 +46,7 @@ _FLIGHT_HORIZON: Final = 60  # frames: a flight's detections are logged well wit
 
 Writer = Callable[[str, Any, int], None]
 """``write(topic, obj, t_unix_ns)``: a new record for the sidecar (topic without prefix)."""
-OnFrame = Callable[[FrameResult, FrameHoles], None]
+OnFrame = Callable[[FrameResult, FrameHoles, PartitionTask], None]
 
 
 class FlightMerger:
@@ -71,7 +71,8 @@ class FlightMerger:
         self.track: list[VehiclePose] = []
         self.flight_holes: tuple[Hole, ...] = ()
         self.first_pose: VehiclePose | None = None
-        self.views: dict[int, View] = {}
+        self.best: dict[int, tuple[PartitionTask, int, Box]] = {}
+        self._task: PartitionTask | None = None
         self.damaged: list[str] = []
         self.frames_read = self.frames_detected = self.frames_unposed = 0
         self.detections = self.detect_errors = self.incomplete_frames = 0
@@ -87,8 +88,9 @@ class FlightMerger:
 
     # -- feeding -----------------------------------------------------------------------------
 
-    def add(self, part: PartitionResult) -> None:
+    def add(self, task: PartitionTask, part: PartitionResult) -> None:
         """One partition's events (partitions of the flight in order)."""
+        self._task = task
         self.damaged += part.damaged
         self.incomplete_frames += part.incomplete_frames
         for _, ev in part.events:
@@ -174,14 +176,14 @@ class FlightMerger:
         step = self.pipeline.add(fr.index, fr.detections, lambda: pose)
         if step.refused:
             self.frames_unposed += 1
+        assert self._task is not None
         if self.on_frame is not None:
-            self.on_frame(fr, step)
+            self.on_frame(fr, step, self._task)
         if not step.changed:
             return
         for h in step.changed:
-            view = fr.views.get((h.best_box[0], h.best_box[1], h.best_box[2], h.best_box[3]))
-            if h.best_frame_index == fr.index and view is not None:
-                self.views[h.id] = view
+            if h.best_frame_index == fr.index:
+                self.best[h.id] = (self._task, fr.index, box_of(h.best_box))
         holes = [jsonable(h) for h in self.pipeline.holes()]
         self.write("holes", {"holes": holes}, t)
         self.write("holes/geojson", holes_geojson_message(holes), t)
@@ -197,8 +199,28 @@ class FlightMerger:
     def holes(self) -> list[Hole]:
         return self.pipeline.holes()
 
+    def views(self, ids: set[int]) -> dict[int, View]:
+        """The best views of holes ``ids``, read again from the logs."""
+        return read_views({i: self.best[i] for i in ids if i in self.best})
+
     def home(self) -> tuple[float, float, float] | None:
         if self.telemetry.home is not None:
             return self.telemetry.home
         p = self.first_pose
         return None if p is None else (p.lat_deg, p.lon_deg, p.alt_m - p.rel_alt_m)
+
+
+def box_of(box: tuple[int, ...]) -> Box:
+    return (int(box[0]), int(box[1]), int(box[2]), int(box[3]))
+
+
+def read_views(where: dict[int, tuple[PartitionTask, int, Box]]) -> dict[int, View]:
+    """hole id -> its best view, from (partition, frame index, box)."""
+    out = {}
+    for hid, (task, index, box) in where.items():
+        view = best_view(task, index, box)
+        if view is not None:
+            out[hid] = view
+        else:
+            _log.warning("hole %d: its best view (frame %d) could not be read again", hid, index)
+    return out

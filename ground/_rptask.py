@@ -5,9 +5,9 @@ byte ranges, so frames never travel through the scheduler. A frame belongs to th
 partition that holds its ``/camera/frame_info`` message; its image parts may lie in a
 neighbouring chunk, which is then read too (at most two either side). Messages are decoded
 by capture's flight-log decoder (:func:`capture.decode_messages`). What comes back is
-small: the detections with a crop around each box (for thumbnails), the raw MAVLink
-packets and the flight's own records, each with its position in the file so the client
-replays everything in log order.
+small: the detections, the raw MAVLink packets and the flight's own records, each with its
+position in the file so the client replays everything in log order. The few pictures the
+outputs need (each hole's best view) are read again afterwards (:func:`best_view`).
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ from detect import Detection, detect_holes
 from geotag import VehiclePose
 from ground._rpplan import FRAME_TOPICS, TASK_TOPICS, PartitionTask
 
-__all__ = ["FrameResult", "PartitionResult", "View", "run_partition"]
+__all__ = ["FrameResult", "PartitionResult", "View", "best_view", "run_partition"]
 
 _log = logging.getLogger(__name__)
 
@@ -72,7 +72,6 @@ class FrameResult:
     t_boot_ns: int | None
     pose: VehiclePose | None
     detections: tuple[Detection, ...]
-    views: dict[Box, View]
     detect_ms: float
     error: str | None
 
@@ -174,11 +173,6 @@ def _detect(task: PartitionTask, rec: LoggedFrame, pos: Pos) -> FrameResult:
     except Exception as exc:  # reported and counted, as the flight's worker does
         dets, err = (), f"{type(exc).__name__}: {exc}"
     ms = (time.perf_counter() - t0) * 1000.0
-    views = {}
-    for d in dets:
-        box = (int(d.box[0]), int(d.box[1]), int(d.box[2]), int(d.box[3]))
-        if box[2] > 0 and box[3] > 0:
-            views[box] = _crop(rgb, depth, box)
     return FrameResult(
         pos=pos,
         index=rec.frame.index,
@@ -187,7 +181,6 @@ def _detect(task: PartitionTask, rec: LoggedFrame, pos: Pos) -> FrameResult:
         t_boot_ns=rec.t_boot_ns,
         pose=rec.pose,
         detections=dets,
-        views=views,
         detect_ms=ms,
         error=err,
     )
@@ -227,3 +220,19 @@ def run_partition(task: PartitionTask) -> PartitionResult:
         worker=f"{socket.gethostname()}:{os.getpid()}",
         peak_rss_mib=peak_kib / 1024.0,
     )
+
+
+def best_view(task: PartitionTask, frame_index: int, box: Box) -> View | None:
+    """The crop around ``box`` in frame ``frame_index`` of ``task``'s partition, read again
+    from the log (None when the frame cannot be read any more)."""
+    if box[2] <= 0 or box[3] <= 0:
+        return None
+    damaged: list[str] = []
+    with open_log(task.url, task.storage_options) as f:
+        selected = _select(task, f, damaged)
+    pending: dict[int, dict[str, Any]] = {}
+    for _, ch, msg in selected:
+        for rec in decode_messages([(ch, msg)], task.layout, pending):
+            if isinstance(rec, LoggedFrame) and rec.frame.index == frame_index:
+                return _crop(rec.frame.rgb, rec.frame.depth, box)
+    return None
