@@ -73,6 +73,7 @@ class FlightMerger:
         self.first_pose: VehiclePose | None = None
         self.best: dict[int, tuple[PartitionTask, int, Box]] = {}
         self._task: PartitionTask | None = None
+        self._task_of: dict[int, PartitionTask] = {}  # frame index -> its partition
         self.damaged: list[str] = []
         self.frames_read = self.frames_detected = self.frames_unposed = 0
         self.detections = self.detect_errors = self.incomplete_frames = 0
@@ -122,6 +123,8 @@ class FlightMerger:
         if fr.pose is not None and self.first_pose is None:
             self.first_pose = fr.pose
         self.frames_read += 1
+        assert self._task is not None
+        self._task_of[fr.index] = self._task
         if self.opts.frames == "flight":
             self._undecided[fr.index] = fr
             self._boots[fr.index] = t_boot
@@ -137,6 +140,7 @@ class FlightMerger:
         while self._undecided and next(iter(self._undecided)) < detected_index - _FLIGHT_HORIZON:
             old, _ = self._undecided.popitem(last=False)
             self._boots.pop(old, None)
+            self._task_of.pop(old, None)
 
     def _dispatch(self, fr: FrameResult, t_boot: int | None) -> None:
         self._order.append(fr.index)
@@ -159,15 +163,16 @@ class FlightMerger:
             index = self._order.popleft()
             fr = self._frames.pop(index)
             pose = self._poses.pop(index)
+            task = self._task_of.pop(index)
             self.frames_detected += 1
             self.detect_ms += fr.detect_ms
             if fr.error is not None:
                 self.detect_errors += 1
                 _log.warning("%s: frame %d: detection failed: %s", self.plan.name, index, fr.error)
                 continue
-            self._merge_frame(fr, pose)
+            self._merge_frame(fr, pose, task)
 
-    def _merge_frame(self, fr: FrameResult, pose: VehiclePose | None) -> None:
+    def _merge_frame(self, fr: FrameResult, pose: VehiclePose | None, task: PartitionTask) -> None:
         t = fr.t_unix_ns
         self.detections += len(fr.detections)
         dets = [detection_json(d) for d in fr.detections]
@@ -176,14 +181,13 @@ class FlightMerger:
         step = self.pipeline.add(fr.index, fr.detections, lambda: pose)
         if step.refused:
             self.frames_unposed += 1
-        assert self._task is not None
         if self.on_frame is not None:
-            self.on_frame(fr, step, self._task)
+            self.on_frame(fr, step, task)
         if not step.changed:
             return
         for h in step.changed:
             if h.best_frame_index == fr.index:
-                self.best[h.id] = (self._task, fr.index, box_of(h.best_box))
+                self.best[h.id] = (task, fr.index, box_of(h.best_box))
         holes = [jsonable(h) for h in self.pipeline.holes()]
         self.write("holes", {"holes": holes}, t)
         self.write("holes/geojson", holes_geojson_message(holes), t)
