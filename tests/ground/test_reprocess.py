@@ -134,29 +134,75 @@ def test_two_worker_processes_give_what_one_process_gives(
 def test_a_worker_killed_mid_run_loses_nothing(
     flight: Flown, reference: ReprocessResult, tmp_path: Path
 ) -> None:
-    from distributed import Client, LocalCluster
+    """A cluster started as the README says (``dask scheduler``, ``dask worker``), used with
+    ``--scheduler``; one worker process is SIGKILLed mid-run (its nanny starts another)."""
+    import psutil
 
     files, _ = flight
-    with (
-        LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=None) as cluster,
-        Client(cluster) as client,
-    ):
-        client.wait_for_workers(2)
-        pids = list(client.run(os.getpid).values())
+    port = free_port()
+    bin_dir = Path(sys.executable).parent
+    dask = (
+        [str(bin_dir / "dask")] if (bin_dir / "dask").exists() else [sys.executable, "-m", "dask"]
+    )
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
+    procs = [
+        subprocess.Popen(
+            [*dask, "scheduler", "--port", str(port), "--no-dashboard"],
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+    ]
+    try:
+        time.sleep(1.0)
+        procs.append(
+            subprocess.Popen(
+                [
+                    *dask,
+                    "worker",
+                    f"tcp://127.0.0.1:{port}",
+                    "--nworkers",
+                    "2",
+                    "--nthreads",
+                    "1",
+                    "--no-dashboard",
+                ],
+                env=env,
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+            )
+        )
         killed: list[int] = []
 
         def progress(p: Progress) -> None:
             if p.partitions_done >= 2 and not killed:
-                killed.append(pids[0])
-                os.kill(pids[0], signal.SIGKILL)  # its running and queued tasks are lost
+                leaves = [
+                    c
+                    for c in psutil.Process(procs[1].pid).children(recursive=True)
+                    if not c.children()
+                ]
+                killed.append(leaves[0].pid)
+                os.kill(leaves[0].pid, signal.SIGKILL)  # its running and queued tasks are lost
 
-        o = opts(scheduler=cluster.scheduler_address, cache=False)
+        o = opts(scheduler=f"tcp://127.0.0.1:{port}", cache=False)
         res = reprocess(files, tmp_path, o, progress=progress)
+    finally:
+        for proc in reversed(procs):
+            proc.terminate()
+            proc.wait(timeout=30)
     assert killed
     (a,), (b,) = res.flights, reference.flights
     assert res.engine.computed == a.partitions  # each partition used once
     assert a.frames_read == b.frames_read and a.holes == b.holes
     assert sidecar(a.outputs[0]) == sidecar(b.outputs[0])
+
+
+def free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
 
 
 def test_stopped_run_resumes_from_the_cache(
