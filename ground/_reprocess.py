@@ -40,7 +40,14 @@ from ground._rpengine import EngineStats, run_tasks
 from ground._rpmerge import FlightMerger
 from ground._rpoptions import Progress, ReprocessOptions, match_points, out_folder
 from ground._rpoutputs import FlightResult, write_hole_outputs
-from ground._rpplan import FlightPlan, PartitionTask, group_flights, partition_flight, plan_flight
+from ground._rpplan import (
+    FlightPlan,
+    PartitionTask,
+    group_flights,
+    partition_flight,
+    plan_flight,
+    ref_name,
+)
 from ground._rpsidecar import Sidecar
 from holescan_errors import InputError
 
@@ -114,7 +121,7 @@ class _Run:
     def check_outputs(self) -> None:
         """Never write over an input or a log: before any work, refuse an output folder
         holding an input, or a sidecar path taken by a file reprocessing did not write."""
-        inputs = [p for plan in self.plans for p in plan.files]
+        inputs = [p for plan in self.plans for p in plan.files if isinstance(p, Path)]
         for plan in self.plans:
             folder = self.folder(plan, create=False)
             for p in inputs:
@@ -233,7 +240,7 @@ def _flight_outputs(
         elapsed_s=elapsed,
     )
     facts = {
-        "logs": ", ".join(p.name for p in plan.files),
+        "logs": ", ".join(ref_name(p) for p in plan.files),
         "reprocessed": f"{result.frames_detected} of {result.frames_read} frames"
         + (" (INTERRUPTED)" if interrupted else ""),
         "detector": f"{opts.params.mode.value}, searcher {opts.params.searcher.name}",
@@ -326,7 +333,7 @@ def _execute(
 ) -> ReprocessResult:
     opts = opts or ReprocessOptions()
     groups = group_flights(logs)
-    out_dir = out_folder(out, [p for g in groups for p in g])
+    out_dir = out_folder(out, [p for g in groups for p in g if isinstance(p, Path)])
     plans = sorted((plan_flight(g, opts) for g in groups), key=lambda p: (p.start_ns, p.name))
     run = _Run(plans, out_dir, opts, campaign)
     run.check_outputs()

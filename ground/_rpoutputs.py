@@ -49,7 +49,7 @@ class FlightResult:
     """
 
     name: str
-    sources: tuple[Path, ...]
+    sources: tuple[Path | str, ...]
     outputs: tuple[Path, ...]
     files: tuple[tuple[str, Path], ...]
     frames_read: int

@@ -12,6 +12,7 @@ import dataclasses
 import hashlib
 import json
 import os
+import re
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Final
@@ -44,7 +45,37 @@ from ground._flightholes import flight_log_files, log_stem
 from ground._rpoptions import ReprocessOptions
 from holescan_errors import InputError
 
-__all__ = ["FlightPlan", "PartitionTask", "group_flights", "partition_flight", "plan_flight"]
+__all__ = [
+    "FlightPlan",
+    "LogRef",
+    "PartitionTask",
+    "group_flights",
+    "is_url",
+    "partition_flight",
+    "plan_flight",
+    "ref_name",
+]
+
+LogRef = Path | str
+"""A log file: a local path, or a URL (``s3://``, ``http://``...) as a string."""
+_URL_PART: Final = re.compile(r"^(?P<stem>.*?)(_\d{4})?\.mcap$")
+
+
+def is_url(ref: str | os.PathLike[str]) -> bool:
+    """A URL fsspec opens (``file://`` counts as a local path)."""
+    return isinstance(ref, str) and "://" in ref and not ref.startswith("file://")
+
+
+def ref_name(ref: LogRef) -> str:
+    """The file name of a path or URL."""
+    return ref.rstrip("/").rsplit("/", 1)[-1] if isinstance(ref, str) else ref.name
+
+
+def _local(ref: str | os.PathLike[str]) -> LogRef:
+    if is_url(ref):
+        return str(ref)
+    return Path(str(ref).removeprefix("file://") if isinstance(ref, str) else ref)
+
 
 FRAME_TOPICS: Final = (TOPIC_FRAME_INFO, TOPIC_COLOR, TOPIC_DEPTH)
 TASK_TOPICS: Final = (*FRAME_TOPICS, TOPIC_MAVLINK_RAW, TOPIC_POSE, TOPIC_DETECTIONS, TOPIC_HOLES)
@@ -91,7 +122,7 @@ class FlightPlan:
     """
 
     name: str
-    files: tuple[Path, ...]
+    files: tuple[LogRef, ...]
     layouts: tuple[LogLayout, ...]
     camera: CameraIntrinsics | None
     mount: CameraMount
@@ -104,25 +135,39 @@ class FlightPlan:
         return sum(c.length for lay in self.layouts for c in lay.chunks)
 
 
-def group_flights(paths: Iterable[str | os.PathLike[str]]) -> list[tuple[Path, ...]]:
+def group_flights(paths: Iterable[str | os.PathLike[str]]) -> list[tuple[LogRef, ...]]:
     """Group log files into flights, in the order given: the rotated parts of one prefix
-    (``NAME_0000.mcap``, ``NAME_0001.mcap`` ...) are one flight, in part order; any other
-    file is a flight of its own. Raises :class:`InputError` when a file is missing."""
-    given = [Path(p) for p in paths]
+    (``NAME_0000.mcap``, ``NAME_0001.mcap`` ...) are one flight, in part order (a local
+    ``NAME_0000.mcap`` brings the parts that follow it; URLs are taken as given); any other
+    file is a flight of its own. Raises :class:`InputError` when a local file is missing."""
+    given = [_local(p) for p in paths]
     if not given:
         raise InputError("no flight log given")
-    flights: dict[Path, set[Path]] = {}
+    flights: dict[str, set[LogRef]] = {}
     for p in given:
+        if isinstance(p, str):
+            match = _URL_PART.match(p)
+            flights.setdefault(match["stem"] if match else p, set()).add(p)
+            continue
         files = flight_log_files(p)
-        flights.setdefault(log_stem(files[0]), set()).update(files)
-    groups = [tuple(sorted(files)) for files in flights.values()]
-    missing = [str(p) for g in groups for p in g if "://" not in str(p) and not p.is_file()]
+        flights.setdefault(str(log_stem(files[0])), set()).update(files)
+    groups = [tuple(sorted(files, key=str)) for files in flights.values()]
+    missing = [str(p) for g in groups for p in g if isinstance(p, Path) and not p.is_file()]
     if missing:
         raise InputError(f"{', '.join(missing)}: no such file")
-    names = [log_stem(g[0]).name for g in groups]
+    names = [flight_name(g) for g in groups]
     if len(set(names)) != len(names):
         raise InputError(f"two flights share a name ({names}): rename one of them")
     return groups
+
+
+def flight_name(files: Sequence[LogRef]) -> str:
+    """``NAME`` of ``NAME_0000.mcap`` (or of ``NAME.mcap``)."""
+    first = files[0]
+    if isinstance(first, Path):
+        return log_stem(first).name
+    match = _URL_PART.match(ref_name(first))
+    return match["stem"] if match else ref_name(first)
 
 
 def _camera(layout: LogLayout, opts: ReprocessOptions) -> CameraIntrinsics | None:
@@ -147,7 +192,7 @@ def _camera(layout: LogLayout, opts: ReprocessOptions) -> CameraIntrinsics | Non
     return None
 
 
-def plan_flight(files: Sequence[Path], opts: ReprocessOptions) -> FlightPlan:
+def plan_flight(files: Sequence[LogRef], opts: ReprocessOptions) -> FlightPlan:
     """Read the layouts of one flight's files. Raises :class:`InputError` for a file that
     is not MCAP, or a log with chunks but no camera calibration (not a holescan log)."""
     layouts: list[LogLayout] = []
@@ -173,7 +218,7 @@ def plan_flight(files: Sequence[Path], opts: ReprocessOptions) -> FlightPlan:
         if camera is None:
             camera = _camera(layout, opts)
         layouts.append(layout)
-    name = log_stem(Path(files[0])).name
+    name = flight_name(files)
     if camera is None and any(lay.chunks for lay in layouts):
         raise InputError(f"{files[0]}: no camera_info record: not a holescan flight log")
     if camera is None:
@@ -189,7 +234,7 @@ def plan_flight(files: Sequence[Path], opts: ReprocessOptions) -> FlightPlan:
     starts = [c.start_time_ns for lay in layouts for c in lay.chunks]
     return FlightPlan(
         name=name,
-        files=tuple(Path(p) for p in files),
+        files=tuple(files),
         layouts=tuple(layouts),
         camera=camera,
         mount=mount,

@@ -239,6 +239,26 @@ def b_params() -> DetectParams:
     return DEFAULT.with_searcher("dog")
 
 
+def test_logs_at_urls_are_read_through_fsspec(
+    flight: Flown, reference: ReprocessResult, tmp_path: Path
+) -> None:
+    import fsspec
+
+    files, _ = flight
+    fs = fsspec.filesystem("memory")
+    urls = []
+    for p in files:
+        fs.pipe(f"/flights/{p.name}", p.read_bytes())
+        urls.append(f"memory://flights/{p.name}")
+    try:
+        res = _reprocess(urls, tmp_path, opts(cache=False))  # in process: memory:// is local
+    finally:
+        fs.rm("/flights", recursive=True)
+    (a,), (b,) = res.flights, reference.flights
+    assert a.name == "sortie" and a.sources == tuple(urls)
+    assert a.holes == b.holes and sidecar(a.outputs[0]) == sidecar(b.outputs[0])
+
+
 def test_log_cut_off_mid_write(flight: Flown, tmp_path: Path) -> None:
     files, summary = flight
     cut = tmp_path / "crash.mcap"
