@@ -17,7 +17,7 @@ What runs, all of it on this machine:
    detection. So one lap of the loop (a whole number of frames, its attitude wobble
    periodic too) is rendered first, in 2 processes, into an ``.oni`` file (timed and
    reported, not part of the flight), and the flight plays it through OpenNI2
-   (:class:`sim._sortie.LapReplay`), lap after lap, each frame at the instant the
+   (:class:`sim.LapReplay`), lap after lap, each frame at the instant the
    autopilot is where it was rendered from. The sensor's cost is then what reading an
    ``.oni`` costs, not the renderer's; late frames are counted, never skipped;
 3. the flight: :class:`capture._daemon.Flight`: capture -> MCAP log writer thread (zstd)

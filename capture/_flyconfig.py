@@ -14,8 +14,16 @@ sensor and the links, and one table per part::
     [sim]      the simulated sortie (``sensor = "sim"``), checked by :mod:`sim`
 
 Unknown keys and wrong types raise :class:`holescan_errors.InputError` naming the key (a
-typo in a flight configuration must not pass silently). :func:`open_sensor` turns the
-sensor setting into a source factory; :func:`capture._fly.fly` runs the flight.
+typo in a flight configuration must not pass silently); the ``[sim]`` table is kept as
+written for :mod:`sim`, which checks it with :func:`check_table` when the sensor is ``sim``
+(the flight side never imports the simulator). :func:`open_sensor` turns the sensor setting
+into a :class:`SensorSetup`; :func:`capture.fly` runs the flight.
+
+Why a table-driven check and not a schema library (pydantic, msgspec): the file is seven
+small tables of scalars and short lists; ``_TABLES`` states each key's types and default in
+one line, :func:`check_table` turns any mistake into one message naming ``table.key``, and
+the typed :class:`FlyConfig` is built from the checked values. A schema library would add a
+dependency on the companion computer for the same checks, with longer error messages.
 """
 
 from __future__ import annotations

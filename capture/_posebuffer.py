@@ -104,20 +104,11 @@ class GpsFix:
 
 def quat_from_euler(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
     """MAVLink Euler angles (rad; yaw-pitch-roll, body FRD to NED) -> (w, x, y, z)."""
-    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    return (
-        cr * cp * cy + sr * sp * sy,
-        sr * cp * cy - cr * sp * sy,
-        cr * sp * cy + sr * cp * sy,
-        cr * cp * sy - sr * sp * cy,
-    )
+    return _wxyz(Rotation.from_euler("ZYX", [yaw, pitch, roll]))
 
 
 def _rotation(q: tuple[float, float, float, float]) -> Rotation:
-    w, x, y, z = q
-    return Rotation.from_quat([x, y, z, w])
+    return Rotation.from_quat(q, scalar_first=True)
 
 
 S = TypeVar("S", PositionSample, AttitudeSample)
@@ -367,5 +358,5 @@ def _propagate(s: AttitudeSample, dt_ns: int) -> tuple[float, float, float, floa
 
 
 def _wxyz(r: Rotation) -> tuple[float, float, float, float]:
-    x, y, z, w = (float(v) for v in r.as_quat())
+    w, x, y, z = (float(v) for v in r.as_quat(scalar_first=True))
     return (w, x, y, z)

@@ -20,6 +20,7 @@ from typing import Literal
 
 import numpy as np
 import numpy.typing as npt
+from scipy.spatial.transform import Rotation
 
 from geotag._types import VehiclePose
 from holescan_errors import InputError
@@ -56,16 +57,7 @@ def dcm_from_euler(roll: float, pitch: float, yaw: float) -> FloatArray:
     (3, 3) float64 ndarray ``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)``: maps vectors of the
     rotated frame into the reference frame (for a vehicle: NED <- body FRD).
     """
-    cr, sr = math.cos(roll), math.sin(roll)
-    cp, sp = math.cos(pitch), math.sin(pitch)
-    cy, sy = math.cos(yaw), math.sin(yaw)
-    return np.array(
-        [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ]
-    )
+    return np.asarray(Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix(), np.float64)
 
 
 def dcm_from_quaternion(q_wxyz: tuple[float, float, float, float]) -> FloatArray:
@@ -78,14 +70,7 @@ def dcm_from_quaternion(q_wxyz: tuple[float, float, float, float]) -> FloatArray
     n = float(np.linalg.norm(q))
     if q.shape != (4,) or not math.isfinite(n) or n < 1e-9:
         raise InputError(f"quaternion must be 4 finite numbers, not all zero; got {q_wxyz!r}")
-    w, x, y, z = q / n
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+    return np.asarray(Rotation.from_quat(q / n, scalar_first=True).as_matrix(), np.float64)
 
 
 def _as_matrix3(m: FloatArray) -> Matrix3:

@@ -45,7 +45,8 @@ from ground._flightholes import (
 )
 from ground._images import read_camera, read_depth, read_rgb, write_depth, write_rgb
 from ground._overlay import depth_colour, draw_detections, render_detections, segmentation
-from ground._report import SCORE_BANDS, ScoreBand, render_report, score_band, write_report
+from ground._report import render_report, write_report
+from ground._reportmap import SCORE_BANDS, ScoreBand, score_band
 from ground._reprocess import ReprocessResult, reprocess, run_campaign
 from ground._rpengine import EngineError, EngineStats
 from ground._rpoptions import HoleMatch, Progress, ReprocessOptions, match_points

@@ -11,31 +11,8 @@
   announces them by STATUSTEXT.
 """
 
-from missions._files import (
-    MAV_CMD_DO_CHANGE_SPEED,
-    MAV_CMD_NAV_LAND,
-    MAV_CMD_NAV_RETURN_TO_LAUNCH,
-    MAV_CMD_NAV_TAKEOFF,
-    MAV_CMD_NAV_WAYPOINT,
-    MAV_FRAME_GLOBAL,
-    MAV_FRAME_GLOBAL_RELATIVE_ALT,
-    MAV_FRAME_MISSION,
-    Area,
-    Waypoint,
-    read_area,
-    read_geojson,
-    read_gpx,
-    read_kml,
-    read_plan,
-    read_waypoints,
-    read_wpl,
-    write_geojson,
-    write_gpx,
-    write_kml,
-    write_plan,
-    write_waypoints,
-    write_wpl,
-)
+from missions._files import read_area, read_waypoints, write_waypoints
+from missions._geofiles import read_geojson, read_gpx, read_kml, write_geojson, write_gpx, write_kml
 from missions._holefiles import (
     HOLE_FORMATS,
     HOLE_SUFFIXES,
@@ -67,6 +44,7 @@ from missions._protocol import (
     download_mission,
     upload_mission,
 )
+from missions._qgcfiles import read_plan, read_wpl, write_plan, write_wpl
 from missions._sun import (
     SUNRISE_ELEVATION_DEG,
     FlightCheck,
@@ -81,6 +59,18 @@ from missions._sun import (
     sunrise_sunset,
 )
 from missions._survey import XTION, Camera, SurveyParams, SurveyPlan, frame_around, plan_survey
+from missions._waypoint import (
+    MAV_CMD_DO_CHANGE_SPEED,
+    MAV_CMD_NAV_LAND,
+    MAV_CMD_NAV_RETURN_TO_LAUNCH,
+    MAV_CMD_NAV_TAKEOFF,
+    MAV_CMD_NAV_WAYPOINT,
+    MAV_FRAME_GLOBAL,
+    MAV_FRAME_GLOBAL_RELATIVE_ALT,
+    MAV_FRAME_MISSION,
+    Area,
+    Waypoint,
+)
 
 __all__ = [
     "HOLE_FORMATS",

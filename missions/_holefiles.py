@@ -45,17 +45,10 @@ from typing import Any, Final, Literal, get_args
 
 from geotag import Hole
 from holescan_errors import InputError
-from missions._files import (
-    MAV_FRAME_GLOBAL,
-    MAV_FRAME_GLOBAL_RELATIVE_ALT,
-    Waypoint,
-    write_geojson,
-    write_gpx,
-    write_kml,
-    write_plan,
-    write_wpl,
-)
+from missions._geofiles import write_geojson, write_gpx, write_kml
 from missions._holeserver import hole_waypoints
+from missions._qgcfiles import write_plan, write_wpl
+from missions._waypoint import MAV_FRAME_GLOBAL, MAV_FRAME_GLOBAL_RELATIVE_ALT, Waypoint
 
 __all__ = [
     "HOLE_FORMATS",

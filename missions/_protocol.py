@@ -23,13 +23,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from holescan_errors import HolescanError, InputError
-from missions._files import (
-    MAV_CMD_NAV_WAYPOINT,
-    MAV_FRAME_GLOBAL,
-    MAV_FRAME_MISSION,
-    Waypoint,
-)
 from missions._link import mavlink, open_link
+from missions._waypoint import MAV_CMD_NAV_WAYPOINT, MAV_FRAME_GLOBAL, MAV_FRAME_MISSION, Waypoint
 
 __all__ = [
     "MAV_MISSION_ACCEPTED",

@@ -15,7 +15,7 @@ Beside the flight side, never imported by it: it may import :mod:`capture`,
 * :func:`synth_dataset` - a synthetic annotated RGB-D dataset.
 """
 
-from sim._autopilot import SimAutopilot, SimPath
+from sim._autopilot import SimAutopilot
 from sim._camera_model import CameraPose, Conditions, random_conditions
 from sim._demo import (
     DEMO_SORTIE,
@@ -28,23 +28,23 @@ from sim._demo import (
     run_demo,
 )
 from sim._fly import SIM_TABLE, SimFlyReport, fly_sim, format_sim_report, sortie_params
+from sim._lap import LapReplay, prerender_lap
 from sim._render import GtBox, hole_boxes, render, render_exact
 from sim._sortie import (
     DEFAULT_ANCHOR,
-    LapReplay,
     SimSortie,
     SortieParams,
     TrueHole,
     lap_frames,
     loop_length_m,
     make_sortie_world,
-    prerender_lap,
     survey_path,
     true_holes,
     world_area,
 )
 from sim._source import SimSource, WorldAnchor, camera_pose_in_world
 from sim._synth import sample_pose, synth_dataset, synth_samples
+from sim._trajectory import SimPath
 from sim._world import AccessHole, HoleKind, RubbleWorld, make_world, relight
 
 __all__ = [

@@ -16,11 +16,10 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
-import pymap3d
 
 from capture import Frame
 from detect import CameraIntrinsics
-from geotag import CameraMount, VehiclePose, dcm_from_euler, rotation_ned_from_optical
+from geotag import CameraMount, LocalFrame, VehiclePose, dcm_from_euler, rotation_ned_from_optical
 from sim._camera_model import CameraPose, Conditions, random_conditions
 from sim._render import GtBox, render
 from sim._world import RubbleWorld
@@ -40,14 +39,17 @@ class WorldAnchor:
     alt_m: float
 
     def to_world(self, lat_deg: float, lon_deg: float, alt_m: float) -> np.ndarray:
-        e, n, u = pymap3d.geodetic2enu(
-            lat_deg, lon_deg, alt_m, self.lat_deg, self.lon_deg, self.alt_m
-        )
+        e, n, u = self.frame.to_enu(lat_deg, lon_deg, alt_m)
         return np.array([float(e), float(n), float(u)])
 
     def to_geodetic(self, x: float, y: float, z: float) -> tuple[float, float, float]:
-        lat, lon, alt = pymap3d.enu2geodetic(x, y, z, self.lat_deg, self.lon_deg, self.alt_m)
+        lat, lon, alt = self.frame.to_geodetic_alt(x, y, z)
         return float(lat), float(lon), float(alt)
+
+    @property
+    def frame(self) -> LocalFrame:
+        """The world frame: ENU metres at the anchor (:class:`geotag.LocalFrame`)."""
+        return LocalFrame(self.lat_deg, self.lon_deg, self.alt_m)
 
 
 def camera_pose_in_world(pose: VehiclePose, mount: CameraMount, anchor: WorldAnchor) -> CameraPose:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-import importlib.util
+import importlib
 import json
 import subprocess
 import sys
@@ -13,18 +13,28 @@ import cv2
 import numpy as np
 import pytest
 
-SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "alien_scenes.py"
+SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "alien_scenes"
 
 
 @pytest.fixture(scope="module")
 def alien() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("alien_scenes", SCRIPT)
-    assert spec is not None
-    assert spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["alien_scenes"] = module  # worker processes find their functions by name
-    spec.loader.exec_module(module)
-    return module
+    sys.path.insert(0, str(SCRIPT.parent))  # the package lives in benchmarks/, run as a folder
+    try:
+        parts = (
+            "alien_scenes",
+            "alien_scenes.dataset",
+            "alien_scenes.scene",
+            "alien_scenes.raycast",
+        )
+        parts += ("alien_scenes.shading",)
+        names: dict[str, object] = {}
+        for name in parts:
+            names.update(vars(importlib.import_module(name)))
+        ns = ModuleType("alien_scenes_all", "the generator's modules' names in one namespace")
+        ns.__dict__.update({k: v for k, v in names.items() if not k.startswith("__")})
+        return ns
+    finally:
+        sys.path.remove(str(SCRIPT.parent))
 
 
 @pytest.fixture(scope="module")

@@ -15,7 +15,7 @@ from capture._daemon import Flight, FlightConfig
 from capture._frame import Frame
 from capture._mcapread import read_flight_log
 from detect import CameraIntrinsics
-from sim._autopilot import SimAutopilot, SimPath
+from sim import SimAutopilot, SimPath
 
 CAM = CameraIntrinsics.xtion()
 

@@ -27,8 +27,7 @@ from capture._mcapread import LoggedFrame, LoggedHealth, LoggedHoles, read_fligh
 from capture._mcaptools import log_info
 from detect import CameraIntrinsics
 from holescan_errors import InputError
-from sim import sortie_params
-from sim._autopilot import SimAutopilot, SimPath
+from sim import SimAutopilot, SimPath, sortie_params
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil

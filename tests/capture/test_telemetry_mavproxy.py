@@ -26,7 +26,7 @@ from capture._clock import ClockSync
 from capture._mavlink import Telemetry, TelemetryTimeoutError
 from capture._posebuffer import PoseUnavailable
 from geotag import VehiclePose
-from sim._autopilot import SimAutopilot, SimPath
+from sim import SimAutopilot, SimPath
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import all as mavlink2
@@ -286,7 +286,7 @@ def test_no_autopilot_times_out() -> None:
 
 
 def test_sim_accepts_and_flies_an_uploaded_mission() -> None:
-    from missions._files import Waypoint
+    from missions import Waypoint
     from missions._protocol import download_mission, upload_mission
 
     home = SimPath()

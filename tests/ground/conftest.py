@@ -16,7 +16,7 @@ import pytest
 from capture import LogOptions
 from capture._daemon import Flight, FlightConfig, FlightSummary
 from detect import CameraIntrinsics
-from sim._autopilot import SimAutopilot, SimPath
+from sim import SimAutopilot, SimPath
 from sim._source import SimSource, WorldAnchor
 from sim._world import RubbleWorld, make_world
 

@@ -1,0 +1,187 @@
+"""Alien scenes: ground truth and the dataset writer."""
+
+from __future__ import annotations
+
+import json
+import multiprocessing
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from alien_scenes.common import F64, CameraModel, _make_textures, _Textures
+from alien_scenes.raycast import _PerspectiveView
+from alien_scenes.sampling import _polygon_area
+from alien_scenes.scene import _sample_scene
+from alien_scenes.shading import _depth_sensor, _rgb_sensor, _shade, _Surface
+from alien_scenes.shapes import _make_library, _Scene, _Shape
+
+# --------------------------------------------------------------------------- ground truth
+
+
+def _clip_polygon(p: F64, x0: float, y0: float, x1: float, y1: float) -> F64:
+    """Sutherland-Hodgman clip of polygon (N, 2) to a rectangle."""
+    for axis, val, ge in ((0, x0, True), (0, x1, False), (1, y0, True), (1, y1, False)):
+        if len(p) == 0:
+            break
+        out = []
+        for i in range(len(p)):
+            a, b = p[i - 1], p[i]
+            ina = a[axis] >= val if ge else a[axis] <= val
+            inb = b[axis] >= val if ge else b[axis] <= val
+            if ina != inb:
+                f = (val - a[axis]) / (b[axis] - a[axis])
+                out.append(a + f * (b - a))
+            if inb:
+                out.append(b)
+        p = np.array(out).reshape(-1, 2)
+    return p
+
+
+def _annotate(sc: _Scene, cam: CameraModel, s: _Surface) -> list[dict[str, Any]]:
+    """COCO annotations (without ids) of the access holes in view."""
+    anns = []
+    for hole in sc.holes:
+        if not hole.access:
+            continue
+        X = (hole.rim - sc.C) @ sc.R
+        if (X[:, 2] <= 0.05).any():
+            continue
+        uv = np.column_stack(
+            [cam.fx * X[:, 0] / X[:, 2] + cam.cx + 0.5, cam.fy * X[:, 1] / X[:, 2] + cam.cy + 0.5]
+        )
+        clipped = _clip_polygon(uv, 0, 0, cam.width, cam.height)
+        if len(clipped) < 3 or _polygon_area(clipped) < 4:
+            continue
+        m = np.zeros((cam.height, cam.width), np.uint8)
+        cv2.fillPoly(m, [np.round((clipped - 0.5) * 16).astype(np.int32)], 1, cv2.LINE_8, 4)
+        npx = int(m.sum())
+        if npx == 0:
+            continue
+        vis = float(((s.tag == hole.tag) & (m > 0)).sum()) / npx
+        if vis < 0.05:
+            continue
+        cut = bool(((uv < 0) | (uv > [cam.width, cam.height])).any())
+        far = float(np.median(X[:, 2])) > sc.zmax
+        lo, hi = clipped.min(0), clipped.max(0)
+        anns.append(
+            {
+                "category_id": 1,
+                "bbox": [round(float(v), 2) + 0.0 for v in (*lo, *(hi - lo))],  # no -0.0
+                "area": round(_polygon_area(clipped), 2),
+                "segmentation": [[round(float(v), 2) for v in clipped.ravel()]],
+                "iscrowd": int(cut or vis < 0.5 or far),
+                "hole_kind": hole.kind,
+                "visible_fraction": round(vis, 3),
+                "rim_depth_m": round(float(np.median(X[:, 2])), 3),
+            }
+        )
+    return anns
+
+
+# --------------------------------------------------------------------------- dataset
+
+
+@dataclass(frozen=True)
+class _Job:
+    index: int
+    seed: int
+    cam: CameraModel
+    out: Path
+
+
+def _assets(seed: int) -> tuple[list[_Shape], _Textures]:
+    rng = np.random.default_rng([seed, 0xA11E])
+    return _make_library(rng), _make_textures(rng)
+
+
+def _render_image(
+    job: _Job, lib: list[_Shape], tex: _Textures
+) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    rng = np.random.default_rng([job.seed, job.index, 1])
+    sc = _sample_scene(rng, job.cam, lib)
+    view = _PerspectiveView(job.cam, sc.C, sc.R)
+    surf = _shade(rng, sc, view, tex)
+    rgb = _rgb_sensor(rng, sc, surf.radiance)
+    depth = _depth_sensor(rng, sc, job.cam, surf)
+    anns = _annotate(sc, job.cam, surf)
+    name = f"alien_{job.index:05d}.png"
+    if not cv2.imwrite(str(job.out / "rgb" / name), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)):
+        raise OSError(f"cannot write {job.out / 'rgb' / name}")
+    if not cv2.imwrite(str(job.out / "depth" / name), depth):
+        raise OSError(f"cannot write {job.out / 'depth' / name}")
+    image = {
+        "id": job.index + 1,
+        "file_name": f"rgb/{name}",
+        "depth_file_name": f"depth/{name}",
+        "width": job.cam.width,
+        "height": job.cam.height,
+        "scene": sc.meta
+        | {
+            "max_range_m": round(sc.zmax, 3),
+            "valid_depth_fraction": round(float((depth > 0).mean()), 3),
+        },
+    }
+    return image, anns
+
+
+_WORKER_ASSETS: dict[int, tuple[list[_Shape], _Textures]] = {}
+
+
+def _worker(job: _Job) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    if job.seed not in _WORKER_ASSETS:
+        _WORKER_ASSETS[job.seed] = _assets(job.seed)
+    lib, tex = _WORKER_ASSETS[job.seed]
+    return _render_image(job, lib, tex)
+
+
+def generate_dataset(out: Path, n: int, seed: int, jobs: int = 1) -> dict[str, Any]:
+    """Write ``n`` scenes to ``out`` (annotations.json, camera.json, rgb/, depth/).
+
+    Deterministic for (n, seed) whatever ``jobs`` is. Returns a summary: images, holes,
+    crowd, empty images, seconds.
+    """
+    if n < 1:
+        raise ValueError("n must be >= 1")
+    t0 = time.monotonic()
+    out = Path(out)
+    (out / "rgb").mkdir(parents=True, exist_ok=True)
+    (out / "depth").mkdir(parents=True, exist_ok=True)
+    cam = CameraModel.sample(np.random.default_rng([seed, 0xCA]))
+    work = [_Job(i, seed, cam, out) for i in range(n)]
+    if jobs > 1:
+        ctx = multiprocessing.get_context("fork")
+        with ctx.Pool(jobs) as pool:
+            results = pool.map(_worker, work, chunksize=1)
+    else:
+        results = [_worker(j) for j in work]
+    images: list[dict[str, Any]] = []
+    annotations: list[dict[str, Any]] = []
+    for image, anns in results:
+        images.append(image)
+        for a in anns:
+            annotations.append({"id": len(annotations) + 1, "image_id": image["id"]} | a)
+    coco = {
+        "info": {
+            "description": "alien synthetic rubble scenes (benchmarks/alien_scenes.py)",
+            "seed": seed,
+            "version": "1",
+        },
+        "images": images,
+        "annotations": annotations,
+        "categories": [{"id": 1, "name": "access_hole", "supercategory": "hole"}],
+    }
+    (out / "annotations.json").write_text(json.dumps(coco, indent=1))
+    (out / "camera.json").write_text(json.dumps(cam.to_json(), indent=1))
+    crowd = sum(a["iscrowd"] for a in annotations)
+    with_hole = {a["image_id"] for a in annotations if not a["iscrowd"]}
+    return {
+        "images": n,
+        "holes": len(annotations) - crowd,
+        "crowd": crowd,
+        "images_without_hole": n - len(with_hole),
+        "seconds": round(time.monotonic() - t0, 1),
+    }
