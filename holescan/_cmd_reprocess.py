@@ -219,12 +219,21 @@ def stop_on_sigint(stop: threading.Event) -> Callable[[], None]:
     return restore
 
 
+def _quiet_dask() -> None:
+    """Dask's own loggers (each set to INFO by its configuration) to errors only."""
+    import distributed  # noqa: F401 (configures its loggers; set them after)
+
+    for name in list(logging.root.manager.loggerDict):
+        if name.split(".")[0] in ("distributed", "dask"):
+            logging.getLogger(name).setLevel(logging.ERROR)
+
+
 def execute(args: argparse.Namespace, fn: Callable[..., ReprocessResult]) -> int:
     """Run ``fn(logs, out, opts, progress=..., stop=...)``; print its lines."""
     opts = options(args)
     if not args.verbose:  # INFO lines would break the progress display
         logging.getLogger().setLevel(logging.WARNING)
-        logging.getLogger("distributed").setLevel(logging.ERROR)
+        _quiet_dask()
     stop = threading.Event()
     restore = stop_on_sigint(stop)
     try:
