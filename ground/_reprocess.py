@@ -292,9 +292,11 @@ def _campaign_outputs(run: _Run, holes: list[CampaignHole]) -> list[tuple[str, P
     confirmed = [h.hole for h in holes]
     got = run.campaign.views({h.id for h in confirmed})
     views = {hid: (v.rgb, v.depth, v.box_in_crop) for hid, v in got.items()}
-    track: list[VehiclePose] = []
+    track: list[VehiclePose] = []  # every flight's, on the Unix clock like the holes' times
     for k in sorted(run.mergers):
-        track += run.mergers[k].track
+        m = run.mergers[k]
+        shift = m.boot_to_unix_ns or 0
+        track += [dataclasses.replace(p, t_boot_ns=p.t_boot_ns + shift) for p in m.track]
     homes = [m.home() for m in run.mergers.values() if m.home() is not None]
     facts = {
         "flights": ", ".join(p.name for p in run.plans),

@@ -100,6 +100,7 @@ def test_campaign_files_and_summary(campaign: ReprocessResult) -> None:
         assert (out / name / f"{name}_report.html").is_file()
     page = kinds["report"].read_text()
     assert "sortie" in page and "second" in page
+    assert page.count(">start</text>") >= 2  # each flight's track drawn on its own
 
 
 def test_a_cut_off_log_in_the_set_is_reported_the_others_processed(
