@@ -120,8 +120,11 @@ def _maps(
     holes: Sequence[Hole],
     poses: Sequence[VehiclePose],
     truth: Sequence[tuple[str, float, float]],
+    breaks: Sequence[int] = (),
 ) -> str:
-    """The whole flight, plus a close-up when the holes fill under a third of it."""
+    """The whole flight, plus a close-up when the holes fill under a third of it.
+
+    breaks : indices into ``poses`` where another flight's line starts."""
     te, tn = frame.en([p.lat_deg for p in poses], [p.lon_deg for p in poses])
     he, hn = frame.en([h.lat_deg for h in holes], [h.lon_deg for h in holes])
     ge, gn = frame.en([t[1] for t in truth], [t[2] for t in truth])
@@ -132,7 +135,7 @@ def _maps(
     )
     all_e = np.concatenate([te, he - reach, he + reach, ge])
     all_n = np.concatenate([tn, hn - reach, hn + reach, gn])
-    cuts = _track_breaks(poses)  # several flights (a campaign): one line each
+    cuts = sorted({*breaks, *_track_breaks(poses)})  # several flights: one line each
     geo = (np.insert(te, cuts, np.nan), np.insert(tn, cuts, np.nan), he, hn, ge, gn)
     out = [_map_svg(_fit(all_e, all_n), holes, truth, geo, "the flight")]
     if holes:

@@ -293,9 +293,11 @@ def _campaign_outputs(run: _Run, holes: list[CampaignHole]) -> list[tuple[str, P
     got = run.campaign.views({h.id for h in confirmed})
     views = {hid: (v.rgb, v.depth, v.box_in_crop) for hid, v in got.items()}
     track: list[VehiclePose] = []  # every flight's, on the Unix clock like the holes' times
+    breaks: list[int] = []
     for k in sorted(run.mergers):
         m = run.mergers[k]
         shift = m.boot_to_unix_ns or 0
+        breaks.append(len(track))
         track += [dataclasses.replace(p, t_boot_ns=p.t_boot_ns + shift) for p in m.track]
     homes = [m.home() for m in run.mergers.values() if m.home() is not None]
     facts = {
@@ -321,6 +323,7 @@ def _campaign_outputs(run: _Run, holes: list[CampaignHole]) -> list[tuple[str, P
         home=homes[0] if homes else None,
         boot_to_unix_ns=0,  # campaign hole times are Unix times
         facts=facts,
+        track_breaks=breaks,
         title="holescan campaign: " + ", ".join(p.name for p in run.plans),
     )
 

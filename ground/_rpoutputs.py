@@ -162,12 +162,14 @@ def write_hole_outputs(
     truth: Sequence[tuple[str, float, float]] = (),
     facts: Mapping[str, str] | None = None,
     title: str | None = None,
+    track_breaks: Sequence[int] = (),
 ) -> list[tuple[str, Path]]:
     """Write a flight's hole files (``NAME_holes.*``) and report (``NAME_report.html``).
 
     holes : the holes to write (confirmed ones). views : hole id -> (rgb, depth, box) of
     its best view, the box (x, y, w, h) in that picture's pixels. track : vehicle poses.
-    truth : (name, lat_deg, lon_deg) drawn on the report's map. Returns (kind, path) pairs.
+    truth : (name, lat_deg, lon_deg) drawn on the report's map. track_breaks : where in
+    ``track`` another flight starts (a campaign). Returns (kind, path) pairs.
     """
     opts = opts or ReprocessOptions()
     wanted = {h.id for h in holes}
@@ -189,6 +191,7 @@ def write_hole_outputs(
         views=report_views,
         truth=truth,
         facts=facts,
+        track_breaks=track_breaks,
     )
     written.append(("report", path))
     return written
