@@ -248,7 +248,7 @@ def plan_flight(files: Sequence[LogRef], opts: ReprocessOptions) -> FlightPlan:
 def partition_key(layout: LogLayout, first: ChunkSpan, last: ChunkSpan, settings: Any) -> str:
     """Cache key of the chunks ``first``..``last`` of a log under detector ``settings`` (and
     this version of holescan: another version may detect otherwise)."""
-    doc = [_CACHE_VERSION, _dist_version("holescan"), layout.content_hash]
+    doc: list[Any] = [_CACHE_VERSION, _dist_version("holescan"), layout.content_hash]
     doc += [first.offset, last.offset, settings]
     return hashlib.blake2b(json.dumps(doc).encode(), digest_size=16).hexdigest()
 
