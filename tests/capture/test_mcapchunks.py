@@ -10,7 +10,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mcap.records import Channel, Message
-from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from capture import (
     AttitudeSample,
@@ -33,6 +32,7 @@ from capture import (
 )
 from detect import CameraIntrinsics
 from geotag import CameraMount
+from missions import mavlink as mavlink2
 
 CAM = CameraIntrinsics(80, 60, 71.3, 71.3, 39.5, 29.5)
 T0 = 1_750_000_000_000_000_000
