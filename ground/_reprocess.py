@@ -338,8 +338,8 @@ def _execute(
 ) -> ReprocessResult:
     opts = opts or ReprocessOptions()
     groups = group_flights(logs)
-    out_dir = out_folder(out, [p for g in groups for p in g if isinstance(p, Path)])
     plans = sorted((plan_flight(g, opts) for g in groups), key=lambda p: (p.start_ns, p.name))
+    out_dir = out_folder(out, [p for g in groups for p in g if isinstance(p, Path)])
     run = _Run(plans, out_dir, opts, campaign)
     run.check_outputs()
     cache = PartitionCache(out_dir / CACHE_FOLDER if opts.cache else None)

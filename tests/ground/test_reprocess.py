@@ -304,6 +304,7 @@ def test_bad_inputs(flight: Flown, tmp_path: Path) -> None:
     junk.write_bytes(b"not an mcap file at all" * 10)
     with pytest.raises(InputError, match="not an MCAP"):
         reprocess([junk], tmp_path / "o1", opts())
+    assert not (tmp_path / "o1").exists()  # nothing written either
     with pytest.raises(InputError, match="no such file"):
         reprocess([files[0], tmp_path / "missing.mcap"], tmp_path / "o2", opts())
     assert not (tmp_path / "o2").exists()  # nothing was started
