@@ -81,11 +81,12 @@ def main() -> int:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--flights", type=int, default=6)
     ap.add_argument("--partition-mib", type=float, default=32.0)
+    ap.add_argument("--campaign-only", action="store_true", help="only step 5")
     args = ap.parse_args()
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     logging.getLogger("distributed").setLevel(logging.ERROR)
 
-    from ground import ReprocessOptions, flight_log_files, reprocess, run_campaign
+    from ground import ReprocessOptions, flight_log_files, reprocess
 
     work = Path(tempfile.mkdtemp(prefix="bench-campaign-"))
     if args.logs:
@@ -94,6 +95,9 @@ def main() -> int:
         flights = fly(work / "fly", args.duration)
     first = flights[0]
     size = sum(p.stat().st_size for p in first)
+    if args.campaign_only:
+        campaign(flights, args, work)
+        return 0
 
     print(f"\n== scaling (flight of {size / 1e6:.0f} MB, {args.repeat} runs each) ==")
     rates: dict[int, list[float]] = {}
@@ -155,22 +159,7 @@ def main() -> int:
         f"({res.engine.cached} partitions cached); load {load():.1f}"
     )
 
-    print(f"\n== campaign of {args.flights} flights, 2 workers ==")
-    logs = copies(flights, args.flights, work / "copies")
-    total = sum(p.stat().st_size for p in logs)
-    l0 = load()
-    opts = ReprocessOptions(workers=2, cache=False, partition_mib=args.partition_mib)
-    t0 = time.monotonic()
-    camp = run_campaign(logs, work / "campaign", opts)
-    wall = time.monotonic() - t0
-    n = sum(f.frames_detected for f in camp.flights)
-    several = sum(len(h.flights) > 1 for h in camp.campaign)
-    print(
-        f"{len(camp.flights)} flights, {n} frames, {total / 1e6:.0f} MB in {wall:.1f} s end to "
-        f"end ({camp.engine.start_s:.1f} s cluster start) = {n / wall:.1f} frames/s; "
-        f"{len(camp.campaign)} campaign holes, {several} seen by several flights; "
-        f"load {l0:.1f}-{load():.1f}"
-    )
+    campaign(flights, args, work)
 
     print("\n== projection ==")
     per_frame_s = 1.0 / r1
@@ -191,6 +180,27 @@ def main() -> int:
         )
     print(f"outputs in {work}")
     return 0
+
+
+def campaign(flights: list[list[Path]], args: argparse.Namespace, work: Path) -> None:
+    from ground import ReprocessOptions, run_campaign
+
+    print(f"\n== campaign of {args.flights} flights, 2 workers ==")
+    logs = copies(flights, args.flights, work / "copies")
+    total = sum(p.stat().st_size for p in logs)
+    l0 = load()
+    opts = ReprocessOptions(workers=2, cache=False, partition_mib=args.partition_mib)
+    t0 = time.monotonic()
+    camp = run_campaign(logs, work / "campaign", opts)
+    wall = time.monotonic() - t0
+    n = sum(f.frames_detected for f in camp.flights)
+    several = sum(len(h.flights) > 1 for h in camp.campaign)
+    print(
+        f"{len(camp.flights)} flights, {n} frames, {total / 1e6:.0f} MB in {wall:.1f} s end to "
+        f"end ({camp.engine.start_s:.1f} s cluster start, {camp.engine.computed} partitions) = "
+        f"{n / wall:.1f} frames/s; {len(camp.campaign)} campaign holes, {several} seen by "
+        f"several flights; load {l0:.1f}-{load():.1f}"
+    )
 
 
 def empty_task_ms(n: int = 200) -> float:

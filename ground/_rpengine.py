@@ -173,6 +173,11 @@ def run_tasks(
     return stats
 
 
+def _dask_key(task: PartitionTask) -> str:
+    """Unique per task (two flights with the same bytes are still two pieces of work)."""
+    return f"holescan-partition-{task.flight}-{task.number}-{task.key}"
+
+
 def _run_on_cluster(
     client: Any,
     tasks: Sequence[PartitionTask],
@@ -185,10 +190,7 @@ def _run_on_cluster(
 ) -> None:
     from distributed import as_completed
 
-    futures = {
-        client.submit(run_partition, tasks[i], key=f"holescan-partition-{tasks[i].key}"): i
-        for i in todo
-    }
+    futures = {client.submit(run_partition, tasks[i], key=_dask_key(tasks[i])): i for i in todo}
     pending = set(futures)
     done = as_completed(futures)  # type: ignore[no-untyped-call]
     try:
