@@ -103,6 +103,7 @@ def main() -> int:
     rates: dict[int, list[float]] = {}
     peaks: dict[int, list[float]] = {}
     overheads: list[float] = []
+    task_rates: list[float] = []  # frames per second of task time (reading + detecting)
     frames = partitions = 0
     for workers in (1, 2):
         for i in range(args.repeat):
@@ -121,6 +122,7 @@ def main() -> int:
             peaks.setdefault(workers, []).append(max(per_worker.values()))
             if workers == 1:
                 overheads.append((run_s - task_s) / partitions)
+                task_rates.append(frames / task_s)
             print(
                 f"{workers} worker(s) run {i + 1}: {frames} frames, {partitions} partitions in "
                 f"{run_s:.1f} s + {res.engine.start_s:.1f} s cluster start = "
@@ -162,9 +164,13 @@ def main() -> int:
     campaign(flights, args, work)
 
     print("\n== projection ==")
-    per_frame_s = 1.0 / r1
+    r_task = statistics.median(task_rates)
     part_frames = frames / max(partitions, 1)
-    eff = part_frames / (part_frames * per_frame_s + per_part)  # per worker, with overhead
+    eff = part_frames / (part_frames / r_task + per_part)  # per worker, with the overhead
+    print(
+        f"per worker: {r_task:.1f} frames/s of task time, {eff:.1f} with {per_part * 1000:.0f} "
+        f"ms overhead per {part_frames:.1f}-frame partition"
+    )
     bytes_per_frame = size / max(frames, 1)
     for bw_name, bw in (("1 GbE NFS", 110e6), ("10 GbE", 1.1e9)):
         print(f"storage limit over {bw_name}: {bw / bytes_per_frame:.0f} frames/s")
