@@ -45,11 +45,12 @@ def reprocess(files: list[Path], out: Path, o: ReprocessOptions, **kw: object) -
 
 
 def sidecar(path: Path) -> dict[str, list[tuple[int, int, bytes]]]:
-    """topic -> [(log_time, sequence, data)] in log-time order, via mcap's indexed reader."""
+    """topic -> [(log_time, sequence, data)] in the order written, via mcap's indexed reader
+    (a flight's Unix times need not grow with the frame index: the clock estimate steps)."""
     out: dict[str, list[tuple[int, int, bytes]]] = defaultdict(list)
     with open(path, "rb") as fh:
         reader = make_reader(fh)
-        for _, channel, msg in reader.iter_messages(log_time_order=True):
+        for _, channel, msg in reader.iter_messages(log_time_order=False):
             out[channel.topic].append((msg.log_time, msg.sequence, bytes(msg.data)))
         stats = reader.get_summary().statistics
         assert stats.message_count == sum(len(v) for v in out.values())
