@@ -96,6 +96,9 @@ def _client(opts: ReprocessOptions, stats: EngineStats) -> Iterator[Any]:
         )
         client = Client(cluster)  # type: ignore[no-untyped-call]
     try:
+        from ground._rpworker import SingleThreaded  # imports distributed: only here
+
+        client.register_plugin(SingleThreaded())
         n = max(1, opts.workers) if cluster is not None else 1
         client.wait_for_workers(n, timeout=120)
         stats.workers = len(client.scheduler_info(n_workers=-1)["workers"])
