@@ -17,19 +17,32 @@ from capture._flyconfig import (
     parse_fly_config,
 )
 from capture._frame import Frame, FrameSource
-from capture._holepipeline import HolePipeline, HoleView, crop_view, view_jpeg
+from capture._holepipeline import FrameHoles, HolePipeline, HoleView, crop_view, view_jpeg
 from capture._mavlink import (
     DEFAULT_RATES_HZ,
     Telemetry,
     TelemetryError,
+    TelemetrySample,
     TelemetryStats,
     TelemetryTimeoutError,
     attitude_from_attitude,
     attitude_from_quaternion,
     gps_from_gps_raw_int,
+    is_autopilot_heartbeat,
     position_from_global_position_int,
+    telemetry_sample,
 )
 from capture._mavrates import read_signing_key
+from capture._mcapchunks import (
+    ChunkDamagedError,
+    ChunkSpan,
+    LogLayout,
+    decode_messages,
+    mount_from_metadata,
+    open_log,
+    read_chunk,
+    read_log_layout,
+)
 from capture._mcaplog import FlightLogError, FlightLogWriter, LogOptions, WriterStats
 from capture._mcapread import (
     LoggedCalibration,
@@ -45,6 +58,22 @@ from capture._mcapread import (
     read_flight_log,
 )
 from capture._mcapscan import DamagedRegion, ScanState, scan_records
+from capture._mcapschemas import (
+    JSON_SCHEMAS,
+    TOPIC_CAMERA_INFO,
+    TOPIC_COLOR,
+    TOPIC_DEPTH,
+    TOPIC_DETECTIONS,
+    TOPIC_FRAME_INFO,
+    TOPIC_HOLES,
+    TOPIC_MAVLINK_RAW,
+    TOPIC_POSE,
+    annotations_message,
+    detection_json,
+    holes_geojson_message,
+    jsonable,
+    to_json,
+)
 from capture._mcaptools import LogInfo, RecoveryReport, TopicInfo, log_info, recover_log
 from capture._oni import OniInfo, OniStreamInfo, OniWriter, export_oni, scan_oni, write_oni
 from capture._openni import OniSource, OpenNI2Device, camera_from_fov, openni2_library
@@ -58,12 +87,24 @@ from capture._outpath import (
     part_path,
 )
 from capture._posebuffer import AttitudeSample, GpsFix, PoseBuffer, PoseUnavailable, PositionSample
+from capture._telemetryreplay import TelemetryReplay
 from capture._usb import UsbDeviceInfo, find_xtion, reset_xtion
 
 __all__ = [
     "DEFAULT_RATES_HZ",
+    "JSON_SCHEMAS",
+    "TOPIC_CAMERA_INFO",
+    "TOPIC_COLOR",
+    "TOPIC_DEPTH",
+    "TOPIC_DETECTIONS",
+    "TOPIC_FRAME_INFO",
+    "TOPIC_HOLES",
+    "TOPIC_MAVLINK_RAW",
+    "TOPIC_POSE",
     "AttitudeSample",
     "CaptureError",
+    "ChunkDamagedError",
+    "ChunkSpan",
     "ClockEstimate",
     "ClockSync",
     "ClockUnavailable",
@@ -77,11 +118,13 @@ __all__ = [
     "FlyConfig",
     "FlyReport",
     "Frame",
+    "FrameHoles",
     "FrameSource",
     "GpsFix",
     "HolePipeline",
     "HoleView",
     "LogInfo",
+    "LogLayout",
     "LogOptions",
     "LogRecord",
     "LoggedCalibration",
@@ -109,12 +152,15 @@ __all__ = [
     "SensorSpec",
     "Telemetry",
     "TelemetryError",
+    "TelemetryReplay",
+    "TelemetrySample",
     "TelemetryStats",
     "TelemetryTimeoutError",
     "TopicInfo",
     "TruncatedLogError",
     "UsbDeviceInfo",
     "WriterStats",
+    "annotations_message",
     "atomic_output",
     "attitude_from_attitude",
     "attitude_from_quaternion",
@@ -124,26 +170,37 @@ __all__ = [
     "check_table",
     "commit_part",
     "crop_view",
+    "decode_messages",
+    "detection_json",
     "export_oni",
     "find_xtion",
     "fly",
     "format_report",
     "gps_from_gps_raw_int",
+    "holes_geojson_message",
+    "is_autopilot_heartbeat",
+    "jsonable",
     "load_fly_config",
     "log_info",
+    "mount_from_metadata",
     "numbers",
+    "open_log",
     "open_sensor",
     "openni2_library",
     "output_via_part",
     "parse_fly_config",
     "part_path",
     "position_from_global_position_int",
+    "read_chunk",
     "read_flight_log",
+    "read_log_layout",
     "read_signing_key",
     "recover_log",
     "reset_xtion",
     "scan_oni",
     "scan_records",
+    "telemetry_sample",
+    "to_json",
     "view_jpeg",
     "write_oni",
 ]

@@ -55,7 +55,9 @@ __all__ = [
     "attitude_from_attitude",
     "attitude_from_quaternion",
     "gps_from_gps_raw_int",
+    "is_autopilot_heartbeat",
     "position_from_global_position_int",
+    "telemetry_sample",
 ]
 
 _log = logging.getLogger(__name__)
@@ -77,6 +79,35 @@ _NS_PER_MS = 1_000_000
 #: framed on its own); other links (tlog replay ...) go through pymavlink's own parser.
 _STREAM_LINKS = {"mavserial": False, "mavtcp": False, "mavtcpin": False}
 _DATAGRAM_LINKS = {"mavudp": True, "mavmcast": True}
+
+
+TelemetrySample = PositionSample | AttitudeSample | GpsFix
+"""What a message from the autopilot adds to a :class:`~capture._posebuffer.PoseBuffer`."""
+
+
+def telemetry_sample(msg: Any, gps_t_boot_ns: int) -> TelemetrySample | None:
+    """The SI sample a parsed MAVLink message carries, or None for messages that carry none.
+
+    The one message -> sample decoder: the live link (:class:`Telemetry`) and log replay
+    (:class:`capture.TelemetryReplay`) both call it. ``gps_t_boot_ns`` : the autopilot boot
+    time to stamp a GPS_RAW_INT with (see :func:`gps_from_gps_raw_int`). Raises
+    ``ValueError`` for an ATTITUDE_QUATERNION with a zero quaternion.
+    """
+    mtype = msg.get_type()
+    if mtype == "GLOBAL_POSITION_INT":
+        return position_from_global_position_int(msg)
+    if mtype == "ATTITUDE":
+        return attitude_from_attitude(msg)
+    if mtype == "ATTITUDE_QUATERNION":
+        return attitude_from_quaternion(msg)
+    if mtype == "GPS_RAW_INT":
+        return gps_from_gps_raw_int(msg, gps_t_boot_ns)
+    return None
+
+
+def is_autopilot_heartbeat(msg: Any) -> bool:
+    """A HEARTBEAT of a real autopilot (not of a GCS or companion: MAV_AUTOPILOT_INVALID)."""
+    return bool(msg.get_type() == "HEARTBEAT" and msg.autopilot != mavlink.MAV_AUTOPILOT_INVALID)
 
 
 # -- the link --------------------------------------------------------------------------------
@@ -426,7 +457,7 @@ class Telemetry(RateRequests):
             handler(self, msg, t_mono_ns)
 
     def _maybe_adopt_target(self, msg: Any, src: tuple[int, int]) -> None:
-        if msg.get_type() != "HEARTBEAT" or msg.autopilot == mavlink.MAV_AUTOPILOT_INVALID:
+        if not is_autopilot_heartbeat(msg):
             return
         if self._want_sysid is not None and src[0] != self._want_sysid:
             return
@@ -484,17 +515,16 @@ class Telemetry(RateRequests):
             self._last_boot_ns = t_boot_ns
 
     def _on_position(self, msg: Any, t_mono_ns: int) -> None:
-        sample = position_from_global_position_int(msg)
+        sample = telemetry_sample(msg, 0)
+        assert isinstance(sample, PositionSample)
         self._stamped(sample.t_boot_ns, t_mono_ns)
         self.poses.add_position(sample)
         with self._cond:
             self._cond.notify_all()
 
     def _on_attitude(self, msg: Any, t_mono_ns: int) -> None:
-        if msg.get_type() == "ATTITUDE":
-            sample = attitude_from_attitude(msg)
-        else:
-            sample = attitude_from_quaternion(msg)
+        sample = telemetry_sample(msg, 0)
+        assert isinstance(sample, AttitudeSample)
         self._stamped(sample.t_boot_ns, t_mono_ns)
         self.poses.add_attitude(sample)
         with self._cond:
@@ -505,7 +535,9 @@ class Telemetry(RateRequests):
             t_boot_ns = self.clock.mono_to_boot_ns(t_mono_ns)
         except ClockUnavailable:
             t_boot_ns = self._last_boot_ns or 0
-        self.poses.add_gps(gps_from_gps_raw_int(msg, t_boot_ns))
+        sample = telemetry_sample(msg, t_boot_ns)
+        assert isinstance(sample, GpsFix)
+        self.poses.add_gps(sample)
 
     def _on_system_time(self, msg: Any, t_mono_ns: int) -> None:
         t_boot_ns = int(msg.time_boot_ms) * _NS_PER_MS

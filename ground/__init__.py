@@ -1,7 +1,8 @@
 """On the ground: what is done with a flight after it, or beside it at the ground station.
 
-* :func:`reprocess` - detect again over whole flight logs (also cut-off ones), poses from
-  the logged telemetry, holes merged as in flight; MCAP copies, hole files, report.
+* :func:`reprocess` / :func:`run_campaign` - detect again over whole flight logs (also
+  cut-off ones) on Dask, poses from the logged telemetry, holes merged as in flight (and
+  across the flights of a campaign); sidecar MCAPs, hole files, reports, summary.json.
 * :func:`export_flight_holes` / :func:`read_flight_holes` - the holes of a flight log as
   the ground crew's files (GPX, KML/KMZ with thumbnails, GeoJSON, QGC ``.plan``, WPL).
 * :func:`write_report` - a flight's self-contained HTML report.
@@ -15,6 +16,7 @@
   image files and overlays for ``holescan detect``.
 """
 
+from ground._campaign import CampaignHole, FlightSightings
 from ground._cot import COT_TYPE, DEFAULT_COT_URL, CotError, CotPublisher, hole_cot, withdraw_cot
 from ground._csvimport import FramePair, find_pairs, import_csv_dataset, read_box_csv
 from ground._datasets import (
@@ -55,18 +57,11 @@ from ground._images import read_camera, read_depth, read_rgb, write_depth, write
 from ground._overlay import depth_colour, draw_detections, render_detections, segmentation
 from ground._report import render_report, write_report
 from ground._reportmap import SCORE_BANDS, ScoreBand, score_band
-from ground._reprocess import (
-    FlightResult,
-    HoleMatch,
-    Progress,
-    ReprocessOptions,
-    ReprocessResult,
-    group_flights,
-    match_points,
-    reprocess,
-    reprocess_flight,
-    write_hole_outputs,
-)
+from ground._reprocess import ReprocessResult, reprocess, run_campaign
+from ground._rpengine import EngineError, EngineStats
+from ground._rpoptions import HoleMatch, Progress, ReprocessOptions, match_points
+from ground._rpoutputs import FlightResult, write_hole_outputs
+from ground._rpplan import group_flights
 from ground._station import GroundOptions, GroundStation, run_ground
 from ground._station_files import hole_summary, hole_waypoint, write_station_files
 from ground._station_link import VehicleLink
@@ -86,14 +81,18 @@ __all__ = [
     "DEFAULT_COT_URL",
     "MARKS",
     "SCORE_BANDS",
+    "CampaignHole",
     "CotError",
     "CotPublisher",
     "Dataset",
     "DatasetImage",
+    "EngineError",
+    "EngineStats",
     "EvalReport",
     "ExportReport",
     "FlightHoles",
     "FlightResult",
+    "FlightSightings",
     "FramePair",
     "GroundHole",
     "GroundOptions",
@@ -144,7 +143,7 @@ __all__ = [
     "render_report",
     "render_thumbnail",
     "reprocess",
-    "reprocess_flight",
+    "run_campaign",
     "run_detector",
     "run_ground",
     "score_band",

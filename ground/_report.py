@@ -48,6 +48,7 @@ def write_report(
     views: Mapping[int, BestView],
     truth: Sequence[tuple[str, float, float]] = (),
     facts: Mapping[str, str] | None = None,
+    track_breaks: Sequence[int] = (),
 ) -> Path:
     """Write the flight report to ``path`` as one self-contained HTML file.
 
@@ -62,6 +63,9 @@ def write_report(
         on it. Holes without a view get a "no image" cell.
     truth : ground-truth holes ``(name, lat_deg, lon_deg)`` drawn as hollow diamonds.
     facts : flight facts shown at the top (file names, duration, detector mode...).
+    track_breaks : indices into ``track`` where another flight's track starts (a campaign):
+        each flight is drawn as its own line. The line also breaks where the boot clock
+        goes back or jumps by more than a minute.
 
     Returns
     -------
@@ -73,7 +77,13 @@ def write_report(
         a box outside its image, or a folder that cannot be written.
     """
     page = render_report(
-        title=title, holes=holes, track=track, views=views, truth=truth, facts=facts
+        title=title,
+        holes=holes,
+        track=track,
+        views=views,
+        truth=truth,
+        facts=facts,
+        track_breaks=track_breaks,
     )
     out = Path(path)
     tmp = out.with_name(out.name + ".part")
@@ -101,19 +111,21 @@ def render_report(
     views: Mapping[int, BestView],
     truth: Sequence[tuple[str, float, float]] = (),
     facts: Mapping[str, str] | None = None,
+    track_breaks: Sequence[int] = (),
 ) -> str:
     """The page :func:`write_report` writes, as a string (same parameters)."""
     holes = sorted(holes, key=lambda h: h.id)
     _check_holes(holes)
-    poses = [p for p in track if math.isfinite(p.lat_deg) and math.isfinite(p.lon_deg)]
+    kept = [i for i, p in enumerate(track) if math.isfinite(p.lat_deg) and math.isfinite(p.lon_deg)]
+    poses = [track[i] for i in kept]
+    breaks = sorted({sum(i < b for i in kept) for b in track_breaks} - {0, len(poses)})
     if len(poses) < len(track):
         logger.warning("report: %d track poses without a position skipped", len(track) - len(poses))
     frame = _LocalFrame.around(poses, holes, truth)
     t0_ns = poses[0].t_boot_ns if poses else min((h.t_first_boot_ns for h in holes), default=0)
     holes_html = _holes_section(holes, views, frame, t0_ns, truth, bool(poses))
-    map_html = (
-        f"<section><h2>Map</h2>{_legend(bool(truth))}{_maps(frame, holes, poses, truth)}</section>"
-    )
+    maps = _maps(frame, holes, poses, truth, breaks)
+    map_html = f"<section><h2>Map</h2>{_legend(bool(truth))}{maps}</section>"
     body = [
         f"<header><h1>{_e(title)}</h1>{_summary(holes, poses, frame)}"
         f"{_facts(facts or {})}</header>",

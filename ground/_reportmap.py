@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import html
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -119,8 +120,11 @@ def _maps(
     holes: Sequence[Hole],
     poses: Sequence[VehiclePose],
     truth: Sequence[tuple[str, float, float]],
+    breaks: Sequence[int] = (),
 ) -> str:
-    """The whole flight, plus a close-up when the holes fill under a third of it."""
+    """The whole flight, plus a close-up when the holes fill under a third of it.
+
+    breaks : indices into ``poses`` where another flight's line starts."""
     te, tn = frame.en([p.lat_deg for p in poses], [p.lon_deg for p in poses])
     he, hn = frame.en([h.lat_deg for h in holes], [h.lon_deg for h in holes])
     ge, gn = frame.en([t[1] for t in truth], [t[2] for t in truth])
@@ -131,7 +135,8 @@ def _maps(
     )
     all_e = np.concatenate([te, he - reach, he + reach, ge])
     all_n = np.concatenate([tn, hn - reach, hn + reach, gn])
-    geo = (te, tn, he, hn, ge, gn)
+    cuts = sorted({*breaks, *_track_breaks(poses)})  # several flights: one line each
+    geo = (np.insert(te, cuts, np.nan), np.insert(tn, cuts, np.nan), he, hn, ge, gn)
     out = [_map_svg(_fit(all_e, all_n), holes, truth, geo, "the flight")]
     if holes:
         hole_e = np.concatenate([he - reach, he + reach])
@@ -241,7 +246,24 @@ def _grid(view: _View, step: float) -> str:
     return f'<path d="{"".join(lines)}" stroke="#dcdcd6" stroke-width="1"/>'
 
 
+_TRACK_GAP_NS = 60_000_000_000
+
+
+def _track_breaks(poses: Sequence[VehiclePose]) -> list[int]:
+    """Where the track is another flight: the boot clock goes back or jumps over a minute
+    (each autopilot boot starts its own clock)."""
+    t = [p.t_boot_ns for p in poses]
+    return [i for i in range(1, len(t)) if not 0 <= t[i] - t[i - 1] <= _TRACK_GAP_NS]
+
+
 def _track_svg(view: _View, te: np.ndarray, tn: np.ndarray) -> str:
+    """The track as a line from a start triangle to an end square; NaN separates flights."""
+    gaps = np.flatnonzero(np.isnan(te))
+    if gaps.size:
+        bounds = [-1, *gaps.tolist(), te.size]
+        return "".join(
+            _track_svg(view, te[a + 1 : b], tn[a + 1 : b]) for a, b in itertools.pairwise(bounds)
+        )
     if te.size == 0:
         return ""
     pts = list(zip(te.tolist(), tn.tolist(), strict=True))

@@ -1,45 +1,49 @@
-"""``holescan reprocess FLIGHT.mcap... [--out DIR] [--mode ...] [--workers N]``."""
+"""``holescan reprocess FLIGHT.mcap... [--out DIR] [--mode ...] [--workers N | --scheduler URL]``.
+
+Also the arguments, progress bar and Ctrl-C handling ``holescan campaign`` shares.
+"""
 
 from __future__ import annotations
 
 import argparse
 import logging
+import math
 import os
+import signal
 import sys
-import time
+import threading
+from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, TextIO
+from typing import TYPE_CHECKING, Any
 
 from holescan._args import EXIT_INTERRUPTED
 from missions import HOLE_FORMATS
 
 if TYPE_CHECKING:
-    from ground import Progress
+    from ground import Progress, ReprocessOptions, ReprocessResult
 
 
-def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    p = sub.add_parser(
-        "reprocess",
-        help="detect again over whole flight logs (other thresholds, another searcher) and "
-        "get the holes, hole files and report again",
-        description="Read each flight log once (also one cut off by a crash), detect on every "
-        "frame in parallel, pose frames from the logged telemetry and merge holes as in flight. "
-        "Writes a copy of each log with the new detections and holes on /reprocess/* topics "
-        "(the original is never modified), the hole files, an HTML report and summary.json. "
-        "Ctrl-C stops cleanly and keeps what is done; a second Ctrl-C aborts.",
-    )
+def _score(text: str) -> float:
+    """argparse type: a number in [0, 1] (NaN refused: it would silently drop nothing)."""
+    try:
+        value = float(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(f"expected a number in [0, 1], got {text!r}") from err
+    if math.isnan(value) or not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"must be a number in [0, 1], got {text!r}")
+    return value
+
+
+def add_engine_arguments(p: argparse.ArgumentParser, default_out: str) -> None:
+    """The arguments ``reprocess`` and ``campaign`` share."""
     p.add_argument(
         "logs",
-        type=Path,
         nargs="+",
-        help="flight logs: files of one or more flights (NAME_0000.mcap brings its parts)",
+        help="flight logs: files of one or more flights (NAME_0000.mcap brings its parts); "
+        "paths every worker can read, or URLs fsspec opens",
     )
     p.add_argument(
-        "-o",
-        "--out",
-        type=Path,
-        default=Path("reprocessed"),
-        help="output folder (default ./reprocessed; one subfolder per flight when several)",
+        "-o", "--out", type=Path, default=Path(default_out), help=f"output folder ({default_out})"
     )
     p.add_argument("--mode", choices=("default", "paper"), default="default", help="detector")
     p.add_argument(
@@ -48,12 +52,30 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         default="human",
         help="who must fit through the hole (default human)",
     )
-    p.add_argument("--min-score", type=float, help="drop detections scoring below this")
-    p.add_argument(
+    p.add_argument("--min-score", type=_score, help="drop detections scoring below this (0-1)")
+    engine = p.add_mutually_exclusive_group()
+    engine.add_argument(
         "--workers",
         type=int,
         default=os.cpu_count() or 1,
-        help="detection processes (default: one per core; 0 = in this process)",
+        help="worker processes of the local Dask cluster (default: one per core; "
+        "0 = in this process, no cluster)",
+    )
+    engine.add_argument(
+        "--scheduler",
+        metavar="tcp://HOST:8786",
+        help="use this running Dask scheduler and its workers instead of a local cluster",
+    )
+    p.add_argument(
+        "--partition-mib",
+        type=float,
+        default=32.0,
+        help="log bytes per task, MiB (default 32: about 30 frames)",
+    )
+    p.add_argument(
+        "--no-cache",
+        action="store_true",
+        help="compute every partition again (default: reuse OUT/.holescan-cache)",
     )
     p.add_argument(
         "--frames",
@@ -79,45 +101,29 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help=f"hole file format, repeatable: {', '.join(HOLE_FORMATS)} "
         "(default: gpx, kml, geojson, plan)",
     )
+
+
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = sub.add_parser(
+        "reprocess",
+        help="detect again over whole flight logs (other thresholds, another searcher) and "
+        "get each flight's holes, hole files and report again",
+        description="Detect on every frame of each flight log (also one cut off by a crash) "
+        "on a Dask cluster (local by default), pose frames from the logged telemetry and "
+        "merge holes as in flight. Writes per flight a sidecar MCAP with the new detections "
+        "and holes on /reprocess/* (open it in Foxglove together with the logs), the hole "
+        "files, an HTML report and summary.json. Finished partitions are cached: a rerun "
+        "does only what is missing. Ctrl-C stops cleanly; a second Ctrl-C aborts.",
+    )
+    add_engine_arguments(p, "reprocessed")
     p.set_defaults(func=run)
 
 
-class _Bar:
-    """One progress line on a terminal (redrawn), or a line every 5 s elsewhere."""
-
-    def __init__(self, stream: TextIO) -> None:
-        self.stream = stream
-        self.tty = stream.isatty()
-        self._last = 0.0
-
-    def __call__(self, p: Progress) -> None:
-        now = time.monotonic()
-        if not self.tty and now - self._last < 5.0 and p.fraction < 1.0:
-            return
-        self._last = now
-        width = 24
-        filled = round(width * min(p.fraction, 1.0))
-        eta = "--:--" if p.eta_s != p.eta_s else f"{int(p.eta_s) // 60}:{int(p.eta_s) % 60:02d}"
-        flight = f"flight {p.flight_number}/{p.flights} " if p.flights > 1 else ""
-        line = (
-            f"{flight}{p.flight} [{'#' * filled}{'.' * (width - filled)}] "
-            f"{100 * p.fraction:3.0f}% {p.frames_done} frames {p.frames_per_s:5.1f} frames/s "
-            f"ETA {eta}"
-        )
-        self.stream.write(("\r" + line + "\x1b[K") if self.tty else line + "\n")
-        self.stream.flush()
-
-    def done(self) -> None:
-        if self.tty:
-            self.stream.write("\n")
-            self.stream.flush()
-
-
-def run(args: argparse.Namespace) -> int:
+def options(args: argparse.Namespace) -> ReprocessOptions:
     import dataclasses
 
     from detect import DEFAULT, PAPER
-    from ground import ReprocessOptions, reprocess
+    from ground import ReprocessOptions
 
     params = (PAPER if args.mode == "paper" else DEFAULT).with_searcher(args.searcher)
     if args.min_score is not None:
@@ -125,18 +131,122 @@ def run(args: argparse.Namespace) -> int:
     opts = ReprocessOptions(
         params=params,
         workers=args.workers,
+        scheduler=args.scheduler,
+        partition_mib=args.partition_mib,
         frames=args.frames,
         min_sightings=args.min_sightings,
+        cache=not args.no_cache,
     )
     if args.formats:
         opts = dataclasses.replace(opts, formats=tuple(dict.fromkeys(args.formats)))
+    return opts
+
+
+class ProgressBar:
+    """A rich progress bar on a terminal (a line every 5 s elsewhere); prints the Dask
+    dashboard's address once it is known."""
+
+    def __init__(self) -> None:
+        from rich.console import Console
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
+
+        self.console = Console(stderr=True)
+        self._bar = Progress(
+            "[progress.description]{task.description}",
+            BarColumn(),
+            MofNCompleteColumn(),
+            "partitions",
+            "{task.fields[rate]}",
+            TimeRemainingColumn(),
+            console=self.console,
+            disable=not self.console.is_terminal,
+        )
+        self._task = self._bar.add_task("reprocessing", total=None, rate="")
+        self._dashboard: str | None = None
+        self._last_line = -math.inf
+
+    def __enter__(self) -> ProgressBar:
+        self._bar.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._bar.stop()
+
+    def __call__(self, p: Progress) -> None:
+        if p.dashboard and p.dashboard != self._dashboard:
+            self._dashboard = p.dashboard
+            self.console.print(f"Dask dashboard: {p.dashboard}")
+        rate = f"{p.frames_done} frames, {p.frames_per_s:.1f}/s"
+        cached = f" ({p.partitions_cached} cached)" if p.partitions_cached else ""
+        self._bar.update(
+            self._task,
+            total=p.partitions_total,
+            completed=p.partitions_done,
+            rate=rate + cached,
+            description=f"flights {p.flights_done}/{p.flights}",
+        )
+        if not self.console.is_terminal and (
+            p.elapsed_s - self._last_line >= 5.0 or p.partitions_done == p.partitions_total
+        ):
+            self._last_line = p.elapsed_s
+            print(
+                f"{p.partitions_done}/{p.partitions_total} partitions{cached}, {rate}",
+                file=sys.stderr,
+                flush=True,
+            )
+
+
+def stop_on_sigint(stop: threading.Event) -> Callable[[], None]:
+    """First Ctrl-C sets ``stop`` (a clean stop); a second one interrupts at once.
+    Returns the undo."""
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+    previous = signal.getsignal(signal.SIGINT)
+
+    def handler(signum: int, frame: Any) -> None:
+        if stop.is_set():
+            raise KeyboardInterrupt
+        logging.getLogger("holescan").warning(
+            "stopping: merging what is done (Ctrl-C again to abort)"
+        )
+        stop.set()
+
+    signal.signal(signal.SIGINT, handler)
+
+    def restore() -> None:
+        signal.signal(signal.SIGINT, previous)
+
+    return restore
+
+
+def _quiet_dask() -> None:
+    """Dask's own loggers (each set to INFO by its configuration) to errors only."""
+    import distributed  # noqa: F401 (configures its loggers; set them after)
+
+    for name in list(logging.root.manager.loggerDict):
+        if name.split(".")[0] in ("distributed", "dask"):
+            logging.getLogger(name).setLevel(logging.ERROR)
+
+
+def execute(args: argparse.Namespace, fn: Callable[..., ReprocessResult]) -> int:
+    """Run ``fn(logs, out, opts, progress=..., stop=...)``; print its lines."""
+    opts = options(args)
     if not args.verbose:  # INFO lines would break the progress display
         logging.getLogger().setLevel(logging.WARNING)
-    bar = _Bar(sys.stderr)
+        _quiet_dask()
+    stop = threading.Event()
+    restore = stop_on_sigint(stop)
     try:
-        result = reprocess(args.logs, args.out, opts, progress=bar)
+        with ProgressBar() as bar:
+            result = fn(args.logs, args.out, opts, progress=bar, stop=stop)
     finally:
-        bar.done()
+        restore()
     for line in result.lines():
         print(line)
     return EXIT_INTERRUPTED if result.interrupted else 0
+
+
+def run(args: argparse.Namespace) -> int:
+    from ground import reprocess
+
+    return execute(args, reprocess)

@@ -30,6 +30,7 @@ _COMMAND_MODULES = (
     "holescan._cmd_holes",
     "holescan._cmd_fly",
     "holescan._cmd_reprocess",
+    "holescan._cmd_campaign",
     "holescan._cmd_demo",
     "holescan._cmd_ground",
 )

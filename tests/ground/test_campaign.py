@@ -1,0 +1,129 @@
+"""``holescan campaign``: two simulated sorties over the same world (``conftest.flight`` and
+``conftest.flight_b``: different paths, different vehicles' clocks) -> one campaign in
+which every hole both saw is one hole with sightings per flight; a bad log in the set."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pymap3d
+import pytest
+
+from capture._daemon import FlightSummary
+from ground import ReprocessOptions, ReprocessResult, run_campaign
+from holescan import cli
+from holescan_errors import InputError
+from sim._source import WorldAnchor
+from sim._world import RubbleWorld
+
+ANCHOR = WorldAnchor(43.6532, -79.3832, 120.0)  # as in conftest.py
+
+Flown = tuple[list[Path], FlightSummary]
+
+
+def opts(**kw: object) -> ReprocessOptions:
+    kw.setdefault("workers", 0)
+    kw.setdefault("partition_mib", 0.3)
+    return ReprocessOptions(**kw)  # type: ignore[arg-type]
+
+
+def true_holes(world: RubbleWorld) -> list[tuple[float, float]]:
+    out = []
+    for h in world.access_holes:
+        e, n = h.centre_xy
+        lat, lon, _ = pymap3d.enu2geodetic(e, n, 0.0, ANCHOR.lat_deg, ANCHOR.lon_deg, 0.0)
+        out.append((float(lat), float(lon)))
+    return out
+
+
+def dist_m(a: tuple[float, float], b: tuple[float, float]) -> float:
+    e, n, _ = pymap3d.geodetic2enu(a[0], a[1], 0.0, b[0], b[1], 0.0)
+    return math.hypot(e, n)
+
+
+@pytest.fixture(scope="module")
+def campaign(
+    flight: Flown, flight_b: Flown, tmp_path_factory: pytest.TempPathFactory
+) -> ReprocessResult:
+    return run_campaign(
+        [*flight[0], *flight_b[0]], tmp_path_factory.mktemp("campaign"), opts(cache=False)
+    )
+
+
+def test_a_hole_seen_on_both_sorties_is_one_hole(
+    campaign: ReprocessResult, world: RubbleWorld
+) -> None:
+    by_name = {f.name: f for f in campaign.flights}
+    assert set(by_name) == {"sortie", "second"}
+    both = 0
+    for truth in true_holes(world):
+        seen_by = [
+            name
+            for name, f in by_name.items()
+            if any(dist_m(truth, (h.lat_deg, h.lon_deg)) < 1.0 for h in f.confirmed)
+        ]
+        near = [
+            h for h in campaign.campaign if dist_m(truth, (h.hole.lat_deg, h.hole.lon_deg)) < 1.0
+        ]
+        if not seen_by:
+            continue
+        assert len(near) == 1, (truth, near)  # one hole, however many flights saw it
+        flights = {s.flight for s in near[0].flights}
+        assert set(seen_by) <= flights
+        both += len(seen_by) == 2
+        per = {s.flight: s for s in near[0].flights}
+        assert sum(s.sightings for s in per.values()) == near[0].hole.sightings
+        for s in per.values():
+            assert s.first_seen_unix_ns <= s.last_seen_unix_ns
+    assert both >= 1  # the sorties overlap: at least one hole was seen by both
+    ids = [h.id for h in campaign.campaign]
+    assert ids == sorted(set(ids))
+
+
+def test_campaign_files_and_summary(campaign: ReprocessResult) -> None:
+    kinds = dict(campaign.files)
+    assert set(kinds) == {"gpx", "kml", "geojson", "plan", "report"}
+    out = campaign.summary_path.parent
+    assert kinds["gpx"] == out / "campaign_holes.gpx"
+    geo = json.loads(kinds["geojson"].read_text())
+    assert len(geo["features"]) == len(campaign.campaign)
+    doc = json.loads(campaign.summary_path.read_text())
+    holes = doc["campaign"]["holes"]
+    assert [h["id"] for h in holes] == [h.id for h in campaign.campaign]
+    for h in holes:
+        assert h["flights"] and {f["flight"] for f in h["flights"]} <= {"sortie", "second"}
+    assert doc["campaign"]["holes_seen_by_several_flights"] >= 1
+    for name in ("sortie", "second"):
+        assert (out / name / f"{name}_reprocess.mcap").is_file()
+        assert (out / name / f"{name}_report.html").is_file()
+    page = kinds["report"].read_text()
+    assert "sortie" in page and "second" in page
+    assert page.count(">start</text>") >= 2  # each flight's track drawn on its own
+
+
+def test_a_cut_off_log_in_the_set_is_reported_the_others_processed(
+    flight: Flown, flight_b: Flown, tmp_path: Path
+) -> None:
+    files_b = flight_b[0]
+    cut = tmp_path / "cut.mcap"
+    data = files_b[-1].read_bytes()
+    cut.write_bytes(data[: len(data) // 2])
+    res = run_campaign([*flight[0], cut], tmp_path / "out", opts())
+    by_name = {f.name: f for f in res.flights}
+    assert by_name["cut"].truncated and "cut.mcap" in by_name["cut"].truncated[0]
+    assert by_name["sortie"].frames_read == 40 and not by_name["sortie"].truncated
+    with pytest.raises(InputError, match="no such file"):
+        run_campaign([*flight[0], tmp_path / "gone.mcap"], tmp_path / "out2", opts())
+    assert not (tmp_path / "out2").exists()
+
+
+def test_cli(flight: Flown, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "c"
+    argv = ["campaign", *map(str, flight[0]), "--out", str(out), "--workers", "0"]
+    assert cli.main([*argv, "-f", "gpx"]) == 0
+    text = capsys.readouterr().out
+    assert "campaign:" in text and (out / "summary.json").is_file()
+    assert cli.main(argv) == 0  # again: every partition from the cache
+    assert "0 computed" in capsys.readouterr().out
