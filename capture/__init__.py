@@ -18,19 +18,21 @@ from capture._flyconfig import (
 )
 from capture._frame import Frame, FrameSource
 from capture._holepipeline import FrameHoles, HolePipeline, HoleView, crop_view, view_jpeg
-from capture._mavlink import (
-    DEFAULT_RATES_HZ,
-    Telemetry,
-    TelemetryError,
+from capture._mavadapt import (
     TelemetrySample,
-    TelemetryStats,
-    TelemetryTimeoutError,
     attitude_from_attitude,
     attitude_from_quaternion,
     gps_from_gps_raw_int,
     is_autopilot_heartbeat,
     position_from_global_position_int,
     telemetry_sample,
+)
+from capture._mavlink import (
+    DEFAULT_RATES_HZ,
+    Telemetry,
+    TelemetryError,
+    TelemetryStats,
+    TelemetryTimeoutError,
 )
 from capture._mavrates import read_signing_key
 from capture._mcapchunks import (

@@ -7,12 +7,16 @@ import math
 from typing import Any
 
 from capture._posebuffer import AttitudeSample, GpsFix, PositionSample, quat_from_euler
+from missions import mavlink
 
 __all__ = [
+    "TelemetrySample",
     "attitude_from_attitude",
     "attitude_from_quaternion",
     "gps_from_gps_raw_int",
+    "is_autopilot_heartbeat",
     "position_from_global_position_int",
+    "telemetry_sample",
 ]
 
 _NS_PER_MS = 1_000_000
@@ -74,3 +78,32 @@ def gps_from_gps_raw_int(msg: Any, t_boot_ns: int) -> GpsFix:
         lon_deg=msg.lon * 1e-7,
         alt_m=msg.alt * 1e-3,
     )
+
+
+TelemetrySample = PositionSample | AttitudeSample | GpsFix
+"""What a message from the autopilot adds to a :class:`~capture._posebuffer.PoseBuffer`."""
+
+
+def telemetry_sample(msg: Any, gps_t_boot_ns: int) -> TelemetrySample | None:
+    """The SI sample a parsed MAVLink message carries, or None for messages that carry none.
+
+    The one message -> sample decoder: the live link (:class:`Telemetry`) and log replay
+    (:class:`capture.TelemetryReplay`) both call it. ``gps_t_boot_ns`` : the autopilot boot
+    time to stamp a GPS_RAW_INT with (see :func:`gps_from_gps_raw_int`). Raises
+    ``ValueError`` for an ATTITUDE_QUATERNION with a zero quaternion.
+    """
+    mtype = msg.get_type()
+    if mtype == "GLOBAL_POSITION_INT":
+        return position_from_global_position_int(msg)
+    if mtype == "ATTITUDE":
+        return attitude_from_attitude(msg)
+    if mtype == "ATTITUDE_QUATERNION":
+        return attitude_from_quaternion(msg)
+    if mtype == "GPS_RAW_INT":
+        return gps_from_gps_raw_int(msg, gps_t_boot_ns)
+    return None
+
+
+def is_autopilot_heartbeat(msg: Any) -> bool:
+    """A HEARTBEAT of a real autopilot (not of a GCS or companion: MAV_AUTOPILOT_INVALID)."""
+    return bool(msg.get_type() == "HEARTBEAT" and msg.autopilot != mavlink.MAV_AUTOPILOT_INVALID)

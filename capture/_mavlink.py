@@ -32,14 +32,12 @@ from typing import Any
 
 from capture._clock import ClockSync, ClockUnavailable
 from capture._mavadapt import (
-    attitude_from_attitude,
-    attitude_from_quaternion,
-    gps_from_gps_raw_int,
-    position_from_global_position_int,
+    is_autopilot_heartbeat,
+    telemetry_sample,
 )
 from capture._mavrates import RateMethod, RateRequests, TelemetryError, TelemetryTimeoutError
 from capture._mavstream import MavlinkStream
-from capture._posebuffer import GpsFix, PoseBuffer, PoseUnavailable
+from capture._posebuffer import AttitudeSample, GpsFix, PoseBuffer, PoseUnavailable, PositionSample
 from geotag import VehiclePose
 from missions import mavlink, open_link
 
@@ -52,12 +50,6 @@ __all__ = [
     "TelemetryError",
     "TelemetryStats",
     "TelemetryTimeoutError",
-    "attitude_from_attitude",
-    "attitude_from_quaternion",
-    "gps_from_gps_raw_int",
-    "is_autopilot_heartbeat",
-    "position_from_global_position_int",
-    "telemetry_sample",
 ]
 
 _log = logging.getLogger(__name__)
@@ -79,35 +71,6 @@ _NS_PER_MS = 1_000_000
 #: framed on its own); other links (tlog replay ...) go through pymavlink's own parser.
 _STREAM_LINKS = {"mavserial": False, "mavtcp": False, "mavtcpin": False}
 _DATAGRAM_LINKS = {"mavudp": True, "mavmcast": True}
-
-
-TelemetrySample = PositionSample | AttitudeSample | GpsFix
-"""What a message from the autopilot adds to a :class:`~capture._posebuffer.PoseBuffer`."""
-
-
-def telemetry_sample(msg: Any, gps_t_boot_ns: int) -> TelemetrySample | None:
-    """The SI sample a parsed MAVLink message carries, or None for messages that carry none.
-
-    The one message -> sample decoder: the live link (:class:`Telemetry`) and log replay
-    (:class:`capture.TelemetryReplay`) both call it. ``gps_t_boot_ns`` : the autopilot boot
-    time to stamp a GPS_RAW_INT with (see :func:`gps_from_gps_raw_int`). Raises
-    ``ValueError`` for an ATTITUDE_QUATERNION with a zero quaternion.
-    """
-    mtype = msg.get_type()
-    if mtype == "GLOBAL_POSITION_INT":
-        return position_from_global_position_int(msg)
-    if mtype == "ATTITUDE":
-        return attitude_from_attitude(msg)
-    if mtype == "ATTITUDE_QUATERNION":
-        return attitude_from_quaternion(msg)
-    if mtype == "GPS_RAW_INT":
-        return gps_from_gps_raw_int(msg, gps_t_boot_ns)
-    return None
-
-
-def is_autopilot_heartbeat(msg: Any) -> bool:
-    """A HEARTBEAT of a real autopilot (not of a GCS or companion: MAV_AUTOPILOT_INVALID)."""
-    return bool(msg.get_type() == "HEARTBEAT" and msg.autopilot != mavlink.MAV_AUTOPILOT_INVALID)
 
 
 # -- the link --------------------------------------------------------------------------------

@@ -12,7 +12,7 @@ from __future__ import annotations
 import logging
 from typing import Any, Final
 
-from capture._mavlink import is_autopilot_heartbeat, telemetry_sample
+from capture._mavadapt import is_autopilot_heartbeat, telemetry_sample
 from capture._posebuffer import AttitudeSample, GpsFix, PoseBuffer, PoseUnavailable, PositionSample
 from geotag import VehiclePose
 from missions import mavlink, parser
