@@ -81,8 +81,7 @@ def _cached(root: str, load):  # type: ignore[no-untyped-def]
 
 def collect(root: Path, workers: int) -> list[Row]:
     """Every default-mode detection on ``root``, labelled by COCO matching at IoU > 0.5."""
-    from detect import GroundTruthBox, ScoredBox
-    from detect._evaluate import _match_image
+    from detect import GroundTruthBox, ScoredBox, match_image
     from ground import ground_truth, load_dataset
 
     ds = load_dataset(root)
@@ -101,7 +100,7 @@ def collect(root: Path, workers: int) -> list[Row]:
             continue
         image_id = dets[0][0]
         order = sorted(dets, key=lambda d: -d[2])
-        outcomes = _match_image(
+        outcomes = match_image(
             [ScoredBox(image_id, d[1], d[2]) for d in order], gts.get(image_id, []), "iou", 0.5
         )
         for d, (_, outcome) in zip(order, outcomes, strict=True):
@@ -209,7 +208,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--dump", type=Path, help="write every labelled detection as JSON")
     args = ap.parse_args(argv)
 
-    from detect._calibration import logistic
+    from detect import logistic
 
     rows: list[Row] = []
     for root in args.datasets:

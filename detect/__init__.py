@@ -6,11 +6,11 @@ accurate detector.
 """
 
 from detect._baseline import detect_baseline
-from detect._calibration import p_hole_of_score
+from detect._calibration import logistic, p_hole_of_score
 from detect._default import basin_labels, box_iou
 from detect._detector import detect_holes
 from detect._ers import ers_superpixels
-from detect._evaluate import GroundTruthBox, PRResult, ScoredBox, evaluate_detections
+from detect._evaluate import GroundTruthBox, PRResult, ScoredBox, evaluate_detections, match_image
 from detect._paper import detect_paper, paper_superpixels
 from detect._scores import luminance, ramp
 from detect._types import (
@@ -51,7 +51,9 @@ __all__ = [
     "detect_paper",
     "ers_superpixels",
     "evaluate_detections",
+    "logistic",
     "luminance",
+    "match_image",
     "p_hole_of_score",
     "paper_superpixels",
     "ramp",

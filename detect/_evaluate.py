@@ -79,7 +79,7 @@ def overlap(det: Box, gt: Box, rule: OverlapRule, crowd: bool = False) -> float:
     return inter / denom if denom > 0 else 0.0
 
 
-def _match_image(
+def match_image(
     dets: list[ScoredBox], gts: list[GroundTruthBox], rule: OverlapRule, threshold: float
 ) -> list[tuple[float, int]]:
     """(score, outcome) per detection: 1 true positive, 0 false positive, -1 ignored."""
@@ -124,7 +124,7 @@ def evaluate_detections(
     n_gt = sum(1 for g in ground_truth if not g.crowd)
     outcomes: list[tuple[float, int]] = []
     for img, dets in by_img_d.items():
-        outcomes += _match_image(dets, by_img_g.get(img, []), rule, threshold)
+        outcomes += match_image(dets, by_img_g.get(img, []), rule, threshold)
     kept = [(s, o) for s, o in outcomes if o >= 0]
     kept.sort(key=lambda so: -so[0])  # stable, as pycocotools' mergesort
     scores = np.array([s for s, _ in kept], dtype=np.float64)

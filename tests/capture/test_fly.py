@@ -29,7 +29,7 @@ from holescan_errors import InputError
 from sim import SimAutopilot, SimPath, sortie_params
 
 os.environ.setdefault("MAVLINK20", "1")
-from pymavlink import mavutil
+from missions import mavutil
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "deploy" / "fly.example.toml"

@@ -22,7 +22,6 @@ from mcap.reader import make_reader
 from mcap.records import Footer, Message
 from mcap.stream_reader import StreamReader
 from mcap_protobuf.decoder import DecoderFactory
-from pymavlink.dialects.v20 import common as mavlink2
 
 from capture import (
     FlightLogError,
@@ -46,6 +45,7 @@ from capture._mcaplog import log_file_path
 from detect import CameraIntrinsics, Detection, FeatureScores
 from geotag import CameraMount, Hole, VehiclePose
 from holescan_errors import HolescanError
+from missions import mavlink as mavlink2
 
 REPO = Path(__file__).resolve().parents[2]
 SMALL = CameraIntrinsics(80, 60, 71.3, 71.3, 39.5, 29.5)

@@ -29,7 +29,7 @@ from geotag import VehiclePose
 from sim import SimAutopilot, SimPath
 
 os.environ.setdefault("MAVLINK20", "1")
-from pymavlink.dialects.v20 import all as mavlink2
+from missions import mavlink as mavlink2
 
 log = logging.getLogger(__name__)
 

@@ -21,13 +21,13 @@ import gpxpy
 import numpy as np
 import numpy.typing as npt
 import pytest
-from pymavlink.dialects.v20 import common as mavlink2
 
 from capture import FlightLogWriter, Frame, LogOptions
 from detect import CameraIntrinsics, Detection, FeatureScores
 from geotag import Hole, VehiclePose
 from ground._flightholes import flight_log_files, read_flight_holes
 from holescan import cli
+from missions import mavlink as mavlink2
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavwp

@@ -25,7 +25,7 @@ from missions._holeserver import (
 )
 
 os.environ.setdefault("MAVLINK20", "1")
-from pymavlink import mavutil
+from missions import mavutil
 
 SYSID = 1
 
