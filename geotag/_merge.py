@@ -297,7 +297,9 @@ class AnnounceGate:
     21 of the 22 true holes in view (the 22nd: one detection at score 0.09 in the whole
     lap), first sighting to delivery median 0.3 s. 0.5 leans to recall (a missed hole can
     cost a life) yet on independent scenes keeps single detections at precision 0.90 with
-    98 of 101 true ones (0.9 would keep 91).
+    98 of 101 true ones (0.9 would keep 91). Through the whole demo path
+    (``benchmarks/bench_delivery.py``, the same 8 worlds) it announced 20 holes, all true,
+    all 20 true holes in view, first sighting to announcement median 0.4 s, max 17.6 s.
 
     Examples
     --------
