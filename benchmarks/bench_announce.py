@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""What is worth announcing: score, sightings and time span of true and false holes.
+"""What is worth announcing: p_hole, sightings and time span of true and false holes.
 
 For each simulated world (``SortieParams(world_seed=S)``, the demo's 10 x 10 m survey at
 3 m with the full set of distractors: small holes, cracks, depressions, stains, shadows),
@@ -11,14 +11,18 @@ of every hole is recorded (time, best score, sightings, time span of its sightin
 final holes are scored against the world's truth (:func:`sim.score_holes`: a hole within
 0.5 m of a true access hole's centre, or inside its opening, is true).
 
-Then each gate ``score >= s and sightings >= n and span >= t`` of a grid is replayed over
-the recorded histories: a hole is delivered at the first change that passes the gate.
-Printed: the score/sightings/span distributions of true and false holes, and per gate the
-delivered precision, the recall of holes in view (whole in >= 3 frames), and the time from
-first sighting to delivery (median, max).
+A hole's ``p_hole`` is :func:`detect.p_hole_of_score` of its best score, as in
+:class:`geotag.AnnounceGate` (the histories keep the raw score; the map is monotone). Then
+each gate ``p_hole >= p and sightings >= n and span >= t`` of a grid is replayed over the
+recorded histories: a hole is delivered at the first change that passes the gate.
+Printed: the best score, p_hole, sightings and span distributions of true and false holes
+(all, and those seen twice over 0.3 s), and per gate the delivered precision, the recall of
+holes in view (whole in >= 3 frames), and the time from first sighting to delivery
+(median, max).
 
-Also (``--alien DATASET``): per-detection scores of true and false detections on the
-independent scenes of ``benchmarks/alien_scenes.py`` (IoU > 0.5 with an access hole).
+Also (``--alien DATASET``): per-detection scores and p_hole of true and false detections
+on the independent scenes of ``benchmarks/alien_scenes.py`` (IoU > 0.5 with an access
+hole). ``--load JSON`` replays the histories of an earlier ``--json`` run.
 
 Usage::
 
@@ -41,7 +45,7 @@ from typing import Any
 import numpy as np
 
 from capture import HolePipeline
-from detect import CameraIntrinsics, detect_holes
+from detect import CameraIntrinsics, detect_holes, p_hole_of_score
 from geotag import CameraMount, VehiclePose
 from sim import (
     Conditions,
@@ -119,7 +123,8 @@ def fly_world(seed: int, fps: float) -> dict[str, Any]:
     }
 
 
-def replay(worlds: list[dict[str, Any]], s: float, n: int, span: float) -> dict[str, Any]:
+def replay(worlds: list[dict[str, Any]], p: float, n: int, span: float) -> dict[str, Any]:
+    """Gate ``p_hole >= p``, ``n`` sightings over ``span`` seconds over the histories."""
     delivered = true_delivered = 0
     latency = []
     in_view = found = 0
@@ -128,7 +133,7 @@ def replay(worlds: list[dict[str, Any]], s: float, n: int, span: float) -> dict[
         for h in w["holes"]:
             t_first = h["history"][0][0]
             for t, score, k, sp in h["history"]:
-                if score >= s and k >= n and sp >= span:
+                if p_hole_of_score(score) >= p and k >= n and sp >= span:
                     first_pass[h["id"]] = t - t_first
                     break
         for h in w["holes"]:
@@ -142,7 +147,7 @@ def replay(worlds: list[dict[str, Any]], s: float, n: int, span: float) -> dict[
                 found += 1
                 latency.append(min(got))
     return {
-        "score": s,
+        "p_hole": p,
         "sightings": n,
         "span_s": span,
         "delivered": delivered,
@@ -216,43 +221,56 @@ def main(argv: list[str] | None = None) -> int:
     tru = [h for w in worlds for h in w["holes"] if h["true"]]
     fal = [h for w in worlds for h in w["holes"] if not h["true"]]
     print(f"{len(worlds)} worlds, {sum(w['frames'] for w in worlds)} frames")
-    print("final holes (percentiles 0/10/50/90/100):")
-    for name, hs in (("true", tru), ("false", fal)):
+
+    def dist(name: str, hs: list[dict[str, Any]]) -> None:
+        best = [h["history"][-1][1] for h in hs]
         print(
-            f"  {name:5} n={len(hs):3}  score {_pct([h['history'][-1][1] for h in hs])}"
+            f"  {name:22} n={len(hs):3}  score {_pct(best)}  p_hole "
+            f"{_pct([p_hole_of_score(s) for s in best])}"
             f"  sightings {_pct([h['history'][-1][2] for h in hs])}"
             f"  span s {_pct([h['history'][-1][3] for h in hs])}"
         )
+
+    def twice(hs: list[dict[str, Any]]) -> list[dict[str, Any]]:
+        return [h for h in hs if h["history"][-1][2] >= 2 and h["history"][-1][3] >= 0.3]
+
+    print("final holes (percentiles 0/10/50/90/100):")
+    dist("true", tru)
+    dist("false", fal)
+    dist("true, 2 over 0.3 s", twice(tru))
+    dist("false, 2 over 0.3 s", twice(fal))
+    dist("false, >= 3 sightings", [h for h in fal if h["history"][-1][2] >= 3])
     kinds: dict[str, int] = {}
     for h in fal:
         kinds[h["nearest"]] = kinds.get(h["nearest"], 0) + 1
     print("  false holes by nearest feature:", kinds)
-    fal3 = [h for h in fal if h["history"][-1][2] >= 3]
-    print(
-        f"  false with >= 3 sightings: n={len(fal3)} "
-        f"score {_pct([h['history'][-1][1] for h in fal3])}"
-    )
-    print("gate                         delivered precision recall  latency median/max s")
-    for s in (0.3, 0.4, 0.5, 0.55, 0.6, 0.65, 0.7, 0.75):
+    for name, hs in (("true", twice(tru)), ("false", twice(fal))):
+        ps = sorted(round(p_hole_of_score(h["history"][-1][1]), 3) for h in hs)
+        print(f"  p_hole of every {name} hole seen twice over 0.3 s: {ps}")
+    print("gate                          delivered precision recall  latency median/max s")
+    for p in (0.05, 0.1, 0.2, 0.3, 0.5, 0.7, 0.8, 0.9, 0.95, 0.98, 0.99):
         for n in (2, 3, 5):
             for span in (0.0, 0.3, 0.6):
-                r = replay(worlds, s, n, span)
+                r = replay(worlds, p, n, span)
                 print(
-                    f"  score>={s:.2f} n>={n} span>={span:.1f}  {r['delivered']:4d}  "
+                    f"  p_hole>={p:.2f} n>={n} span>={span:.1f}  {r['delivered']:4d}  "
                     f"{r['precision']:.3f}  {r['recall']:.3f} ({r['in_view']})  "
                     f"{r['latency_median_s']:.2f} / {r['latency_max_s']:.2f}"
                 )
     if args.alien:
         a = alien_scores(args.alien)
-        print(f"alien scenes {args.alien}: per-detection scores (percentiles 0/10/50/90/100)")
+        print(f"alien scenes {args.alien}: per-detection (percentiles 0/10/50/90/100)")
         for k, v in a.items():
-            print(f"  {k:5} n={len(v):4}  {_pct(v)}")
-        for s in (0.3, 0.4, 0.5, 0.6, 0.7):
-            tp = sum(v >= s for v in a["true"])
-            fp = sum(v >= s for v in a["false"])
             print(
-                f"  score>={s:.1f}: true kept {tp}/{len(a['true'])}, "
-                f"false kept {fp}/{len(a['false'])}"
+                f"  {k:5} n={len(v):4}  score {_pct(v)}  p_hole "
+                f"{_pct([p_hole_of_score(s) for s in v])}"
+            )
+        for p in (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.9, 0.95):
+            tp = sum(p_hole_of_score(v) >= p for v in a["true"])
+            fp = sum(p_hole_of_score(v) >= p for v in a["false"])
+            print(
+                f"  p_hole>={p:.2f}: true kept {tp}/{len(a['true'])}, "
+                f"false kept {fp}/{len(a['false'])}, precision {tp / max(tp + fp, 1):.3f}"
             )
     return 0
 

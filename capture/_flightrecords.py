@@ -29,9 +29,9 @@ class FlightConfig:
     params : detector parameters. mount : camera mount on the vehicle.
     frame_timeout_s : no frame for this long = the sensor stalled.
     retry_backoff_s : waits between sensor reopen attempts (the last one repeats).
-    announce_min_score, announce_min_sightings, announce_min_span_s : the announce gate
+    announce_min_p_hole, announce_min_sightings, announce_min_span_s : the announce gate
         (:class:`geotag.AnnounceGate`): a hole is announced, served as a waypoint and its
-        view sent only when its score, sightings and time span reach these. Weaker holes
+        view sent only when its ``p_hole``, sightings and time span reach these. Weaker holes
         stay candidates (logged, never a waypoint).
     pose_wait_s : how long the results thread waits for telemetry after a frame's time.
     startup_sync_s : at start, wait up to this long for the clock sync and a first pose
@@ -46,7 +46,7 @@ class FlightConfig:
     log_options: LogOptions = field(default_factory=LogOptions)
     frame_timeout_s: float = 3.0
     retry_backoff_s: tuple[float, ...] = (0.5, 1.0, 2.0, 4.0, 8.0)
-    announce_min_score: float = AnnounceGate.min_score
+    announce_min_p_hole: float = AnnounceGate.min_p_hole
     announce_min_sightings: int = AnnounceGate.min_sightings
     announce_min_span_s: float = AnnounceGate.min_span_s
     health_period_s: float = 1.0
@@ -60,7 +60,7 @@ class FlightConfig:
     def gate(self) -> AnnounceGate:
         """The announce gate these settings make."""
         return AnnounceGate(
-            self.announce_min_score, self.announce_min_sightings, self.announce_min_span_s
+            self.announce_min_p_hole, self.announce_min_sightings, self.announce_min_span_s
         )
 
 

@@ -150,7 +150,7 @@ def format_report(report: FlyReport, gate: AnnounceGate | None = None) -> str:
     said = {int(t.split()[1]) for t in report.announced}
     confirmed = gate.select(s.holes, said)
     lines.append(
-        f"holes: {len(confirmed)} announced (score >= {gate.min_score:g}, >= "
+        f"holes: {len(confirmed)} announced (p_hole >= {gate.min_p_hole:g}, >= "
         f"{gate.min_sightings} sightings over >= {gate.min_span_s:g} s) of {len(s.holes)}, "
         f"the rest candidates; "
         f"{c.announcements} announcements, {len(report.announced)} sent to the ground station"

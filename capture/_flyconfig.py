@@ -65,6 +65,10 @@ SensorKind = Literal["openni2", "oni", "mcap", "sim"]
 
 # key -> (type(s), default) per table; None default = optional.
 _NUM = (int, float)
+_RENAMED = {
+    "announce_min_score": "the gate now takes a probability, announce_min_p_hole "
+    "(README, 'What is announced'; p_hole 0.5 is a best score of 0.37)",
+}
 _TOP: dict[str, tuple[tuple[type, ...], Any]] = {
     "sensor": ((str,), "openni2"),
     "mavlink": ((str,), None),
@@ -109,7 +113,7 @@ _TABLES: dict[str, dict[str, tuple[tuple[type, ...], Any]]] = {
         "max_queued_messages": ((int,), 20_000),
     },
     "holes": {
-        "announce_min_score": (_NUM, AnnounceGate.min_score),
+        "announce_min_p_hole": (_NUM, AnnounceGate.min_p_hole),
         "announce_min_sightings": ((int,), AnnounceGate.min_sightings),
         "announce_min_span_s": (_NUM, AnnounceGate.min_span_s),
         "card_bytes_per_s": (_NUM, 1000.0),
@@ -218,6 +222,8 @@ def check_table(table: str, doc: Mapping[str, Any], spec: TableSpec, where: str)
         if key not in spec:
             if not table and (key in _TABLES or key == "sim"):
                 continue
+            if key in _RENAMED:
+                raise InputError(f"{where}: {prefix}{key} is gone: {_RENAMED[key]}")
             raise InputError(
                 f"{where}: unknown setting {prefix}{key} (known: {', '.join(sorted(spec))})"
             )
@@ -324,7 +330,7 @@ def parse_fly_config(
     holes = tables["holes"]
     try:
         AnnounceGate(
-            float(holes["announce_min_score"]),
+            float(holes["announce_min_p_hole"]),
             holes["announce_min_sightings"],
             float(holes["announce_min_span_s"]),
         )
@@ -340,7 +346,7 @@ def parse_fly_config(
         log_options=options,
         frame_timeout_s=float(cap["frame_timeout_s"]),
         retry_backoff_s=backoff,
-        announce_min_score=float(holes["announce_min_score"]),
+        announce_min_p_hole=float(holes["announce_min_p_hole"]),
         announce_min_sightings=holes["announce_min_sightings"],
         announce_min_span_s=float(holes["announce_min_span_s"]),
         health_period_s=float(cap["health_period_s"]),

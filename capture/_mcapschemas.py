@@ -124,6 +124,8 @@ _DETECTION_SCHEMA: Final[dict[str, Any]] = {
         "minor_m": _NUM,
         "rim_depth_m": _NUM,
         "beyond_range": {"type": "boolean"},
+        "relative_brightness": {"type": ["number", "null"]},
+        "p_hole": {"type": ["number", "null"]},
     },
 }
 
@@ -229,6 +231,10 @@ def from_json(data: bytes) -> Any:
 
 def _float(value: Any) -> float:
     return math.nan if value is None else float(value)
+
+
+def _opt_float(value: Any) -> float | None:
+    return None if value is None else float(value)
 
 
 # ------------------------------------------------------------------------ frames, camera
@@ -414,6 +420,8 @@ def detection_json(det: Detection) -> dict[str, Any]:
 
 
 def decode_detection(obj: Mapping[str, Any]) -> Detection:
+    """Inverse of :func:`detection_json`; logs written before ``p_hole`` and
+    ``relative_brightness`` existed (or in paper mode) give None for them."""
     f = obj["features"]
     x, y, w, h = (int(v) for v in obj["box"])
     return Detection(
@@ -425,6 +433,8 @@ def decode_detection(obj: Mapping[str, Any]) -> Detection:
         minor_m=_float(obj["minor_m"]),
         rim_depth_m=_float(obj["rim_depth_m"]),
         beyond_range=bool(obj.get("beyond_range", False)),
+        relative_brightness=_opt_float(obj.get("relative_brightness")),
+        p_hole=_opt_float(obj.get("p_hole")),
     )
 
 

@@ -345,7 +345,7 @@ def run_demo(
         stack.enter_context(sortie)
         cfg = FlightConfig(
             log_prefix=out / "flight",
-            announce_min_score=opts.gate.min_score,
+            announce_min_p_hole=opts.gate.min_p_hole,
             announce_min_sightings=opts.gate.min_sightings,
             announce_min_span_s=opts.gate.min_span_s,
             config_record={

@@ -22,8 +22,8 @@ def format_result(r: DemoResult) -> list[str]:
         f"{n_access} access holes and {distractors} distractors in the field",
         f"frames: {c.frames_captured} captured ({c.frames_captured / max(r.capture_s, 1e-9):.1f}"
         f"/s), {c.frames_detected} detected, {c.frames_unposed} not posed at capture",
-        f"holes against the simulator's truth (an announced hole: score >= "
-        f"{r.gate.min_score:g}, >= {r.gate.min_sightings} sightings over >= "
+        f"holes against the simulator's truth (an announced hole: p_hole >= "
+        f"{r.gate.min_p_hole:g}, >= {r.gate.min_sightings} sightings over >= "
         f"{r.gate.min_span_s:g} s; inside a true opening or within {r.match_m:g} m of its "
         f"centre finds it; {r.candidates} weaker candidates not announced):",
     ]

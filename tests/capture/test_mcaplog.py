@@ -4,6 +4,7 @@ speed at 30 fps."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import math
@@ -42,6 +43,7 @@ from capture import (
     recover_log,
 )
 from capture._mcaplog import log_file_path
+from capture._mcapschemas import decode_detection, detection_json
 from detect import CameraIntrinsics, Detection, FeatureScores
 from geotag import CameraMount, Hole, VehiclePose
 from holescan_errors import HolescanError
@@ -94,6 +96,8 @@ def make_detection(i: int) -> Detection:
         minor_m=0.43,
         rim_depth_m=2.9,
         beyond_range=i % 2 == 1,
+        relative_brightness=0.23 + 0.01 * i if i % 2 == 1 else None,
+        p_hole=None if i % 3 == 2 else 0.5 + 0.01 * i,  # None: a paper-mode detection
     )
 
 
@@ -268,6 +272,22 @@ def test_round_trip_every_record(tmp_path: Path) -> None:
     cals = [r for r in recs if isinstance(r, LoggedCalibration)]
     assert cals
     assert all(c.camera == SMALL for c in cals)
+
+
+def test_detection_p_hole_and_brightness_round_trip(tmp_path: Path) -> None:
+    """A detection's calibrated p_hole and relative brightness come back from the log."""
+    det = dataclasses.replace(make_detection(1), p_hole=0.973, relative_brightness=0.21)
+    paper = dataclasses.replace(make_detection(2), p_hole=None, relative_brightness=None)
+    with FlightLogWriter(tmp_path / "f", SMALL) as w:
+        assert w.write_detections(4, [det, paper], T0_UNIX_NS)
+    (got,) = [r for r in read_flight_log(w.paths[0]) if isinstance(r, LoggedDetections)]
+    assert list(got.detections) == [det, paper]
+    assert got.detections[0].p_hole == 0.973 and got.detections[0].relative_brightness == 0.21
+    # a log written before the fields existed reads back with None
+    old = {
+        k: v for k, v in detection_json(det).items() if k not in ("p_hole", "relative_brightness")
+    }
+    assert decode_detection(old) == dataclasses.replace(det, p_hole=None, relative_brightness=None)
 
 
 def test_foxglove_messages_decode_with_generic_reader(tmp_path: Path) -> None:

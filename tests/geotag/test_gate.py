@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
+from detect import p_hole_of_score
 from geotag import AnnounceGate, Hole
 from holescan_errors import InputError
 
@@ -17,9 +20,9 @@ def hole(hid: int, score: float, n: int, span_s: float, north_m: float = 0.0) ->
 
 
 def test_each_condition_is_needed() -> None:
-    gate = AnnounceGate(min_score=0.6, min_sightings=3, min_span_s=0.3)
-    assert gate.passes(hole(1, 0.6, 3, 0.3))
-    assert not gate.passes(hole(1, 0.59, 30, 5.0))  # a crack seen often: still a candidate
+    gate = AnnounceGate(min_p_hole=0.5, min_sightings=3, min_span_s=0.3)
+    assert gate.passes(hole(1, 0.37, 3, 0.3))  # p_hole 0.507
+    assert not gate.passes(hole(1, 0.36, 30, 5.0))  # p_hole 0.467: seen often, a candidate
     assert not gate.passes(hole(1, 0.95, 2, 5.0))
     assert not gate.passes(hole(1, 0.95, 10, 0.2))  # ten frames of one instant
 
@@ -38,8 +41,26 @@ def test_select_drops_a_second_hole_at_the_same_place_keeps_neighbours() -> None
     assert [h.id for h in gate.select(holes, announced={1, 3})] == [1, 3, 4]
 
 
+def test_the_threshold_is_the_detectors_calibrated_probability() -> None:
+    gate = AnnounceGate(min_p_hole=0.9, min_sightings=1, min_span_s=0.0)
+    for score in (0.0, 0.2, 0.36, 0.37, 0.5, 0.55, 0.6, 1.0):
+        h = hole(1, score, 1, 0.0)
+        assert gate.p_hole(h) == p_hole_of_score(score)
+        assert gate.passes(h) == (p_hole_of_score(score) >= 0.9)
+    # p_hole is kept within [0.01, 0.99]: the highest threshold still lets the best through
+    assert AnnounceGate(min_p_hole=0.99).passes(hole(1, 1.0, 5, 1.0))
+    assert AnnounceGate(min_p_hole=0.0).passes(hole(1, 0.0, 5, 1.0))
+
+
 @pytest.mark.parametrize(
-    "kw", [{"min_score": 1.5}, {"min_score": -0.1}, {"min_sightings": 0}, {"min_span_s": -1.0}]
+    "kw",
+    [
+        {"min_p_hole": 1.0},  # never reached: p_hole <= 0.99
+        {"min_p_hole": -0.1},
+        {"min_p_hole": math.nan},
+        {"min_sightings": 0},
+        {"min_span_s": -1.0},
+    ],
 )
 def test_bad_settings_are_input_errors(kw: dict[str, float]) -> None:
     with pytest.raises(InputError):

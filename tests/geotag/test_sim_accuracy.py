@@ -63,8 +63,10 @@ def pct(values: list[float], q: float) -> float:
 
 
 @pytest.mark.timeout(150)
-def test_pipeline_geotag_error_and_every_hole_once(tmp_path: Path) -> None:
-    logging.getLogger("capture").setLevel(logging.ERROR)
+def test_pipeline_geotag_error_and_every_hole_once(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.ERROR, logger="capture")  # restored after the test
     with SimSortie(PARAMS) as sortie:
         cfg = FlightConfig(
             log_prefix=tmp_path / "flight",
