@@ -3,6 +3,7 @@ with the REQUEST_DATA_STREAM fallback (a part of :class:`capture._mavlink.Teleme
 
 from __future__ import annotations
 
+import abc
 import logging
 import math
 import os
@@ -63,7 +64,7 @@ def read_signing_key(path: str | os.PathLike[str]) -> bytes:
     raise TelemetryError(f"signing key {path}: expected 64 hex digits or 32 bytes")
 
 
-class RateRequests:
+class RateRequests(abc.ABC):
     """Commands and message rates; the receiver thread fills ``_acks`` from COMMAND_ACKs."""
 
     _conn: Any
@@ -79,8 +80,9 @@ class RateRequests:
     _arrivals: dict[str, Any]
     rate_method: RateMethod
 
+    @abc.abstractmethod
     def _require_target(self) -> tuple[int, int]:
-        raise NotImplementedError
+        """The autopilot's (system, component); the link class knows it from the heartbeat."""
 
     def command_long(self, command: int, *params: float) -> int:
         """Send COMMAND_LONG to the autopilot and return the MAV_RESULT of its COMMAND_ACK.
