@@ -19,6 +19,9 @@ How sightings are matched (deterministic; no clocks, no randomness):
 * Sightings of one frame are different holes: each hole takes at most one sighting per
   frame, assigned greedily by normalised distance (ties: lower hole id, earlier sighting).
   This is what keeps two real holes 1.2 m apart separate when the GPS error is metres.
+* Sightings from another GPS source (another flight or vehicle: :meth:`HoleTracker.update`'s
+  ``source``) carry an independent GPS error: for them the bias drift is at its cap at
+  once, however close in time the flights were.
 * A sighting that joins no hole starts a new one. A single false detection therefore
   becomes a hole with ``sightings == 1``: consumers ask :meth:`HoleTracker.confirmed`.
 
@@ -117,6 +120,7 @@ class _Track:
         self.best = s
         self.best_quality = -math.inf
         self.best_score = -math.inf
+        self.source: str | None = None
         self._add(s, ned)
 
     def _add(self, s: HoleSighting, ned: tuple[float, float, float]) -> None:
@@ -136,14 +140,25 @@ class _Track:
             self.best_quality = quality
             self.best = s
 
-    def predicted_var(self, s: HoleSighting, params: MergeParams) -> float:
+    def predicted_var(
+        self, s: HoleSighting, params: MergeParams, source: str | None = None
+    ) -> float:
         dt_s = abs(s.t_boot_ns - self.t_last) * 1e-9
         gps_var = s.sigma_gps_m**2
         drift = min(gps_var * dt_s / params.gps_decorrelation_s, 2.0 * gps_var)
+        if source != self.source:  # another receiver's bias: independent of this one's
+            drift = 2.0 * gps_var
         return self.p + drift
 
-    def update(self, s: HoleSighting, ned: tuple[float, float, float], params: MergeParams) -> None:
-        p = self.predicted_var(s, params)
+    def update(
+        self,
+        s: HoleSighting,
+        ned: tuple[float, float, float],
+        params: MergeParams,
+        source: str | None = None,
+    ) -> None:
+        p = self.predicted_var(s, params, source)
+        self.source = source
         r = _rel_var(s)
         k = p / (p + r)
         self.kn += k * (ned[0] - self.kn)
@@ -181,8 +196,13 @@ class HoleTracker:
         n, e, d = pymap3d.geodetic2ned(s.lat_deg, s.lon_deg, s.alt_m, *self._origin)
         return (float(n), float(e), float(d))
 
-    def update(self, sightings: Sequence[HoleSighting]) -> list[Hole]:
-        """Merge new sightings; return the holes they created or changed, sorted by id."""
+    def update(self, sightings: Sequence[HoleSighting], source: str | None = None) -> list[Hole]:
+        """Merge new sightings; return the holes they created or changed, sorted by id.
+
+        ``source`` names where the sightings' positions come from (a flight, a vehicle):
+        a hole last seen from another source is matched with that source's GPS error taken
+        as independent of its own (one flight's tracker leaves it None).
+        """
         frames: dict[tuple[int, int | None], list[HoleSighting]] = {}
         for s in sightings:
             if not (math.isfinite(s.lat_deg) and math.isfinite(s.lon_deg)):
@@ -190,10 +210,10 @@ class HoleTracker:
             frames.setdefault((s.t_boot_ns, s.frame_index), []).append(s)
         changed: set[int] = set()
         for key in sorted(frames, key=lambda k: k[0]):
-            changed.update(self._update_frame(frames[key]))
+            changed.update(self._update_frame(frames[key], source))
         return [self._hole(t) for t in self._tracks if t.id in changed]
 
-    def _update_frame(self, group: list[HoleSighting]) -> list[int]:
+    def _update_frame(self, group: list[HoleSighting], source: str | None) -> list[int]:
         p = self.params
         local = [self._local(s) for s in group]
         pairs: list[tuple[float, int, int]] = []
@@ -203,7 +223,8 @@ class HoleTracker:
                     continue
                 major = max(s.major_m, t.best.major_m)
                 floor = max(p.min_radius_m, p.size_fraction * major if major > 0 else 0.0)
-                gate = max(floor, p.n_sigma * math.sqrt(t.predicted_var(s, p) + _rel_var(s)))
+                var = t.predicted_var(s, p, source) + _rel_var(s)
+                gate = max(floor, p.n_sigma * math.sqrt(var))
                 dist = math.hypot(ned[0] - t.kn, ned[1] - t.ke)
                 if dist < gate:
                     pairs.append((dist / gate, ti, i))
@@ -219,9 +240,10 @@ class HoleTracker:
         for i, (s, ned) in enumerate(zip(group, local, strict=True)):
             if i in assigned:
                 track = self._tracks[assigned[i]]
-                track.update(s, ned, p)
+                track.update(s, ned, p, source)
             else:
                 track = _Track(len(self._tracks) + 1, s, ned)
+                track.source = source
                 self._tracks.append(track)
             changed.append(track.id)
         return changed

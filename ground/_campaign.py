@@ -87,7 +87,8 @@ class CampaignMerge:
             return
         t = fr.t_unix_ns
         sightings = [dataclasses.replace(s, t_boot_ns=t) for s in step.sightings]
-        for h in self.tracker.update(sightings):  # one sighting per hole and frame at most
+        # one sighting per hole and frame at most; each flight's GPS error is its own
+        for h in self.tracker.update(sightings, source=flight):
             stats = self._seen.setdefault(h.id, {}).setdefault(flight, [0, t, t])
             stats[0] += 1
             stats[1], stats[2] = min(stats[1], t), max(stats[2], t)

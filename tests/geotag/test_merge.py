@@ -232,3 +232,23 @@ def test_bad_sighting_and_params_raise() -> None:
         HoleTracker().update([replace(s, lat_deg=math.nan)])
     with pytest.raises(InputError):
         MergeParams(n_sigma=0.0)
+
+
+def _two_sorties(source_a: str | None, source_b: str | None, seed_b: int) -> list[int]:
+    """One hole flown over by two vehicles at the same time of day: each has its own GPS bias."""
+    tracker = HoleTracker()
+    for f in fly([(0.0, 0.0)], frames=20, seed=1):
+        tracker.update(only(f), source=source_a)
+    for f in fly([(0.0, 0.0)], frames=20, seed=seed_b):
+        tracker.update(only(f), source=source_b)
+    return [h.sightings for h in tracker.holes()]
+
+
+def test_another_flights_gps_bias_is_independent_of_this_ones() -> None:
+    seeds = range(2, 30)  # 28 second vehicles, each with its own 2 m GPS bias
+    # Seen as one stream (no source), every second vehicle's bias jump splits the hole...
+    assert all(len(_two_sorties(None, None, b)) == 2 for b in seeds)
+    # ...named as two flights, the gate widens to the two independent biases: one hole with
+    # all 40 sightings, but for a bias difference in the gate's 3-sigma tail (seed 26).
+    merged = [b for b in seeds if _two_sorties("sortie-1", "sortie-2", b) == [40]]
+    assert len(merged) >= 26, merged

@@ -13,8 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from capture import LogOptions
-from capture._daemon import Flight, FlightConfig, FlightSummary
+from capture import Flight, FlightConfig, FlightSummary, LogOptions
 from detect import CameraIntrinsics
 from sim import SimAutopilot, SimPath
 from sim._source import SimSource, WorldAnchor
