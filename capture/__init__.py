@@ -78,7 +78,8 @@ from capture._mcapschemas import (
 )
 from capture._mcaptools import LogInfo, RecoveryReport, TopicInfo, log_info, recover_log
 from capture._oni import OniInfo, OniStreamInfo, OniWriter, export_oni, scan_oni, write_oni
-from capture._openni import OniSource, OpenNI2Device, camera_from_fov, openni2_library
+from capture._openni import OniSource, OpenNI2Device
+from capture._openni2lib import camera_from_fov, openni2_library
 from capture._outpath import (
     OutputPathError,
     atomic_output,

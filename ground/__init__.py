@@ -45,14 +45,13 @@ from ground._evaluation import (
 from ground._flightholes import (
     ExportReport,
     FlightHoles,
-    HoleThumbnail,
     default_out_path,
     export_flight_holes,
     flight_log_files,
     log_stem,
     read_flight_holes,
-    render_thumbnail,
 )
+from ground._flightviews import HoleThumbnail, render_thumbnail
 from ground._images import read_camera, read_depth, read_rgb, write_depth, write_rgb
 from ground._overlay import depth_colour, draw_detections, render_detections, segmentation
 from ground._report import render_report, write_report

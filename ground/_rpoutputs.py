@@ -19,7 +19,7 @@ import numpy.typing as npt
 
 from capture import jsonable
 from geotag import Hole, VehiclePose
-from ground._flightholes import render_thumbnail
+from ground._flightviews import render_thumbnail
 from ground._report import write_report
 from ground._rpoptions import HoleMatch, ReprocessOptions
 from missions import HOLE_SUFFIXES, write_hole_file

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from capture import Frame, OniSource, write_oni
-from capture._openni import _Pairer, _Raw
+from capture._openni2lib import _Pairer, _Raw
 from detect import CameraIntrinsics
 from holescan_errors import InputError
 
@@ -283,7 +283,7 @@ def test_openni2_initialises_once_and_survives_an_unload(tmp_path: Path) -> None
     child = textwrap.dedent(
         """
         import sys
-        import capture._openni as co
+        import capture._openni2lib as co
         from capture import OniSource
         assert not co._init_lock.locked()
         lib = co.openni2_library()

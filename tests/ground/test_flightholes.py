@@ -25,7 +25,7 @@ import pytest
 from capture import FlightLogWriter, Frame, LogOptions
 from detect import CameraIntrinsics, Detection, FeatureScores
 from geotag import Hole, VehiclePose
-from ground._flightholes import flight_log_files, read_flight_holes
+from ground import flight_log_files, read_flight_holes
 from holescan import cli
 from missions import mavlink as mavlink2
 

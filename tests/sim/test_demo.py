@@ -20,7 +20,7 @@ from shapely.geometry import Point, Polygon
 
 from capture import log_info
 from geotag import AnnounceGate, Hole
-from ground._flightholes import read_flight_holes
+from ground import read_flight_holes
 from holescan import cli
 from sim._demo import DEMO_SORTIE
 from sim._sortie import TrueHole, make_sortie_world, true_holes
