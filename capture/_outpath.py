@@ -158,24 +158,13 @@ def atomic_output(
     """Open ``path`` for writing through ``.STEM.part.EXT``: checked first
     (:func:`check_output`), flushed, fsynced and renamed on success, removed on any error.
     """
-    p = check_output(path, inputs=inputs, suffixes=suffixes, force=force)
-    tmp = part_path(p)
-    try:
-        f = open(tmp, "wb")  # noqa: SIM115 (closed below)
-    except OSError as err:
-        raise _os_error(p, err) from err
-    try:
-        with f:
-            yield f
-            f.flush()
-            os.fsync(f.fileno())
-    except OSError as err:
-        tmp.unlink(missing_ok=True)
-        raise _os_error(p, err) from err
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    commit_part(tmp, p, force=force)
+    with (
+        output_via_part(path, inputs=inputs, suffixes=suffixes, force=force) as tmp,
+        open(tmp, "wb") as f,
+    ):
+        yield f
+        f.flush()
+        os.fsync(f.fileno())
 
 
 @contextlib.contextmanager
