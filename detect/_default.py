@@ -48,7 +48,7 @@ import numpy.typing as npt
 
 from detect._calibration import p_hole_of_score
 from detect._evaluate import overlap
-from detect._geometry import GROW_PX, grow_walls, occluders, opening_axes
+from detect._geometry import GROW_PX, grow_walls, measure_opening, occluders, opening_axes
 from detect._photometry import relative_luminance, void_evidence
 from detect._regions import (
     SHALLOW_M,
@@ -188,8 +188,17 @@ def _measure(
     occ = occluders(rim_u, rim_v, rim_zs, f.cam)
     if occ.any() and (~occ).sum() >= 3:
         rim_u, rim_v, rim_zs = rim_u[~occ], rim_v[~occ], rim_zs[~occ]
-    major, minor_pca, area, rim_z = opening_axes(
+    # How much of the opening's outline is bordered by rim we saw: not the image border,
+    # not unread pixels, not a nearer edge standing in front.
+    rim_seen = min(1.0, (n_rim - int(occ.sum())) / (int(ring_all.sum()) + RING_PX * open_px))
+    opening = measure_opening(
         (us.astype(np.float64) + x0, vs.astype(np.float64) + y0), (rim_u, rim_v, rim_zs), f.cam
+    )
+    major, minor_pca, area, rim_z = (
+        opening.major_m,
+        opening.minor_m,
+        opening.area_m2,
+        opening.rim_depth_m,
     )
     # Passable width: diameter of the largest disk inside the region (metres at the rim).
     dist = cv2.distanceTransform(np.pad(big, 1), cv2.DIST_L2, 5)
@@ -238,7 +247,14 @@ def _measure(
         rim_depth_m=rim_z,
         beyond_range=beyond,
         relative_brightness=round(rel_in, 3) if beyond else None,
+        opening_m=_xyz(opening.centre),
+        rim_normal=_xyz(opening.normal),
+        rim_seen=round(max(rim_seen, 0.0), 3),
     )
+
+
+def _xyz(v: npt.NDArray[np.float64]) -> tuple[float, float, float]:
+    return (round(float(v[0]), 4), round(float(v[1]), 4), round(float(v[2]), 4))
 
 
 def detect_default(

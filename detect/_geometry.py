@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -41,20 +42,47 @@ def fit_plane(
     return normal, centre
 
 
-def opening_axes(
+@dataclass(frozen=True)
+class Opening:
+    """An opening measured on its rim plane (camera optical frame, metres).
+
+    major_m, minor_m : axes of the ellipse with the opening's second moments on the plane.
+    area_m2 : its area on the plane.
+    rim_depth_m : median axial depth of the rim.
+    centre : (3,) the opening's centroid on the rim plane (area-weighted: each pixel's ray
+        meets the plane in a patch whose size grows with range and obliqueness).
+    normal : (3,) unit normal of the rim plane, pointing toward the camera.
+    """
+
+    major_m: float
+    minor_m: float
+    area_m2: float
+    rim_depth_m: float
+    centre: npt.NDArray[np.float64]
+    normal: npt.NDArray[np.float64]
+
+
+def measure_opening(
     region_uv: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]],
     rim_uvz: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]],
     cam: CameraIntrinsics,
-) -> tuple[float, float, float, float]:
-    """Metric size of an opening: ``(major_m, minor_m, area_m2, rim_depth_m)``.
+) -> Opening:
+    """Metric size and centre of an opening on the plane of its rim.
 
     region_uv : pixel coordinates of the region; rim_uvz : pixel coordinates and depth (m)
     of the valid ring around it. The rim's 3-D points define the opening plane (least
-    squares); the region's rays meet that plane; their second moments (plus each pixel's own
-    footprint) give the axes of the ellipse with the same moments.
+    squares); the region's pixel rays meet that plane in points whose area-weighted mean is
+    the opening's centre and whose second moments (plus each pixel's own footprint) give the
+    axes of the ellipse with the same moments.
+
+    The centre is the opening's own, whatever the view: seen obliquely, the box of the
+    region spans the visible far wall and the near rim, and the ray through the box centre
+    meets the ground off the opening's centre (toward the camera).
     """
     ru, rv, rz = rim_uvz
     normal, centre = fit_plane(rays_of(ru, rv, cam) * rz[:, None])
+    if normal @ centre > 0:
+        normal = -normal
     rays = rays_of(region_uv[0], region_uv[1], cam)
     t = (centre @ normal) / (rays @ normal)
     pts = rays * t[:, None]
@@ -64,15 +92,26 @@ def opening_axes(
         e1 = np.cross(normal, [1.0, 0.0, 0.0])
     e1 /= np.linalg.norm(e1)
     e2 = np.cross(normal, e1)
-    p2 = np.stack([pts @ e1, pts @ e2], axis=1)
     cos_incidence = np.abs(rays @ normal) / np.linalg.norm(rays, axis=1)
     pix_area = (t**2) / (cam.fx * cam.fy) / np.maximum(cos_incidence, 0.2)
     area = float(pix_area.sum())
+    mid = (pix_area[:, None] * pts).sum(axis=0) / area
+    p2 = np.stack([(pts - mid) @ e1, (pts - mid) @ e2], axis=1)
     cov = np.cov(p2.T) if len(p2) > 1 else np.zeros((2, 2))
     cov = cov + np.eye(2) * float(np.mean(pix_area)) / 12.0
     lam = np.sort(np.linalg.eigvalsh(cov))[::-1]
     major, minor = 4.0 * math.sqrt(max(lam[0], 0.0)), 4.0 * math.sqrt(max(lam[1], 0.0))
-    return major, minor, area, float(np.median(rz))
+    return Opening(major, minor, area, float(np.median(rz)), mid, normal)
+
+
+def opening_axes(
+    region_uv: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]],
+    rim_uvz: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]],
+    cam: CameraIntrinsics,
+) -> tuple[float, float, float, float]:
+    """``(major_m, minor_m, area_m2, rim_depth_m)`` of :func:`measure_opening`."""
+    o = measure_opening(region_uv, rim_uvz, cam)
+    return o.major_m, o.minor_m, o.area_m2, o.rim_depth_m
 
 
 def disk(r: int) -> npt.NDArray[np.uint8]:

@@ -188,6 +188,15 @@ class Detection:
     p_hole : probability that this is a true access hole (default mode, calibrated on
         independent scene sets, see :mod:`detect._calibration`); None in paper mode,
         whose score is the published method's own.
+    opening_m : centre of the opening on the plane of its rim, metres in the camera's
+        optical frame (x right, y down, z forward): where the hole is, whatever the view
+        (the box centre is not: seen obliquely, the box spans the visible far wall and the
+        near rim). None when not measured (paper mode, the baseline, older logs).
+    rim_normal : unit normal of the rim plane in the optical frame, toward the camera;
+        None when not measured.
+    rim_seen : fraction of the opening's outline bordered by rim the sensor saw (not the
+        image border, no unread pixels, no nearer edge in front): 1 = the whole rim seen;
+        None when not measured.
     """
 
     box: tuple[int, int, int, int]
@@ -200,6 +209,9 @@ class Detection:
     beyond_range: bool = False
     relative_brightness: float | None = None
     p_hole: float | None = None
+    opening_m: tuple[float, float, float] | None = None
+    rim_normal: tuple[float, float, float] | None = None
+    rim_seen: float | None = None
 
     @property
     def centre_px(self) -> tuple[float, float]:
