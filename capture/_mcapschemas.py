@@ -110,6 +110,7 @@ _POSE_SCHEMA: Final[dict[str, Any]] = {
     },
     "required": [f.name for f in dataclasses.fields(VehiclePose)],
 }
+_XYZ: Final = {"type": "array", "items": _NUM, "minItems": 3, "maxItems": 3}
 _DETECTION_SCHEMA: Final[dict[str, Any]] = {
     "type": "object",
     "properties": {
@@ -126,6 +127,9 @@ _DETECTION_SCHEMA: Final[dict[str, Any]] = {
         "beyond_range": {"type": "boolean"},
         "relative_brightness": {"type": ["number", "null"]},
         "p_hole": {"type": ["number", "null"]},
+        "opening_m": {"oneOf": [_XYZ, {"type": "null"}]},
+        "rim_normal": {"oneOf": [_XYZ, {"type": "null"}]},
+        "rim_seen": {"type": ["number", "null"]},
     },
 }
 
@@ -420,8 +424,9 @@ def detection_json(det: Detection) -> dict[str, Any]:
 
 
 def decode_detection(obj: Mapping[str, Any]) -> Detection:
-    """Inverse of :func:`detection_json`; logs written before ``p_hole`` and
-    ``relative_brightness`` existed (or in paper mode) give None for them."""
+    """Inverse of :func:`detection_json`; logs written before ``p_hole``,
+    ``relative_brightness``, ``opening_m``, ``rim_normal`` and ``rim_seen`` existed (or in
+    paper mode) give None for them."""
     f = obj["features"]
     x, y, w, h = (int(v) for v in obj["box"])
     return Detection(
@@ -435,7 +440,19 @@ def decode_detection(obj: Mapping[str, Any]) -> Detection:
         beyond_range=bool(obj.get("beyond_range", False)),
         relative_brightness=_opt_float(obj.get("relative_brightness")),
         p_hole=_opt_float(obj.get("p_hole")),
+        opening_m=_opt_xyz(obj.get("opening_m")),
+        rim_normal=_opt_xyz(obj.get("rim_normal")),
+        rim_seen=_opt_float(obj.get("rim_seen")),
     )
+
+
+def _opt_xyz(value: Any) -> tuple[float, float, float] | None:
+    if value is None:
+        return None
+    if not isinstance(value, list | tuple) or len(value) != 3:
+        raise InputError(f"expected 3 numbers or null, got {value!r}")
+    x, y, z = (_float(v) for v in value)
+    return (x, y, z)
 
 
 def _score_color(score: float) -> Color:

@@ -11,7 +11,7 @@ How sightings are matched (deterministic; no clocks, no randomness):
   hole keeps a local position estimate that follows that bias (a 2-D random-walk Kalman
   filter: process noise ``sigma_gps**2 / gps_decorrelation_s`` per second, capped at
   ``2 * sigma_gps**2``; measurement noise = the sighting's non-GPS variance from attitude,
-  depth and timing).
+  depth, timing and the opening's centre).
 * A sighting may join a hole when its horizontal distance to that estimate is below
   ``max(floor, n_sigma * sqrt(P + R))`` with ``floor = max(min_radius_m, size_fraction *
   major axis)`` (a big hole's detected centre wanders with the view), and the two major
@@ -25,8 +25,10 @@ How sightings are matched (deterministic; no clocks, no randomness):
 * A sighting that joins no hole starts a new one. A single false detection therefore
   becomes a hole with ``sightings == 1``: consumers ask :meth:`HoleTracker.confirmed`.
 
-Reported position: inverse-variance weighted mean (weights ``1 / sigma_h_m**2``) of all
-sightings. Its sigma combines the non-GPS part (averages down as ``1/sqrt(n)``) with the
+Reported position: inverse-variance weighted mean of all sightings, weighted by their
+non-GPS variance (attitude, depth, timing, and where the detector put the opening: an
+oblique view or a rim half hidden weighs less); the GPS error, shared by sightings close in
+time, cannot tell them apart. Its sigma combines the non-GPS part (averages down as ``1/sqrt(n)``) with the
 GPS part, which only averages down over independent stretches of ``gps_decorrelation_s``.
 """
 
@@ -124,7 +126,7 @@ class _Track:
         self._add(s, ned)
 
     def _add(self, s: HoleSighting, ned: tuple[float, float, float]) -> None:
-        w = 1.0 / max(s.sigma_h_m, _MIN_REL_SIGMA_M) ** 2
+        w = 1.0 / _rel_var(s)  # GPS error is shared: it cannot tell sightings apart
         self.count += 1
         self.w_sum += w
         self.wn += w * ned[0]
@@ -168,7 +170,7 @@ class _Track:
 
 
 def _rel_var(s: HoleSighting) -> float:
-    """Variance of the sighting's non-GPS error (attitude, depth, timing), m^2."""
+    """Variance of the sighting's non-GPS error (attitude, depth, timing, opening), m^2."""
     return max(s.sigma_h_m**2 - s.sigma_gps_m**2, _MIN_REL_SIGMA_M**2)
 
 

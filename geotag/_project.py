@@ -39,25 +39,42 @@ _log = logging.getLogger(__name__)
 
 @dataclass(frozen=True)
 class ErrorModel:
-    """1-sigma error sources that make up a sighting's horizontal uncertainty.
+    """Error sources that make up a sighting's horizontal uncertainty.
 
-    attitude_sigma_rad : attitude (and mount calibration) error per axis, rad; moves the
-        point by ``range * angle`` (1 deg = 1.7 cm per metre of range).
+    ``sigma_h_m`` is the radius that holds about 68 % of a sighting's horizontal errors;
+    the sources below are independent and added in quadrature.
+
+    attitude_sigma_rad : roll/pitch (and mount calibration) error, rad; moves the point by
+        ``range * angle`` (1 deg = 1.7 cm per metre of range).
     default_eph_m : GPS horizontal 1-sigma, metres, used when ``pose.eph_m`` is NaN.
     depth_noise_per_mm : Xtion axial depth noise ``sigma_Z = k * Z_mm**2`` mm
         (Khoshelham & Elberink 2012: k = 1.425e-6, 1.4 mm at 1 m, 13 mm at 3 m).
+    opening_base_m, opening_oblique, opening_unseen : where the detector put the opening's
+        centre (:attr:`detect.Detection.opening_m`): ``hypot(opening_base_m, opening_oblique
+        * major * tan(view angle), opening_unseen * major * (1 - rim_seen))``; the view
+        angle is the line of sight's angle to the rim plane's normal. Calibrated with
+        ``benchmarks/bench_geotag.py`` so that 68 % of sightings fall within it.
+    box_oblique : detections without an opening centre (paper mode, older logs) are placed
+        at their box centre, which moves toward the camera as the view turns oblique:
+        ``hypot(opening_base_m, box_oblique * major * tan(view angle))``.
     """
 
     attitude_sigma_rad: float = math.radians(1.0)
     default_eph_m: float = 3.0
     depth_noise_per_mm: float = 1.425e-6
+    opening_base_m: float = 0.01
+    opening_oblique: float = 0.08
+    opening_unseen: float = 0.5
+    box_oblique: float = 0.35
 
 
 @dataclass(frozen=True)
 class HoleSighting:
     """One detection placed on the Earth.
 
-    lat_deg, lon_deg : WGS84 of the hole's opening (box centre at rim depth).
+    lat_deg, lon_deg : WGS84 of the hole's opening: its centre on the rim plane
+        (:attr:`detect.Detection.opening_m`), or for detections without one the box centre
+        at rim depth.
     alt_m : altitude of the opening above mean sea level, metres.
     sigma_h_m : 1-sigma horizontal uncertainty, metres (all sources below combined).
     sigma_gps_m : the GPS part of ``sigma_h_m`` (shared by sightings close in time).
@@ -70,6 +87,12 @@ class HoleSighting:
     range_m : distance camera -> opening, metres.
     off_centre : distance of the box centre from the principal point, 0 (centre) to 1
         (image corner); smaller = better view.
+    sigma_opening_m : the part of ``sigma_h_m`` from where the detector put the opening's
+        centre in the image (view angle, rim seen).
+    view_angle_deg : angle between the line of sight and the rim plane's normal, degrees
+        (without a rim plane: the ray's angle off the optical axis, the camera taken to
+        face the ground as on a survey).
+    rim_seen : fraction of the opening's rim the sensor saw (NaN: not measured).
     """
 
     lat_deg: float
@@ -86,6 +109,9 @@ class HoleSighting:
     sigma_gps_m: float = 0.0
     range_m: float = float("nan")
     off_centre: float = 0.0
+    sigma_opening_m: float = 0.0
+    view_angle_deg: float = float("nan")
+    rim_seen: float = float("nan")
 
 
 def _check_pose(pose: VehiclePose) -> None:
@@ -137,22 +163,33 @@ def geotag_detection(
     if not (math.isfinite(z) and z > 0):
         raise InputError(f"detection rim_depth_m must be positive metres, got {z}")
     u, v = det.centre_px
-    ray = np.array([(u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, 1.0])
     r_ned_opt = rotation_ned_from_optical(mount, pose)
-    p_ned = r_ned_opt @ (ray * z) + _offset_ned(mount, pose)
+    centre = _opening_centre(det)
+    if centre is not None:
+        p_opt = centre
+        normal_ned = r_ned_opt @ np.asarray(det.rim_normal, dtype=np.float64)
+    else:  # no opening measured: the box centre at rim depth, the ground facing the camera
+        p_opt = np.array([(u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, 1.0]) * z
+        normal_ned = r_ned_opt @ np.array([0.0, 0.0, -1.0])
+    los_ned = r_ned_opt @ p_opt
+    p_ned = los_ned + _offset_ned(mount, pose)
     lat, lon, alt = pymap3d.ned2geodetic(
         float(p_ned[0]), float(p_ned[1]), float(p_ned[2]), pose.lat_deg, pose.lon_deg, pose.alt_m
     )
 
-    # 1-sigma horizontal error, independent sources added in quadrature.
+    # Horizontal error: independent sources added in quadrature.
     range_m = float(np.linalg.norm(p_ned))
     eph = pose.eph_m if math.isfinite(pose.eph_m) and pose.eph_m >= 0 else em.default_eph_m
     attitude = range_m * em.attitude_sigma_rad
-    sigma_z_m = em.depth_noise_per_mm * (z * 1000.0) ** 2 / 1000.0
-    ray_ned = r_ned_opt @ ray  # displacement per metre of Z
+    z_los = float(p_opt[2])
+    sigma_z_m = em.depth_noise_per_mm * (z_los * 1000.0) ** 2 / 1000.0
+    ray_ned = los_ned / z_los  # displacement per metre of Z
     depth = sigma_z_m * math.hypot(float(ray_ned[0]), float(ray_ned[1]))
     timing = abs(pose.age_ns) * 1e-9 * math.hypot(pose.vn, pose.ve)
-    sigma_h = math.sqrt(eph**2 + attitude**2 + depth**2 + timing**2)
+    cos_view = abs(float(normal_ned @ los_ned)) / max(float(np.linalg.norm(los_ned)), 1e-9)
+    view = math.acos(min(1.0, cos_view))
+    opening = _opening_sigma(det, view, centre is not None, em)
+    sigma_h = math.sqrt(eph**2 + attitude**2 + depth**2 + timing**2 + opening**2)
 
     half_diag = math.hypot(camera.width / 2.0, camera.height / 2.0)
     off_centre = min(1.0, math.hypot(u - camera.cx, v - camera.cy) / half_diag)
@@ -171,7 +208,34 @@ def geotag_detection(
         sigma_gps_m=eph,
         range_m=range_m,
         off_centre=off_centre,
+        sigma_opening_m=opening,
+        view_angle_deg=math.degrees(view),
+        rim_seen=float(det.rim_seen) if det.rim_seen is not None else math.nan,
     )
+
+
+def _opening_centre(det: Detection) -> FloatArray | None:
+    """The detection's opening centre (optical frame, m), or None to use the box centre."""
+    if det.opening_m is None or det.rim_normal is None:
+        return None
+    c = np.asarray(det.opening_m, dtype=np.float64)
+    n = np.asarray(det.rim_normal, dtype=np.float64)
+    if c.shape != (3,) or n.shape != (3,) or not (np.isfinite(c).all() and np.isfinite(n).all()):
+        return None
+    if c[2] <= 0 or not 0.5 < float(np.linalg.norm(n)) < 1.5:
+        return None
+    return c
+
+
+def _opening_sigma(det: Detection, view_rad: float, measured: bool, em: ErrorModel) -> float:
+    """How far the detector's idea of the opening's centre may be off, metres (68 %)."""
+    major = det.major_m if math.isfinite(det.major_m) and det.major_m > 0 else 0.0
+    oblique = major * math.tan(min(view_rad, math.radians(80.0)))
+    if not measured:
+        return math.hypot(em.opening_base_m, em.box_oblique * oblique) if oblique > 0 else 0.0
+    seen = det.rim_seen if det.rim_seen is not None and math.isfinite(det.rim_seen) else 1.0
+    unseen = major * (1.0 - min(max(seen, 0.0), 1.0))
+    return math.hypot(em.opening_base_m, em.opening_oblique * oblique, em.opening_unseen * unseen)
 
 
 def geotag_frame(

@@ -127,6 +127,9 @@ def render_frame(seed: int, index: int, intr_full: Intrinsics, scale: float = 1.
         "index": index,
         **cam,
         "max_range_m": _r(plan.max_range),
+        # The world's vertical (up) in the camera frame: horizontal errors are measured
+        # perpendicular to it.
+        "up_cam": [_r(float(c), 5) for c in R[2, :]],
         "range_limit_in_view": bool(beyond.any()),
         "beyond_range_frac": _r(beyond.mean()),
         "no_reading_frac": _r(np.mean(depth == 0)),

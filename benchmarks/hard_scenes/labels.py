@@ -39,6 +39,7 @@ def opening_view(intr: Intrinsics, R, C, D, hits: Hits, grid: Grid, op: dict) ->
     u0, u1 = max(0, int(np.floor(u.min())) - 2), min(W, int(np.ceil(u.max())) + 3)
     v0, v1 = max(0, int(np.floor(v.min())) - 2), min(H, int(np.ceil(v.max())) + 3)
     res = {"cut": cut, "area_px": area, "rim_Z": Z, "rim_inside": inside}
+    res.update(_centre_truth(R, C, op))
     if u0 >= u1 or v0 >= v1:
         res.update(full=np.zeros(0, np.intp), vis=np.zeros(0, np.intp))
         return res
@@ -53,6 +54,26 @@ def opening_view(intr: Intrinsics, R, C, D, hits: Hits, grid: Grid, op: dict) ->
     vis = full & (hits.t[idx] >= tpl - 0.04 / np.abs(d[:, 2]))
     res.update(full=idx[full], vis=idx[vis])
     return res
+
+
+def _centre_truth(R, C, op: dict) -> dict:
+    """The opening's area centroid on its rim plane, and the plane's normal, in the camera
+    frame (x right, y down, z forward; metres), and the view's angle off the vertical."""
+    x, y = op["poly"][:, 0], op["poly"][:, 1]
+    cross = x * np.roll(y, -1) - np.roll(x, -1) * y
+    a2 = float(cross.sum())
+    cx = float(((x + np.roll(x, -1)) * cross).sum()) / (3.0 * a2)
+    cy = float(((y + np.roll(y, -1)) * cross).sum()) / (3.0 * a2)
+    P = np.array([cx, cy, float(rim_z(op, cx, cy))])
+    _, gx, gy, _, _ = op["plane"]
+    n = np.array([-gx, -gy, 1.0]) / np.sqrt(gx * gx + gy * gy + 1.0)
+    los = P - C
+    off = np.degrees(np.arccos(-los[2] / np.linalg.norm(los)))
+    return {
+        "centre_cam": [round(float(c), 4) for c in (P - C) @ R],
+        "normal_cam": [round(float(c), 4) for c in n @ R],
+        "view_off_vertical_deg": round(float(off), 2),
+    }
 
 
 def hole_annotation(
@@ -99,6 +120,11 @@ def hole_annotation(
         "rim_in_range_frac": round(rim_in, 3),
         "no_reading_frac": round(float(noread.sum() / vis.size), 3),
         "touches_range_limit": touches,
+        # The opening's area centroid on its rim plane and the plane's normal (up, out of
+        # the ground), camera frame, metres: truth for geotagging, for analysis only.
+        "centre_cam_m": view["centre_cam"],
+        "rim_normal_cam": view["normal_cam"],
+        "view_off_vertical_deg": view["view_off_vertical_deg"],
     }
 
 

@@ -46,7 +46,7 @@ from capture._mcaplog import log_file_path
 from capture._mcapschemas import decode_detection, detection_json
 from detect import CameraIntrinsics, Detection, FeatureScores
 from geotag import CameraMount, Hole, VehiclePose
-from holescan_errors import HolescanError
+from holescan_errors import HolescanError, InputError
 from missions import mavlink as mavlink2
 
 REPO = Path(__file__).resolve().parents[2]
@@ -793,3 +793,24 @@ def test_write_failure_keeps_capture_running_and_is_reported(tmp_path: Path) -> 
     assert report.frames >= 8  # 300 kB of 24 kB frames, less the chunk cut by the limit
     got = [r.frame for r in read_flight_log(report.dst, kinds={LoggedFrame})]
     assert all(frames_equal(a, make_frame(a.index)) for a in got)
+
+
+def test_detection_opening_centre_round_trips(tmp_path: Path) -> None:
+    """The opening's centre, rim normal and rim seen come back; older logs give None."""
+    det = dataclasses.replace(
+        make_detection(1), opening_m=(0.41, -0.2, 2.93), rim_normal=(0.1, 0.0, -0.995), rim_seen=0.8
+    )
+    with FlightLogWriter(tmp_path / "f", SMALL) as w:
+        assert w.write_detections(4, [det], T0_UNIX_NS)
+    (got,) = [r for r in read_flight_log(w.paths[0]) if isinstance(r, LoggedDetections)]
+    assert list(got.detections) == [det]
+    old = {
+        k: v
+        for k, v in detection_json(det).items()
+        if k not in ("opening_m", "rim_normal", "rim_seen")
+    }
+    assert decode_detection(old) == dataclasses.replace(
+        det, opening_m=None, rim_normal=None, rim_seen=None
+    )
+    with pytest.raises(InputError, match="3 numbers"):
+        decode_detection({**detection_json(det), "opening_m": [1.0, 2.0]})

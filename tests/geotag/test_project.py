@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pymap3d
@@ -226,3 +227,71 @@ def test_geotag_frame_skips_detections_without_depth() -> None:
     out = geotag_frame(dets, CAM, CameraMount(), pose(), frame_index=9)
     assert [s.box for s in out] == [dets[0].box, dets[2].box]
     assert all(s.frame_index == 9 for s in out)
+
+
+def opening_detection(
+    centre: tuple[float, float, float],
+    normal: tuple[float, float, float] = (0.0, 0.0, -1.0),
+    rim_seen: float = 1.0,
+    major: float = 0.8,
+) -> Detection:
+    """A detection whose box sits off the opening (as in an oblique view)."""
+    det = detection_at(399.5, 299.5, centre[2])
+    return replace(det, major_m=major, opening_m=centre, rim_normal=normal, rim_seen=rim_seen)
+
+
+def test_opening_centre_places_the_hole_not_the_box() -> None:
+    """The sighting is at the opening's centre on its rim plane, wherever the box is."""
+    em = ErrorModel(attitude_sigma_rad=0.0)
+    det = opening_detection((0.5, -0.3, 3.0))
+    s = geotag_detection(det, CAM, CameraMount(), pose(yaw_deg=90.0, eph_m=0.0), errors=em)
+    # Heading east, nadir mount: optical x (image right) = south, optical y (down) = west.
+    lat, lon, alt = pymap3d.ned2geodetic(-0.5, 0.3, 3.0, LAT0, LON0, ALT0)
+    _assert_at(s.lat_deg, s.lon_deg, s.alt_m, (float(lat), float(lon), float(alt)))
+    view = math.degrees(math.atan(math.hypot(0.5, 0.3) / 3.0))
+    assert s.view_angle_deg == pytest.approx(view)
+    assert s.rim_seen == 1.0
+    expected = math.hypot(
+        em.opening_base_m, em.opening_oblique * 0.8 * math.tan(math.radians(view))
+    )
+    assert s.sigma_opening_m == pytest.approx(expected)
+    assert s.sigma_h_m > s.sigma_opening_m  # depth noise on top
+
+
+def test_opening_sigma_grows_with_obliqueness_and_hidden_rim() -> None:
+    em = ErrorModel(attitude_sigma_rad=0.0)
+    p = pose(eph_m=0.0)
+    below = geotag_detection(opening_detection((0.0, 0.0, 3.0)), CAM, CameraMount(), p, errors=em)
+    side = geotag_detection(opening_detection((1.5, 0.0, 3.0)), CAM, CameraMount(), p, errors=em)
+    cut = geotag_detection(
+        opening_detection((1.5, 0.0, 3.0), rim_seen=0.6), CAM, CameraMount(), p, errors=em
+    )
+    assert below.sigma_opening_m == pytest.approx(em.opening_base_m)
+    assert below.sigma_opening_m < side.sigma_opening_m < cut.sigma_opening_m
+    # A tilted rim plane seen straight along its normal is not oblique.
+    n = np.array([-1.5, 0.0, -3.0]) / math.hypot(1.5, 3.0)
+    facing = geotag_detection(
+        opening_detection((1.5, 0.0, 3.0), normal=(float(n[0]), 0.0, float(n[2]))),
+        CAM,
+        CameraMount(),
+        p,
+        errors=em,
+    )
+    assert facing.view_angle_deg == pytest.approx(0.0, abs=1e-6)
+    # Without an opening centre the box centre is used, with the box's own (larger) term.
+    box = geotag_detection(
+        replace(side_det := opening_detection((1.5, 0.0, 3.0)), opening_m=None),
+        CAM,
+        CameraMount(),
+        p,
+        errors=em,
+    )
+    assert box.box == side_det.box and box.sigma_opening_m > side.sigma_opening_m
+
+
+def test_unusable_opening_centre_falls_back_to_the_box() -> None:
+    for bad in ((0.1, 0.2, -3.0), (math.nan, 0.0, 3.0)):
+        det = replace(opening_detection((0.1, 0.2, 3.0)), opening_m=bad)
+        s = geotag_detection(det, CAM, CameraMount(), pose())
+        ref = geotag_detection(replace(det, opening_m=None), CAM, CameraMount(), pose())
+        assert (s.lat_deg, s.lon_deg) == (ref.lat_deg, ref.lon_deg)
