@@ -37,6 +37,7 @@ are exact; ``--with-attitude`` puts it back.
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import math
 import statistics
@@ -51,10 +52,16 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 import pymap3d
-from scipy.spatial.transform import Rotation
 
 from detect import DEFAULT, CameraIntrinsics, Detection, detect_holes
-from geotag import CameraMount, ErrorModel, HoleTracker, VehiclePose, geotag_detection
+from geotag import (
+    CameraMount,
+    ErrorModel,
+    HoleSighting,
+    HoleTracker,
+    VehiclePose,
+    geotag_detection,
+)
 from ground import load_dataset, load_image_pair
 from sim import (
     DEFAULT_ANCHOR,
@@ -84,6 +91,9 @@ class Row:
     err_box_m: float  # box centre at rim depth vs truth
     sigma_m: float  # sigma_h without GNSS (and without attitude unless asked)
     sigma_box_m: float
+    major_m: float = math.nan  # the detector's major axis
+    view_deg: float = math.nan  # the sighting's view angle (to the rim plane's normal)
+    other_m: float = 0.0  # sigma_m without the opening term (depth noise, attitude)
 
 
 def _box_only(d: Detection) -> Detection:
@@ -110,6 +120,42 @@ def _horizontal_m(lat1: float, lon1: float, lat2: float, lon2: float) -> float:
 
 def _non_gnss(s_sigma_h: float, s_gps: float) -> float:
     return math.sqrt(max(s_sigma_h**2 - s_gps**2, 0.0))
+
+
+def _fit_inputs(det: Detection, s: HoleSighting) -> tuple[float, float, float]:
+    other = math.sqrt(max(_non_gnss(s.sigma_h_m, s.sigma_gps_m) ** 2 - s.sigma_opening_m**2, 0.0))
+    return (det.major_m, s.view_angle_deg, other)
+
+
+def fit_opening_sigma(rows: Sequence[Row], model: ErrorModel) -> ErrorModel:
+    """The opening terms of :class:`geotag.ErrorModel` that cover 68 % in every group.
+
+    Groups: view angle (0-15, 15-25, 25+ deg) x rim seen (>= 0.95, below); the loss is the
+    count-weighted squared distance of each group's coverage from 0.68.
+    """
+    rs = [r for r in rows if math.isfinite(r.rim_seen) and math.isfinite(r.view_deg)]
+    err = np.array([r.err_m for r in rs])
+    other = np.array([r.other_m for r in rs])
+    oblique = np.array([r.major_m * math.tan(math.radians(min(r.view_deg, 80.0))) for r in rs])
+    unseen = np.array([r.major_m * (1.0 - min(max(r.rim_seen, 0.0), 1.0)) for r in rs])
+    angle = np.array([r.view_deg for r in rs])
+    seen = np.array([r.rim_seen for r in rs])
+    groups = [
+        (lo <= angle) & (angle < hi) & ((seen >= 0.95) if whole else (seen < 0.95))
+        for lo, hi in ((0, 15), (15, 25), (25, 90))
+        for whole in (True, False)
+    ]
+    best = (math.inf, 0.0, 0.0, 0.0)
+    for base in np.arange(0.004, 0.04, 0.002):
+        for obl in np.arange(0.0, 0.4, 0.01):
+            for uns in np.arange(0.0, 1.5, 0.05):
+                sig = np.sqrt(other**2 + base**2 + (obl * oblique) ** 2 + (uns * unseen) ** 2)
+                inside = err <= sig
+                loss = sum(g.sum() * (inside[g].mean() - 0.68) ** 2 for g in groups if g.any())
+                if loss < best[0]:
+                    best = (loss, float(base), float(obl), float(uns))
+    _, base, obl, uns = best
+    return replace(model, opening_base_m=base, opening_oblique=obl, opening_unseen=uns)
 
 
 # ------------------------------------------------------------------ 1. simulator sweep
@@ -172,6 +218,7 @@ def sim_sweep(seeds: Iterable[int], errors: ErrorModel, quick: bool) -> list[Row
                                 _horizontal_m(sb.lat_deg, sb.lon_deg, t.lat_deg, t.lon_deg),
                                 _non_gnss(s.sigma_h_m, s.sigma_gps_m),
                                 _non_gnss(sb.sigma_h_m, sb.sigma_gps_m),
+                                *_fit_inputs(det, s),
                             )
                         )
     return rows
@@ -232,6 +279,7 @@ def hard_rows(root: Path, errors: ErrorModel) -> list[Row]:
                     _horizontal_m(sb.lat_deg, sb.lon_deg, float(tl), float(tn)),
                     _non_gnss(s.sigma_h_m, s.sigma_gps_m),
                     _non_gnss(sb.sigma_h_m, sb.sigma_gps_m),
+                    *_fit_inputs(det, s),
                 )
             )
     return rows
@@ -241,7 +289,10 @@ def hard_rows(root: Path, errors: ErrorModel) -> list[Row]:
 
 
 def one_side(seeds: Iterable[int], errors: ErrorModel, quick: bool) -> list[tuple[float, ...]]:
-    """Merged error of holes passed at the swath edge: (lateral offset, opening, box)."""
+    """Merged holes passed at the swath edge.
+
+    Returns (lateral offset, opening error, its sigma_h, box error, its sigma_h) per pass.
+    """
     cam = CameraIntrinsics.xtion()
     mount = CameraMount()
     rng = np.random.default_rng(2)
@@ -286,10 +337,13 @@ def one_side(seeds: Iterable[int], errors: ErrorModel, quick: bool) -> list[tupl
                 for name in ("opening", "box"):
                     holes = trackers[name].holes()
                     if not holes:
-                        errs.append(math.nan)
+                        errs += [math.nan, math.nan]
                         continue
                     best = max(holes, key=lambda h: h.sightings)
-                    errs.append(_horizontal_m(best.lat_deg, best.lon_deg, t_hole.lat_deg, t_hole.lon_deg))
+                    errs.append(
+                        _horizontal_m(best.lat_deg, best.lon_deg, t_hole.lat_deg, t_hole.lon_deg)
+                    )
+                    errs.append(best.sigma_h_m)  # no GNSS term: the poses report eph 0
                 out.append((lateral, *errs))
     return out
 
@@ -317,9 +371,12 @@ def report(title: str, rows: Sequence[Row]) -> None:
         return
     print("per-sighting horizontal error vs the true opening centre, by view angle off vertical")
     print("  angle      n  | opening centre: median   p90  cover | box centre: median   p90  cover")
-    for lo, hi in zip(ANGLE_BINS[:-1], ANGLE_BINS[1:], strict=True):
+    for lo, hi in itertools.pairwise(ANGLE_BINS):
         sel = [r for r in rows if lo <= r.angle_deg < hi]
-        for label, part in (("whole rim", [r for r in sel if r.whole]), ("part", [r for r in sel if not r.whole])):
+        for label, part in (
+            ("whole rim", [r for r in sel if r.whole]),
+            ("part", [r for r in sel if not r.whole]),
+        ):
             if not part:
                 continue
             e = [r.err_m for r in part]
@@ -330,7 +387,7 @@ def report(title: str, rows: Sequence[Row]) -> None:
                 f"{np.percentile(b, 90):6.3f} {_coverage(part, True):>5s}"
             )
     print("by the fraction of rim the detector saw (rim_seen)")
-    for lo, hi in zip(SEEN_BINS[:-1], SEEN_BINS[1:], strict=True):
+    for lo, hi in itertools.pairwise(SEEN_BINS):
         part = [r for r in rows if lo <= r.rim_seen < hi]
         if part:
             print(
@@ -358,38 +415,73 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help="fewer views (a smoke run)")
     ap.add_argument("--with-attitude", action="store_true", help="keep the 1 deg attitude term")
     ap.add_argument("--skip", nargs="*", default=[], choices=("sim", "hard", "side"))
+    ap.add_argument(
+        "--fit",
+        action="store_true",
+        help="fit the opening terms of the error model on the simulator's sightings, print "
+        "them, and measure the independent generator and the passes with them",
+    )
     args = ap.parse_args(argv)
     errors = ErrorModel() if args.with_attitude else ErrorModel(attitude_sigma_rad=0.0)
     t0 = time.monotonic()
     if "sim" not in args.skip:
         rows = sim_sweep(args.sim_seeds, errors, args.quick)
-        report("simulator, camera leaning toward the hole (whole rim in view)", [r for r in rows if r.source == "sim-tilted"])
-        report("simulator, level nadir camera (border cuts the rim far off nadir)", [r for r in rows if r.source == "sim-level"])
+        if args.fit:
+            errors = fit_opening_sigma(rows, errors)
+            print(
+                f"fitted on the simulator: opening_base_m={errors.opening_base_m:.3f}, "
+                f"opening_oblique={errors.opening_oblique:.2f}, "
+                f"opening_unseen={errors.opening_unseen:.2f}"
+            )
+            rows = sim_sweep(args.sim_seeds, errors, args.quick)
+        report(
+            "simulator, camera leaning toward the hole (whole rim in view)",
+            [r for r in rows if r.source == "sim-tilted"],
+        )
+        report(
+            "simulator, level nadir camera (border cuts the rim far off nadir)",
+            [r for r in rows if r.source == "sim-level"],
+        )
         print(f"({time.monotonic() - t0:.0f} s)")
     if "hard" not in args.skip:
         root = args.hard_dir or Path(tempfile.mkdtemp(prefix="holescan-hard-"))
         if not (root / "annotations.json").is_file():
             subprocess.run(
-                [sys.executable, str(ROOT / "hard_scenes"), str(root), "--n", str(args.hard_n),
-                 "--seed", str(args.hard_seed), "--jobs", "2"],
+                [
+                    sys.executable,
+                    str(ROOT / "hard_scenes"),
+                    str(root),
+                    "--n",
+                    str(args.hard_n),
+                    "--seed",
+                    str(args.hard_seed),
+                    "--jobs",
+                    "2",
+                ],
                 check=True,
             )
-        report(f"independent generator (hard_scenes seed {args.hard_seed}, {args.hard_n} frames)", hard_rows(root, errors))
+        report(
+            f"independent generator (hard_scenes seed {args.hard_seed}, {args.hard_n} frames)",
+            hard_rows(root, errors),
+        )
         print(f"({time.monotonic() - t0:.0f} s)")
     if "side" not in args.skip:
         res = one_side(args.sim_seeds, errors, args.quick)
         print("\n== one side only: passes at 0.35 m/s, 3 m up, hole beside the track ==")
-        for lateral in sorted({r[0] for r in res}):
-            part = [r for r in res if r[0] == lateral]
-            print(
-                f"  {lateral:.1f} m beside the track ({math.degrees(math.atan(lateral / 3.0)):.0f} deg): "
-                f"merged opening {_stats([r[1] for r in part if math.isfinite(r[1])])}; box "
-                f"{_stats([r[2] for r in part if math.isfinite(r[2])])}"
+        print("merged hole vs the true opening centre; cover: passes within the hole's sigma_h")
+        for lateral in [*sorted({r[0] for r in res}), None]:
+            part = [r for r in res if lateral is None or r[0] == lateral]
+            where = (
+                f"{lateral:.1f} m beside ({math.degrees(math.atan(lateral / 3.0)):.0f} deg)"
+                if lateral is not None
+                else "all passes"
             )
-        print(
-            f"all passes: merged opening {_stats([r[1] for r in res if math.isfinite(r[1])])}; "
-            f"box {_stats([r[2] for r in res if math.isfinite(r[2])])}"
-        )
+            cells = []
+            for name, k in (("opening", 1), ("box", 3)):
+                ok = [r for r in part if math.isfinite(r[k])]
+                cover = sum(r[k] <= r[k + 1] for r in ok) / max(len(ok), 1)
+                cells.append(f"{name} {_stats([r[k] for r in ok])}, cover {100 * cover:.0f} %")
+            print(f"  {where}: " + "; ".join(cells))
         print(f"({time.monotonic() - t0:.0f} s)")
     return 0
 

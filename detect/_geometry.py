@@ -104,6 +104,43 @@ def measure_opening(
     return Opening(major, minor, area, float(np.median(rz)), mid, normal)
 
 
+def rim_circle_centre(
+    rim_uvz: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]],
+    opening: Opening,
+    cam: CameraIntrinsics,
+) -> npt.NDArray[np.float64] | None:
+    """Centre of the circle through the seen rim, on the rim plane (optical frame, m).
+
+    For an opening the image border cuts: the centroid of its visible part lies toward the
+    image, the circle through the rim it shows does not. Least squares (Kasa) on the rim's
+    points in the plane. None when the fit is not a plausible opening: radius outside
+    0.15-1.0 m, or a centre farther than that radius from the visible part's centroid.
+    """
+    ru, rv, rz = rim_uvz
+    if len(rz) < 8:
+        return None
+    pts = rays_of(ru, rv, cam) * rz[:, None]
+    n = opening.normal
+    e1 = np.cross(n, [0.0, 1.0, 0.0])
+    if np.linalg.norm(e1) < 1e-6:
+        e1 = np.cross(n, [1.0, 0.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(n, e1)
+    rel = pts - opening.centre
+    x, y = rel @ e1, rel @ e2
+    a = np.column_stack([2.0 * x, 2.0 * y, np.ones_like(x)])
+    sol, *_ = np.linalg.lstsq(a, x * x + y * y, rcond=None)
+    cx, cy, c = (float(v) for v in sol)
+    r2 = c + cx * cx + cy * cy
+    if not r2 > 0.0:
+        return None
+    r = math.sqrt(r2)
+    if not 0.15 <= r <= 1.0 or math.hypot(cx, cy) > r:
+        return None
+    out: npt.NDArray[np.float64] = opening.centre + cx * e1 + cy * e2
+    return out
+
+
 def opening_axes(
     region_uv: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]],
     rim_uvz: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]],

@@ -28,8 +28,11 @@ How sightings are matched (deterministic; no clocks, no randomness):
 Reported position: inverse-variance weighted mean of all sightings, weighted by their
 non-GPS variance (attitude, depth, timing, and where the detector put the opening: an
 oblique view or a rim half hidden weighs less); the GPS error, shared by sightings close in
-time, cannot tell them apart. Its sigma combines the non-GPS part (averages down as ``1/sqrt(n)``) with the
-GPS part, which only averages down over independent stretches of ``gps_decorrelation_s``.
+time, cannot tell them apart. Its sigma combines three parts: where the detector put the
+opening (the weighted mean of the sightings' ``sigma_opening_m``: views from one side share
+their error, it does not average down), the rest of the non-GPS error (averages down as
+``1/sqrt(n)``), and the GPS part, which only averages down over independent stretches of
+``gps_decorrelation_s``.
 """
 
 from __future__ import annotations
@@ -113,7 +116,8 @@ class _Track:
         self.count = 0
         self.w_sum = 0.0
         self.wn = self.we = self.wd = 0.0
-        self.inv_rel_var = 0.0
+        self.inv_noise_var = 0.0
+        self.w_opening = 0.0
         self.gps_sum = 0.0
         self.t_first = s.t_boot_ns
         self.t_last = s.t_boot_ns
@@ -132,7 +136,8 @@ class _Track:
         self.wn += w * ned[0]
         self.we += w * ned[1]
         self.wd += w * ned[2]
-        self.inv_rel_var += 1.0 / _rel_var(s)
+        self.inv_noise_var += 1.0 / _noise_var(s)
+        self.w_opening += w * s.sigma_opening_m
         self.gps_sum += s.sigma_gps_m
         self.t_first = min(self.t_first, s.t_boot_ns)
         self.t_last = max(self.t_last, s.t_boot_ns)
@@ -172,6 +177,11 @@ class _Track:
 def _rel_var(s: HoleSighting) -> float:
     """Variance of the sighting's non-GPS error (attitude, depth, timing, opening), m^2."""
     return max(s.sigma_h_m**2 - s.sigma_gps_m**2, _MIN_REL_SIGMA_M**2)
+
+
+def _noise_var(s: HoleSighting) -> float:
+    """The part of :func:`_rel_var` that is not the opening's (depth, attitude, timing)."""
+    return max(_rel_var(s) - s.sigma_opening_m**2, _MIN_REL_SIGMA_M**2)
 
 
 def _size_ok(a: float, b: float, max_ratio: float) -> bool:
@@ -257,7 +267,11 @@ class HoleTracker:
         span_s = (t.t_last - t.t_first) * 1e-9
         independent = min(float(t.count), 1.0 + span_s / self.params.gps_decorrelation_s)
         gps = (t.gps_sum / t.count) / math.sqrt(independent)
-        rel = 1.0 / math.sqrt(t.inv_rel_var)
+        # The opening's error is shared by views from the same side (it does not average
+        # down): the weighted mean of the sightings' opening sigmas. The rest (depth noise,
+        # attitude, timing) averages down as 1/sqrt(n).
+        opening = t.w_opening / t.w_sum
+        rel = math.hypot(opening, 1.0 / math.sqrt(t.inv_noise_var))
         return Hole(
             id=t.id,
             lat_deg=float(lat),

@@ -62,9 +62,9 @@ class ErrorModel:
     attitude_sigma_rad: float = math.radians(1.0)
     default_eph_m: float = 3.0
     depth_noise_per_mm: float = 1.425e-6
-    opening_base_m: float = 0.01
-    opening_oblique: float = 0.08
-    opening_unseen: float = 0.5
+    opening_base_m: float = 0.018
+    opening_oblique: float = 0.03
+    opening_unseen: float = 0.6
     box_oblique: float = 0.35
 
 
