@@ -27,7 +27,12 @@ the *basins* of the depth image instead, found at every scale at once:
    opening is not rim); a plane fitted to the rim's 3-D points is the opening, and the
    region's pixel rays meet it in points whose principal axes give the opening's major/minor
    axes (``4 sqrt(lambda)``, the ellipse of equal second moments, as the paper's ellipse
-   fit); the passable width is the largest inscribed disk.
+   fit); the passable width is the largest inscribed disk. Their area-weighted mean is the
+   opening's centre on the rim plane (``Detection.opening_m``, where geotagging puts the
+   hole: seen obliquely, the box spans the near rim and the visible far wall and its centre
+   lies toward the camera); for an opening the image border cuts, the centre of the circle
+   through the rim it shows. ``rim_seen`` is the fraction of its outline bordered by rim
+   the sensor saw (not the border, no unread pixels, no nearer edge).
 5. The five attribute scores of the paper are kept (so a rescuer sees *why*), but combined so
    that geometry is necessary: ``score = sqrt(Sd) * Sw * (0.35 + 0.65 Sr) * (0.85 + 0.15
    max(Sb, Sc))``, times ``0.2 + 0.8 V`` for a region without floor readings, V the

@@ -10,6 +10,7 @@ from geotag._camera import (
 from geotag._local import LocalFrame, local_en_m
 from geotag._merge import AnnounceGate, Hole, HoleTracker, MergeParams
 from geotag._project import (
+    CIRCLE_95_PER_SIGMA,
     ErrorModel,
     HoleSighting,
     geotag_detection,
@@ -19,6 +20,7 @@ from geotag._project import (
 from geotag._types import VehiclePose
 
 __all__ = [
+    "CIRCLE_95_PER_SIGMA",
     "AnnounceGate",
     "CameraMount",
     "ErrorModel",

@@ -84,7 +84,8 @@ class Hole:
 
     id : stable number from 1 in order of first sighting.
     lat_deg, lon_deg : WGS84; alt_m : metres above mean sea level (fused).
-    sigma_h_m : 1-sigma horizontal uncertainty of the fused position, metres.
+    sigma_h_m : horizontal uncertainty of the fused position, metres: the radius that holds
+        about 68 % of its errors (``CIRCLE_95_PER_SIGMA`` times it holds 95 %).
     score : best detector score of any sighting.
     sightings : number of sightings merged (require >= N to drop one-off false alarms).
     t_first_boot_ns, t_last_boot_ns : autopilot boot time of the first and last sighting.

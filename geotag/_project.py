@@ -27,6 +27,7 @@ from geotag._types import VehiclePose
 from holescan_errors import InputError
 
 __all__ = [
+    "CIRCLE_95_PER_SIGMA",
     "ErrorModel",
     "HoleSighting",
     "geotag_detection",
@@ -35,6 +36,10 @@ __all__ = [
 ]
 
 _log = logging.getLogger(__name__)
+
+#: ``sigma_h_m`` is the radius holding 68 % of horizontal errors; for a circular 2-D normal
+#: the 95 % radius is 2.448 / 1.510 = 1.621 times that (per-axis sigma: 1.510 and 2.448).
+CIRCLE_95_PER_SIGMA = math.sqrt(math.log(0.05) / math.log(0.32))
 
 
 @dataclass(frozen=True)
@@ -64,7 +69,7 @@ class ErrorModel:
     depth_noise_per_mm: float = 1.425e-6
     opening_base_m: float = 0.018
     opening_oblique: float = 0.03
-    opening_unseen: float = 0.6
+    opening_unseen: float = 0.5
     box_oblique: float = 0.35
 
 
@@ -76,7 +81,8 @@ class HoleSighting:
         (:attr:`detect.Detection.opening_m`), or for detections without one the box centre
         at rim depth.
     alt_m : altitude of the opening above mean sea level, metres.
-    sigma_h_m : 1-sigma horizontal uncertainty, metres (all sources below combined).
+    sigma_h_m : horizontal uncertainty, metres: the radius that holds about 68 % of the
+        errors (all sources below combined; :class:`ErrorModel`).
     sigma_gps_m : the GPS part of ``sigma_h_m`` (shared by sightings close in time).
     score : detector confidence in [0, 1].
     major_m, minor_m : metric axes of the opening.

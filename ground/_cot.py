@@ -8,8 +8,9 @@ Each hole is one CoT event:
   as shipped by ``@tak-ps/node-cot``) names "spi", sensor point of interest: a point a
   sensor (our camera) marks for people to look at; ``how`` ``m-g`` (machine, GPS-derived);
 * ``point``: lat/lon; ``hae`` from the vehicle's MSL altitude (9999999 when unknown; the
-  geoid offset is not applied); ``ce`` = 2.45 sigma (the 95 % circle of the horizontal
-  error model), ``le`` = 9999999 (the vertical error is not modelled);
+  geoid offset is not applied); ``ce`` = 1.62 sigma (the 95 % circle of the horizontal
+  error model, whose sigma is the 68 % circle), ``le`` = 9999999 (the vertical error is
+  not modelled);
 * ``detail``: ``contact callsign`` "HOLE <id>", ``remarks`` with size, score, sightings,
   uncertainty, the detector's "why" and the operator's mark, ``link`` to the picture's
   URL on the station's web page when one is served, a ``color`` by mark;
@@ -36,6 +37,7 @@ import threading
 import xml.etree.ElementTree as ET
 from typing import Any
 
+from geotag import CIRCLE_95_PER_SIGMA
 from ground._station_files import hole_summary
 from ground._station_state import GroundHole
 from holescan_errors import HolescanError
@@ -47,7 +49,6 @@ _log = logging.getLogger(__name__)
 COT_TYPE = "b-m-p-s-p-i"
 DEFAULT_COT_URL = "udp+wo://239.2.3.1:6969"
 _UNKNOWN = "9999999.0"
-_CE_95 = 2.4477  # 95 % circle radius / sigma for a circular 2-D normal
 _COLOURS = {  # ARGB as TAK writes it (signed 32-bit)
     "new": -256,  # yellow
     "confirmed": -65536,  # red: go there
@@ -90,7 +91,7 @@ def hole_cot(
             "stale": _time(now + dt.timedelta(seconds=stale_s)),
         },
     )
-    ce = f"{_CE_95 * h.sigma_m:.2f}" if h.sigma_m is not None else _UNKNOWN
+    ce = f"{CIRCLE_95_PER_SIGMA * h.sigma_m:.2f}" if h.sigma_m is not None else _UNKNOWN
     hae = f"{h.alt:.2f}" if h.alt is not None else _UNKNOWN
     ET.SubElement(
         ev,

@@ -134,7 +134,7 @@ def render_report(
         "local "
         f"east/north frame around {_e(frame.origin_name)} "
         f"({frame.lat0:.7f}, {frame.lon0:.7f}); a hole lies within its 1&sigma; circle "
-        f"with 39 % probability, within {_R95:.2f}&sigma; with 95 %.</footer>",
+        f"with 68 % probability, within {_R95:.2f}&sigma; with 95 %.</footer>",
     ]
     return (
         '<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from shapely.geometry import LineString
 
-from geotag import Hole, VehiclePose
+from geotag import CIRCLE_95_PER_SIGMA, Hole, VehiclePose
 
 if TYPE_CHECKING:
     from ground._report import _LocalFrame
@@ -50,7 +50,7 @@ _STRIP_PX = 56  # band under the map for the scale bar and the north arrow
 _BADGE_R = 15
 _MIN_SIGMA_PX = 7.0
 _MIN_EXTENT_M = 20.0
-_R95 = math.sqrt(-2.0 * math.log(0.05))  # 2-D Gaussian: P(r < 2.45 sigma) = 95 %
+_R95 = CIRCLE_95_PER_SIGMA  # sigma_h is the 68 % circle; the 95 % one is 1.62 times it
 
 
 def score_band(score: float) -> ScoreBand:

@@ -1,7 +1,7 @@
 """The ground station's live page: a local web server, no internet, no tile server.
 
 ``http://HOST:PORT/`` shows the vehicle's track, the camera's footprints and the holes with
-their uncertainty circles (95 %: 2.45 sigma) drawn to scale in local metres
+their uncertainty circles (95 %: 1.62 sigma, the 68 % radius) drawn to scale in local metres
 (:class:`geotag.LocalFrame` at the first hole or track point), with a north arrow and a
 scale bar; beside the map, each hole's picture, facts and the detector's "why", and three
 buttons: confirmed / rejected / visited.
@@ -27,7 +27,7 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from importlib import resources
 from typing import Any
 
-from geotag import LocalFrame
+from geotag import CIRCLE_95_PER_SIGMA, LocalFrame
 from ground._station_files import hole_summary
 from ground._station_state import StationState
 from holescan_errors import InputError
@@ -67,7 +67,7 @@ def state_document(state: StationState, footprint_every: int = 3) -> dict[str, A
         d.update(
             x=round(float(e), 3),
             y=round(float(n), 3),
-            r95=round(2.4477 * h.sigma_m, 3) if h.sigma_m is not None else None,
+            r95=round(CIRCLE_95_PER_SIGMA * h.sigma_m, 3) if h.sigma_m is not None else None,
             summary=hole_summary(h),
             picture=f"/cards/hole-{h.id}.jpg?rev={h.card_rev}" if h.has_picture else None,
         )

@@ -11,7 +11,8 @@ Figures (printed; run with ``-s`` to see them):
 
 * *added*: each sighting the daemon geotagged vs the same detection geotagged with the
   true pose of its frame: the pipeline's own error (issue 4: median <= 0.10 m);
-* *sighting*: each sighting vs the true hole's centre (adds the detector's box error);
+* *sighting*: each sighting vs the true hole's centre (adds where the detector put the
+  opening's centre);
 * *hole*: each merged hole vs the true hole: every access hole wholly in view in enough
   frames must be reported exactly once (no misses, no duplicates).
 """
@@ -151,4 +152,7 @@ def test_pipeline_geotag_error_and_every_hole_once(
     assert pct(added, 90) <= 0.20
     for hole_id in in_view:
         assert len(matches.get(hole_id, [])) == 1, (hole_id, matches)
-    assert max(hole_err) <= 0.30
+    # Placed at the opening's centre (issue 14): before, the box centre put sightings a
+    # median 0.11 m and merged holes up to 0.20 m from the truth in this flight.
+    assert statistics.median(to_truth) <= 0.05
+    assert max(hole_err) <= 0.10

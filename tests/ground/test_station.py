@@ -228,7 +228,7 @@ def test_holes_pictures_files_and_cot(rig: dict[str, Any]) -> None:
     assert e1.type == "b-m-p-s-p-i" and e1.how == "m-g"
     assert e1.lat == pytest.approx(holes[0].lat_deg, abs=1e-7)
     assert e1.lon == pytest.approx(holes[0].lon_deg, abs=1e-7)
-    assert e1.ce == pytest.approx(2.4477 * 0.3, abs=0.01)
+    assert e1.ce == pytest.approx(1.6215 * 0.3, abs=0.01)
     assert e1.staleTime - e1.sendTime == pytest.approx(3600_000, abs=2000)
     assert "score 0.88" in e1.detail.xmlDetail and "opening 1.10 x 0.70 m" in e1.detail.xmlDetail
     assert e1.detail.contact.callsign == "HOLE 1"
@@ -377,6 +377,6 @@ def test_cot_xml_parsed_by_node_cot(tmp_path: Path) -> None:
     lon, lat = last["geojson"]["geometry"]["coordinates"][:2]
     h = hole(1)
     assert (lat, lon) == pytest.approx((h.lat_deg, h.lon_deg), abs=1e-7)
-    assert float(last["point"]["ce"]) == pytest.approx(2.4477 * 0.3, abs=0.01)
+    assert float(last["point"]["ce"]) == pytest.approx(1.6215 * 0.3, abs=0.01)
     assert "score 0.88" in last["geojson"]["properties"]["remarks"]
     assert last["geojson"]["properties"]["callsign"] == "HOLE 1"
