@@ -80,7 +80,7 @@ class Flight:
         self._usb_reset = usb_reset
         self._on_holes = on_holes
         self.counters = FlightCounters()
-        self.hole_pipeline = HolePipeline(camera, config.mount)
+        self.hole_pipeline = HolePipeline(camera, config.mount, errors=config.errors)
         self.tracker = self.hole_pipeline.tracker
         self.stop = threading.Event()
         self._writer: FlightLogWriter | None = None
@@ -372,6 +372,7 @@ class Flight:
             self.camera,
             config=cfg.config_record,
             mount=cfg.mount,
+            errors=cfg.errors,
             options=cfg.log_options,
         )
         self._writer = writer

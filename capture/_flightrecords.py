@@ -4,6 +4,7 @@ turns a silent sensor into a :class:`SensorError`."""
 from __future__ import annotations
 
 import logging
+import math
 import queue
 import threading
 import time
@@ -16,7 +17,7 @@ from capture._errors import SensorError
 from capture._frame import Frame, FrameSource
 from capture._mcaplog import LogOptions, WriterStats
 from detect import DEFAULT, DetectParams
-from geotag import AnnounceGate, CameraMount, Hole
+from geotag import AnnounceGate, CameraMount, ErrorModel, Hole
 
 log = logging.getLogger(__name__)
 
@@ -27,6 +28,8 @@ class FlightConfig:
 
     log_prefix : path prefix of the MCAP files (``PREFIX_0000.mcap`` ...).
     params : detector parameters. mount : camera mount on the vehicle.
+    attitude_sigma_deg : how well the camera's attitude is known (autopilot roll/pitch and
+        mount calibration), degrees: the attitude term of each sighting's ``sigma_h_m``.
     frame_timeout_s : no frame for this long = the sensor stalled.
     retry_backoff_s : waits between sensor reopen attempts (the last one repeats).
     announce_min_p_hole, announce_min_sightings, announce_min_span_s : the announce gate
@@ -43,6 +46,7 @@ class FlightConfig:
     log_prefix: Path
     params: DetectParams = DEFAULT
     mount: CameraMount = field(default_factory=CameraMount)
+    attitude_sigma_deg: float = math.degrees(ErrorModel.attitude_sigma_rad)
     log_options: LogOptions = field(default_factory=LogOptions)
     frame_timeout_s: float = 3.0
     retry_backoff_s: tuple[float, ...] = (0.5, 1.0, 2.0, 4.0, 8.0)
@@ -55,6 +59,11 @@ class FlightConfig:
     max_duration_s: float | None = None
     startup_sync_s: float = 3.0
     config_record: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def errors(self) -> ErrorModel:
+        """The sightings' error model these settings make."""
+        return ErrorModel(attitude_sigma_rad=math.radians(self.attitude_sigma_deg))
 
     @property
     def gate(self) -> AnnounceGate:

@@ -102,6 +102,7 @@ _TABLES: dict[str, dict[str, tuple[tuple[type, ...], Any]]] = {
         "pitch_deg": (_NUM, -90.0),
         "yaw_deg": (_NUM, 0.0),
         "offset_m": ((list,), [0.0, 0.0, 0.0]),
+        "attitude_sigma_deg": (_NUM, 1.0),
     },
     "log": {
         "compression": ((str,), "zstd"),
@@ -316,6 +317,10 @@ def parse_fly_config(
         (offset[0], offset[1], offset[2]),
     )
 
+    attitude_sigma_deg = float(mnt["attitude_sigma_deg"])
+    if not 0.0 <= attitude_sigma_deg <= 10.0:
+        raise InputError(f"{where}: mount.attitude_sigma_deg must be in 0-10 degrees")
+
     lg = tables["log"]
     options = LogOptions(
         chunk_size=lg["chunk_size"],
@@ -343,6 +348,7 @@ def parse_fly_config(
         log_prefix=Path("flight"),
         params=params,
         mount=mount,
+        attitude_sigma_deg=attitude_sigma_deg,
         log_options=options,
         frame_timeout_s=float(cap["frame_timeout_s"]),
         retry_backoff_s=backoff,

@@ -18,6 +18,7 @@ import dataclasses
 import hashlib
 import io
 import json
+import math
 import os
 import struct
 from collections.abc import Collection, Iterable, Iterator, Mapping
@@ -33,7 +34,7 @@ from mcap.stream_reader import breakup_chunk
 
 from capture._mcaplog import FlightLogError
 from capture._mcapread import LogRecord, _decode
-from geotag import CameraMount
+from geotag import CameraMount, ErrorModel
 
 __all__ = [
     "ChunkDamagedError",
@@ -300,6 +301,22 @@ def decode_messages(
         rec = _decode(channel.topic, layout.schemas.get(channel.schema_id), msg, metadata, pending)
         if rec is not None:
             yield rec
+
+
+def errors_from_metadata(metadata: Mapping[str, Mapping[str, str]]) -> ErrorModel:
+    """The sightings' error model of a log: its ``holescan.mount`` record's
+    ``attitude_sigma_deg`` (the default model for logs without one). Raises
+    :class:`FlightLogError` when the value cannot be read."""
+    value = metadata.get("holescan.mount", {}).get("attitude_sigma_deg")
+    if value is None:
+        return ErrorModel()
+    try:
+        deg = float(value)
+    except ValueError as err:
+        raise FlightLogError(f"unreadable holescan.mount attitude_sigma_deg: {value!r}") from err
+    if not 0.0 <= deg <= 10.0:
+        raise FlightLogError(f"holescan.mount attitude_sigma_deg {deg} is not 0-10 degrees")
+    return ErrorModel(attitude_sigma_rad=math.radians(deg))
 
 
 def mount_from_metadata(metadata: Mapping[str, Mapping[str, str]]) -> CameraMount:

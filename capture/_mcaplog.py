@@ -11,6 +11,7 @@ left as a gap a reader can see. Topics and frames: see :mod:`capture._mcapschema
 from __future__ import annotations
 
 import logging
+import math
 import os
 import platform
 import queue
@@ -37,7 +38,7 @@ from capture._mcapfile import (
     mcap_version,
 )
 from detect import CameraIntrinsics, Detection
-from geotag import CameraMount, VehiclePose
+from geotag import CameraMount, ErrorModel, VehiclePose
 from holescan_errors import InputError
 
 __all__ = [
@@ -71,6 +72,8 @@ class FlightLogWriter:
     mount : how the camera sits on the vehicle (default: nadir, image top towards the
         nose); logged as the ``/tf`` transform base_link -> camera and as metadata
         ``holescan.mount``. A gimbal attitude in it is not logged.
+    errors : the sightings' error model; its attitude sigma is logged in ``holescan.mount``
+        (``attitude_sigma_deg``) so that reprocessing places holes with the same one.
     options : :class:`LogOptions`.
 
     Every ``write_*`` returns at once: True when queued, False when dropped (queue full
@@ -86,6 +89,7 @@ class FlightLogWriter:
         *,
         config: Mapping[str, Any] | None = None,
         mount: CameraMount | None = None,
+        errors: ErrorModel | None = None,
         options: LogOptions | None = None,
     ) -> None:
         self.options = options or LogOptions()
@@ -107,6 +111,9 @@ class FlightLogWriter:
             "holescan.mount": {
                 "rotation_frd_from_camera": sch.to_json(self._mount_rot).decode(),
                 "offset_frd_m": sch.to_json(self._mount_offset).decode(),
+                "attitude_sigma_deg": repr(
+                    math.degrees((errors or ErrorModel()).attitude_sigma_rad)
+                ),
             },
         }
         self._queue: queue.Queue[tuple[Any, ...]] = queue.Queue(self.options.max_queued_messages)

@@ -66,7 +66,7 @@ class FlightMerger:
         self.opts = opts
         self.write = write
         self.on_frame = on_frame
-        self.pipeline = HolePipeline(plan.camera, plan.mount)
+        self.pipeline = HolePipeline(plan.camera, plan.mount, errors=plan.errors)
         self.telemetry = TelemetryReplay()
         self.track: list[VehiclePose] = []
         self.flight_holes: tuple[Hole, ...] = ()

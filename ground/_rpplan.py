@@ -35,13 +35,14 @@ from capture import (
     LoggedCalibration,
     LogLayout,
     decode_messages,
+    errors_from_metadata,
     mount_from_metadata,
     open_log,
     read_chunk,
     read_log_layout,
 )
 from detect import CameraIntrinsics, DetectParams
-from geotag import CameraMount
+from geotag import CameraMount, ErrorModel
 from ground._flightholes import flight_log_files, log_stem
 from ground._rpoptions import ReprocessOptions
 from holescan_errors import InputError
@@ -119,6 +120,7 @@ class FlightPlan:
 
     camera : from the first ``camera_info`` (None when no complete chunk holds one: the
     log was cut off at its very start). start_ns : log time of its first chunk.
+    mount, errors : the camera mount and the sightings' error model the flight logged.
     problems : files cut off or damaged, in words.
     """
 
@@ -127,6 +129,7 @@ class FlightPlan:
     layouts: tuple[LogLayout, ...]
     camera: CameraIntrinsics | None
     mount: CameraMount
+    errors: ErrorModel
     config: Mapping[str, str]
     start_ns: int
     problems: tuple[str, ...]
@@ -230,6 +233,7 @@ def plan_flight(files: Sequence[LogRef], opts: ReprocessOptions) -> FlightPlan:
             metadata.setdefault(key, value)
     try:
         mount = mount_from_metadata(metadata)
+        errors = errors_from_metadata(metadata)
     except FlightLogError as err:
         raise InputError(f"{files[0]}: {err}") from err
     starts = [c.start_time_ns for lay in layouts for c in lay.chunks]
@@ -239,6 +243,7 @@ def plan_flight(files: Sequence[LogRef], opts: ReprocessOptions) -> FlightPlan:
         layouts=tuple(layouts),
         camera=camera,
         mount=mount,
+        errors=errors,
         config=dict(metadata.get("holescan.config", {})),
         start_ns=min(starts, default=0),
         problems=tuple(problems),

@@ -80,6 +80,7 @@ def test_example_config_is_valid_and_its_defaults_are_the_daemons(tmp_path: Path
     for name in (
         "params",
         "mount",
+        "attitude_sigma_deg",
         "log_options",
         "frame_timeout_s",
         "retry_backoff_s",
@@ -127,6 +128,7 @@ def test_log_names_never_collide(tmp_path: Path) -> None:
         ('log_dir = "/x"\nsensor = "kinect"', "sensor must be openni2, oni:PATH"),
         ('log_dir = "/x"\nsensor = "oni:"', "sensor must be openni2, oni:PATH"),
         ('log_dir = "/x"\n[mount]\noffset_m = [0, 0]', "mount.offset_m must be a list of 3"),
+        ('log_dir = "/x"\n[mount]\nattitude_sigma_deg = -1', "attitude_sigma_deg must be in 0-10"),
         ('log_dir = "/x"\n[detect]\nmode = "fast"', "detect.mode must be"),
         ('log_dir = "/x"\n[holes]\nannounce_min_score = 0.6', "announce_min_p_hole"),
         ('log_dir = "/x"\n[holes]\nannounce_min_p_hole = 1.0', "min_p_hole must be in [0, 0.99]"),

@@ -5,6 +5,7 @@ by the live link and log replay."""
 from __future__ import annotations
 
 import dataclasses
+import math
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +24,7 @@ from capture import (
     PositionSample,
     TelemetryReplay,
     decode_messages,
+    errors_from_metadata,
     is_autopilot_heartbeat,
     mount_from_metadata,
     read_chunk,
@@ -31,7 +33,7 @@ from capture import (
     telemetry_sample,
 )
 from detect import CameraIntrinsics
-from geotag import CameraMount
+from geotag import CameraMount, ErrorModel
 from missions import mavlink as mavlink2
 
 CAM = CameraIntrinsics(80, 60, 71.3, 71.3, 39.5, 29.5)
@@ -157,3 +159,17 @@ def test_channels_in_a_chunk_are_read(log: Path) -> None:
     with open(log, "rb") as f:
         records = read_chunk(f, layout.chunks[0])
     assert any(isinstance(r, Channel) for r in records)
+
+
+def test_the_attitude_sigma_is_logged_and_read_back(tmp_path: Path) -> None:
+    """Reprocessing places holes with the error model the flight had."""
+    errors = ErrorModel(attitude_sigma_rad=math.radians(0.3))
+    with FlightLogWriter(tmp_path / "e", CAM, errors=errors) as w:
+        w.write_frame(frame(0), T0, t_boot_ns=5 * 10**9)
+    (path,) = w.paths
+    got = errors_from_metadata(read_log_layout(path).metadata)
+    assert math.degrees(got.attitude_sigma_rad) == pytest.approx(0.3)
+    assert errors_from_metadata({}) == ErrorModel()  # logs from before: the default
+    for bad, match in (("x", "unreadable"), ("45", "0-10")):
+        with pytest.raises(FlightLogError, match=match):
+            errors_from_metadata({"holescan.mount": {"attitude_sigma_deg": bad}})
