@@ -65,7 +65,7 @@ def test_independent_frames_place_whole_openings_within_10_cm(hard_frames: Path)
 def test_simulator_views_30_deg_off_vertical() -> None:
     """Leaning views of one world's holes: the opening centre holds, the box centre drifts."""
     rows = sim_sweep([7], ErrorModel(attitude_sigma_rad=0.0), quick=True)
-    oblique = [r for r in rows if r.source == "sim-tilted" and r.whole and 25 <= r.angle_deg]
+    oblique = [r for r in rows if r.source == "sim-tilted" and r.whole and r.angle_deg >= 25]
     err = sorted(r.err_m for r in oblique)
     box = sorted(r.err_box_m for r in oblique)
     print(f"\n{len(oblique)} views 25-35 deg: opening {err}\nbox {box}")
