@@ -1,7 +1,9 @@
-"""Detections -> positions on the Earth (and back), with a 1-sigma horizontal error.
+"""Detections -> positions on the Earth (and back), with a horizontal error (68 % radius).
 
-A detection's box centre defines a ray from the camera; the opening's rim depth
-(``Detection.rim_depth_m``, axial Z) fixes the point on it. The point is rotated
+The point is the opening's centre on its rim plane as the detector measured it
+(``Detection.opening_m``, camera frame): not the box centre, which an oblique view moves
+toward the camera. Detections without it (paper mode, the baseline, logs from before) use
+the box centre's ray at the rim depth (``Detection.rim_depth_m``, axial Z). The point is rotated
 optical -> NED (mount or gimbal, then the vehicle's roll/pitch/yaw), shifted by the camera's
 offset on the vehicle, and converted to WGS84 with :func:`pymap3d.ned2geodetic`.
 

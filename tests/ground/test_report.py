@@ -175,7 +175,9 @@ def test_table_rows_thumbnails_and_escaping(flight: dict, tmp_path: Path) -> Non
         assert row[1].startswith(f"{h.score:.2f} {score_band(h.score).name}")
         assert f"{h.lat_deg:.7f} {h.lon_deg:.7f}" in row[2]
         assert f"1σ {h.sigma_h_m:.2f} m" in row[3]
-        assert f"95 %: {math.sqrt(-2 * math.log(0.05)) * h.sigma_h_m:.2f} m" in row[3]
+        # sigma_h is the 68 % circle (issue 14): the 95 % one is 2.448 / 1.510 times it.
+        r95 = math.sqrt(math.log(0.05) / math.log(0.32))
+        assert f"95 %: {r95 * h.sigma_h_m:.2f} m" in row[3]
         assert row[4] == f"{h.major_m:.2f} × {h.minor_m:.2f} m"
         assert row[5] == str(h.sightings)
         t0_ns = flight["track"][0].t_boot_ns
