@@ -65,6 +65,9 @@ from geotag import (
 from ground import load_dataset, load_image_pair
 from sim import (
     DEFAULT_ANCHOR,
+    CameraPose,
+    GtBox,
+    RubbleWorld,
     SortieParams,
     camera_pose_in_world,
     hole_boxes,
@@ -166,6 +169,22 @@ def _pose_at(x: float, y: float, z: float, roll: float, pitch: float, yaw: float
     return VehiclePose(0, lat, lon, alt, z, roll, pitch, yaw, eph_m=0.0)
 
 
+def _detect_hole(
+    world: RubbleWorld,
+    hole_id: int,
+    cpose: CameraPose,
+    cam: CameraIntrinsics,
+    rng: np.random.Generator,
+) -> tuple[Detection, GtBox] | None:
+    """Render the view, detect, and return the detection of ``hole_id`` with its truth box."""
+    rgb, depth, _ = render(world, cpose, cam, rng)
+    gt = [b for b in hole_boxes(world, cpose, cam) if b.hole_id == hole_id]
+    if not gt:
+        return None
+    det = _best_match(detect_holes(rgb, depth, cam, DEFAULT), gt[0].box)
+    return None if det is None else (det, gt[0])
+
+
 def sim_sweep(seeds: Iterable[int], errors: ErrorModel, quick: bool) -> list[Row]:
     cam = CameraIntrinsics.xtion()
     mount = CameraMount()
@@ -196,13 +215,10 @@ def sim_sweep(seeds: Iterable[int], errors: ErrorModel, quick: bool) -> list[Row
                         roll = -lean * math.sin(rel) + math.radians(rng.normal(0, 1.0))
                         pose = _pose_at(x, y, hole.rim_z + h, roll, pitch, yaw)
                         cpose = camera_pose_in_world(pose, mount, DEFAULT_ANCHOR)
-                        rgb, depth, _ = render(world, cpose, cam, rng)
-                        gt = [b for b in hole_boxes(world, cpose, cam) if b.hole_id == hole.id]
-                        if not gt:
+                        seen = _detect_hole(world, hole.id, cpose, cam, rng)
+                        if seen is None:
                             continue
-                        det = _best_match(detect_holes(rgb, depth, cam, DEFAULT), gt[0].box)
-                        if det is None:
-                            continue
+                        det, gt = seen
                         t = truth[hole.id]
                         s = geotag_detection(det, cam, mount, pose, errors=errors)
                         sb = geotag_detection(_box_only(det), cam, mount, pose, errors=errors)
@@ -212,7 +228,7 @@ def sim_sweep(seeds: Iterable[int], errors: ErrorModel, quick: bool) -> list[Row
                             Row(
                                 f"sim-{style}",
                                 true_angle,
-                                not gt[0].iscrowd,
+                                not gt.iscrowd,
                                 float(det.rim_seen if det.rim_seen is not None else math.nan),
                                 _horizontal_m(s.lat_deg, s.lon_deg, t.lat_deg, t.lon_deg),
                                 _horizontal_m(sb.lat_deg, sb.lon_deg, t.lat_deg, t.lon_deg),
@@ -322,13 +338,10 @@ def one_side(seeds: Iterable[int], errors: ErrorModel, quick: bool) -> list[tupl
                     pose = _pose_at(xy[0], xy[1], hole.rim_z + 3.0, roll, pitch, yaw)
                     pose = replace(pose, t_boot_ns=round(t * 1e9))
                     cpose = camera_pose_in_world(pose, mount, DEFAULT_ANCHOR)
-                    rgb, depth, _ = render(world, cpose, cam, rng)
-                    gt = [b for b in hole_boxes(world, cpose, cam) if b.hole_id == hole.id]
-                    if not gt:
+                    seen = _detect_hole(world, hole.id, cpose, cam, rng)
+                    if seen is None:
                         continue
-                    det = _best_match(detect_holes(rgb, depth, cam, DEFAULT), gt[0].box)
-                    if det is None:
-                        continue
+                    det = seen[0]
                     for name, d in (("opening", det), ("box", _box_only(det))):
                         s = geotag_detection(d, cam, mount, pose, frame_index=i, errors=errors)
                         trackers[name].update([s])

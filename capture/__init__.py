@@ -46,6 +46,7 @@ from capture._mcapchunks import (
     read_chunk,
     read_log_layout,
 )
+from capture._mcapdetections import annotations_message, detection_json
 from capture._mcaplog import FlightLogError, FlightLogWriter, LogOptions, WriterStats
 from capture._mcapread import (
     LoggedCalibration,
@@ -71,8 +72,6 @@ from capture._mcapschemas import (
     TOPIC_HOLES,
     TOPIC_MAVLINK_RAW,
     TOPIC_POSE,
-    annotations_message,
-    detection_json,
     holes_geojson_message,
     jsonable,
     to_json,

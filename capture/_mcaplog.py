@@ -11,7 +11,6 @@ left as a gap a reader can see. Topics and frames: see :mod:`capture._mcapschema
 from __future__ import annotations
 
 import logging
-import math
 import os
 import platform
 import queue
@@ -29,6 +28,7 @@ from mcap.writer import CompressionType
 
 from capture import _mcapschemas as sch
 from capture._frame import Frame
+from capture._mcapdetections import annotations_message, detection_json
 from capture._mcapfile import (
     FlightLogError,
     LogOptions,
@@ -108,13 +108,7 @@ class FlightLogWriter:
             },
             "holescan.config": {k: sch.to_json(v).decode() for k, v in (config or {}).items()},
             "holescan.camera": {k: repr(v) for k, v in camera.to_dict().items()},
-            "holescan.mount": {
-                "rotation_frd_from_camera": sch.to_json(self._mount_rot).decode(),
-                "offset_frd_m": sch.to_json(self._mount_offset).decode(),
-                "attitude_sigma_deg": repr(
-                    math.degrees((errors or ErrorModel()).attitude_sigma_rad)
-                ),
-            },
+            "holescan.mount": sch.mount_metadata(mount, errors or ErrorModel()),
         }
         self._queue: queue.Queue[tuple[Any, ...]] = queue.Queue(self.options.max_queued_messages)
         self._lock = threading.Lock()
@@ -406,12 +400,12 @@ class FlightLogWriter:
         record = {
             "frame_index": frame_index,
             "t_unix_ns": t,
-            "detections": [sch.detection_json(d) for d in dets],
+            "detections": [detection_json(d) for d in dets],
         }
         self._json(sch.TOPIC_DETECTIONS, record, seq, log_time, t)
         ann_seq = self._own_seq(sch.TOPIC_DETECTION_ANNOTATIONS)
         self._proto(
-            sch.TOPIC_DETECTION_ANNOTATIONS, sch.annotations_message(dets, t), ann_seq, log_time, t
+            sch.TOPIC_DETECTION_ANNOTATIONS, annotations_message(dets, t), ann_seq, log_time, t
         )
         self._count(sch.TOPIC_DETECTIONS)
         self._count(sch.TOPIC_DETECTION_ANNOTATIONS)

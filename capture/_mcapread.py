@@ -21,6 +21,7 @@ from mcap.records import Channel, Message, Metadata, Schema
 
 from capture import _mcapschemas as sch
 from capture._frame import Frame
+from capture._mcapdetections import decode_detection
 from capture._mcaplog import FlightLogError
 from capture._mcapscan import ScanState, scan_records
 from detect import CameraIntrinsics, Detection
@@ -277,7 +278,7 @@ def _decode(
         return LoggedMavlink(t, seq, packet, str(obj.get("name", "")), msgid, sysid, compid)
     if topic == sch.TOPIC_DETECTIONS:
         obj = sch.from_json(msg.data)
-        dets = tuple(sch.decode_detection(d) for d in obj["detections"])
+        dets = tuple(decode_detection(d) for d in obj["detections"])
         return LoggedDetections(int(obj["t_unix_ns"]), seq, int(obj["frame_index"]), dets)
     if topic == sch.TOPIC_HOLES:
         return LoggedHoles(t, seq, tuple(sch.from_json(msg.data)["holes"]))

@@ -24,21 +24,16 @@ from typing import Any, Final
 import numpy as np
 import numpy.typing as npt
 from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
-from foxglove_schemas_protobuf.Color_pb2 import Color
 from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
 from foxglove_schemas_protobuf.GeoJSON_pb2 import GeoJSON
-from foxglove_schemas_protobuf.ImageAnnotations_pb2 import ImageAnnotations
 from foxglove_schemas_protobuf.LocationFix_pb2 import LocationFix
-from foxglove_schemas_protobuf.Point2_pb2 import Point2
-from foxglove_schemas_protobuf.PointsAnnotation_pb2 import PointsAnnotation
 from foxglove_schemas_protobuf.Quaternion_pb2 import Quaternion
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
-from foxglove_schemas_protobuf.TextAnnotation_pb2 import TextAnnotation
 from foxglove_schemas_protobuf.Vector3_pb2 import Vector3
 from google.protobuf.timestamp_pb2 import Timestamp
 
-from detect import CameraIntrinsics, Detection, FeatureScores
-from geotag import VehiclePose
+from detect import CameraIntrinsics, FeatureScores
+from geotag import CameraMount, ErrorModel, VehiclePose
 from holescan_errors import InputError
 
 __all__ = [
@@ -59,13 +54,10 @@ __all__ = [
     "TOPIC_POSE",
     "TOPIC_TF",
     "WORLD_FRAME",
-    "annotations_message",
     "calibration_message",
     "camera_from_calibration",
     "camera_mount_transform",
-    "decode_detection",
     "decode_pose",
-    "detection_json",
     "from_json",
     "holes_geojson_message",
     "image_from_raw",
@@ -400,6 +392,17 @@ def location_message(pose: VehiclePose, t_unix_ns: int) -> LocationFix:
     )
 
 
+def mount_metadata(mount: CameraMount, errors: ErrorModel) -> dict[str, str]:
+    """The ``holescan.mount`` metadata record: the mount's rotation and offset, and the
+    attitude sigma of the sightings' error model (read back by ``mount_from_metadata`` and
+    ``errors_from_metadata``)."""
+    return {
+        "rotation_frd_from_camera": to_json(np.asarray(mount.rotation, np.float64)).decode(),
+        "offset_frd_m": to_json(tuple(float(v) for v in mount.offset_m)).decode(),
+        "attitude_sigma_deg": repr(math.degrees(errors.attitude_sigma_rad)),
+    }
+
+
 def pose_json(pose: VehiclePose) -> dict[str, Any]:
     out: dict[str, Any] = jsonable(pose)
     return out
@@ -413,81 +416,6 @@ def decode_pose(obj: Mapping[str, Any]) -> VehiclePose:
             value = obj[f.name]
             kwargs[f.name] = int(value) if f.name in ("t_boot_ns", "age_ns") else _float(value)
     return VehiclePose(**kwargs)
-
-
-# --------------------------------------------------------------------------- detections
-
-
-def detection_json(det: Detection) -> dict[str, Any]:
-    out: dict[str, Any] = jsonable(det)
-    return out
-
-
-def decode_detection(obj: Mapping[str, Any]) -> Detection:
-    """Inverse of :func:`detection_json`; logs written before ``p_hole``,
-    ``relative_brightness``, ``opening_m``, ``rim_normal`` and ``rim_seen`` existed (or in
-    paper mode) give None for them."""
-    f = obj["features"]
-    x, y, w, h = (int(v) for v in obj["box"])
-    return Detection(
-        box=(x, y, w, h),
-        score=_float(obj["score"]),
-        features=FeatureScores(**{k: _float(f[k]) for k in FeatureScores.__dataclass_fields__}),
-        depth_rel_m=_float(obj["depth_rel_m"]),
-        major_m=_float(obj["major_m"]),
-        minor_m=_float(obj["minor_m"]),
-        rim_depth_m=_float(obj["rim_depth_m"]),
-        beyond_range=bool(obj.get("beyond_range", False)),
-        relative_brightness=_opt_float(obj.get("relative_brightness")),
-        p_hole=_opt_float(obj.get("p_hole")),
-        opening_m=_opt_xyz(obj.get("opening_m")),
-        rim_normal=_opt_xyz(obj.get("rim_normal")),
-        rim_seen=_opt_float(obj.get("rim_seen")),
-    )
-
-
-def _opt_xyz(value: Any) -> tuple[float, float, float] | None:
-    if value is None:
-        return None
-    if not isinstance(value, list | tuple) or len(value) != 3:
-        raise InputError(f"expected 3 numbers or null, got {value!r}")
-    x, y, z = (_float(v) for v in value)
-    return (x, y, z)
-
-
-def _score_color(score: float) -> Color:
-    s = min(max(score, 0.0), 1.0)
-    return Color(r=1.0, g=1.0 - s, b=0.0, a=1.0)
-
-
-def annotations_message(detections: Sequence[Detection], t_unix_ns: int) -> ImageAnnotations:
-    """Boxes as LINE_LOOP outlines (yellow -> red with the score) and the score as text."""
-    stamp = _stamp(t_unix_ns)
-    msg = ImageAnnotations()
-    for det in detections:
-        x, y, w, h = det.box
-        color = _score_color(det.score)
-        corners = [(x, y), (x + w, y), (x + w, y + h), (x, y + h)]
-        msg.points.append(
-            PointsAnnotation(
-                timestamp=stamp,
-                type=PointsAnnotation.Type.LINE_LOOP,
-                points=[Point2(x=float(u) - 0.5, y=float(v) - 0.5) for u, v in corners],
-                outline_color=color,
-                thickness=2.0,
-            )
-        )
-        msg.texts.append(
-            TextAnnotation(
-                timestamp=stamp,
-                position=Point2(x=float(x), y=float(max(y - 4, 0))),
-                text=f"{det.score:.2f}",
-                font_size=14.0,
-                text_color=color,
-                background_color=Color(r=0.0, g=0.0, b=0.0, a=0.6),
-            )
-        )
-    return msg
 
 
 # --------------------------------------------------------------------------------- holes

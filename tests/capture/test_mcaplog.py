@@ -42,8 +42,8 @@ from capture import (
     read_flight_log,
     recover_log,
 )
+from capture._mcapdetections import decode_detection, detection_json
 from capture._mcaplog import log_file_path
-from capture._mcapschemas import decode_detection, detection_json
 from detect import CameraIntrinsics, Detection, FeatureScores
 from geotag import CameraMount, Hole, VehiclePose
 from holescan_errors import HolescanError, InputError
