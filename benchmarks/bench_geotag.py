@@ -1,10 +1,9 @@
 #!/usr/bin/env python3
 """Geotag benchmark: where each sighting puts the opening, against the true opening centre.
 
-Run (from the repository root; ~6 minutes on 2 cores)::
+Run from the repository root (~4.5 minutes on 2 cores; ``--hard-dir`` keeps the frames)::
 
-    python benchmarks/bench_geotag.py                       # everything, prints the figures
-    python benchmarks/bench_geotag.py --hard-n 60 --hard-dir /tmp/hs303   # keep the frames
+    python benchmarks/bench_geotag.py --hard-dir /tmp/hs303 [--fit]
 
 Three measurements, each against truth this code did not produce:
 
@@ -14,24 +13,21 @@ Three measurements, each against truth this code did not produce:
    its whole rim stays in view) and *level* (a nadir camera: far off the vertical the image
    border cuts the rim). Frames are rendered from a :class:`geotag.VehiclePose` through the
    camera mount, detected, and geotagged with that pose by :func:`geotag.geotag_detection`
-   (the pose is exact: what is measured is where the detector put the opening). Truth: the
-   world's opening centroid (:class:`sim.TrueHole`).
+   (exact: what is measured is where the detector put the opening) against the world's
+   opening centroid (:class:`sim.TrueHole`).
 2. **Independent generator, per sighting.** ``benchmarks/hard_scenes`` (written without
    reading this code) renders held-out frames; each annotation carries the opening's area
    centroid on its rim plane in the camera frame and the world's vertical. A detection
    matching a labelled opening (IoU >= 0.3, crowd ones too: cut by the border, occluded)
    is placed through a level camera pose with the scene's attitude.
 3. **One side only.** Straight passes at 0.35 m/s, 3 m up, with roll/pitch/yaw wobble,
-   beside each simulated hole so that it is seen from one side only (at the swath edge);
-   the sightings are merged by :class:`geotag.HoleTracker` and the merged hole compared
-   with the truth.
+   beside each simulated hole (seen from one side only, at the swath edge), the sightings
+   merged by :class:`geotag.HoleTracker`.
 
-Each figure is printed for the opening centre (``Detection.opening_m``, what holescan uses)
-and for the box centre at rim depth (what it used before, and still uses for detections
-without an opening centre), with the coverage of ``sigma_h_m`` without its GNSS term: the
-fraction of sightings whose error is within it (the target: about 68 %). The attitude term
-(:class:`geotag.ErrorModel`, 1 deg) is left out of that coverage here because the poses
-are exact; ``--with-attitude`` puts it back.
+Each figure is printed for the opening centre (``Detection.opening_m``) and the box centre
+at rim depth (the fallback), with the coverage of ``sigma_h_m`` without its GNSS term (the
+target: about 68 % of errors within it). The poses are exact, so the attitude term
+(:class:`geotag.ErrorModel`, 1 deg) is left out of it; ``--with-attitude`` puts it back.
 """
 
 from __future__ import annotations

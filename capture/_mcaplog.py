@@ -72,8 +72,7 @@ class FlightLogWriter:
     mount : how the camera sits on the vehicle (default: nadir, image top towards the
         nose); logged as the ``/tf`` transform base_link -> camera and as metadata
         ``holescan.mount``. A gimbal attitude in it is not logged.
-    errors : the sightings' error model; its attitude sigma is logged in ``holescan.mount``
-        (``attitude_sigma_deg``) so that reprocessing places holes with the same one.
+    errors : the sightings' error model; its attitude sigma goes into ``holescan.mount``.
     options : :class:`LogOptions`.
 
     Every ``write_*`` returns at once: True when queued, False when dropped (queue full
