@@ -7,13 +7,10 @@ from capture._flightrecords import FlightConfig, FlightCounters, FlightSummary
 from capture._fly import FlyReport, fly, format_report
 from capture._flyconfig import (
     FlyConfig,
-    PacedReplay,
-    SensorSetup,
     SensorSpec,
     check_table,
     load_fly_config,
     numbers,
-    open_sensor,
     parse_fly_config,
 )
 from capture._frame import Frame, FrameSource
@@ -90,6 +87,7 @@ from capture._outpath import (
     part_path,
 )
 from capture._posebuffer import AttitudeSample, GpsFix, PoseBuffer, PoseUnavailable, PositionSample
+from capture._sensorsetup import PacedReplay, SensorSetup, open_sensor
 from capture._telemetryreplay import TelemetryReplay
 from capture._usb import UsbDeviceInfo, find_xtion, reset_xtion
 

@@ -20,9 +20,10 @@ from dataclasses import dataclass
 
 from capture._daemon import Flight
 from capture._flightrecords import FlightSummary
-from capture._flyconfig import FlyConfig, SensorSetup, open_sensor
+from capture._flyconfig import FlyConfig
 from capture._holepipeline import HoleView
 from capture._mavlink import Telemetry
+from capture._sensorsetup import SensorSetup, open_sensor
 from geotag import AnnounceGate, Hole
 from missions import HoleMissionServer
 
