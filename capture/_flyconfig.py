@@ -42,7 +42,7 @@ from typing import Any, Literal
 from capture._flightrecords import FlightConfig
 from capture._mcaplog import LogOptions
 from detect import DEFAULT, PAPER, SEARCHERS, DetectParams
-from geotag import AnnounceGate, CameraMount
+from geotag import AnnounceGate, CameraMount, ErrorModel
 from holescan_errors import InputError
 
 __all__ = [
@@ -313,8 +313,10 @@ def parse_fly_config(
     )
 
     attitude_sigma_deg = float(mnt["attitude_sigma_deg"])
-    if not 0.0 <= attitude_sigma_deg <= 10.0:
-        raise InputError(f"{where}: mount.attitude_sigma_deg must be in 0-10 degrees")
+    try:
+        ErrorModel(attitude_sigma_rad=math.radians(attitude_sigma_deg))
+    except InputError as err:
+        raise InputError(f"{where}: mount.{err}") from err
 
     lg = tables["log"]
     options = LogOptions(

@@ -35,6 +35,7 @@ from mcap.stream_reader import breakup_chunk
 from capture._mcaplog import FlightLogError
 from capture._mcapread import LogRecord, _decode
 from geotag import CameraMount, ErrorModel
+from holescan_errors import InputError
 
 __all__ = [
     "ChunkDamagedError",
@@ -311,12 +312,11 @@ def errors_from_metadata(metadata: Mapping[str, Mapping[str, str]]) -> ErrorMode
     if value is None:
         return ErrorModel()
     try:
-        deg = float(value)
+        return ErrorModel(attitude_sigma_rad=math.radians(float(value)))
+    except InputError as err:  # a ValueError too: first
+        raise FlightLogError(f"holescan.mount {err}") from err
     except ValueError as err:
         raise FlightLogError(f"unreadable holescan.mount attitude_sigma_deg: {value!r}") from err
-    if not 0.0 <= deg <= 10.0:
-        raise FlightLogError(f"holescan.mount attitude_sigma_deg {deg} is not 0-10 degrees")
-    return ErrorModel(attitude_sigma_rad=math.radians(deg))
 
 
 def mount_from_metadata(metadata: Mapping[str, Mapping[str, str]]) -> CameraMount:

@@ -74,6 +74,11 @@ class ErrorModel:
     opening_unseen: float = 0.5
     box_oblique: float = 0.35
 
+    def __post_init__(self) -> None:
+        deg = math.degrees(self.attitude_sigma_rad)
+        if not 0.0 <= deg <= 10.0:
+            raise InputError(f"attitude_sigma_deg must be in 0-10 degrees, got {deg:g}")
+
 
 @dataclass(frozen=True)
 class HoleSighting:
