@@ -41,7 +41,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -49,7 +49,7 @@ import numpy as np
 import numpy.typing as npt
 import pymap3d
 
-from detect import DEFAULT, CameraIntrinsics, Detection, detect_holes
+from detect import DEFAULT, CameraIntrinsics, Detection, box_iou, detect_holes
 from geotag import (
     CameraMount,
     ErrorModel,
@@ -57,14 +57,17 @@ from geotag import (
     HoleTracker,
     VehiclePose,
     geotag_detection,
+    local_en_m,
 )
 from ground import load_dataset, load_image_pair
 from sim import (
     DEFAULT_ANCHOR,
+    AccessHole,
     CameraPose,
     GtBox,
     RubbleWorld,
     SortieParams,
+    TrueHole,
     camera_pose_in_world,
     hole_boxes,
     make_sortie_world,
@@ -99,22 +102,14 @@ def _box_only(d: Detection) -> Detection:
     return replace(d, opening_m=None, rim_normal=None, rim_seen=None)
 
 
-def _iou(a: Sequence[float], b: Sequence[float]) -> float:
-    ix = max(0.0, min(a[0] + a[2], b[0] + b[2]) - max(a[0], b[0]))
-    iy = max(0.0, min(a[1] + a[3], b[1] + b[3]) - max(a[1], b[1]))
-    inter = ix * iy
-    return inter / max(a[2] * a[3] + b[2] * b[3] - inter, 1e-9)
-
-
 def _best_match(dets: Sequence[Detection], box: Sequence[float]) -> Detection | None:
-    scored = [(_iou(d.box, box), d) for d in dets]
+    scored = [(box_iou(d.box, box), d) for d in dets]  # type: ignore[arg-type]
     scored = [p for p in scored if p[0] >= 0.3]
     return max(scored, key=lambda p: p[0])[1] if scored else None
 
 
 def _horizontal_m(lat1: float, lon1: float, lat2: float, lon2: float) -> float:
-    n, e, _ = pymap3d.geodetic2ned(lat1, lon1, 0.0, lat2, lon2, 0.0)
-    return math.hypot(float(n), float(e))
+    return math.hypot(*local_en_m(lat1, lon1, lat2, lon2))
 
 
 def _non_gnss(s_sigma_h: float, s_gps: float) -> float:
@@ -165,6 +160,15 @@ def _pose_at(x: float, y: float, z: float, roll: float, pitch: float, yaw: float
     return VehiclePose(0, lat, lon, alt, z, roll, pitch, yaw, eph_m=0.0)
 
 
+def _sim_holes(seeds: Iterable[int]) -> Iterator[tuple[int, RubbleWorld, AccessHole, TrueHole]]:
+    """Each access hole of each simulated world: (seed, world, hole, its truth on the Earth)."""
+    for seed in seeds:
+        world = make_sortie_world(SortieParams(world_seed=seed))
+        truth = {t.id: t for t in true_holes(world, DEFAULT_ANCHOR)}
+        for hole in world.access_holes:
+            yield seed, world, hole, truth[hole.id]
+
+
 def _detect_hole(
     world: RubbleWorld,
     hole_id: int,
@@ -188,51 +192,47 @@ def sim_sweep(seeds: Iterable[int], errors: ErrorModel, quick: bool) -> list[Row
     rows: list[Row] = []
     headings = (0, 120, 240) if quick else (0, 60, 120, 180, 240, 300)
     angles = (0, 10, 20, 30, 35) if quick else (0, 5, 10, 15, 20, 25, 30, 35)
-    for seed in seeds:
-        world = make_sortie_world(SortieParams(world_seed=seed))
-        truth = {t.id: t for t in true_holes(world, DEFAULT_ANCHOR)}
-        for hole in world.access_holes:
-            cx, cy = hole.centre_xy
-            for k, ang in enumerate(angles):
-                for head in headings:
-                    h = (2.5, 3.0, 3.5)[(k + head // 60) % 3]
-                    a = math.radians(head + 7 * seed)
-                    off = h * math.tan(math.radians(ang))
-                    x, y = cx + off * math.sin(a), cy + off * math.cos(a)
-                    yaw = rng.uniform(-math.pi, math.pi)
-                    for style in ("tilted", "level"):
-                        if style == "level" and ang < 20:
-                            continue
-                        lean = math.radians(max(0.0, ang - 12.0)) if style == "tilted" else 0.0
-                        # Lean the camera toward the hole (the default mount looks down, image
-                        # top to the nose: +pitch turns it forward, +roll to the left).
-                        rel = (a + math.pi) - yaw  # heading to the hole, relative to the nose
-                        pitch = lean * math.cos(rel) + math.radians(rng.normal(0, 1.0))
-                        roll = -lean * math.sin(rel) + math.radians(rng.normal(0, 1.0))
-                        pose = _pose_at(x, y, hole.rim_z + h, roll, pitch, yaw)
-                        cpose = camera_pose_in_world(pose, mount, DEFAULT_ANCHOR)
-                        seen = _detect_hole(world, hole.id, cpose, cam, rng)
-                        if seen is None:
-                            continue
-                        det, gt = seen
-                        t = truth[hole.id]
-                        s = geotag_detection(det, cam, mount, pose, errors=errors)
-                        sb = geotag_detection(_box_only(det), cam, mount, pose, errors=errors)
-                        los = cpose.to_camera([[cx, cy, hole.rim_z]])[0]
-                        true_angle = math.degrees(math.acos(min(1.0, h / np.linalg.norm(los))))
-                        rows.append(
-                            Row(
-                                f"sim-{style}",
-                                true_angle,
-                                not gt.iscrowd,
-                                float(det.rim_seen if det.rim_seen is not None else math.nan),
-                                _horizontal_m(s.lat_deg, s.lon_deg, t.lat_deg, t.lon_deg),
-                                _horizontal_m(sb.lat_deg, sb.lon_deg, t.lat_deg, t.lon_deg),
-                                _non_gnss(s.sigma_h_m, s.sigma_gps_m),
-                                _non_gnss(sb.sigma_h_m, sb.sigma_gps_m),
-                                *_fit_inputs(det, s),
-                            )
+    for seed, world, hole, t in _sim_holes(seeds):
+        cx, cy = hole.centre_xy
+        for k, ang in enumerate(angles):
+            for head in headings:
+                h = (2.5, 3.0, 3.5)[(k + head // 60) % 3]
+                a = math.radians(head + 7 * seed)
+                off = h * math.tan(math.radians(ang))
+                x, y = cx + off * math.sin(a), cy + off * math.cos(a)
+                yaw = rng.uniform(-math.pi, math.pi)
+                for style in ("tilted", "level"):
+                    if style == "level" and ang < 20:
+                        continue
+                    lean = math.radians(max(0.0, ang - 12.0)) if style == "tilted" else 0.0
+                    # Lean the camera toward the hole (the default mount looks down, image
+                    # top to the nose: +pitch turns it forward, +roll to the left).
+                    rel = (a + math.pi) - yaw  # heading to the hole, relative to the nose
+                    pitch = lean * math.cos(rel) + math.radians(rng.normal(0, 1.0))
+                    roll = -lean * math.sin(rel) + math.radians(rng.normal(0, 1.0))
+                    pose = _pose_at(x, y, hole.rim_z + h, roll, pitch, yaw)
+                    cpose = camera_pose_in_world(pose, mount, DEFAULT_ANCHOR)
+                    seen = _detect_hole(world, hole.id, cpose, cam, rng)
+                    if seen is None:
+                        continue
+                    det, gt = seen
+                    s = geotag_detection(det, cam, mount, pose, errors=errors)
+                    sb = geotag_detection(_box_only(det), cam, mount, pose, errors=errors)
+                    los = cpose.to_camera([[cx, cy, hole.rim_z]])[0]
+                    true_angle = math.degrees(math.acos(min(1.0, h / np.linalg.norm(los))))
+                    rows.append(
+                        Row(
+                            f"sim-{style}",
+                            true_angle,
+                            not gt.iscrowd,
+                            float(det.rim_seen if det.rim_seen is not None else math.nan),
+                            _horizontal_m(s.lat_deg, s.lon_deg, t.lat_deg, t.lon_deg),
+                            _horizontal_m(sb.lat_deg, sb.lon_deg, t.lat_deg, t.lon_deg),
+                            _non_gnss(s.sigma_h_m, s.sigma_gps_m),
+                            _non_gnss(sb.sigma_h_m, sb.sigma_gps_m),
+                            *_fit_inputs(det, s),
                         )
+                    )
     return rows
 
 
@@ -310,50 +310,46 @@ def one_side(seeds: Iterable[int], errors: ErrorModel, quick: bool) -> list[tupl
     rng = np.random.default_rng(2)
     out: list[tuple[float, ...]] = []
     offsets = (1.2, 1.7) if quick else (1.0, 1.3, 1.6, 1.9)
-    for seed in seeds:
-        world = make_sortie_world(SortieParams(world_seed=seed))
-        truth = {t.id: t for t in true_holes(world, DEFAULT_ANCHOR)}
-        for hole in world.access_holes:
-            cx, cy = hole.centre_xy
-            for k, lateral in enumerate(offsets):
-                side = 1.0 if k % 2 else -1.0
-                head = math.radians(rng.uniform(0, 360))
-                fwd = np.array([math.sin(head), math.cos(head)])
-                right = np.array([fwd[1], -fwd[0]])
-                start = np.array([cx, cy]) - 3.0 * fwd - side * lateral * right
-                trackers = {"opening": HoleTracker(), "box": HoleTracker()}
-                speed, rate = 0.35, 5.0
-                n = int(6.0 / speed * rate)
-                phase = rng.uniform(0, 2 * math.pi, 3)
-                for i in range(n):
-                    t = i / rate
-                    xy = start + fwd * speed * t
-                    roll = math.radians(2.0) * math.sin(1.3 * t + phase[0])
-                    pitch = math.radians(2.0) * math.sin(0.9 * t + phase[1])
-                    yaw = head + math.radians(3.0) * math.sin(0.5 * t + phase[2])
-                    pose = _pose_at(xy[0], xy[1], hole.rim_z + 3.0, roll, pitch, yaw)
-                    pose = replace(pose, t_boot_ns=round(t * 1e9))
-                    cpose = camera_pose_in_world(pose, mount, DEFAULT_ANCHOR)
-                    seen = _detect_hole(world, hole.id, cpose, cam, rng)
-                    if seen is None:
-                        continue
-                    det = seen[0]
-                    for name, d in (("opening", det), ("box", _box_only(det))):
-                        s = geotag_detection(d, cam, mount, pose, frame_index=i, errors=errors)
-                        trackers[name].update([s])
-                t_hole = truth[hole.id]
-                errs = []
-                for name in ("opening", "box"):
-                    holes = trackers[name].holes()
-                    if not holes:
-                        errs += [math.nan, math.nan]
-                        continue
-                    best = max(holes, key=lambda h: h.sightings)
-                    errs.append(
-                        _horizontal_m(best.lat_deg, best.lon_deg, t_hole.lat_deg, t_hole.lon_deg)
-                    )
-                    errs.append(best.sigma_h_m)  # no GNSS term: the poses report eph 0
-                out.append((lateral, *errs))
+    for _, world, hole, t_hole in _sim_holes(seeds):
+        cx, cy = hole.centre_xy
+        for k, lateral in enumerate(offsets):
+            side = 1.0 if k % 2 else -1.0
+            head = math.radians(rng.uniform(0, 360))
+            fwd = np.array([math.sin(head), math.cos(head)])
+            right = np.array([fwd[1], -fwd[0]])
+            start = np.array([cx, cy]) - 3.0 * fwd - side * lateral * right
+            trackers = {"opening": HoleTracker(), "box": HoleTracker()}
+            speed, rate = 0.35, 5.0
+            n = int(6.0 / speed * rate)
+            phase = rng.uniform(0, 2 * math.pi, 3)
+            for i in range(n):
+                t = i / rate
+                xy = start + fwd * speed * t
+                roll = math.radians(2.0) * math.sin(1.3 * t + phase[0])
+                pitch = math.radians(2.0) * math.sin(0.9 * t + phase[1])
+                yaw = head + math.radians(3.0) * math.sin(0.5 * t + phase[2])
+                pose = _pose_at(xy[0], xy[1], hole.rim_z + 3.0, roll, pitch, yaw)
+                pose = replace(pose, t_boot_ns=round(t * 1e9))
+                cpose = camera_pose_in_world(pose, mount, DEFAULT_ANCHOR)
+                seen = _detect_hole(world, hole.id, cpose, cam, rng)
+                if seen is None:
+                    continue
+                det = seen[0]
+                for name, d in (("opening", det), ("box", _box_only(det))):
+                    s = geotag_detection(d, cam, mount, pose, frame_index=i, errors=errors)
+                    trackers[name].update([s])
+            errs = []
+            for name in ("opening", "box"):
+                holes = trackers[name].holes()
+                if not holes:
+                    errs += [math.nan, math.nan]
+                    continue
+                best = max(holes, key=lambda h: h.sightings)
+                errs.append(
+                    _horizontal_m(best.lat_deg, best.lon_deg, t_hole.lat_deg, t_hole.lon_deg)
+                )
+                errs.append(best.sigma_h_m)  # no GNSS term: the poses report eph 0
+            out.append((lateral, *errs))
     return out
 
 
