@@ -194,6 +194,18 @@ def test_announce_needs_a_running_server() -> None:
         srv.announce(HOLES[0])
 
 
+def _items_in_tlog(path: Path) -> dict[int, tuple[int, int]]:
+    """``MISSION_ITEM_INT`` (x, y) by sequence number in a MAVProxy telemetry log."""
+    if not path.exists():
+        return {}
+    tlog = mavutil.mavlink_connection(str(path))
+    got = {}
+    while (m := tlog.recv_match(type="MISSION_ITEM_INT")) is not None:
+        got[m.seq] = (m.x, m.y)
+    tlog.close()
+    return got
+
+
 def _read_wpl(path: Path) -> list[list[str]]:
     lines = path.read_text().splitlines()
     assert lines[0] == "QGC WPL 110"
@@ -229,7 +241,10 @@ def test_mavproxy_downloads_and_saves_hole_waypoints(tmp_path: Path, use_int: bo
             srv.update_holes(HOLES)
             deadline = time.monotonic() + 40.0
             while time.monotonic() < deadline and proc.poll() is None:
-                if out.exists() and len(out.read_text().splitlines()) == 6:
+                # MAVProxy's telemetry log is written by a thread of its own: on a loaded
+                # machine the waypoint file is complete before the log holds the items.
+                saved = out.exists() and len(out.read_text().splitlines()) == 6
+                if saved and (not use_int or len(_items_in_tlog(tmp_path / "mav.tlog")) == 5):
                     break
                 time.sleep(0.2)
     finally:
@@ -259,11 +274,7 @@ def test_mavproxy_downloads_and_saves_hole_waypoints(tmp_path: Path, use_int: bo
         assert math.isclose(float(row[9]), h.lon_deg, abs_tol=tol)
         assert float(row[10]) == pytest.approx(10.0)
     if use_int:  # MAVProxy's own telemetry log holds the items at full 1e-7 precision
-        tlog = mavutil.mavlink_connection(str(tmp_path / "mav.tlog"))
-        got = {}
-        while (m := tlog.recv_match(type="MISSION_ITEM_INT")) is not None:
-            got[m.seq] = (m.x, m.y)
-        tlog.close()
+        got = _items_in_tlog(tmp_path / "mav.tlog")
         for seq, hid in enumerate(ORDER, start=1):
             h = by_id[hid]
             x, y = got[seq]
