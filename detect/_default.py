@@ -31,8 +31,11 @@ the *basins* of the depth image instead, found at every scale at once:
    opening's centre on the rim plane (``Detection.opening_m``, where geotagging puts the
    hole: seen obliquely, the box spans the near rim and the visible far wall and its centre
    lies toward the camera); for an opening the image border cuts, the centre of the circle
-   through the rim it shows. ``rim_seen`` is the fraction of its outline bordered by rim
-   the sensor saw (not the border, no unread pixels, no nearer edge).
+   through the rim it shows, on the plane of the terrain around it (RANSAC over a band
+   beyond the rim: the ring alone is the near rim plus the top of the far wall, and a plane
+   through those two lines leans into the hole). ``rim_seen`` is the fraction of its
+   outline bordered by rim the sensor saw (not the border, no unread pixels, no nearer
+   edge).
 5. The five attribute scores of the paper are kept (so a rescuer sees *why*), but combined so
    that geometry is necessary: ``score = sqrt(Sd) * Sw * (0.35 + 0.65 Sr) * (0.85 + 0.15
    max(Sb, Sc))``, times ``0.2 + 0.8 V`` for a region without floor readings, V the
@@ -55,11 +58,14 @@ from detect._calibration import p_hole_of_score
 from detect._evaluate import overlap
 from detect._geometry import (
     GROW_PX,
+    disk,
     grow_walls,
     measure_opening,
     occluders,
     opening_axes,
+    rays_of,
     rim_circle_centre,
+    terrain_plane,
 )
 from detect._photometry import relative_luminance, void_evidence
 from detect._regions import (
@@ -97,6 +103,10 @@ RING_PX = 2
 # An opening cut by the image border is placed at the centre of the circle through its seen
 # rim rather than at the centroid of its visible part (benchmarks/bench_geotag.py).
 CUT_CIRCLE = True
+# ... on the plane of the terrain read this many work pixels beyond its ring (the ring alone
+# runs along the near rim and the top of the far wall: two lines, and a plane leaning into
+# the hole through both).
+TERRAIN_PX = 6
 # NMS: a detection is dropped when this much of a better one's box lies inside its box.
 CONTAINED = 0.8
 # Also measure the dark part of spilled no-reading blobs (see detect_default).
@@ -159,6 +169,7 @@ class _FrameData:
 
 
 _RING_KERNEL = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * RING_PX + 1, 2 * RING_PX + 1))
+_TERRAIN_KERNEL = disk(RING_PX + TERRAIN_PX)
 
 
 def _measure(
@@ -171,7 +182,7 @@ def _measure(
     """
     mask, (x, y, w, h), enclosed = region
     hh, ww = f.z.shape
-    pad = RING_PX + GROW_PX + 4
+    pad = RING_PX + GROW_PX + 4 + TERRAIN_PX
     x0, y0 = max(0, x - pad), max(0, y - pad)
     x1, y1 = min(ww, x + w + pad), min(hh, y + h + pad)
     zc, inv_c = f.z[y0:y1, x0:x1], f.invalid[y0:y1, x0:x1]
@@ -206,13 +217,20 @@ def _measure(
     # How much of the opening's outline is bordered by rim we saw: not the image border,
     # not unread pixels, not a nearer edge standing in front.
     rim_seen = min(1.0, (n_rim - int(occ.sum())) / (int(ring_all.sum()) + RING_PX * open_px))
-    opening = measure_opening(
-        (us.astype(np.float64) + x0, vs.astype(np.float64) + y0), (rim_u, rim_v, rim_zs), f.cam
-    )
-    centre = opening.centre
+    region_uv = (us.astype(np.float64) + x0, vs.astype(np.float64) + y0)
+    opening = measure_opening(region_uv, (rim_u, rim_v, rim_zs), f.cam)
+    # Sizes (and so the score) come from the rim's plane; where the opening is, from the
+    # terrain's when the border cuts it.
+    placed, centre = opening, opening.centre
     if open_px and CUT_CIRCLE:  # cut by the border: the circle through the rim it shows
-        fitted = rim_circle_centre((rim_u, rim_v, rim_zs), opening, f.cam)
-        centre = fitted if fitted is not None else centre
+        band = (cv2.dilate(big, _TERRAIN_KERNEL) > 0) & ~inside & ~inv_c
+        bv, bu = (np.nonzero(band)[k].astype(np.float64) for k in (0, 1))
+        around = rays_of(bu + x0, bv + y0, f.cam) * zc[band].astype(np.float64)[:, None]
+        plane = terrain_plane(around, rays_of(rim_u, rim_v, f.cam) * rim_zs[:, None])
+        if plane is not None:
+            placed = measure_opening(region_uv, (rim_u, rim_v, rim_zs), f.cam, plane=plane)
+        fitted = rim_circle_centre((rim_u, rim_v, rim_zs), placed, f.cam)
+        centre = placed.centre if fitted is None else fitted
     major, minor_pca, area, rim_z = (
         opening.major_m,
         opening.minor_m,
@@ -267,7 +285,7 @@ def _measure(
         beyond_range=beyond,
         relative_brightness=round(rel_in, 3) if beyond else None,
         opening_m=_xyz(centre),
-        rim_normal=_xyz(opening.normal),
+        rim_normal=_xyz(placed.normal),
         rim_seen=round(max(rim_seen, 0.0), 3),
     )
 

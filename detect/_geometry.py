@@ -17,6 +17,12 @@ GROW_PX = 4
 WALL_MARGIN_M = 0.06
 # A rim reading this much nearer than the rim's plane is an occluding edge, not rim.
 OCCLUDER_STEP_M = 0.25
+# A reading lies on a plane when within the structured-light depth noise of it, which grows
+# with the square of range: PLANE_TOL_M + PLANE_TOL_PER_M2 * z**2 (4.5 cm at 2.7 m).
+PLANE_TOL_M = 0.02
+PLANE_TOL_PER_M2 = 3e-3
+# The terrain around an opening is its rim's surface only if this share of the rim lies on it.
+TERRAIN_RIM_SHARE = 0.3
 
 
 def rays_of(
@@ -40,6 +46,70 @@ def fit_plane(
         if sv[1] > 1e-6 and abs(vt[2][2]) > 0.3:
             normal = vt[2] / np.linalg.norm(vt[2])
     return normal, centre
+
+
+def on_plane(
+    points: npt.NDArray[np.float64], plane: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]
+) -> npt.NDArray[np.bool_]:
+    """Which (N, 3) camera-frame points lie on ``(normal, centre)`` within the depth noise."""
+    normal, centre = plane
+    tol = PLANE_TOL_M + PLANE_TOL_PER_M2 * points[:, 2] ** 2
+    return np.asarray(np.abs((points - centre) @ normal) < tol)
+
+
+def fit_plane_ransac(
+    points: npt.NDArray[np.float64], tries: int = 200
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """The plane most of (N, 3) points lie on (:func:`on_plane`), refitted to them.
+
+    MSAC (RANSAC scored by truncated squared residuals) over planes through three of the
+    points; planes seen edge-on (normal more than ~72 deg from the optical axis) are not
+    candidates. The samples are drawn from a generator seeded by the number of points, so
+    the same frame always gives the same plane. Falls back to :func:`fit_plane` of all
+    points when fewer than 12 or no candidate is found.
+    """
+    n = len(points)
+    if n < 12:
+        return fit_plane(points)
+    idx = np.random.default_rng(n).integers(0, n, size=(tries, 3))
+    a, b, c = points[idx[:, 0]], points[idx[:, 1]], points[idx[:, 2]]
+    normals = np.cross(b - a, c - a)
+    length = np.linalg.norm(normals, axis=1)
+    ok = length > 1e-9
+    normals, a = normals[ok] / length[ok, None], a[ok]
+    facing = np.abs(normals[:, 2]) > 0.3
+    normals, a = normals[facing], a[facing]
+    if not len(normals):
+        return fit_plane(points)
+    tol = PLANE_TOL_M + PLANE_TOL_PER_M2 * points[:, 2] ** 2
+    dist = np.abs(normals @ points.T - np.einsum("kj,kj->k", normals, a)[:, None])
+    # MSAC: outliers cost a constant, inliers their squared residual, so of two planes
+    # that hold the same points the closer one wins (not one tilted to reach a few more).
+    cost = np.minimum(dist / tol, 1.0) ** 2
+    inliers = dist[int(np.argmin(cost.sum(axis=1)))] < tol
+    plane = fit_plane(points[inliers])
+    refit = on_plane(points, plane)  # once more, with the refitted plane's own inliers
+    return fit_plane(points[refit]) if refit.sum() >= 6 else plane
+
+
+def terrain_plane(
+    around: npt.NDArray[np.float64], rim: npt.NDArray[np.float64]
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]] | None:
+    """The surface an opening is cut in, from the readings around it (camera frame, m).
+
+    around : (N, 3) readings in a wide band around the opening (its rim ring included);
+    rim : (M, 3) the rim ring's. Where the image border cuts an opening, the ring around
+    its visible part is two lines: the near rim, and the top of the far wall it sees into.
+    A plane through both leans toward the wall (40-50 deg on level ground seen straight
+    down), and so does the centre placed on it. The terrain beyond the rim is a surface,
+    not a line: the plane most of the band lies on is the terrain's. It is the rim's only
+    when ``TERRAIN_RIM_SHARE`` of the rim lies on it too (rough rubble may offer a plane
+    that misses the rim); otherwise None.
+    """
+    plane = fit_plane_ransac(around)
+    if len(rim) == 0 or float(on_plane(rim, plane).mean()) < TERRAIN_RIM_SHARE:
+        return None
+    return plane
 
 
 @dataclass(frozen=True)
@@ -66,12 +136,14 @@ def measure_opening(
     region_uv: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]],
     rim_uvz: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]],
     cam: CameraIntrinsics,
+    plane: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]] | None = None,
 ) -> Opening:
     """Metric size and centre of an opening on the plane of its rim.
 
     region_uv : pixel coordinates of the region; rim_uvz : pixel coordinates and depth (m)
-    of the valid ring around it. The rim's 3-D points define the opening plane (least
-    squares); the region's pixel rays meet that plane in points whose area-weighted mean is
+    of the valid ring around it; plane : ``(normal, point)`` of the opening's plane when
+    known (:func:`terrain_plane`). Otherwise the rim's 3-D points define it (least
+    squares). The region's pixel rays meet that plane in points whose area-weighted mean is
     the opening's centre and whose second moments (plus each pixel's own footprint) give the
     axes of the ellipse with the same moments.
 
@@ -80,7 +152,7 @@ def measure_opening(
     meets the ground off the opening's centre (toward the camera).
     """
     ru, rv, rz = rim_uvz
-    normal, centre = fit_plane(rays_of(ru, rv, cam) * rz[:, None])
+    normal, centre = fit_plane(rays_of(ru, rv, cam) * rz[:, None]) if plane is None else plane
     if normal @ centre > 0:
         normal = -normal
     rays = rays_of(region_uv[0], region_uv[1], cam)
