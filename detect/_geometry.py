@@ -48,13 +48,16 @@ def fit_plane(
     return normal, centre
 
 
+def _depth_tol(points: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    return np.asarray(PLANE_TOL_M + PLANE_TOL_PER_M2 * points[:, 2] ** 2)
+
+
 def on_plane(
     points: npt.NDArray[np.float64], plane: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]
 ) -> npt.NDArray[np.bool_]:
     """Which (N, 3) camera-frame points lie on ``(normal, centre)`` within the depth noise."""
     normal, centre = plane
-    tol = PLANE_TOL_M + PLANE_TOL_PER_M2 * points[:, 2] ** 2
-    return np.asarray(np.abs((points - centre) @ normal) < tol)
+    return np.asarray(np.abs((points - centre) @ normal) < _depth_tol(points))
 
 
 def fit_plane_ransac(
@@ -81,7 +84,7 @@ def fit_plane_ransac(
     normals, a = normals[facing], a[facing]
     if not len(normals):
         return fit_plane(points)
-    tol = PLANE_TOL_M + PLANE_TOL_PER_M2 * points[:, 2] ** 2
+    tol = _depth_tol(points)
     dist = np.abs(normals @ points.T - np.einsum("kj,kj->k", normals, a)[:, None])
     # MSAC: outliers cost a constant, inliers their squared residual, so of two planes
     # that hold the same points the closer one wins (not one tilted to reach a few more).
