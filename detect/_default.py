@@ -224,8 +224,9 @@ def _measure(
     placed, centre = opening, opening.centre
     if open_px and CUT_CIRCLE:  # cut by the border: the circle through the rim it shows
         band = (cv2.dilate(big, _TERRAIN_KERNEL) > 0) & ~inside & ~inv_c
-        bv, bu = (np.nonzero(band)[k].astype(np.float64) for k in (0, 1))
-        around = rays_of(bu + x0, bv + y0, f.cam) * zc[band].astype(np.float64)[:, None]
+        bv, bu = np.nonzero(band)
+        uv_band = (bu.astype(np.float64) + x0, bv.astype(np.float64) + y0)
+        around = rays_of(*uv_band, f.cam) * zc[band].astype(np.float64)[:, None]
         plane = terrain_plane(around, rays_of(rim_u, rim_v, f.cam) * rim_zs[:, None])
         if plane is not None:
             placed = measure_opening(region_uv, (rim_u, rim_v, rim_zs), f.cam, plane=plane)
