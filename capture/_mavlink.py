@@ -5,13 +5,18 @@
 that vehicle (the vehicle's system id, component 191 = MAV_COMP_ID_ONBOARD_COMPUTER), asks
 for the messages it needs with MAV_CMD_SET_MESSAGE_INTERVAL (falling back to
 REQUEST_DATA_STREAM when that is not acknowledged), and runs a receiver thread that
+hands the autopilot's messages to a :class:`~capture._mavingest.VehicleState`, which
 
 * converts units once (``time_boot_ms`` -> ns, degE7 -> deg, mm -> m, cm/s -> m/s,
   cdeg -> rad) into :class:`~capture._posebuffer.PositionSample`,
   :class:`~capture._posebuffer.AttitudeSample` and :class:`~capture._posebuffer.GpsFix`
   records that fill a :class:`~capture._posebuffer.PoseBuffer`;
 * keeps a :class:`~capture._clock.ClockSync` up to date (TIMESYNC round trips at
-  ``timesync_hz``, arrival times of stamped messages, SYSTEM_TIME for UTC);
+  ``timesync_hz``, arrival times of stamped messages, SYSTEM_TIME for UTC) and notices
+  reboots;
+
+and itself
+
 * counts (and logs) garbage bytes and packets that fail to parse; they are otherwise ignored;
 * hands every parsed message with its arrival time to ``on_message`` (e.g. a flight logger).
 
@@ -31,13 +36,11 @@ from dataclasses import dataclass
 from typing import Any
 
 from capture._clock import ClockSync, ClockUnavailable
-from capture._mavadapt import (
-    is_autopilot_heartbeat,
-    telemetry_sample,
-)
+from capture._mavadapt import is_autopilot_heartbeat
+from capture._mavingest import VehicleState
 from capture._mavrates import RateMethod, RateRequests, TelemetryError, TelemetryTimeoutError
 from capture._mavstream import MavlinkStream
-from capture._posebuffer import AttitudeSample, GpsFix, PoseBuffer, PoseUnavailable, PositionSample
+from capture._posebuffer import GpsFix, PoseBuffer, PoseUnavailable
 from geotag import VehiclePose
 from missions import mavlink, open_link
 
@@ -66,7 +69,6 @@ DEFAULT_RATES_HZ: Mapping[str, float] = {
 MessageCallback = Callable[[Any, int], None]
 """``on_message(msg, t_mono_ns)``: a parsed pymavlink message and its arrival time."""
 
-_NS_PER_MS = 1_000_000
 #: Links read as raw bytes through :class:`MavlinkStream` (datagram links: each datagram
 #: framed on its own); other links (tlog replay ...) go through pymavlink's own parser.
 _STREAM_LINKS = {"mavserial": False, "mavtcp": False, "mavtcpin": False}
@@ -166,21 +168,19 @@ class Telemetry(RateRequests):
         self._cond = threading.Condition()  # guards _acks, _target; signals new samples
         self._target: tuple[int, int] | None = None
         self._acks: dict[int, int] = {}  # command -> MAV_RESULT of the latest ack
-        self._outstanding: dict[int, int] = {}  # TIMESYNC ts1 -> t0 (same value)
         self._counts: dict[str, int] = {}
         self._arrivals: dict[str, deque[int]] = {}
         self._bad_bytes = 0
         self._bad_packets = 0
         self._stream: MavlinkStream | None = None
-        self.reboots = 0  # autopilot reboots seen (boot clock went back)
+        self._state = VehicleState(
+            self.poses, self.clock, on_sample=self._notify, on_reboot=self._rerequest_rates_soon
+        )
         self._last_hb_ns: int | None = None
         self._last_rate_request_ns = 0
         self._unknown_packets = 0
         self._callback_errors = 0
-        self._timesync_sent = 0
-        self._timesync_received = 0
         self._last_bad_log_ns = 0
-        self._last_boot_ns: int | None = None
         self._last_rx_mono_ns: int | None = None
         self.rate_method: RateMethod = "none"
 
@@ -226,6 +226,11 @@ class Telemetry(RateRequests):
             self._conn = None
 
     # -- public queries --------------------------------------------------------------------
+
+    @property
+    def reboots(self) -> int:
+        """Autopilot reboots seen (its boot clock went back)."""
+        return self._state.reboots
 
     @property
     def target(self) -> tuple[int, int] | None:
@@ -304,8 +309,8 @@ class Telemetry(RateRequests):
             lost_packets=int(getattr(self._conn, "mav_loss", 0)) if self._conn else 0,
             callback_errors=self._callback_errors,
             rate_method=self.rate_method,
-            timesync_sent=self._timesync_sent,
-            timesync_received=self._timesync_received,
+            timesync_sent=self._state.timesync_sent,
+            timesync_received=self._state.timesync_received,
         )
 
     # -- commands --------------------------------------------------------------------------
@@ -382,10 +387,11 @@ class Telemetry(RateRequests):
         with self._send_lock:
             t0 = time.monotonic_ns()
             self._conn.mav.timesync_send(0, t0)
-        for ts1 in [k for k in self._outstanding if t0 - k > 2_000_000_000]:
-            del self._outstanding[ts1]  # unanswered for 2 s: lost
-        self._outstanding[t0] = t0
-        self._timesync_sent += 1
+        self._state.timesync_request(t0)
+
+    def _notify(self) -> None:
+        with self._cond:
+            self._cond.notify_all()
 
     def _handle(self, msg: Any, t_mono_ns: int) -> None:
         mtype = msg.get_type()
@@ -415,9 +421,12 @@ class Telemetry(RateRequests):
         with self._cond:
             self._counts[mtype] = self._counts.get(mtype, 0) + 1
             self._arrivals.setdefault(mtype, deque(maxlen=512)).append(t_mono_ns)
-        handler = self._HANDLERS.get(mtype)
-        if handler is not None:
-            handler(self, msg, t_mono_ns)
+        if mtype == "TIMESYNC":
+            self._on_timesync(msg, t_mono_ns)
+        elif mtype == "COMMAND_ACK":
+            self._on_command_ack(msg)
+        else:
+            self._state.handle(mtype, msg, t_mono_ns)
 
     def _maybe_adopt_target(self, msg: Any, src: tuple[int, int]) -> None:
         if not is_autopilot_heartbeat(msg):
@@ -459,68 +468,14 @@ class Telemetry(RateRequests):
                 self._bad_packets,
             )
 
-    def _stamped(self, t_boot_ns: int, t_mono_ns: int) -> None:
-        self._check_boot(t_boot_ns)
-        self.clock.add_arrival(t_mono_ns, t_boot_ns)
-
-    def _check_boot(self, t_boot_ns: int) -> None:
-        """A boot clock more than 2 s behind the newest seen: the autopilot rebooted."""
-        last = self._last_boot_ns
-        if last is not None and t_boot_ns < last - 2_000_000_000:
-            _log.warning(
-                "autopilot boot time went back %.1f s: reboot, resetting clock sync",
-                (last - t_boot_ns) / 1e9,
-            )
-            self.clock.reset()
-            self.reboots += 1
-            self._rerequest_rates_soon()  # a rebooted autopilot forgot them
-        if last is None or t_boot_ns > last or t_boot_ns < last - 2_000_000_000:
-            self._last_boot_ns = t_boot_ns
-
-    def _on_position(self, msg: Any, t_mono_ns: int) -> None:
-        sample = telemetry_sample(msg, 0)
-        assert isinstance(sample, PositionSample)
-        self._stamped(sample.t_boot_ns, t_mono_ns)
-        self.poses.add_position(sample)
-        with self._cond:
-            self._cond.notify_all()
-
-    def _on_attitude(self, msg: Any, t_mono_ns: int) -> None:
-        sample = telemetry_sample(msg, 0)
-        assert isinstance(sample, AttitudeSample)
-        self._stamped(sample.t_boot_ns, t_mono_ns)
-        self.poses.add_attitude(sample)
-        with self._cond:
-            self._cond.notify_all()
-
-    def _on_gps(self, msg: Any, t_mono_ns: int) -> None:
-        try:
-            t_boot_ns = self.clock.mono_to_boot_ns(t_mono_ns)
-        except ClockUnavailable:
-            t_boot_ns = self._last_boot_ns or 0
-        sample = telemetry_sample(msg, t_boot_ns)
-        assert isinstance(sample, GpsFix)
-        self.poses.add_gps(sample)
-
-    def _on_system_time(self, msg: Any, t_mono_ns: int) -> None:
-        t_boot_ns = int(msg.time_boot_ms) * _NS_PER_MS
-        self._stamped(t_boot_ns, t_mono_ns)
-        self.clock.add_system_time(t_boot_ns, int(msg.time_unix_usec) * 1000)
-
     def _on_timesync(self, msg: Any, t_mono_ns: int) -> None:
         if msg.tc1 == 0:  # the autopilot asks us: answer with our clock
             with self._send_lock:
                 self._conn.mav.timesync_send(time.monotonic_ns(), msg.ts1)
             return
-        t0 = self._outstanding.pop(int(msg.ts1), None)
-        if t0 is None:  # someone else's exchange (e.g. a GCS on the same router)
-            return
-        self._timesync_received += 1
-        self._check_boot(int(msg.tc1))
-        self.clock.add_timesync(t0, t_mono_ns, int(msg.tc1))
+        self._state.timesync_reply(msg, t_mono_ns)
 
-    def _on_command_ack(self, msg: Any, t_mono_ns: int) -> None:
-        del t_mono_ns
+    def _on_command_ack(self, msg: Any) -> None:
         target = (getattr(msg, "target_system", 0), getattr(msg, "target_component", 0))
         ours = (self._conn.mav.srcSystem, COMPANION_COMPONENT)
         if target != (0, 0) and target != ours:  # an answer to someone else's command
@@ -528,13 +483,3 @@ class Telemetry(RateRequests):
         with self._cond:
             self._acks[int(msg.command)] = int(msg.result)
             self._cond.notify_all()
-
-    _HANDLERS: Mapping[str, Callable[[Telemetry, Any, int], None]] = {
-        "GLOBAL_POSITION_INT": _on_position,
-        "ATTITUDE": _on_attitude,
-        "ATTITUDE_QUATERNION": _on_attitude,
-        "GPS_RAW_INT": _on_gps,
-        "SYSTEM_TIME": _on_system_time,
-        "TIMESYNC": _on_timesync,
-        "COMMAND_ACK": _on_command_ack,
-    }
