@@ -19,7 +19,7 @@ from alien_scenes.common import (
     _rz,
 )
 from alien_scenes.raycast import _Grid
-from alien_scenes.sampling import _LIB_BOX, _camera_rotation, _footprint
+from alien_scenes.sampling import _LIB_BOX, _camera_rotation, _footprint, rubble_piece
 from alien_scenes.shapes import _Scene, _Shape, _Stain
 
 
@@ -136,7 +136,7 @@ def _sample_scene(rng: np.random.Generator, cam: CameraModel, lib: list[_Shape])
         c, r = g.px(xy).astype(int)
         if g.hmap[r, c] > b.pile_cap or g.keep[r, c]:
             continue
-        shape, dims, Rr, mat, embed = b.rubble_piece()
+        shape, dims, Rr, mat, embed = rubble_piece(b.rng, len(b.lib))
         if b.add_resting(shape, dims, Rr, xy, mat, embed):
             acc += float(dims[0] * dims[1]) * 0.8
     # camera height is measured above the rubble surface under the view
