@@ -95,18 +95,15 @@ class VehicleState:
         if last is None or t_boot_ns > last or went_back:
             self._last_boot_ns = t_boot_ns
 
-    def _on_position(self, msg: Any, t_mono_ns: int) -> None:
+    def _on_pose_sample(self, msg: Any, t_mono_ns: int) -> None:
+        """GLOBAL_POSITION_INT, ATTITUDE or ATTITUDE_QUATERNION: a stamped pose sample."""
         sample = telemetry_sample(msg, 0)
-        assert isinstance(sample, PositionSample)
+        assert isinstance(sample, (PositionSample, AttitudeSample))
         self._stamped(sample.t_boot_ns, t_mono_ns)
-        self.poses.add_position(sample)
-        self._on_sample()
-
-    def _on_attitude(self, msg: Any, t_mono_ns: int) -> None:
-        sample = telemetry_sample(msg, 0)
-        assert isinstance(sample, AttitudeSample)
-        self._stamped(sample.t_boot_ns, t_mono_ns)
-        self.poses.add_attitude(sample)
+        if isinstance(sample, PositionSample):
+            self.poses.add_position(sample)
+        else:
+            self.poses.add_attitude(sample)
         self._on_sample()
 
     def _on_gps(self, msg: Any, t_mono_ns: int) -> None:
@@ -124,9 +121,9 @@ class VehicleState:
         self.clock.add_system_time(t_boot_ns, int(msg.time_unix_usec) * 1000)
 
     _HANDLERS: Mapping[str, Callable[[VehicleState, Any, int], None]] = {
-        "GLOBAL_POSITION_INT": _on_position,
-        "ATTITUDE": _on_attitude,
-        "ATTITUDE_QUATERNION": _on_attitude,
+        "GLOBAL_POSITION_INT": _on_pose_sample,
+        "ATTITUDE": _on_pose_sample,
+        "ATTITUDE_QUATERNION": _on_pose_sample,
         "GPS_RAW_INT": _on_gps,
         "SYSTEM_TIME": _on_system_time,
     }
