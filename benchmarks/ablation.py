@@ -36,13 +36,14 @@ VARIANTS: dict[str, dict[str, Any]] = {
 
 
 def _init(overrides: dict[str, Any]) -> None:
-    import detect._default
-    import detect._geometry
-    import detect._photometry
-    import detect._regions
+    import holescan.detect._default
+    import holescan.detect._geometry
+    import holescan.detect._photometry
+    import holescan.detect._regions
 
     # The ablation switches are private module constants on purpose; set each where it lives.
-    modules = (detect._default, detect._geometry, detect._photometry, detect._regions)
+    d = holescan.detect
+    modules = (d._default, d._geometry, d._photometry, d._regions)
     for k, v in overrides.items():
         homes = [m for m in modules if hasattr(m, k)]
         if not homes:
@@ -55,8 +56,8 @@ _DATASETS: dict[Path, Any] = {}
 
 
 def _one(job: tuple[Path, int]) -> tuple[int, list[tuple[int, tuple[float, ...], float]]]:
-    from detect import DEFAULT, detect_holes
-    from ground import load_dataset, load_image_pair
+    from holescan.detect import DEFAULT, detect_holes
+    from holescan.ground import load_dataset, load_image_pair
 
     root, i = job
     if root not in _DATASETS:
@@ -73,8 +74,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("datasets", nargs="+", type=Path)
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args(argv)
-    from detect import ScoredBox, evaluate_detections
-    from ground import ground_truth, load_dataset
+    from holescan.detect import ScoredBox, evaluate_detections
+    from holescan.ground import ground_truth, load_dataset
 
     sets = [(p, load_dataset(p)) for p in args.datasets]
     head = " | ".join(f"{p.name} AP IoU / authors / recall" for p, _ in sets)

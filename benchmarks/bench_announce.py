@@ -44,10 +44,10 @@ from typing import Any
 
 import numpy as np
 
-from capture import HolePipeline
-from detect import CameraIntrinsics, detect_holes, p_hole_of_score
-from geotag import CameraMount, VehiclePose
-from sim import (
+from holescan.capture import HolePipeline
+from holescan.detect import CameraIntrinsics, detect_holes, p_hole_of_score
+from holescan.geotag import CameraMount, VehiclePose
+from holescan.sim import (
     Conditions,
     SimAutopilot,
     SortieParams,
@@ -163,7 +163,7 @@ def alien_scores(dataset: Path) -> dict[str, list[float]]:
     """Per-detection scores on an alien dataset: true (IoU > 0.5 with an access hole), false."""
     import cv2
 
-    from detect import box_iou
+    from holescan.detect import box_iou
 
     coco = json.loads((dataset / "annotations.json").read_text())
     cam = json.loads((dataset / "camera.json").read_text())

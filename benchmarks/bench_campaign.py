@@ -45,7 +45,7 @@ def load() -> float:
 
 
 def fly(work: Path, duration_s: float) -> list[list[Path]]:
-    from sim import DEMO_SORTIE, DemoOptions, run_demo
+    from holescan.sim import DEMO_SORTIE, DemoOptions, run_demo
 
     flights = []
     for name, heading in (("a", 0.0), ("b", 90.0)):
@@ -86,7 +86,7 @@ def main() -> int:
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     logging.getLogger("distributed").setLevel(logging.ERROR)
 
-    from ground import ReprocessOptions, flight_log_files, reprocess
+    from holescan.ground import ReprocessOptions, flight_log_files, reprocess
 
     work = Path(tempfile.mkdtemp(prefix="bench-campaign-"))
     if args.logs:
@@ -189,7 +189,7 @@ def main() -> int:
 
 
 def campaign(flights: list[list[Path]], args: argparse.Namespace, work: Path) -> None:
-    from ground import ReprocessOptions, run_campaign
+    from holescan.ground import ReprocessOptions, run_campaign
 
     print(f"\n== campaign of {args.flights} flights, 2 workers ==")
     logs = copies(flights, args.flights, work / "copies")

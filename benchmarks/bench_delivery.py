@@ -27,8 +27,8 @@ import statistics
 import sys
 from pathlib import Path
 
-from geotag import AnnounceGate
-from sim import DEMO_SORTIE, DemoOptions, run_demo
+from holescan.geotag import AnnounceGate
+from holescan.sim import DEMO_SORTIE, DemoOptions, run_demo
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -41,12 +41,12 @@ def main(argv: list[str] | None = None) -> int:
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
     from dataclasses import replace
 
-    from detect import DEFAULT, PAPER, detect_baseline, detect_holes
-    from ground import load_dataset, load_image_pair
+    from holescan.detect import DEFAULT, PAPER, detect_baseline, detect_holes
+    from holescan.ground import load_dataset, load_image_pair
 
     root = args.dataset
     if root is None:
-        from sim import synth_dataset
+        from holescan.sim import synth_dataset
 
         root = Path(tempfile.mkdtemp(prefix="holescan-bench-"))
         print(f"rendering {args.frames} synthetic frames into {root} ...", flush=True)

@@ -48,10 +48,17 @@ from typing import Any
 import numpy as np
 import pymap3d
 
-from capture import Flight, FlightConfig, LoggedDetections, LogOptions, log_info, read_flight_log
-from detect import Detection
-from geotag import ErrorModel, HoleSighting, geotag_detection
-from sim import (
+from holescan.capture import (
+    Flight,
+    FlightConfig,
+    LoggedDetections,
+    LogOptions,
+    log_info,
+    read_flight_log,
+)
+from holescan.detect import Detection
+from holescan.geotag import ErrorModel, HoleSighting, geotag_detection
+from holescan.sim import (
     LapReplay,
     SimSortie,
     SortieParams,
@@ -171,7 +178,7 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(
         level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s"
     )
-    logging.getLogger("sim").setLevel(logging.ERROR)
+    logging.getLogger("holescan.sim").setLevel(logging.ERROR)
 
     work = args.workdir or Path(tempfile.mkdtemp(prefix="holescan-bench-"))
     work.mkdir(parents=True, exist_ok=True)

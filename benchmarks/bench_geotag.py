@@ -49,8 +49,8 @@ import numpy as np
 import numpy.typing as npt
 import pymap3d
 
-from detect import DEFAULT, CameraIntrinsics, Detection, box_iou, detect_holes
-from geotag import (
+from holescan.detect import DEFAULT, CameraIntrinsics, Detection, box_iou, detect_holes
+from holescan.geotag import (
     CameraMount,
     ErrorModel,
     HoleSighting,
@@ -59,8 +59,8 @@ from geotag import (
     geotag_detection,
     local_en_m,
 )
-from ground import load_dataset, load_image_pair
-from sim import (
+from holescan.ground import load_dataset, load_image_pair
+from holescan.sim import (
     DEFAULT_ANCHOR,
     AccessHole,
     CameraPose,

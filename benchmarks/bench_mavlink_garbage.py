@@ -13,8 +13,8 @@ import time
 
 import numpy as np
 
-from capture import PoseUnavailable, Telemetry
-from sim import SimAutopilot, SimPath
+from holescan.capture import PoseUnavailable, Telemetry
+from holescan.sim import SimAutopilot, SimPath
 
 
 def free_port() -> int:

@@ -47,8 +47,8 @@ class Row:
 
 
 def _detect_one(job: tuple[str, int]) -> list[tuple[int, tuple[float, ...], float, bool, tuple]]:  # type: ignore[type-arg]
-    from detect import DEFAULT, detect_holes
-    from ground import load_dataset, load_image_pair
+    from holescan.detect import DEFAULT, detect_holes
+    from holescan.ground import load_dataset, load_image_pair
 
     root, i = job
     ds = _cached(root, load_dataset)
@@ -81,8 +81,8 @@ def _cached(root: str, load):  # type: ignore[no-untyped-def]
 
 def collect(root: Path, workers: int) -> list[Row]:
     """Every default-mode detection on ``root``, labelled by COCO matching at IoU > 0.5."""
-    from detect import GroundTruthBox, ScoredBox, match_image
-    from ground import ground_truth, load_dataset
+    from holescan.detect import GroundTruthBox, ScoredBox, match_image
+    from holescan.ground import ground_truth, load_dataset
 
     ds = load_dataset(root)
     jobs = [(str(root), i) for i in range(len(ds.images))]
@@ -208,7 +208,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--dump", type=Path, help="write every labelled detection as JSON")
     args = ap.parse_args(argv)
 
-    from detect import logistic
+    from holescan.detect import logistic
 
     rows: list[Row] = []
     for root in args.datasets:
@@ -246,7 +246,7 @@ def main(argv: list[str] | None = None) -> int:
         gap = abs(mp - obs)
         print(f"| {lo:.1f}-{lo + 0.1:.1f} | {mp:.3f} | {obs:.3f} | {n} | {gap:.3f}{flag} |")
     if args.write:
-        from detect import _calibration
+        from holescan.detect import _calibration
 
         path = Path(_calibration.__file__).with_name("_calibration_table.py")
         names = ", ".join(p.name for p in args.datasets)
@@ -260,7 +260,7 @@ def main(argv: list[str] | None = None) -> int:
         )
         print(f"wrote {path}")
     if args.plot:
-        from ground import plot_reliability
+        from holescan.ground import plot_reliability
 
         plot_reliability(
             args.plot, ph, yh, f"held-out split: {len(held)} detections, Brier {brier:.3f}"

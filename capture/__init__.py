@@ -1,11 +1,11 @@
 """The flight side: frame sources, telemetry, the MCAP flight log and the capture daemon."""
 
-from capture._clock import ClockEstimate, ClockSync, ClockUnavailable
-from capture._daemon import Flight
-from capture._errors import CaptureError, SensorError
-from capture._flightrecords import FlightConfig, FlightCounters, FlightSummary
-from capture._fly import FlyReport, fly, format_report
-from capture._flyconfig import (
+from holescan.capture._clock import ClockEstimate, ClockSync, ClockUnavailable
+from holescan.capture._daemon import Flight
+from holescan.capture._errors import CaptureError, SensorError
+from holescan.capture._flightrecords import FlightConfig, FlightCounters, FlightSummary
+from holescan.capture._fly import FlyReport, fly, format_report
+from holescan.capture._flyconfig import (
     FlyConfig,
     SensorSpec,
     check_table,
@@ -13,9 +13,9 @@ from capture._flyconfig import (
     numbers,
     parse_fly_config,
 )
-from capture._frame import Frame, FrameSource
-from capture._holepipeline import FrameHoles, HolePipeline, HoleView, crop_view, view_jpeg
-from capture._mavadapt import (
+from holescan.capture._frame import Frame, FrameSource
+from holescan.capture._holepipeline import FrameHoles, HolePipeline, HoleView, crop_view, view_jpeg
+from holescan.capture._mavadapt import (
     TelemetrySample,
     attitude_from_attitude,
     attitude_from_quaternion,
@@ -24,15 +24,15 @@ from capture._mavadapt import (
     position_from_global_position_int,
     telemetry_sample,
 )
-from capture._mavlink import (
+from holescan.capture._mavlink import (
     DEFAULT_RATES_HZ,
     Telemetry,
     TelemetryError,
     TelemetryStats,
     TelemetryTimeoutError,
 )
-from capture._mavrates import read_signing_key
-from capture._mcapchunks import (
+from holescan.capture._mavrates import read_signing_key
+from holescan.capture._mcapchunks import (
     ChunkDamagedError,
     ChunkSpan,
     LogLayout,
@@ -43,9 +43,9 @@ from capture._mcapchunks import (
     read_chunk,
     read_log_layout,
 )
-from capture._mcapdetections import annotations_message, detection_json
-from capture._mcaplog import FlightLogError, FlightLogWriter, LogOptions, WriterStats
-from capture._mcapread import (
+from holescan.capture._mcapdetections import annotations_message, detection_json
+from holescan.capture._mcaplog import FlightLogError, FlightLogWriter, LogOptions, WriterStats
+from holescan.capture._mcapread import (
     LoggedCalibration,
     LoggedDetections,
     LoggedFrame,
@@ -58,8 +58,8 @@ from capture._mcapread import (
     TruncatedLogError,
     read_flight_log,
 )
-from capture._mcapscan import DamagedRegion, ScanState, scan_records
-from capture._mcapschemas import (
+from holescan.capture._mcapscan import DamagedRegion, ScanState, scan_records
+from holescan.capture._mcapschemas import (
     JSON_SCHEMAS,
     TOPIC_CAMERA_INFO,
     TOPIC_COLOR,
@@ -73,11 +73,11 @@ from capture._mcapschemas import (
     jsonable,
     to_json,
 )
-from capture._mcaptools import LogInfo, RecoveryReport, TopicInfo, log_info, recover_log
-from capture._oni import OniInfo, OniStreamInfo, OniWriter, export_oni, scan_oni, write_oni
-from capture._openni import OniSource, OpenNI2Device
-from capture._openni2lib import camera_from_fov, openni2_library
-from capture._outpath import (
+from holescan.capture._mcaptools import LogInfo, RecoveryReport, TopicInfo, log_info, recover_log
+from holescan.capture._oni import OniInfo, OniStreamInfo, OniWriter, export_oni, scan_oni, write_oni
+from holescan.capture._openni import OniSource, OpenNI2Device
+from holescan.capture._openni2lib import camera_from_fov, openni2_library
+from holescan.capture._outpath import (
     OutputPathError,
     atomic_output,
     check_folder,
@@ -86,10 +86,16 @@ from capture._outpath import (
     output_via_part,
     part_path,
 )
-from capture._posebuffer import AttitudeSample, GpsFix, PoseBuffer, PoseUnavailable, PositionSample
-from capture._sensorsetup import PacedReplay, SensorSetup, open_sensor
-from capture._telemetryreplay import TelemetryReplay
-from capture._usb import UsbDeviceInfo, find_xtion, reset_xtion
+from holescan.capture._posebuffer import (
+    AttitudeSample,
+    GpsFix,
+    PoseBuffer,
+    PoseUnavailable,
+    PositionSample,
+)
+from holescan.capture._sensorsetup import PacedReplay, SensorSetup, open_sensor
+from holescan.capture._telemetryreplay import TelemetryReplay
+from holescan.capture._usb import UsbDeviceInfo, find_xtion, reset_xtion
 
 __all__ = [
     "DEFAULT_RATES_HZ",

@@ -30,7 +30,7 @@ from typing import Literal
 
 import numpy as np
 
-from capture._errors import CaptureError
+from holescan.capture._errors import CaptureError
 
 __all__ = ["ClockEstimate", "ClockSource", "ClockSync", "ClockUnavailable"]
 

@@ -31,23 +31,23 @@ from typing import Any
 
 import pymap3d
 
-from capture._clock import ClockUnavailable
-from capture._errors import SensorError
-from capture._flightrecords import (
+from holescan.capture._clock import ClockUnavailable
+from holescan.capture._errors import SensorError
+from holescan.capture._flightrecords import (
     FlightConfig,
     FlightCounters,
     FlightSummary,
     _close_quietly,
     frames_with_timeout,
 )
-from capture._frame import Frame, FrameSource
-from capture._holepipeline import BestViews, HolePipeline, HoleView
-from capture._mavlink import Telemetry, TelemetryTimeoutError
-from capture._mcaplog import FlightLogError, FlightLogWriter
-from capture._posebuffer import PoseUnavailable
-from capture._worker import DetectionWorker, WorkerResult
-from detect import CameraIntrinsics
-from geotag import Hole, VehiclePose
+from holescan.capture._frame import Frame, FrameSource
+from holescan.capture._holepipeline import BestViews, HolePipeline, HoleView
+from holescan.capture._mavlink import Telemetry, TelemetryTimeoutError
+from holescan.capture._mcaplog import FlightLogError, FlightLogWriter
+from holescan.capture._posebuffer import PoseUnavailable
+from holescan.capture._worker import DetectionWorker, WorkerResult
+from holescan.detect import CameraIntrinsics
+from holescan.geotag import Hole, VehiclePose
 
 log = logging.getLogger(__name__)
 

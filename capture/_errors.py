@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from holescan_errors import HolescanError
+from holescan.errors import HolescanError
 
 __all__ = ["CaptureError", "SensorError"]
 

@@ -13,11 +13,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from capture._errors import SensorError
-from capture._frame import Frame, FrameSource
-from capture._mcaplog import LogOptions, WriterStats
-from detect import DEFAULT, DetectParams
-from geotag import AnnounceGate, CameraMount, ErrorModel, Hole
+from holescan.capture._errors import SensorError
+from holescan.capture._frame import Frame, FrameSource
+from holescan.capture._mcaplog import LogOptions, WriterStats
+from holescan.detect import DEFAULT, DetectParams
+from holescan.geotag import AnnounceGate, CameraMount, ErrorModel, Hole
 
 log = logging.getLogger(__name__)
 

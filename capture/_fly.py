@@ -18,14 +18,14 @@ import threading
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from capture._daemon import Flight
-from capture._flightrecords import FlightSummary
-from capture._flyconfig import FlyConfig
-from capture._holepipeline import HoleView
-from capture._mavlink import Telemetry
-from capture._sensorsetup import SensorSetup, open_sensor
-from geotag import AnnounceGate, Hole
-from missions import HoleMissionServer
+from holescan.capture._daemon import Flight
+from holescan.capture._flightrecords import FlightSummary
+from holescan.capture._flyconfig import FlyConfig
+from holescan.capture._holepipeline import HoleView
+from holescan.capture._mavlink import Telemetry
+from holescan.capture._sensorsetup import SensorSetup, open_sensor
+from holescan.geotag import AnnounceGate, Hole
+from holescan.missions import HoleMissionServer
 
 __all__ = ["FlyReport", "fly", "format_report"]
 

@@ -13,7 +13,7 @@ sensor and the links, and one table per part::
     [holes]    announcing and serving holes
     [sim]      the simulated sortie (``sensor = "sim"``), checked by :mod:`sim`
 
-Unknown keys and wrong types raise :class:`holescan_errors.InputError` naming the key (a
+Unknown keys and wrong types raise :class:`holescan.errors.InputError` naming the key (a
 typo in a flight configuration must not pass silently); the ``[sim]`` table is kept as
 written for :mod:`sim`, which checks it with :func:`check_table` when the sensor is ``sim``
 (the flight side never imports the simulator). :func:`capture.open_sensor` turns the sensor
@@ -39,11 +39,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from capture._flightrecords import FlightConfig
-from capture._mcaplog import LogOptions
-from detect import DEFAULT, PAPER, SEARCHERS, DetectParams
-from geotag import AnnounceGate, CameraMount, ErrorModel
-from holescan_errors import InputError
+from holescan.capture._flightrecords import FlightConfig
+from holescan.capture._mcaplog import LogOptions
+from holescan.detect import DEFAULT, PAPER, SEARCHERS, DetectParams
+from holescan.errors import InputError
+from holescan.geotag import AnnounceGate, CameraMount, ErrorModel
 
 __all__ = [
     "FlyConfig",

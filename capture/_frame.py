@@ -9,7 +9,7 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 
-from detect import CameraIntrinsics
+from holescan.detect import CameraIntrinsics
 
 
 @dataclass(frozen=True, eq=False)

@@ -22,8 +22,9 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from detect import CameraIntrinsics, Detection
-from geotag import (
+from holescan.detect import CameraIntrinsics, Detection
+from holescan.errors import InputError
+from holescan.geotag import (
     CameraMount,
     ErrorModel,
     Hole,
@@ -32,7 +33,6 @@ from geotag import (
     VehiclePose,
     geotag_frame,
 )
-from holescan_errors import InputError
 
 _log = logging.getLogger(__name__)
 
@@ -139,7 +139,7 @@ def crop_view(
 
     Raises
     ------
-    holescan_errors.InputError
+    holescan.errors.InputError
         An empty box, or one entirely outside the image.
 
     Examples

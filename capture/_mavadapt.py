@@ -6,8 +6,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from capture._posebuffer import AttitudeSample, GpsFix, PositionSample, quat_from_euler
-from missions import mavlink
+from holescan.capture._posebuffer import AttitudeSample, GpsFix, PositionSample, quat_from_euler
+from holescan.missions import mavlink
 
 __all__ = [
     "TelemetrySample",

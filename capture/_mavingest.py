@@ -15,11 +15,11 @@ import logging
 from collections.abc import Callable, Mapping
 from typing import Any
 
-from capture._clock import ClockSync, ClockUnavailable
-from capture._mavadapt import telemetry_sample
-from capture._posebuffer import AttitudeSample, GpsFix, PoseBuffer, PositionSample
+from holescan.capture._clock import ClockSync, ClockUnavailable
+from holescan.capture._mavadapt import telemetry_sample
+from holescan.capture._posebuffer import AttitudeSample, GpsFix, PoseBuffer, PositionSample
 
-_log = logging.getLogger("capture._mavlink")
+_log = logging.getLogger("holescan.capture._mavlink")
 
 _NS_PER_MS = 1_000_000
 # A boot clock this far behind the newest seen is a reboot, not reordering.

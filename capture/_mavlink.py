@@ -35,14 +35,19 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from capture._clock import ClockSync, ClockUnavailable
-from capture._mavadapt import is_autopilot_heartbeat
-from capture._mavingest import VehicleState
-from capture._mavrates import RateMethod, RateRequests, TelemetryError, TelemetryTimeoutError
-from capture._mavstream import MavlinkStream
-from capture._posebuffer import GpsFix, PoseBuffer, PoseUnavailable
-from geotag import VehiclePose
-from missions import mavlink, open_link
+from holescan.capture._clock import ClockSync, ClockUnavailable
+from holescan.capture._mavadapt import is_autopilot_heartbeat
+from holescan.capture._mavingest import VehicleState
+from holescan.capture._mavrates import (
+    RateMethod,
+    RateRequests,
+    TelemetryError,
+    TelemetryTimeoutError,
+)
+from holescan.capture._mavstream import MavlinkStream
+from holescan.capture._posebuffer import GpsFix, PoseBuffer, PoseUnavailable
+from holescan.geotag import VehiclePose
+from holescan.missions import mavlink, open_link
 
 __all__ = [
     "COMPANION_COMPONENT",

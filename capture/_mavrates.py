@@ -13,8 +13,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal
 
-from capture._errors import CaptureError
-from missions import mavlink
+from holescan.capture._errors import CaptureError
+from holescan.missions import mavlink
 
 __all__ = [
     "RateMethod",
@@ -24,7 +24,7 @@ __all__ = [
     "read_signing_key",
 ]
 
-_log = logging.getLogger("capture._mavlink")
+_log = logging.getLogger("holescan.capture._mavlink")
 
 RateMethod = Literal["message_interval", "data_stream", "mixed", "none"]
 

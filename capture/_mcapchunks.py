@@ -32,10 +32,10 @@ from mcap.reader import make_reader
 from mcap.records import Channel, Chunk, McapRecord, Message, Metadata, Schema
 from mcap.stream_reader import breakup_chunk
 
-from capture._mcaplog import FlightLogError
-from capture._mcapread import LogRecord, _decode
-from geotag import CameraMount, ErrorModel
-from holescan_errors import InputError
+from holescan.capture._mcaplog import FlightLogError
+from holescan.capture._mcapread import LogRecord, _decode
+from holescan.errors import InputError
+from holescan.geotag import CameraMount, ErrorModel
 
 __all__ = [
     "ChunkDamagedError",

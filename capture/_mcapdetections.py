@@ -12,9 +12,9 @@ from foxglove_schemas_protobuf.Point2_pb2 import Point2
 from foxglove_schemas_protobuf.PointsAnnotation_pb2 import PointsAnnotation
 from foxglove_schemas_protobuf.TextAnnotation_pb2 import TextAnnotation
 
-from capture._mcapschemas import _float, _opt_float, _stamp, jsonable
-from detect import Detection, FeatureScores
-from holescan_errors import InputError
+from holescan.capture._mcapschemas import _float, _opt_float, _stamp, jsonable
+from holescan.detect import Detection, FeatureScores
+from holescan.errors import InputError
 
 __all__ = ["annotations_message", "decode_detection", "detection_json"]
 

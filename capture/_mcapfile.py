@@ -17,8 +17,8 @@ from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 from mcap_protobuf.schema import build_file_descriptor_set
 
-from capture import _mcapschemas as sch
-from holescan_errors import InputError
+from holescan.capture import _mcapschemas as sch
+from holescan.errors import InputError
 
 __all__ = ["FlightLogError", "LogOptions", "WriterStats", "log_file_path", "mcap_version"]
 

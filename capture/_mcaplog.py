@@ -26,10 +26,10 @@ import numpy as np
 import pymap3d
 from mcap.writer import CompressionType
 
-from capture import _mcapschemas as sch
-from capture._frame import Frame
-from capture._mcapdetections import annotations_message, detection_json
-from capture._mcapfile import (
+from holescan.capture import _mcapschemas as sch
+from holescan.capture._frame import Frame
+from holescan.capture._mcapdetections import annotations_message, detection_json
+from holescan.capture._mcapfile import (
     FlightLogError,
     LogOptions,
     WriterStats,
@@ -37,9 +37,9 @@ from capture._mcapfile import (
     log_file_path,
     mcap_version,
 )
-from detect import CameraIntrinsics, Detection
-from geotag import CameraMount, ErrorModel, VehiclePose
-from holescan_errors import InputError
+from holescan.detect import CameraIntrinsics, Detection
+from holescan.errors import InputError
+from holescan.geotag import CameraMount, ErrorModel, VehiclePose
 
 __all__ = [
     "FlightLogError",

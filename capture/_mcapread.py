@@ -19,13 +19,13 @@ from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 from mcap.records import Channel, Message, Metadata, Schema
 
-from capture import _mcapschemas as sch
-from capture._frame import Frame
-from capture._mcapdetections import decode_detection
-from capture._mcaplog import FlightLogError
-from capture._mcapscan import ScanState, scan_records
-from detect import CameraIntrinsics, Detection
-from geotag import Hole, VehiclePose
+from holescan.capture import _mcapschemas as sch
+from holescan.capture._frame import Frame
+from holescan.capture._mcapdetections import decode_detection
+from holescan.capture._mcaplog import FlightLogError
+from holescan.capture._mcapscan import ScanState, scan_records
+from holescan.detect import CameraIntrinsics, Detection
+from holescan.geotag import Hole, VehiclePose
 
 __all__ = [
     "LogRecord",

@@ -46,7 +46,7 @@ from mcap.records import (
     SummaryOffset,
 )
 
-from capture._mcaplog import FlightLogError
+from holescan.capture._mcaplog import FlightLogError
 
 __all__ = ["MAGIC", "DamagedRegion", "ScanState", "scan_records"]
 

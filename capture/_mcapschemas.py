@@ -32,9 +32,9 @@ from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 from foxglove_schemas_protobuf.Vector3_pb2 import Vector3
 from google.protobuf.timestamp_pb2 import Timestamp
 
-from detect import CameraIntrinsics, FeatureScores
-from geotag import CameraMount, ErrorModel, VehiclePose
-from holescan_errors import InputError
+from holescan.detect import CameraIntrinsics, FeatureScores
+from holescan.errors import InputError
+from holescan.geotag import CameraMount, ErrorModel, VehiclePose
 
 __all__ = [
     "BODY_FRAME",

@@ -27,11 +27,11 @@ from mcap.records import (
 from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 
-from capture import _mcapschemas as sch
-from capture._mcaplog import FlightLogError
-from capture._mcapread import TruncatedLogError, _as_paths
-from capture._mcapscan import DamagedRegion, ScanState, scan_records
-from capture._outpath import OutputPathError, check_output, commit_part, part_path
+from holescan.capture import _mcapschemas as sch
+from holescan.capture._mcaplog import FlightLogError
+from holescan.capture._mcapread import TruncatedLogError, _as_paths
+from holescan.capture._mcapscan import DamagedRegion, ScanState, scan_records
+from holescan.capture._outpath import OutputPathError, check_output, commit_part, part_path
 
 __all__ = ["LogInfo", "RecoveryReport", "TopicInfo", "log_info", "recover_log"]
 

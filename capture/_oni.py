@@ -31,8 +31,8 @@ from typing import BinaryIO
 
 import numpy as np
 
-from capture._frame import Frame
-from capture._oniformat import (
+from holescan.capture._frame import Frame
+from holescan.capture._oniformat import (
     _FILE_HEADER,
     _FILE_MAGIC,
     _FILE_VERSION,
@@ -47,10 +47,10 @@ from capture._oniformat import (
     _Record,
     _record,
 )
-from capture._oniscan import OniInfo, OniStreamInfo, scan_oni
-from capture._outpath import check_output, commit_part, part_path
-from detect import CameraIntrinsics
-from holescan_errors import InputError
+from holescan.capture._oniscan import OniInfo, OniStreamInfo, scan_oni
+from holescan.capture._outpath import check_output, commit_part, part_path
+from holescan.detect import CameraIntrinsics
+from holescan.errors import InputError
 
 __all__ = [
     "OniInfo",
@@ -339,7 +339,7 @@ def export_oni(
     Sensor timestamps that jump back (the Xtion's clock restarts after a USB reset) are
     shifted to continue after the previous frame, by the companion clock's interval.
     """
-    from capture._mcapread import McapSource  # the MCAP stack, only when exporting
+    from holescan.capture._mcapread import McapSource  # the MCAP stack, only when exporting
 
     inputs = [logs] if isinstance(logs, str | os.PathLike) else list(logs)
     check_output(path, inputs=inputs, suffixes={".oni"}, force=force)

@@ -9,7 +9,7 @@ import struct
 from dataclasses import dataclass
 from typing import Final
 
-from detect import CameraIntrinsics
+from holescan.detect import CameraIntrinsics
 
 _FILE_MAGIC: Final = b"NI10"
 _FILE_VERSION: Final = (1, 0, 1, 0)

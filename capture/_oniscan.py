@@ -10,7 +10,7 @@ import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from capture._oniformat import (
+from holescan.capture._oniformat import (
     _CAMERA_PROPERTY,
     _FILE_HEADER,
     _FILE_MAGIC,
@@ -24,8 +24,8 @@ from capture._oniformat import (
     _U64_MAX,
     _Record,
 )
-from detect import CameraIntrinsics
-from holescan_errors import InputError
+from holescan.detect import CameraIntrinsics
+from holescan.errors import InputError
 
 __all__ = ["OniInfo", "OniStreamInfo", "scan_oni"]
 

@@ -26,10 +26,10 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from capture._errors import SensorError
-from capture._frame import Frame
-from capture._oni import OniInfo, scan_oni
-from capture._openni2lib import (
+from holescan.capture._errors import SensorError
+from holescan.capture._frame import Frame
+from holescan.capture._oni import OniInfo, scan_oni
+from holescan.capture._openni2lib import (
     _PIXEL_DEPTH_1_MM,
     _PIXEL_RGB888,
     _copy_frame,
@@ -39,9 +39,9 @@ from capture._openni2lib import (
     camera_from_fov,
     openni2_library,
 )
-from capture._usb import XTION_VENDOR_ID, find_xtion
-from detect import CameraIntrinsics
-from holescan_errors import HolescanError, InputError
+from holescan.capture._usb import XTION_VENDOR_ID, find_xtion
+from holescan.detect import CameraIntrinsics
+from holescan.errors import HolescanError, InputError
 
 __all__ = ["OniSource", "OpenNI2Device"]
 

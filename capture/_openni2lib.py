@@ -16,9 +16,9 @@ from typing import Any, Final
 import numpy as np
 import numpy.typing as npt
 
-from capture._errors import SensorError
-from detect import CameraIntrinsics
-from holescan_errors import InputError
+from holescan.capture._errors import SensorError
+from holescan.detect import CameraIntrinsics
+from holescan.errors import InputError
 
 _log = logging.getLogger(__name__)
 

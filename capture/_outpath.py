@@ -6,7 +6,7 @@
 * the file is written as ``.STEM.part.EXT`` beside it and renamed when complete, so a crash or
   an error leaves no half-written output under the real name.
 
-Problems are :class:`OutputPathError` (an :class:`holescan_errors.InputError`): the CLI
+Problems are :class:`OutputPathError` (an :class:`holescan.errors.InputError`): the CLI
 prints them as one line and exits 2.
 """
 
@@ -19,8 +19,8 @@ from collections.abc import Collection, Iterable, Iterator
 from pathlib import Path
 from typing import IO
 
-from capture._errors import CaptureError
-from holescan_errors import InputError
+from holescan.capture._errors import CaptureError
+from holescan.errors import InputError
 
 __all__ = [
     "OutputPathError",

@@ -20,8 +20,8 @@ from typing import Generic, TypeVar
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from capture._errors import CaptureError
-from geotag import VehiclePose
+from holescan.capture._errors import CaptureError
+from holescan.geotag import VehiclePose
 
 __all__ = [
     "AttitudeSample",

@@ -12,10 +12,16 @@ from __future__ import annotations
 import logging
 from typing import Any, Final
 
-from capture._mavadapt import is_autopilot_heartbeat, telemetry_sample
-from capture._posebuffer import AttitudeSample, GpsFix, PoseBuffer, PoseUnavailable, PositionSample
-from geotag import VehiclePose
-from missions import mavlink, parser
+from holescan.capture._mavadapt import is_autopilot_heartbeat, telemetry_sample
+from holescan.capture._posebuffer import (
+    AttitudeSample,
+    GpsFix,
+    PoseBuffer,
+    PoseUnavailable,
+    PositionSample,
+)
+from holescan.geotag import VehiclePose
+from holescan.missions import mavlink, parser
 
 __all__ = ["TelemetryReplay"]
 

@@ -33,9 +33,9 @@ from typing import Any, cast
 
 import numpy as np
 
-from capture._errors import CaptureError
-from capture._frame import Frame
-from detect import CameraIntrinsics, Detection, DetectParams
+from holescan.capture._errors import CaptureError
+from holescan.capture._frame import Frame
+from holescan.detect import CameraIntrinsics, Detection, DetectParams
 
 log = logging.getLogger(__name__)
 
@@ -113,7 +113,7 @@ def _worker_main(
     _ignore_stop_signals()
     die_with_parent(parent_pid)
 
-    from detect import detect_holes
+    from holescan.detect import detect_holes
 
     # Logging must win the CPU: detection may skip frames, the log may not drop them
     # (5-minute benchmark: 707 of 8,873 frames dropped from the log at equal priority,

@@ -5,15 +5,21 @@ Two modes share one feature framework (depth, width, fill, darkness, contrast):
 accurate detector.
 """
 
-from detect._baseline import detect_baseline
-from detect._calibration import logistic, p_hole_of_score
-from detect._default import basin_labels, box_iou
-from detect._detector import detect_holes
-from detect._ers import ers_superpixels
-from detect._evaluate import GroundTruthBox, PRResult, ScoredBox, evaluate_detections, match_image
-from detect._paper import detect_paper, paper_superpixels
-from detect._scores import luminance, ramp
-from detect._types import (
+from holescan.detect._baseline import detect_baseline
+from holescan.detect._calibration import logistic, p_hole_of_score
+from holescan.detect._default import basin_labels, box_iou
+from holescan.detect._detector import detect_holes
+from holescan.detect._ers import ers_superpixels
+from holescan.detect._evaluate import (
+    GroundTruthBox,
+    PRResult,
+    ScoredBox,
+    evaluate_detections,
+    match_image,
+)
+from holescan.detect._paper import detect_paper, paper_superpixels
+from holescan.detect._scores import luminance, ramp
+from holescan.detect._types import (
     DEFAULT,
     DOG,
     HUMAN,

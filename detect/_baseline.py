@@ -12,9 +12,9 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from detect._scores import ramp
-from detect._types import CameraIntrinsics, Detection, FeatureScores
-from detect._validate import check_frame
+from holescan.detect._scores import ramp
+from holescan.detect._types import CameraIntrinsics, Detection, FeatureScores
+from holescan.detect._validate import check_frame
 
 
 def detect_baseline(

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from detect._calibration_table import P_HOLE_LOGISTIC
+from holescan.detect._calibration_table import P_HOLE_LOGISTIC
 
 P_MIN = 0.01
 

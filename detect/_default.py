@@ -54,9 +54,9 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from detect._calibration import p_hole_of_score
-from detect._evaluate import overlap
-from detect._geometry import (
+from holescan.detect._calibration import p_hole_of_score
+from holescan.detect._evaluate import overlap
+from holescan.detect._geometry import (
     GROW_PX,
     disk,
     grow_walls,
@@ -67,8 +67,8 @@ from detect._geometry import (
     rim_circle_centre,
     terrain_plane,
 )
-from detect._photometry import relative_luminance, void_evidence
-from detect._regions import (
+from holescan.detect._photometry import relative_luminance, void_evidence
+from holescan.detect._regions import (
     SHALLOW_M,
     Candidate,
     basin_depth,
@@ -76,9 +76,9 @@ from detect._regions import (
     block_depth,
     no_reading_regions,
 )
-from detect._scores import contrast_score, darkness_score, ramp, width_score
-from detect._types import CameraIntrinsics, Detection, DetectParams, FeatureScores
-from detect._validate import check_frame
+from holescan.detect._scores import contrast_score, darkness_score, ramp, width_score
+from holescan.detect._types import CameraIntrinsics, Detection, DetectParams, FeatureScores
+from holescan.detect._validate import check_frame
 
 __all__ = [
     "basin_depth",

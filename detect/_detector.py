@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from detect._default import detect_default
-from detect._types import DEFAULT, CameraIntrinsics, Detection, DetectParams, Mode
-from detect._validate import check_size
+from holescan.detect._default import detect_default
+from holescan.detect._types import DEFAULT, CameraIntrinsics, Detection, DetectParams, Mode
+from holescan.detect._validate import check_size
 
 
 def detect_holes(
@@ -31,14 +31,14 @@ def detect_holes(
 
     Raises
     ------
-    holescan_errors.InputError
+    holescan.errors.InputError
         Wrong shapes or dtypes, sizes that do not match ``camera``, no depth at all.
     """
     if isinstance(depth, np.ndarray) and depth.ndim == 2:  # (other shapes: the mode says)
         check_size(depth.shape[0], depth.shape[1], paper=params.mode is Mode.PAPER)
     if params.mode is Mode.PAPER:
         # Imported here: paper mode compiles ERS with numba on first use.
-        from detect._paper import detect_paper
+        from holescan.detect._paper import detect_paper
 
         return detect_paper(rgb, depth, camera, params)
     return detect_default(rgb, depth, camera, params)

@@ -46,7 +46,7 @@ import numbers
 import numpy as np
 import numpy.typing as npt
 
-from holescan_errors import HolescanError, InputError
+from holescan.errors import HolescanError, InputError
 
 __all__ = ["ers_superpixels"]
 
@@ -97,7 +97,7 @@ def ers_superpixels(
         raise InputError(f"sigma must be a finite number > 0, got {sigma!r}")
 
     ea, eb, dist = _grid_edges(img)
-    from detect._ers_jit import _lazy_greedy, _normalised_weights  # numba: paper mode only
+    from holescan.detect._ers_jit import _lazy_greedy, _normalised_weights  # numba: paper mode only
 
     w, loop = _normalised_weights(n, ea, eb, dist, float(sigma))
     roots, clusters = _lazy_greedy(n, ea, eb, w, loop, k, lam * k)

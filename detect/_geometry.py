@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from detect._types import CameraIntrinsics
+from holescan.detect._types import CameraIntrinsics
 
 # Walls: grow regions by up to this many work pixels into readings this far below the
 # opening plane.

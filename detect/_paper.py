@@ -70,10 +70,10 @@ import numpy as np
 import numpy.typing as npt
 from scipy import ndimage
 
-from detect._ers import ers_superpixels
-from detect._scores import contrast_score, darkness_score, luminance, ramp, width_score
-from detect._types import PAPER, CameraIntrinsics, Detection, DetectParams, FeatureScores
-from holescan_errors import InputError
+from holescan.detect._ers import ers_superpixels
+from holescan.detect._scores import contrast_score, darkness_score, luminance, ramp, width_score
+from holescan.detect._types import PAPER, CameraIntrinsics, Detection, DetectParams, FeatureScores
+from holescan.errors import InputError
 
 __all__ = ["detect_paper", "paper_superpixels", "score_regions"]
 

@@ -23,7 +23,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from detect._scores import ramp
+from holescan.detect._scores import ramp
 
 # Reference: Gaussian over readable pixels, sigma in work pixels (x4 at full resolution),
 # wide enough to reach across the largest hole to its rim.

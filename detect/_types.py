@@ -9,7 +9,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from holescan_errors import InputError
+from holescan.errors import InputError
 
 
 def _is_int(v: object) -> bool:

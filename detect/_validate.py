@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from detect._types import CameraIntrinsics
-from holescan_errors import InputError
+from holescan.detect._types import CameraIntrinsics
+from holescan.errors import InputError
 
 #: Smallest frame side the detectors work on (their block grid is 4 px).
 MIN_SIDE_PX = 4

@@ -1,15 +1,15 @@
 """Geotagging (pure): detections + camera + vehicle pose -> hole positions; merging sightings."""
 
-from geotag._camera import (
+from holescan.geotag._camera import (
     CameraMount,
     GimbalAttitude,
     dcm_from_euler,
     dcm_from_quaternion,
     rotation_ned_from_optical,
 )
-from geotag._local import LocalFrame, local_en_m
-from geotag._merge import AnnounceGate, Hole, HoleTracker, MergeParams
-from geotag._project import (
+from holescan.geotag._local import LocalFrame, local_en_m
+from holescan.geotag._merge import AnnounceGate, Hole, HoleTracker, MergeParams
+from holescan.geotag._project import (
     CIRCLE_95_PER_SIGMA,
     ErrorModel,
     HoleSighting,
@@ -17,7 +17,7 @@ from geotag._project import (
     geotag_frame,
     project_to_pixel,
 )
-from geotag._types import VehiclePose
+from holescan.geotag._types import VehiclePose
 
 __all__ = [
     "CIRCLE_95_PER_SIGMA",

@@ -22,8 +22,8 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
-from geotag._types import VehiclePose
-from holescan_errors import InputError
+from holescan.errors import InputError
+from holescan.geotag._types import VehiclePose
 
 __all__ = [
     "CameraMount",

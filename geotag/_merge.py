@@ -43,9 +43,9 @@ from dataclasses import dataclass
 
 import pymap3d
 
-from detect import p_hole_of_score
-from geotag._project import HoleSighting
-from holescan_errors import InputError
+from holescan.detect import p_hole_of_score
+from holescan.errors import InputError
+from holescan.geotag._project import HoleSighting
 
 __all__ = ["AnnounceGate", "Hole", "HoleTracker", "MergeParams"]
 

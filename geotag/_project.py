@@ -23,10 +23,15 @@ from dataclasses import dataclass
 import numpy as np
 import pymap3d
 
-from detect import CameraIntrinsics, Detection, FeatureScores
-from geotag._camera import CameraMount, FloatArray, dcm_from_euler, rotation_ned_from_optical
-from geotag._types import VehiclePose
-from holescan_errors import InputError
+from holescan.detect import CameraIntrinsics, Detection, FeatureScores
+from holescan.errors import InputError
+from holescan.geotag._camera import (
+    CameraMount,
+    FloatArray,
+    dcm_from_euler,
+    rotation_ned_from_optical,
+)
+from holescan.geotag._types import VehiclePose
 
 __all__ = [
     "CIRCLE_95_PER_SIGMA",

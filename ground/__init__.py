@@ -16,10 +16,17 @@
   image files and overlays for ``holescan detect``.
 """
 
-from ground._campaign import CampaignHole, FlightSightings
-from ground._cot import COT_TYPE, DEFAULT_COT_URL, CotError, CotPublisher, hole_cot, withdraw_cot
-from ground._csvimport import FramePair, find_pairs, import_csv_dataset, read_box_csv
-from ground._datasets import (
+from holescan.ground._campaign import CampaignHole, FlightSightings
+from holescan.ground._cot import (
+    COT_TYPE,
+    DEFAULT_COT_URL,
+    CotError,
+    CotPublisher,
+    hole_cot,
+    withdraw_cot,
+)
+from holescan.ground._csvimport import FramePair, find_pairs, import_csv_dataset, read_box_csv
+from holescan.ground._datasets import (
     CATEGORY,
     Dataset,
     DatasetImage,
@@ -29,7 +36,7 @@ from ground._datasets import (
     load_image_pair,
     write_dataset,
 )
-from ground._evaluation import (
+from holescan.ground._evaluation import (
     EvalReport,
     brier_score,
     calibration_outcomes,
@@ -42,7 +49,7 @@ from ground._evaluation import (
     run_detector,
     write_coco_results,
 )
-from ground._flightholes import (
+from holescan.ground._flightholes import (
     ExportReport,
     FlightHoles,
     default_out_path,
@@ -51,20 +58,20 @@ from ground._flightholes import (
     log_stem,
     read_flight_holes,
 )
-from ground._flightviews import HoleThumbnail, render_thumbnail
-from ground._images import read_camera, read_depth, read_rgb, write_depth, write_rgb
-from ground._overlay import depth_colour, draw_detections, render_detections, segmentation
-from ground._report import render_report, write_report
-from ground._reportmap import SCORE_BANDS, ScoreBand, score_band
-from ground._reprocess import ReprocessResult, reprocess, run_campaign
-from ground._rpengine import EngineError, EngineStats
-from ground._rpoptions import HoleMatch, Progress, ReprocessOptions, match_points
-from ground._rpoutputs import FlightResult, write_hole_outputs
-from ground._rpplan import group_flights
-from ground._station import GroundOptions, GroundStation, run_ground
-from ground._station_files import hole_summary, hole_waypoint, write_station_files
-from ground._station_link import VehicleLink
-from ground._station_state import (
+from holescan.ground._flightviews import HoleThumbnail, render_thumbnail
+from holescan.ground._images import read_camera, read_depth, read_rgb, write_depth, write_rgb
+from holescan.ground._overlay import depth_colour, draw_detections, render_detections, segmentation
+from holescan.ground._report import render_report, write_report
+from holescan.ground._reportmap import SCORE_BANDS, ScoreBand, score_band
+from holescan.ground._reprocess import ReprocessResult, reprocess, run_campaign
+from holescan.ground._rpengine import EngineError, EngineStats
+from holescan.ground._rpoptions import HoleMatch, Progress, ReprocessOptions, match_points
+from holescan.ground._rpoutputs import FlightResult, write_hole_outputs
+from holescan.ground._rpplan import group_flights
+from holescan.ground._station import GroundOptions, GroundStation, run_ground
+from holescan.ground._station_files import hole_summary, hole_waypoint, write_station_files
+from holescan.ground._station_link import VehicleLink
+from holescan.ground._station_state import (
     MARKS,
     GroundHole,
     StationState,
@@ -72,7 +79,7 @@ from ground._station_state import (
     atomic_write,
     parse_hole_statustext,
 )
-from ground._web import StationWeb, state_document
+from holescan.ground._web import StationWeb, state_document
 
 __all__ = [
     "CATEGORY",

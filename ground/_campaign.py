@@ -18,11 +18,11 @@ from typing import Any
 import numpy as np
 import pymap3d
 
-from capture import FrameHoles
-from geotag import Hole, HoleTracker, VehiclePose
-from ground._rpmerge import box_of, read_views
-from ground._rpplan import PartitionTask
-from ground._rptask import Box, FrameResult, View
+from holescan.capture import FrameHoles
+from holescan.geotag import Hole, HoleTracker, VehiclePose
+from holescan.ground._rpmerge import box_of, read_views
+from holescan.ground._rpplan import PartitionTask
+from holescan.ground._rptask import Box, FrameResult, View
 
 __all__ = [
     "CampaignHole",

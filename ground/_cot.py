@@ -37,10 +37,10 @@ import threading
 import xml.etree.ElementTree as ET
 from typing import Any
 
-from geotag import CIRCLE_95_PER_SIGMA
-from ground._station_files import hole_summary
-from ground._station_state import GroundHole
-from holescan_errors import HolescanError
+from holescan.errors import HolescanError
+from holescan.geotag import CIRCLE_95_PER_SIGMA
+from holescan.ground._station_files import hole_summary
+from holescan.ground._station_state import GroundHole
 
 __all__ = ["COT_TYPE", "DEFAULT_COT_URL", "CotError", "CotPublisher", "hole_cot", "withdraw_cot"]
 

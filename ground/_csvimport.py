@@ -37,10 +37,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from detect import CameraIntrinsics
-from ground._datasets import CATEGORY, CATEGORY_ID, Box, load_dataset
-from ground._images import read_depth, read_rgb
-from holescan_errors import InputError
+from holescan.detect import CameraIntrinsics
+from holescan.errors import InputError
+from holescan.ground._datasets import CATEGORY, CATEGORY_ID, Box, load_dataset
+from holescan.ground._images import read_depth, read_rgb
 
 _PREFIXES = (("rgb_", "depth_"), ("rgb-", "depth-"))
 _IMAGE_EXT = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")

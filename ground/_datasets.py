@@ -27,9 +27,9 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from detect import CameraIntrinsics
-from ground._images import read_camera, read_depth, read_rgb, write_depth, write_rgb
-from holescan_errors import InputError
+from holescan.detect import CameraIntrinsics
+from holescan.errors import InputError
+from holescan.ground._images import read_camera, read_depth, read_rgb, write_depth, write_rgb
 
 log = logging.getLogger(__name__)
 

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from detect import (
+from holescan.detect import (
     CameraIntrinsics,
     Detection,
     DetectParams,
@@ -25,8 +25,8 @@ from detect import (
     evaluate_detections,
     p_hole_of_score,
 )
-from ground._datasets import Dataset, DatasetImage, load_dataset, load_image_pair
-from holescan_errors import InputError
+from holescan.errors import InputError
+from holescan.ground._datasets import Dataset, DatasetImage, load_dataset, load_image_pair
 
 log = logging.getLogger(__name__)
 

@@ -31,7 +31,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from capture import (
+from holescan.capture import (
     FlightLogError,
     LoggedDetections,
     LoggedFrame,
@@ -44,10 +44,10 @@ from capture import (
     part_path,
     read_flight_log,
 )
-from geotag import Hole
-from ground._flightviews import HoleThumbnail, _BestViews
-from holescan_errors import InputError
-from missions import (
+from holescan.errors import InputError
+from holescan.geotag import Hole
+from holescan.ground._flightviews import HoleThumbnail, _BestViews
+from holescan.missions import (
     HOLE_FORMATS,
     HOLE_SUFFIXES,
     HoleFormat,

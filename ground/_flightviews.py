@@ -12,14 +12,14 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from capture import (
+from holescan.capture import (
     LoggedDetections,
     LoggedFrame,
     crop_view,
 )
-from geotag import Hole
-from ground._overlay import depth_colour
-from holescan_errors import InputError
+from holescan.errors import InputError
+from holescan.geotag import Hole
+from holescan.ground._overlay import depth_colour
 
 _log = logging.getLogger(__name__)
 

@@ -18,8 +18,8 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from detect import CameraIntrinsics
-from holescan_errors import InputError
+from holescan.detect import CameraIntrinsics
+from holescan.errors import InputError
 
 
 @contextlib.contextmanager

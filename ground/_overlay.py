@@ -8,8 +8,8 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from detect import CameraIntrinsics, Detection, DetectParams, Mode
-from ground._images import write_rgb
+from holescan.detect import CameraIntrinsics, Detection, DetectParams, Mode
+from holescan.ground._images import write_rgb
 
 
 def segmentation(
@@ -17,10 +17,10 @@ def segmentation(
 ) -> npt.NDArray[np.int32]:
     """The segmentation the detector scored: ERS superpixels (paper) or depth basins."""
     if params.mode is Mode.PAPER:
-        from detect import paper_superpixels
+        from holescan.detect import paper_superpixels
 
         return paper_superpixels(depth, params)
-    from detect import basin_labels
+    from holescan.detect import basin_labels
 
     return basin_labels(depth, camera, params)
 

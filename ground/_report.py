@@ -25,11 +25,20 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from capture import crop_view
-from geotag import Hole, LocalFrame, VehiclePose
-from ground._overlay import depth_colour
-from ground._reportmap import _R95, _THUMB_W, SCORE_BANDS, ScoreBand, _e, _legend, _maps, score_band
-from holescan_errors import InputError
+from holescan.capture import crop_view
+from holescan.errors import InputError
+from holescan.geotag import Hole, LocalFrame, VehiclePose
+from holescan.ground._overlay import depth_colour
+from holescan.ground._reportmap import (
+    _R95,
+    _THUMB_W,
+    SCORE_BANDS,
+    ScoreBand,
+    _e,
+    _legend,
+    _maps,
+    score_band,
+)
 
 __all__ = ["render_report", "thumbnails", "write_report"]
 
@@ -362,4 +371,4 @@ def _png_uri(rgb: npt.NDArray[np.uint8]) -> str:
 @functools.cache
 def _css() -> str:
     """The page's style sheet (``ground/report.css``, inlined: the page needs no file)."""
-    return resources.files("ground").joinpath("report.css").read_text(encoding="utf-8")
+    return resources.files("holescan.ground").joinpath("report.css").read_text(encoding="utf-8")

@@ -12,10 +12,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 from shapely.geometry import LineString
 
-from geotag import CIRCLE_95_PER_SIGMA, Hole, VehiclePose
+from holescan.geotag import CIRCLE_95_PER_SIGMA, Hole, VehiclePose
 
 if TYPE_CHECKING:
-    from ground._report import _LocalFrame
+    from holescan.ground._report import _LocalFrame
 
 __all__ = ["SCORE_BANDS", "ScoreBand", "score_band"]
 

@@ -32,15 +32,16 @@ from importlib.metadata import version as _dist_version
 from pathlib import Path
 from typing import Any
 
-from capture import FlightLogError, read_log_layout, to_json
-from geotag import VehiclePose
-from ground._campaign import CampaignHole, CampaignMerge, campaign_summary
-from ground._rpcache import PartitionCache
-from ground._rpengine import EngineStats, run_tasks
-from ground._rpmerge import FlightMerger
-from ground._rpoptions import Progress, ReprocessOptions, match_points, out_folder
-from ground._rpoutputs import FlightResult, write_hole_outputs
-from ground._rpplan import (
+from holescan.capture import FlightLogError, read_log_layout, to_json
+from holescan.errors import InputError
+from holescan.geotag import VehiclePose
+from holescan.ground._campaign import CampaignHole, CampaignMerge, campaign_summary
+from holescan.ground._rpcache import PartitionCache
+from holescan.ground._rpengine import EngineStats, run_tasks
+from holescan.ground._rpmerge import FlightMerger
+from holescan.ground._rpoptions import Progress, ReprocessOptions, match_points, out_folder
+from holescan.ground._rpoutputs import FlightResult, write_hole_outputs
+from holescan.ground._rpplan import (
     FlightPlan,
     PartitionTask,
     group_flights,
@@ -48,8 +49,7 @@ from ground._rpplan import (
     plan_flight,
     ref_name,
 )
-from ground._rpsidecar import Sidecar
-from holescan_errors import InputError
+from holescan.ground._rpsidecar import Sidecar
 
 __all__ = ["ReprocessResult", "reprocess", "run_campaign"]
 

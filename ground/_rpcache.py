@@ -14,7 +14,7 @@ import os
 import pickle
 from pathlib import Path
 
-from ground._rptask import PartitionResult
+from holescan.ground._rptask import PartitionResult
 
 __all__ = ["PartitionCache"]
 

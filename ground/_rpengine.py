@@ -23,11 +23,11 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
-from ground._rpcache import PartitionCache
-from ground._rpoptions import ReprocessOptions
-from ground._rpplan import PartitionTask
-from ground._rptask import PartitionResult, run_partition
-from holescan_errors import HolescanError
+from holescan.errors import HolescanError
+from holescan.ground._rpcache import PartitionCache
+from holescan.ground._rpoptions import ReprocessOptions
+from holescan.ground._rpplan import PartitionTask
+from holescan.ground._rptask import PartitionResult, run_partition
 
 __all__ = ["EngineError", "EngineStats", "TaskStats", "run_tasks"]
 
@@ -96,7 +96,7 @@ def _client(opts: ReprocessOptions, stats: EngineStats) -> Iterator[Any]:
         )
         client = Client(cluster)  # type: ignore[no-untyped-call]
     try:
-        from ground._rpworker import SingleThreaded  # imports distributed: only here
+        from holescan.ground._rpworker import SingleThreaded  # imports distributed: only here
 
         client.register_plugin(SingleThreaded())
         n = max(1, opts.workers) if cluster is not None else 1

@@ -19,7 +19,7 @@ from collections import OrderedDict, deque
 from collections.abc import Callable
 from typing import Any, Final
 
-from capture import (
+from holescan.capture import (
     FlightLogError,
     FrameHoles,
     HolePipeline,
@@ -33,10 +33,10 @@ from capture import (
     holes_geojson_message,
     jsonable,
 )
-from geotag import Hole, VehiclePose
-from ground._rpoptions import ReprocessOptions
-from ground._rpplan import FlightPlan, PartitionTask
-from ground._rptask import Box, FrameResult, PartitionResult, View, best_view
+from holescan.geotag import Hole, VehiclePose
+from holescan.ground._rpoptions import ReprocessOptions
+from holescan.ground._rpplan import FlightPlan, PartitionTask
+from holescan.ground._rptask import Box, FrameResult, PartitionResult, View, best_view
 
 __all__ = ["FlightMerger", "box_of", "read_views"]
 

@@ -17,9 +17,9 @@ from typing import Any, Final, Literal
 import numpy as np
 import pymap3d
 
-from detect import DEFAULT, DetectParams
-from holescan_errors import InputError
-from missions import HoleFormat
+from holescan.detect import DEFAULT, DetectParams
+from holescan.errors import InputError
+from holescan.missions import HoleFormat
 
 __all__ = ["TOPICS", "HoleMatch", "Progress", "ReprocessOptions", "match_points"]
 

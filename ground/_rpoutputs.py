@@ -17,12 +17,12 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from capture import jsonable
-from geotag import Hole, VehiclePose
-from ground._flightviews import render_thumbnail
-from ground._report import write_report
-from ground._rpoptions import HoleMatch, ReprocessOptions
-from missions import HOLE_SUFFIXES, write_hole_file
+from holescan.capture import jsonable
+from holescan.geotag import Hole, VehiclePose
+from holescan.ground._flightviews import render_thumbnail
+from holescan.ground._report import write_report
+from holescan.ground._rpoptions import HoleMatch, ReprocessOptions
+from holescan.missions import HOLE_SUFFIXES, write_hole_file
 
 __all__ = ["FlightResult", "write_hole_outputs"]
 

@@ -20,7 +20,7 @@ from typing import Any, Final
 
 from mcap.records import Message
 
-from capture import (
+from holescan.capture import (
     TOPIC_CAMERA_INFO,
     TOPIC_COLOR,
     TOPIC_DEPTH,
@@ -41,11 +41,11 @@ from capture import (
     read_chunk,
     read_log_layout,
 )
-from detect import CameraIntrinsics, DetectParams
-from geotag import CameraMount, ErrorModel
-from ground._flightholes import flight_log_files, log_stem
-from ground._rpoptions import ReprocessOptions
-from holescan_errors import InputError
+from holescan.detect import CameraIntrinsics, DetectParams
+from holescan.errors import InputError
+from holescan.geotag import CameraMount, ErrorModel
+from holescan.ground._flightholes import flight_log_files, log_stem
+from holescan.ground._rpoptions import ReprocessOptions
 
 __all__ = [
     "FlightPlan",

@@ -22,7 +22,7 @@ from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 from mcap_protobuf.schema import build_file_descriptor_set
 
-from capture import JSON_SCHEMAS, TOPIC_DETECTIONS, TOPIC_HOLES, to_json
+from holescan.capture import JSON_SCHEMAS, TOPIC_DETECTIONS, TOPIC_HOLES, to_json
 
 __all__ = ["Sidecar"]
 

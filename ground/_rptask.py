@@ -25,7 +25,7 @@ import numpy as np
 import numpy.typing as npt
 from mcap.records import Channel, McapRecord, Message
 
-from capture import (
+from holescan.capture import (
     TOPIC_FRAME_INFO,
     ChunkDamagedError,
     ChunkSpan,
@@ -38,9 +38,9 @@ from capture import (
     open_log,
     read_chunk,
 )
-from detect import Detection, detect_holes
-from geotag import VehiclePose
-from ground._rpplan import FRAME_TOPICS, TASK_TOPICS, PartitionTask
+from holescan.detect import Detection, detect_holes
+from holescan.geotag import VehiclePose
+from holescan.ground._rpplan import FRAME_TOPICS, TASK_TOPICS, PartitionTask
 
 __all__ = ["FrameResult", "PartitionResult", "View", "best_view", "run_partition"]
 

@@ -23,11 +23,11 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from ground._cot import DEFAULT_COT_URL, CotPublisher, hole_cot, withdraw_cot
-from ground._station_files import write_station_files
-from ground._station_link import VehicleLink
-from ground._station_state import GroundHole, StationState
-from ground._web import StationWeb
+from holescan.ground._cot import DEFAULT_COT_URL, CotPublisher, hole_cot, withdraw_cot
+from holescan.ground._station_files import write_station_files
+from holescan.ground._station_link import VehicleLink
+from holescan.ground._station_state import GroundHole, StationState
+from holescan.ground._web import StationWeb
 
 __all__ = ["GroundOptions", "GroundStation", "run_ground"]
 

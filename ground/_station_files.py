@@ -22,8 +22,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from ground._station_state import GroundHole, atomic_write
-from missions import (
+from holescan.ground._station_state import GroundHole, atomic_write
+from holescan.missions import (
     MAV_FRAME_GLOBAL,
     MAV_FRAME_GLOBAL_RELATIVE_ALT,
     Waypoint,

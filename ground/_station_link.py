@@ -29,8 +29,8 @@ import threading
 import time
 from typing import Any
 
-from ground._station_state import StationState, TrackPoint
-from missions import CardAssembler, mavlink, open_link, read_card
+from holescan.ground._station_state import StationState, TrackPoint
+from holescan.missions import CardAssembler, mavlink, open_link, read_card
 
 __all__ = ["VehicleLink"]
 

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from holescan_errors import InputError
+from holescan.errors import InputError
 
 __all__ = [
     "MARKS",

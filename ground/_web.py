@@ -27,10 +27,10 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from importlib import resources
 from typing import Any
 
-from geotag import CIRCLE_95_PER_SIGMA, LocalFrame
-from ground._station_files import hole_summary
-from ground._station_state import StationState
-from holescan_errors import InputError
+from holescan.errors import InputError
+from holescan.geotag import CIRCLE_95_PER_SIGMA, LocalFrame
+from holescan.ground._station_files import hole_summary
+from holescan.ground._station_state import StationState
 
 __all__ = ["XTION_FOV_DEG", "StationWeb", "state_document"]
 
@@ -141,7 +141,7 @@ class StationWeb:
 
 
 def _page() -> bytes:
-    return resources.files("ground").joinpath("station.html").read_bytes()
+    return resources.files("holescan.ground").joinpath("station.html").read_bytes()
 
 
 def _handler(web: StationWeb) -> type[BaseHTTPRequestHandler]:

@@ -1,10 +1,16 @@
-"""holescan's command line: ``holescan <verb>`` parses, calls one library function, and maps
-the project's errors to exit codes (:mod:`holescan.cli`).
+"""holescan: find access holes in disaster rubble from a UAV's RGB-D camera.
 
-The library sits in the packages beside this one, lowest first: :mod:`detect` and
-:mod:`geotag` (pure), :mod:`missions` (MAVLink missions and plan files), :mod:`capture` (the
-flight side), :mod:`ground` (post-flight and ground station), and :mod:`sim` (the simulated
-world, Xtion and autopilot, beside the flight side). Errors: :mod:`holescan_errors`.
+Every import name of the project lives under this one package. The folders of the
+repository's root are its subpackages (``holescan/capture`` is a link to ``capture/``, and so
+on), lowest layer first:
+
+- :mod:`holescan.errors`: the exception root (a leaf);
+- :mod:`holescan.detect` and :mod:`holescan.geotag`: the pure core;
+- :mod:`holescan.missions`: MAVLink missions and the crew's plan and hole files;
+- :mod:`holescan.capture`: the flight side;
+- :mod:`holescan.ground`: after the flight and the ground station;
+- :mod:`holescan.sim`: the simulated world, Xtion and autopilot (beside the flight side);
+- :mod:`holescan.cli`: ``holescan <verb>``, on top.
 """
 
 from importlib.metadata import version as _dist_version

@@ -12,9 +12,16 @@
   announces them by STATUSTEXT.
 """
 
-from missions._files import read_area, read_waypoints, write_waypoints
-from missions._geofiles import read_geojson, read_gpx, read_kml, write_geojson, write_gpx, write_kml
-from missions._holecards import (
+from holescan.missions._files import read_area, read_waypoints, write_waypoints
+from holescan.missions._geofiles import (
+    read_geojson,
+    read_gpx,
+    read_kml,
+    write_geojson,
+    write_gpx,
+    write_kml,
+)
+from holescan.missions._holecards import (
     CARD_PAYLOAD,
     CardAssembler,
     CardSender,
@@ -22,7 +29,7 @@ from missions._holecards import (
     make_card,
     read_card,
 )
-from missions._holefiles import (
+from holescan.missions._holefiles import (
     HOLE_FORMATS,
     HOLE_SUFFIXES,
     HoleFormat,
@@ -34,14 +41,14 @@ from missions._holefiles import (
     rank_holes,
     write_hole_file,
 )
-from missions._holeserver import (
+from holescan.missions._holeserver import (
     HoleMissionServer,
     MissionServerError,
     hole_statustext,
     hole_waypoints,
 )
-from missions._link import mavlink, mavutil, open_link, parser
-from missions._protocol import (
+from holescan.missions._link import mavlink, mavutil, open_link, parser
+from holescan.missions._protocol import (
     MAV_MISSION_ACCEPTED,
     MissionError,
     MissionRejectedError,
@@ -51,8 +58,8 @@ from missions._protocol import (
     download_mission,
     upload_mission,
 )
-from missions._qgcfiles import read_plan, read_wpl, write_plan, write_wpl
-from missions._sun import (
+from holescan.missions._qgcfiles import read_plan, read_wpl, write_plan, write_wpl
+from holescan.missions._sun import (
     SUNRISE_ELEVATION_DEG,
     FlightCheck,
     SunDay,
@@ -65,9 +72,16 @@ from missions._sun import (
     sun_windows,
     sunrise_sunset,
 )
-from missions._survey import XTION, Camera, SurveyParams, SurveyPlan, frame_around, plan_survey
-from missions._vehicle import MissionReceiver, MissionServer
-from missions._waypoint import (
+from holescan.missions._survey import (
+    XTION,
+    Camera,
+    SurveyParams,
+    SurveyPlan,
+    frame_around,
+    plan_survey,
+)
+from holescan.missions._vehicle import MissionReceiver, MissionServer
+from holescan.missions._waypoint import (
     MAV_CMD_DO_CHANGE_SPEED,
     MAV_CMD_NAV_LAND,
     MAV_CMD_NAV_RETURN_TO_LAUNCH,

@@ -6,7 +6,7 @@ import dataclasses
 import math
 from typing import Any
 
-from holescan_errors import InputError
+from holescan.errors import InputError
 
 __all__ = ["check_latlon", "check_survey_numbers"]
 

@@ -15,8 +15,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from holescan_errors import InputError
-from missions._geofiles import (
+from holescan.errors import InputError
+from holescan.missions._geofiles import (
     _ns_of,
     _parse_coord_text,
     _parse_kml,
@@ -27,8 +27,8 @@ from missions._geofiles import (
     write_gpx,
     write_kml,
 )
-from missions._qgcfiles import read_plan, read_wpl, write_plan, write_wpl
-from missions._waypoint import Area, Waypoint, _open_text
+from holescan.missions._qgcfiles import read_plan, read_wpl, write_plan, write_wpl
+from holescan.missions._waypoint import Area, Waypoint, _open_text
 
 __all__ = ["read_area", "read_waypoints", "write_waypoints"]
 

@@ -9,8 +9,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from holescan_errors import InputError
-from missions._waypoint import (
+from holescan.errors import InputError
+from holescan.missions._waypoint import (
     _KML_NS,
     MAV_CMD_NAV_WAYPOINT,
     MAV_FRAME_GLOBAL,

@@ -33,8 +33,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from holescan_errors import InputError
-from missions._link import mavlink
+from holescan.errors import InputError
+from holescan.missions._link import mavlink
 
 __all__ = [
     "CARD_PAYLOAD",

@@ -44,12 +44,12 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Final, Literal, get_args
 
-from geotag import Hole
-from holescan_errors import InputError
-from missions._geofiles import write_geojson, write_gpx, write_kml
-from missions._holeserver import hole_waypoints
-from missions._qgcfiles import write_plan, write_wpl
-from missions._waypoint import MAV_FRAME_GLOBAL, MAV_FRAME_GLOBAL_RELATIVE_ALT, Waypoint
+from holescan.errors import InputError
+from holescan.geotag import Hole
+from holescan.missions._geofiles import write_geojson, write_gpx, write_kml
+from holescan.missions._holeserver import hole_waypoints
+from holescan.missions._qgcfiles import write_plan, write_wpl
+from holescan.missions._waypoint import MAV_FRAME_GLOBAL, MAV_FRAME_GLOBAL_RELATIVE_ALT, Waypoint
 
 __all__ = [
     "HOLE_FORMATS",

@@ -44,13 +44,13 @@ import time
 from collections.abc import Iterable
 from typing import Any
 
-from geotag import Hole
-from holescan_errors import HolescanError, InputError
-from missions._holecards import CardSender, card_facts, make_card
-from missions._link import mavlink
-from missions._protocol import MissionError
-from missions._vehicle import MissionReceiver, MissionServer
-from missions._waypoint import MAV_FRAME_GLOBAL, MAV_FRAME_GLOBAL_RELATIVE_ALT, Waypoint
+from holescan.errors import HolescanError, InputError
+from holescan.geotag import Hole
+from holescan.missions._holecards import CardSender, card_facts, make_card
+from holescan.missions._link import mavlink
+from holescan.missions._protocol import MissionError
+from holescan.missions._vehicle import MissionReceiver, MissionServer
+from holescan.missions._waypoint import MAV_FRAME_GLOBAL, MAV_FRAME_GLOBAL_RELATIVE_ALT, Waypoint
 
 __all__ = [
     "HoleMissionServer",

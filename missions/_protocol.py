@@ -18,9 +18,14 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from holescan_errors import HolescanError
-from missions._link import mavlink, open_link
-from missions._waypoint import MAV_CMD_NAV_WAYPOINT, MAV_FRAME_GLOBAL, MAV_FRAME_MISSION, Waypoint
+from holescan.errors import HolescanError
+from holescan.missions._link import mavlink, open_link
+from holescan.missions._waypoint import (
+    MAV_CMD_NAV_WAYPOINT,
+    MAV_FRAME_GLOBAL,
+    MAV_FRAME_MISSION,
+    Waypoint,
+)
 
 __all__ = [
     "MAV_MISSION_ACCEPTED",

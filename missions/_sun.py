@@ -17,7 +17,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
-from holescan_errors import HolescanError, InputError
+from holescan.errors import HolescanError, InputError
 
 __all__ = [
     "SUNRISE_ELEVATION_DEG",

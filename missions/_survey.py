@@ -28,10 +28,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from geotag import LocalFrame
-from holescan_errors import InputError
-from missions._checks import check_survey_numbers
-from missions._sweep import (
+from holescan.errors import InputError
+from holescan.geotag import LocalFrame
+from holescan.missions._checks import check_survey_numbers
+from holescan.missions._sweep import (
     _check_area,
     _estimate,
     _heading_candidates,
@@ -40,7 +40,7 @@ from missions._sweep import (
     _sweep,
     _validate_polygon,
 )
-from missions._waypoint import (
+from holescan.missions._waypoint import (
     MAV_CMD_DO_CHANGE_SPEED,
     MAV_CMD_NAV_RETURN_TO_LAUNCH,
     MAV_CMD_NAV_TAKEOFF,

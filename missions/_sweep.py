@@ -12,9 +12,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
-from geotag import LocalFrame
-from holescan_errors import InputError
-from missions._waypoint import (
+from holescan.errors import InputError
+from holescan.geotag import LocalFrame
+from holescan.missions._waypoint import (
     Area,
 )
 
@@ -22,7 +22,7 @@ if TYPE_CHECKING:
     from shapely.geometry import Polygon
     from shapely.geometry.base import BaseGeometry
 
-    from missions._survey import SurveyParams
+    from holescan.missions._survey import SurveyParams
 
 _HEADING_STEP_DEG = 5.0
 

@@ -23,16 +23,16 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from holescan_errors import InputError
-from missions._link import mavlink
-from missions._protocol import (
+from holescan.errors import InputError
+from holescan.missions._link import mavlink
+from holescan.missions._protocol import (
     MAV_MISSION_ACCEPTED,
     MissionError,
     _item_message,
     _waypoint_from_message,
     connect,
 )
-from missions._waypoint import Waypoint
+from holescan.missions._waypoint import Waypoint
 
 __all__ = ["MissionReceiver", "MissionServer"]
 

@@ -9,8 +9,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from holescan_errors import InputError
-from missions._link import mavlink
+from holescan.errors import InputError
+from holescan.missions._link import mavlink
 
 __all__ = [
     "MAV_CMD_DO_CHANGE_SPEED",

@@ -15,9 +15,9 @@ Beside the flight side, never imported by it: it may import :mod:`capture`,
 * :func:`synth_dataset` - a synthetic annotated RGB-D dataset.
 """
 
-from sim._autopilot import SimAutopilot
-from sim._camera_model import CameraPose, Conditions, random_conditions
-from sim._demo import (
+from holescan.sim._autopilot import SimAutopilot
+from holescan.sim._camera_model import CameraPose, Conditions, random_conditions
+from holescan.sim._demo import (
     DEMO_SORTIE,
     DemoOptions,
     DemoProgress,
@@ -26,12 +26,12 @@ from sim._demo import (
     TruthRow,
     run_demo,
 )
-from sim._demo_format import format_result
-from sim._fly import SIM_TABLE, SimFlyReport, fly_sim, format_sim_report, sortie_params
-from sim._lap import LapReplay, prerender_lap
-from sim._render import GtBox, hole_boxes, render, render_exact
-from sim._scoring import count_in_view, frames_in_view, score_holes
-from sim._sortie import (
+from holescan.sim._demo_format import format_result
+from holescan.sim._fly import SIM_TABLE, SimFlyReport, fly_sim, format_sim_report, sortie_params
+from holescan.sim._lap import LapReplay, prerender_lap
+from holescan.sim._render import GtBox, hole_boxes, render, render_exact
+from holescan.sim._scoring import count_in_view, frames_in_view, score_holes
+from holescan.sim._sortie import (
     DEFAULT_ANCHOR,
     SimSortie,
     SortieParams,
@@ -43,10 +43,10 @@ from sim._sortie import (
     true_holes,
     world_area,
 )
-from sim._source import SimSource, WorldAnchor, camera_pose_in_world
-from sim._synth import sample_pose, synth_dataset, synth_samples
-from sim._trajectory import SimPath
-from sim._world import AccessHole, HoleKind, RubbleWorld, make_world, relight
+from holescan.sim._source import SimSource, WorldAnchor, camera_pose_in_world
+from holescan.sim._synth import sample_pose, synth_dataset, synth_samples
+from holescan.sim._trajectory import SimPath
+from holescan.sim._world import AccessHole, HoleKind, RubbleWorld, make_world, relight
 
 __all__ = [
     "DEFAULT_ANCHOR",

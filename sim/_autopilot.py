@@ -39,9 +39,9 @@ from typing import Any
 
 from scipy.spatial.transform import Rotation
 
-from geotag import LocalFrame, VehiclePose
-from missions import MissionReceiver, mavlink, open_link
-from sim._trajectory import SimPath, _Trajectory
+from holescan.geotag import LocalFrame, VehiclePose
+from holescan.missions import MissionReceiver, mavlink, open_link
+from holescan.sim._trajectory import SimPath, _Trajectory
 
 __all__ = ["SimAutopilot"]
 

@@ -13,8 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from detect import CameraIntrinsics
-from holescan_errors import InputError
+from holescan.detect import CameraIntrinsics
+from holescan.errors import InputError
 
 __all__ = [
     "XTION_BASELINE_M",

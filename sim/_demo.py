@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from capture import (
+from holescan.capture import (
     Flight,
     FlightConfig,
     FlightSummary,
@@ -49,12 +49,12 @@ from capture import (
     crop_view,
     read_flight_log,
 )
-from geotag import AnnounceGate, Hole, VehiclePose
-from ground import GroundOptions, GroundStation, ReprocessOptions, write_hole_outputs
-from holescan_errors import InputError
-from missions import HoleMissionServer
-from sim._scoring import FalseHole, TruthRow, frames_in_view, score_holes
-from sim._sortie import SimSortie, SortieParams, loop_length_m
+from holescan.errors import InputError
+from holescan.geotag import AnnounceGate, Hole, VehiclePose
+from holescan.ground import GroundOptions, GroundStation, ReprocessOptions, write_hole_outputs
+from holescan.missions import HoleMissionServer
+from holescan.sim._scoring import FalseHole, TruthRow, frames_in_view, score_holes
+from holescan.sim._sortie import SimSortie, SortieParams, loop_length_m
 
 __all__ = [
     "DEMO_SORTIE",

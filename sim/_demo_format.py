@@ -6,7 +6,7 @@ import statistics
 
 import numpy as np
 
-from sim._demo import DemoResult
+from holescan.sim._demo import DemoResult
 
 __all__ = ["format_result"]
 

@@ -16,10 +16,18 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from capture import FlyConfig, FlyReport, SensorSetup, check_table, fly, format_report, numbers
-from geotag import AnnounceGate, local_en_m
-from sim._sortie import DEFAULT_ANCHOR, SimSortie, SortieParams, TrueHole
-from sim._source import WorldAnchor
+from holescan.capture import (
+    FlyConfig,
+    FlyReport,
+    SensorSetup,
+    check_table,
+    fly,
+    format_report,
+    numbers,
+)
+from holescan.geotag import AnnounceGate, local_en_m
+from holescan.sim._sortie import DEFAULT_ANCHOR, SimSortie, SortieParams, TrueHole
+from holescan.sim._source import WorldAnchor
 
 __all__ = ["SIM_TABLE", "SimFlyReport", "fly_sim", "format_sim_report", "sortie_params"]
 

@@ -15,16 +15,16 @@ from pathlib import Path
 
 import numpy as np
 
-from capture import Frame, OniSource, OniWriter, openni2_library
-from detect import CameraIntrinsics
-from geotag import CameraMount
-from sim._autopilot import SimAutopilot
-from sim._camera_model import Conditions, random_conditions
-from sim._render import render
-from sim._sortie import SortieParams, lap_frames, make_sortie_world
-from sim._source import camera_pose_in_world
-from sim._trajectory import SimPath
-from sim._world import RubbleWorld
+from holescan.capture import Frame, OniSource, OniWriter, openni2_library
+from holescan.detect import CameraIntrinsics
+from holescan.geotag import CameraMount
+from holescan.sim._autopilot import SimAutopilot
+from holescan.sim._camera_model import Conditions, random_conditions
+from holescan.sim._render import render
+from holescan.sim._sortie import SortieParams, lap_frames, make_sortie_world
+from holescan.sim._source import camera_pose_in_world
+from holescan.sim._trajectory import SimPath
+from holescan.sim._world import RubbleWorld
 
 _log = logging.getLogger(__name__)
 

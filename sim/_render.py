@@ -7,12 +7,12 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from detect import CameraIntrinsics
-from sim._camera_model import CameraPose, Conditions
-from sim._raster import rasterise_view
-from sim._raycast import cast_rays
-from sim._sensor import colour_image, depth_image
-from sim._world import AccessHole, RubbleWorld
+from holescan.detect import CameraIntrinsics
+from holescan.sim._camera_model import CameraPose, Conditions
+from holescan.sim._raster import rasterise_view
+from holescan.sim._raycast import cast_rays
+from holescan.sim._sensor import colour_image, depth_image
+from holescan.sim._world import AccessHole, RubbleWorld
 
 __all__ = ["GtBox", "hole_boxes", "raycast_view", "render", "render_exact"]
 

@@ -16,10 +16,10 @@ from typing import Any
 
 import pymap3d
 
-from geotag import Hole
-from sim._render import GtBox
-from sim._sortie import TrueHole
-from sim._world import RubbleWorld
+from holescan.geotag import Hole
+from holescan.sim._render import GtBox
+from holescan.sim._sortie import TrueHole
+from holescan.sim._world import RubbleWorld
 
 __all__ = ["FalseHole", "TruthRow", "count_in_view", "frames_in_view", "score_holes"]
 

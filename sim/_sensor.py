@@ -14,7 +14,7 @@ import numpy.typing as npt
 from numba import njit
 from scipy.special import ndtri
 
-from sim._camera_model import XTION_NOISE_COEFF_PER_MM, Conditions
+from holescan.sim._camera_model import XTION_NOISE_COEFF_PER_MM, Conditions
 
 __all__ = ["colour_image", "depth_image"]
 

@@ -30,14 +30,14 @@ from types import TracebackType
 
 import numpy as np
 
-from detect import CameraIntrinsics
-from geotag import CameraMount
-from holescan_errors import InputError
-from missions import Area, SurveyParams, SurveyPlan, Waypoint, plan_survey
-from sim._autopilot import SimAutopilot
-from sim._source import SimSource, WorldAnchor
-from sim._trajectory import SimPath
-from sim._world import RubbleWorld, make_world
+from holescan.detect import CameraIntrinsics
+from holescan.errors import InputError
+from holescan.geotag import CameraMount
+from holescan.missions import Area, SurveyParams, SurveyPlan, Waypoint, plan_survey
+from holescan.sim._autopilot import SimAutopilot
+from holescan.sim._source import SimSource, WorldAnchor
+from holescan.sim._trajectory import SimPath
+from holescan.sim._world import RubbleWorld, make_world
 
 __all__ = [
     "DEFAULT_ANCHOR",

@@ -17,12 +17,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from capture import Frame
-from detect import CameraIntrinsics
-from geotag import CameraMount, LocalFrame, VehiclePose, dcm_from_euler, rotation_ned_from_optical
-from sim._camera_model import CameraPose, Conditions, random_conditions
-from sim._render import GtBox, render
-from sim._world import RubbleWorld
+from holescan.capture import Frame
+from holescan.detect import CameraIntrinsics
+from holescan.geotag import (
+    CameraMount,
+    LocalFrame,
+    VehiclePose,
+    dcm_from_euler,
+    rotation_ned_from_optical,
+)
+from holescan.sim._camera_model import CameraPose, Conditions, random_conditions
+from holescan.sim._render import GtBox, render
+from holescan.sim._world import RubbleWorld
 
 # ENU <- NED (swap north/east, flip down).
 R_ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])

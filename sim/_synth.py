@@ -16,12 +16,12 @@ from pathlib import Path
 
 import numpy as np
 
-from detect import CameraIntrinsics
-from ground import Sample, write_dataset
-from holescan_errors import InputError
-from sim._camera_model import CameraPose, random_conditions
-from sim._render import render
-from sim._world import RubbleWorld, make_world
+from holescan.detect import CameraIntrinsics
+from holescan.errors import InputError
+from holescan.ground import Sample, write_dataset
+from holescan.sim._camera_model import CameraPose, random_conditions
+from holescan.sim._render import render
+from holescan.sim._world import RubbleWorld, make_world
 
 log = logging.getLogger(__name__)
 

@@ -12,7 +12,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.spatial.transform import Rotation
 
-from geotag import LocalFrame
+from holescan.geotag import LocalFrame
 
 __all__ = ["SimPath"]
 

@@ -17,10 +17,10 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from holescan_errors import InputError
-from sim import _shapes as shp
-from sim._lighting import radiance_map
-from sim._raycast import MaxPyramid, build_pyramid
+from holescan.errors import InputError
+from holescan.sim import _shapes as shp
+from holescan.sim._lighting import radiance_map
+from holescan.sim._raycast import MaxPyramid, build_pyramid
 
 __all__ = ["AccessHole", "HoleKind", "RubbleWorld", "make_world", "relight"]
 

@@ -3,4 +3,4 @@
 # pymavlink chooses MAVLink 1 or 2 once, when mavutil is first imported, from MAVLINK20;
 # missions sets it before that import (the project's one door to pymavlink). Importing it
 # here first means no test module's own pymavlink import (mavwp ...) can make it MAVLink 1.
-import missions  # noqa: F401
+import holescan.missions  # noqa: F401

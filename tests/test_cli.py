@@ -11,9 +11,9 @@ import cv2
 import numpy as np
 import pytest
 
-from detect import CameraIntrinsics
-from ground._datasets import Sample, write_dataset
 from holescan.cli import main
+from holescan.detect import CameraIntrinsics
+from holescan.ground._datasets import Sample, write_dataset
 
 CAM = CameraIntrinsics.xtion()
 

@@ -15,9 +15,9 @@ import cv2
 import numpy as np
 import pytest
 
-from detect import PAPER, CameraIntrinsics, detect_holes
 from holescan import cli
-from holescan_errors import InputError
+from holescan.detect import PAPER, CameraIntrinsics, detect_holes
+from holescan.errors import InputError
 
 REPO = Path(__file__).resolve().parents[1]
 AREA = "43.0,-79.0;43.0005,-79.0;43.0005,-78.9995;43.0,-78.9995"

@@ -2,7 +2,7 @@
 address space): the MCAP flight-log reader, the ``.oni`` scanner, MAVLink byte streams into
 the telemetry decoder, area GeoJSON, dataset JSON, camera.json and the fly TOML config.
 
-Property: a result or the project's own error (:class:`holescan_errors.HolescanError`),
+Property: a result or the project's own error (:class:`holescan.errors.HolescanError`),
 never another exception, a hang or unbounded memory.
 """
 
@@ -23,7 +23,7 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from capture import (
+from holescan.capture import (
     FlightLogWriter,
     Frame,
     LoggedFrame,
@@ -34,17 +34,17 @@ from capture import (
     scan_oni,
     write_oni,
 )
-from capture._mavadapt import (
+from holescan.capture._mavadapt import (
     attitude_from_attitude,
     attitude_from_quaternion,
     gps_from_gps_raw_int,
     position_from_global_position_int,
 )
-from capture._mavstream import MavlinkStream
-from detect import CameraIntrinsics
-from ground import load_dataset, read_camera
-from holescan_errors import HolescanError
-from missions import mavlink, parser, read_area
+from holescan.capture._mavstream import MavlinkStream
+from holescan.detect import CameraIntrinsics
+from holescan.errors import HolescanError
+from holescan.ground import load_dataset, read_camera
+from holescan.missions import mavlink, parser, read_area
 
 CAM = CameraIntrinsics(32, 24, 30.0, 30.0, 15.5, 11.5)
 #: Extra address space a parser may take while fuzzed (a corrupt length once asked 5 GB).
@@ -92,7 +92,7 @@ def mcap_bytes(tmp_path_factory: pytest.TempPathFactory) -> bytes:
     d = tmp_path_factory.mktemp("fuzzlog")
     rng = np.random.default_rng(0)
     opts_kw: dict[str, Any] = {}
-    from capture import LogOptions
+    from holescan.capture import LogOptions
 
     with FlightLogWriter(d / "f", CAM, options=LogOptions(chunk_size=4000, **opts_kw)) as w:
         for i in range(12):

@@ -2,49 +2,139 @@
 
 from __future__ import annotations
 
+import ast
+import graphlib
 import subprocess
 import sys
+import zipfile
+from collections.abc import Iterator
 from pathlib import Path
 
+import grimp
 import pytest
 
-from holescan_errors import InputError
-from sim import sortie_params
+from holescan.errors import InputError
+from holescan.sim import sortie_params
 
 ROOT = Path(__file__).resolve().parents[1]
+# The folders of the repository's root that are holescan's subpackages, and the namespace itself.
 PACKAGES = ("capture", "detect", "geotag", "missions", "ground", "sim", "holescan")
+# Python code outside the installed package that follows the same rules.
+OTHER_CODE = ("benchmarks", "tests")
+MAX_MODULE_LINES = 500
+
+
+def _sources(*folders: str) -> Iterator[Path]:
+    for folder in folders:
+        for path in sorted((ROOT / folder).rglob("*.py")):
+            if "node_modules" not in path.parts and not path.is_symlink():
+                yield path
+
+
+def _package_sources() -> Iterator[Path]:
+    # holescan/capture etc. are links to the root folders: walk each file once.
+    for path in _sources(*PACKAGES):
+        if path.resolve() == path:
+            yield path
 
 
 def test_the_flight_side_loads_neither_the_simulator_nor_numba() -> None:
     code = (
-        "import sys, capture, missions, detect, geotag; "
-        "bad = sorted(m for m in sys.modules if m.split('.')[0] in ('sim', 'numba', 'ground')); "
+        "import sys, holescan.capture, holescan.missions, holescan.detect, holescan.geotag; "
+        "bad = sorted(m for m in sys.modules if m.split('.')[0] == 'numba' "
+        "or m.split('.')[:2] in (['holescan', 'sim'], ['holescan', 'ground'], "
+        "['holescan', 'cli'])); "
         "print(bad); sys.exit(1 if bad else 0)"
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stdout + done.stderr
 
 
+def test_an_install_adds_no_import_name_but_holescan(tmp_path: Path) -> None:
+    # A real wheel from the build backend, the way `pip install holescan` would get it.
+    done = subprocess.run(
+        [
+            *(sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation"),
+            *("--disable-pip-version-check", "-q", "-w", str(tmp_path), str(ROOT)),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    (wheel,) = tmp_path.glob("holescan-*.whl")
+    with zipfile.ZipFile(wheel) as zf:
+        names = zf.namelist()
+        (top_level,) = [n for n in names if n.endswith(".dist-info/top_level.txt")]
+        declared = zf.read(top_level).decode().split()
+    tops = {n.split("/")[0] for n in names if not n.split("/")[0].endswith(".dist-info")}
+    assert tops == {"holescan"} and declared == ["holescan"], (tops, declared)
+    # Every subpackage is inside, with its data files.
+    for sub in ("capture", "detect", "geotag", "missions", "ground", "sim", "cli"):
+        assert f"holescan/{sub}/__init__.py" in names, sub
+    assert "holescan/ground/station.html" in names
+
+
+def _private_imports(path: Path) -> Iterator[str]:
+    tree = ast.parse(path.read_text(), filename=str(path))
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            for alias in node.names:
+                if alias.name.startswith("_") and not alias.name.startswith("__"):
+                    yield f"{node.lineno}: from {node.module} import {alias.name}"
+
+
+def test_no_private_name_is_imported_from_another_module() -> None:
+    # What crosses a module boundary is public (no leading underscore) where it is defined.
+    offenders = [
+        f"{path.relative_to(ROOT)}:{line}"
+        for path in (*_package_sources(), *_sources(*OTHER_CODE))
+        for line in _private_imports(path)
+    ]
+    assert offenders == [], "\n".join(offenders)
+
+
 def test_no_module_outside_a_package_imports_its_private_modules() -> None:
     offenders = []
-    for pkg in (*PACKAGES, "benchmarks"):
-        for path in (ROOT / pkg).rglob("*.py"):
-            for n, line in enumerate(path.read_text().splitlines(), 1):
-                words = line.split()
-                if len(words) >= 2 and words[0] in ("from", "import"):
-                    top, _, rest = words[1].partition(".")
-                    if top in PACKAGES and top != pkg and rest.startswith("_"):
-                        offenders.append(f"{path.relative_to(ROOT)}:{n}: {line.strip()}")
+    for path in (*_package_sources(), *_sources(*OTHER_CODE)):
+        rel = path.relative_to(ROOT)
+        own = rel.parts[0] if rel.parts[0] in PACKAGES else None
+        if own == "holescan" and len(rel.parts) > 2:
+            own = rel.parts[1]  # holescan/cli/...
+        for node in ast.walk(ast.parse(path.read_text())):
+            modules = (
+                [a.name for a in node.names]
+                if isinstance(node, ast.Import)
+                else [node.module or ""]
+                if isinstance(node, ast.ImportFrom)
+                else []
+            )
+            for module in modules:
+                parts = module.split(".")
+                if parts[0] != "holescan" or len(parts) < 3:
+                    continue
+                if parts[1] != own and any(p.startswith("_") for p in parts[2:]):
+                    offenders.append(f"{rel}:{node.lineno}: {module}")
     # benchmarks/ablation.py turns the detector's private switches on purpose
     assert [o for o in offenders if not o.startswith("benchmarks/ablation.py:")] == [], offenders
+
+
+def test_no_import_circle() -> None:
+    graph = grimp.build_graph("holescan", cache_dir=None)
+    order = graphlib.TopologicalSorter(
+        {m: graph.find_modules_directly_imported_by(m) for m in graph.modules}
+    )
+    try:
+        order.prepare()
+    except graphlib.CycleError as err:
+        pytest.fail(f"import circle: {' -> '.join(err.args[1])}")
 
 
 def test_modules_stay_small() -> None:
     big = {
         str(p.relative_to(ROOT)): n
-        for pkg in (*PACKAGES, "holescan_errors")
-        for p in (ROOT / pkg).rglob("*.py")
-        if (n := len(p.read_text().splitlines())) > 550
+        for p in _package_sources()
+        if (n := len(p.read_text().splitlines())) > MAX_MODULE_LINES
     }
     assert not big, big
 

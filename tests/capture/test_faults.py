@@ -17,11 +17,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from capture import Flight, FlightConfig, LoggedFrame, log_info, read_flight_log, recover_log
-from capture._frame import Frame
-from capture._mavlink import Telemetry
-from detect import CameraIntrinsics
-from sim import SimAutopilot, SimPath
+from holescan.capture import (
+    Flight,
+    FlightConfig,
+    LoggedFrame,
+    log_info,
+    read_flight_log,
+    recover_log,
+)
+from holescan.capture._frame import Frame
+from holescan.capture._mavlink import Telemetry
+from holescan.detect import CameraIntrinsics
+from holescan.sim import SimAutopilot, SimPath
 from tests.capture.test_shutdown import group_members, start_sim_flight
 
 CAM = CameraIntrinsics.xtion(160, 120)
@@ -227,7 +234,7 @@ def test_sigkill_loses_only_the_last_moments(tmp_path: Path) -> None:
 
 def test_duration_holds_while_the_sensor_is_missing(tmp_path: Path) -> None:
     """``fly --sensor openni2 --duration 3`` with no Xtion retried forever."""
-    from capture import SensorError
+    from holescan.capture import SensorError
 
     def no_xtion() -> FloorSource:
         raise SensorError("no Xtion found on USB")

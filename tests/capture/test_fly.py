@@ -19,17 +19,17 @@ from typing import Any
 import numpy as np
 import pytest
 
-from capture import Flight, FlightConfig, write_oni
-from capture._flyconfig import FlyConfig, SensorSpec, load_fly_config, parse_fly_config
-from capture._frame import Frame
-from capture._mcapread import LoggedFrame, LoggedHealth, LoggedHoles, read_flight_log
-from capture._mcaptools import log_info
-from detect import CameraIntrinsics
-from holescan_errors import InputError
-from sim import SimAutopilot, SimPath, sortie_params
+from holescan.capture import Flight, FlightConfig, write_oni
+from holescan.capture._flyconfig import FlyConfig, SensorSpec, load_fly_config, parse_fly_config
+from holescan.capture._frame import Frame
+from holescan.capture._mcapread import LoggedFrame, LoggedHealth, LoggedHoles, read_flight_log
+from holescan.capture._mcaptools import log_info
+from holescan.detect import CameraIntrinsics
+from holescan.errors import InputError
+from holescan.sim import SimAutopilot, SimPath, sortie_params
 
 os.environ.setdefault("MAVLINK20", "1")
-from missions import mavutil
+from holescan.missions import mavutil
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "deploy" / "fly.example.toml"

@@ -13,10 +13,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from capture import Telemetry, TelemetryError
-from capture._mavstream import MavlinkStream
-from missions import mavlink, parser
-from sim._autopilot import SimAutopilot, SimPath
+from holescan.capture import Telemetry, TelemetryError
+from holescan.capture._mavstream import MavlinkStream
+from holescan.missions import mavlink, parser
+from holescan.sim._autopilot import SimAutopilot, SimPath
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -155,8 +155,8 @@ def test_signed_link_ignores_a_forged_unsigned_autopilot(tmp_path: Path) -> None
     import socket
     import threading
 
-    from capture import read_signing_key
-    from missions import open_link
+    from holescan.capture import read_signing_key
+    from holescan.missions import open_link
 
     key = bytes(range(32))
     (tmp_path / "key").write_text(key.hex() + "\n")

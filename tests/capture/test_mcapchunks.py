@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from mcap.records import Channel, Message
 
-from capture import (
+from holescan.capture import (
     AttitudeSample,
     ChunkDamagedError,
     FlightLogError,
@@ -32,9 +32,9 @@ from capture import (
     read_log_layout,
     telemetry_sample,
 )
-from detect import CameraIntrinsics
-from geotag import CameraMount, ErrorModel
-from missions import mavlink as mavlink2
+from holescan.detect import CameraIntrinsics
+from holescan.geotag import CameraMount, ErrorModel
+from holescan.missions import mavlink as mavlink2
 
 CAM = CameraIntrinsics(80, 60, 71.3, 71.3, 39.5, 29.5)
 T0 = 1_750_000_000_000_000_000

@@ -24,7 +24,7 @@ from mcap.records import Footer, Message
 from mcap.stream_reader import StreamReader
 from mcap_protobuf.decoder import DecoderFactory
 
-from capture import (
+from holescan.capture import (
     FlightLogError,
     FlightLogWriter,
     Frame,
@@ -42,12 +42,12 @@ from capture import (
     read_flight_log,
     recover_log,
 )
-from capture._mcapdetections import decode_detection, detection_json
-from capture._mcaplog import log_file_path
-from detect import CameraIntrinsics, Detection, FeatureScores
-from geotag import CameraMount, Hole, VehiclePose
-from holescan_errors import HolescanError, InputError
-from missions import mavlink as mavlink2
+from holescan.capture._mcapdetections import decode_detection, detection_json
+from holescan.capture._mcaplog import log_file_path
+from holescan.detect import CameraIntrinsics, Detection, FeatureScores
+from holescan.errors import HolescanError, InputError
+from holescan.geotag import CameraMount, Hole, VehiclePose
+from holescan.missions import mavlink as mavlink2
 
 REPO = Path(__file__).resolve().parents[2]
 SMALL = CameraIntrinsics(80, 60, 71.3, 71.3, 39.5, 29.5)
@@ -615,7 +615,7 @@ def test_cli_log_info_and_recover(
     from holescan import cli
 
     # The real entry point with only this verb registered (other verbs are tested elsewhere).
-    monkeypatch.setattr(cli, "_COMMAND_MODULES", ("holescan._cmd_log",))
+    monkeypatch.setattr(cli, "_COMMAND_MODULES", ("holescan.cli._cmd_log",))
     main = cli.main
     path, _ = chunked_log
     assert main(["log", "info", str(path)]) == 0
@@ -651,7 +651,7 @@ def test_cli_log_info_and_recover(
 _CHILD = textwrap.dedent(
     """
     import sys, time
-    from capture import FlightLogWriter
+    from holescan.capture import FlightLogWriter
     from tests.capture.test_mcaplog import VGA, make_frame
 
     w = FlightLogWriter(sys.argv[1], VGA)
@@ -749,7 +749,7 @@ def test_writer_keeps_up_at_30_fps(tmp_path: Path) -> None:
 _DISK_FULL_CHILD = textwrap.dedent(
     """
     import json, resource, signal, sys, time
-    from capture import FlightLogError, FlightLogWriter, LogOptions
+    from holescan.capture import FlightLogError, FlightLogWriter, LogOptions
     from tests.capture.test_mcaplog import SMALL, make_frame
 
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # writes past the limit fail with EFBIG

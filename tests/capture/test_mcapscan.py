@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
-from capture import (
+from holescan.capture import (
     FlightLogWriter,
     LoggedFrame,
     LoggedHoles,
@@ -24,7 +24,7 @@ from capture import (
     recover_log,
     scan_records,
 )
-from holescan_errors import HolescanError
+from holescan.errors import HolescanError
 from tests.capture.test_mcaplog import (
     SMALL,
     T0_UNIX_NS,

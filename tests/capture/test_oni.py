@@ -13,9 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from capture import Frame, OniWriter, scan_oni, write_oni
-from detect import CameraIntrinsics
-from holescan_errors import InputError
+from holescan.capture import Frame, OniWriter, scan_oni, write_oni
+from holescan.detect import CameraIntrinsics
+from holescan.errors import InputError
 
 CAM = CameraIntrinsics(64, 48, 57.3, 58.1, 31.0, 24.5)
 REPO = Path(__file__).resolve().parents[2]
@@ -260,8 +260,8 @@ def test_killed_writer_leaves_only_a_partial_file(tmp_path: Path) -> None:
     child = textwrap.dedent(
         f"""
         import os, numpy as np
-        from capture import Frame, OniWriter
-        from detect import CameraIntrinsics
+        from holescan.capture import Frame, OniWriter
+        from holescan.detect import CameraIntrinsics
         cam = CameraIntrinsics(64, 48, 57.3, 58.1, 31.0, 24.5)
         w = OniWriter({str(path)!r}, cam)
         for i in range(5):
@@ -298,7 +298,7 @@ def read_data_records(path: Path) -> dict[int, list[tuple[int, int, bytes]]]:
 
 
 def write_flight_log(prefix: Path, frames: list[Frame]) -> Path:
-    from capture import FlightLogWriter
+    from holescan.capture import FlightLogWriter
 
     with FlightLogWriter(prefix, CAM) as log:
         for f in frames:
@@ -308,7 +308,7 @@ def write_flight_log(prefix: Path, frames: list[Frame]) -> Path:
 
 
 def test_export_oni_from_a_flight_log(tmp_path: Path) -> None:
-    from capture import export_oni
+    from holescan.capture import export_oni
 
     frames = [replace(f, t_mono_ns=10_000 + i * 33_000_000) for i, f in enumerate(make_frames(6))]
     log = write_flight_log(tmp_path / "flight", frames)
@@ -324,7 +324,7 @@ def test_export_oni_from_a_flight_log(tmp_path: Path) -> None:
 
 
 def test_export_oni_continues_time_across_a_sensor_clock_reset(tmp_path: Path) -> None:
-    from capture import export_oni
+    from holescan.capture import export_oni
 
     frames = make_frames(5)
     mono = [i * 33_000_000 for i in range(5)]

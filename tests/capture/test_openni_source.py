@@ -17,10 +17,10 @@ from typing import Any
 import numpy as np
 import pytest
 
-from capture import Frame, OniSource, write_oni
-from capture._openni2lib import _Pairer, _Raw
-from detect import CameraIntrinsics
-from holescan_errors import InputError
+from holescan.capture import Frame, OniSource, write_oni
+from holescan.capture._openni2lib import _Pairer, _Raw
+from holescan.detect import CameraIntrinsics
+from holescan.errors import InputError
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -28,8 +28,8 @@ PLAYER = textwrap.dedent(
     """
     import json, sys, time
     import numpy as np
-    from capture import OniSource
-    from holescan_errors import InputError
+    from holescan.capture import OniSource
+    from holescan.errors import InputError
 
     args = json.loads(sys.argv[1])
     summary = {"cycles": [], "error": None}
@@ -220,7 +220,7 @@ LIVE_ON_PLAYBACK = textwrap.dedent(
     """
     import json, sys
     import numpy as np
-    from capture import OpenNI2Device, SensorError
+    from holescan.capture import OpenNI2Device, SensorError
 
     class PlaybackAsLive(OpenNI2Device):
         # The live source's own configuration, pairing and stamping, fed by the file
@@ -283,8 +283,8 @@ def test_openni2_initialises_once_and_survives_an_unload(tmp_path: Path) -> None
     child = textwrap.dedent(
         """
         import sys
-        import capture._openni2lib as co
-        from capture import OniSource
+        import holescan.capture._openni2lib as co
+        from holescan.capture import OniSource
         assert not co._init_lock.locked()
         lib = co.openni2_library()
         assert co.openni2_library() is lib and lib.is_initialized()

@@ -8,7 +8,7 @@ import pymap3d
 import pytest
 from scipy.spatial.transform import Rotation
 
-from capture._posebuffer import (
+from holescan.capture._posebuffer import (
     AttitudeSample,
     GpsFix,
     PoseBuffer,

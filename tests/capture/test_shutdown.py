@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from capture import log_info, read_flight_log
-from capture._mcapread import LoggedHealth
+from holescan.capture import log_info, read_flight_log
+from holescan.capture._mcapread import LoggedHealth
 from tests.capture.test_fly import SIM_TOML, holescan
 
 pytestmark = pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc")
@@ -116,8 +116,8 @@ def test_worker_exits_when_its_parent_dies_without_prctl(tmp_path: Path) -> None
     child = textwrap.dedent(
         """
         import os, sys, time
-        from capture._worker import DetectionWorker
-        from detect import DEFAULT, CameraIntrinsics
+        from holescan.capture._worker import DetectionWorker
+        from holescan.detect import DEFAULT, CameraIntrinsics
         w = DetectionWorker(CameraIntrinsics.xtion(64, 48), DEFAULT)
         w.start()
         print(w._proc.pid, flush=True)

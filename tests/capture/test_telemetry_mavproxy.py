@@ -22,14 +22,14 @@ from typing import Any
 import pymap3d
 import pytest
 
-from capture._clock import ClockSync
-from capture._mavlink import Telemetry, TelemetryTimeoutError
-from capture._posebuffer import PoseUnavailable
-from geotag import VehiclePose
-from sim import SimAutopilot, SimPath
+from holescan.capture._clock import ClockSync
+from holescan.capture._mavlink import Telemetry, TelemetryTimeoutError
+from holescan.capture._posebuffer import PoseUnavailable
+from holescan.geotag import VehiclePose
+from holescan.sim import SimAutopilot, SimPath
 
 os.environ.setdefault("MAVLINK20", "1")
-from missions import mavlink as mavlink2
+from holescan.missions import mavlink as mavlink2
 
 log = logging.getLogger(__name__)
 
@@ -286,8 +286,8 @@ def test_no_autopilot_times_out() -> None:
 
 
 def test_sim_accepts_and_flies_an_uploaded_mission() -> None:
-    from missions import Waypoint
-    from missions._protocol import download_mission, upload_mission
+    from holescan.missions import Waypoint
+    from holescan.missions._protocol import download_mission, upload_mission
 
     home = SimPath()
     square = [(0.0, 0.0), (30.0, 0.0), (30.0, 30.0), (0.0, 30.0)]

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from capture import OpenNI2Device, SensorError, UsbDeviceInfo, find_xtion, reset_xtion
-from holescan_errors import HolescanError
+from holescan.capture import OpenNI2Device, SensorError, UsbDeviceInfo, find_xtion, reset_xtion
+from holescan.errors import HolescanError
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -57,7 +57,7 @@ def test_opening_an_absent_uri_raises_sensor_error_from_openni2() -> None:
     child = textwrap.dedent(
         """
         import json
-        from capture import OpenNI2Device, SensorError
+        from holescan.capture import OpenNI2Device, SensorError
         try:
             with OpenNI2Device(uri="1d27/0601@250/127"):
                 result = "opened"

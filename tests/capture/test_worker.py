@@ -6,9 +6,9 @@ import time
 
 import numpy as np
 
-from capture._frame import Frame
-from capture._worker import DetectionWorker
-from detect import DEFAULT, CameraIntrinsics, detect_holes
+from holescan.capture._frame import Frame
+from holescan.capture._worker import DetectionWorker
+from holescan.detect import DEFAULT, CameraIntrinsics, detect_holes
 
 CAM = CameraIntrinsics.xtion()
 

@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from detect import GroundTruthBox, ScoredBox, evaluate_detections, p_hole_of_score
-from detect._calibration import logistic
-from detect._calibration_table import P_HOLE_LOGISTIC
-from ground import brier_score, calibration_outcomes
+from holescan.detect import GroundTruthBox, ScoredBox, evaluate_detections, p_hole_of_score
+from holescan.detect._calibration import logistic
+from holescan.detect._calibration_table import P_HOLE_LOGISTIC
+from holescan.ground import brier_score, calibration_outcomes
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 from calibrate import isotonic, platt

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from detect import DEFAULT, DOG, CameraIntrinsics, Detection, detect_holes
-from detect._default import basin_depth, block_depth, opening_axes
-from holescan_errors import InputError
+from holescan.detect import DEFAULT, DOG, CameraIntrinsics, Detection, detect_holes
+from holescan.detect._default import basin_depth, block_depth, opening_axes
+from holescan.errors import InputError
 
 CAM = CameraIntrinsics.xtion()
 F = CAM.fx

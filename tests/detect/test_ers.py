@@ -7,8 +7,8 @@ import numpy.typing as npt
 import pytest
 from scipy import ndimage
 
-from detect._ers import ers_superpixels
-from holescan_errors import InputError
+from holescan.detect._ers import ers_superpixels
+from holescan.errors import InputError
 
 EIGHT = np.ones((3, 3), dtype=bool)
 

@@ -9,7 +9,7 @@ import json
 import numpy as np
 import pytest
 
-from detect._evaluate import GroundTruthBox, ScoredBox, evaluate_detections, overlap
+from holescan.detect._evaluate import GroundTruthBox, ScoredBox, evaluate_detections, overlap
 
 
 def test_overlap_rules_differ_as_documented() -> None:

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from detect._geometry import fit_plane, fit_plane_ransac, terrain_plane
+from holescan.detect._geometry import fit_plane, fit_plane_ransac, terrain_plane
 
 
 def _view_into_a_cut_hole(seed: int = 0) -> tuple[np.ndarray, np.ndarray]:

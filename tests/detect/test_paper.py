@@ -9,9 +9,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from detect import PAPER, CameraIntrinsics, Detection, detect_holes
-from detect._paper import INVALID_DEPTH_M, detect_paper, paper_superpixels, score_regions
-from holescan_errors import InputError
+from holescan.detect import PAPER, CameraIntrinsics, Detection, detect_holes
+from holescan.detect._paper import INVALID_DEPTH_M, detect_paper, paper_superpixels, score_regions
+from holescan.errors import InputError
 
 # A 80 x 60 camera with f = 100 px: a pixel at depth Z spans Z / 100 metres.
 CAM = CameraIntrinsics(width=80, height=60, fx=100.0, fy=100.0, cx=39.5, cy=29.5)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from detect import DEFAULT, PAPER, CameraIntrinsics, Detection, detect_holes
-from detect._photometry import relative_luminance, void_evidence
+from holescan.detect import DEFAULT, PAPER, CameraIntrinsics, Detection, detect_holes
+from holescan.detect._photometry import relative_luminance, void_evidence
 
 CAM = CameraIntrinsics.xtion()
 F = CAM.fx

@@ -6,9 +6,9 @@ import math
 
 import pytest
 
-from detect import p_hole_of_score
-from geotag import AnnounceGate, Hole
-from holescan_errors import InputError
+from holescan.detect import p_hole_of_score
+from holescan.errors import InputError
+from holescan.geotag import AnnounceGate, Hole
 
 S = 1_000_000_000
 

@@ -10,8 +10,9 @@ import numpy as np
 import pymap3d
 import pytest
 
-from detect import CameraIntrinsics, Detection, FeatureScores
-from geotag import (
+from holescan.detect import CameraIntrinsics, Detection, FeatureScores
+from holescan.errors import InputError
+from holescan.geotag import (
     CameraMount,
     HoleSighting,
     HoleTracker,
@@ -20,7 +21,6 @@ from geotag import (
     geotag_detection,
     rotation_ned_from_optical,
 )
-from holescan_errors import InputError
 
 CAM = CameraIntrinsics.xtion()
 MOUNT = CameraMount()

@@ -9,8 +9,9 @@ import numpy as np
 import pymap3d
 import pytest
 
-from detect import CameraIntrinsics, Detection, FeatureScores
-from geotag import (
+from holescan.detect import CameraIntrinsics, Detection, FeatureScores
+from holescan.errors import InputError
+from holescan.geotag import (
     CameraMount,
     ErrorModel,
     GimbalAttitude,
@@ -21,7 +22,6 @@ from geotag import (
     geotag_frame,
     project_to_pixel,
 )
-from holescan_errors import InputError
 
 CAM = CameraIntrinsics.xtion()
 FEATURES = FeatureScores(0.9, 0.8, 0.7, 0.6, 0.5)

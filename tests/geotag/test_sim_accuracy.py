@@ -29,10 +29,10 @@ import numpy as np
 import pymap3d
 import pytest
 
-from capture import Flight, FlightConfig
-from capture._mcapread import LoggedDetections, read_flight_log
-from geotag import HoleSighting, geotag_frame
-from sim._sortie import SimSortie, SortieParams, TrueHole
+from holescan.capture import Flight, FlightConfig
+from holescan.capture._mcapread import LoggedDetections, read_flight_log
+from holescan.geotag import HoleSighting, geotag_frame
+from holescan.sim._sortie import SimSortie, SortieParams, TrueHole
 
 PARAMS = SortieParams(
     size_m=(4.0, 4.0),
@@ -67,7 +67,7 @@ def pct(values: list[float], q: float) -> float:
 def test_pipeline_geotag_error_and_every_hole_once(
     tmp_path: Path, caplog: pytest.LogCaptureFixture
 ) -> None:
-    caplog.set_level(logging.ERROR, logger="capture")  # restored after the test
+    caplog.set_level(logging.ERROR, logger="holescan.capture")  # restored after the test
     with SimSortie(PARAMS) as sortie:
         cfg = FlightConfig(
             log_prefix=tmp_path / "flight",

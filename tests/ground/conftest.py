@@ -13,11 +13,11 @@ from pathlib import Path
 
 import pytest
 
-from capture import Flight, FlightConfig, FlightSummary, LogOptions
-from detect import CameraIntrinsics
-from sim import SimAutopilot, SimPath
-from sim._source import SimSource, WorldAnchor
-from sim._world import RubbleWorld, make_world
+from holescan.capture import Flight, FlightConfig, FlightSummary, LogOptions
+from holescan.detect import CameraIntrinsics
+from holescan.sim import SimAutopilot, SimPath
+from holescan.sim._source import SimSource, WorldAnchor
+from holescan.sim._world import RubbleWorld, make_world
 
 CAM = CameraIntrinsics.xtion()
 ANCHOR = WorldAnchor(43.6532, -79.3832, 120.0)

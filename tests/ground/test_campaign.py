@@ -11,11 +11,11 @@ from pathlib import Path
 import pymap3d
 import pytest
 
-from capture import FlightSummary
-from ground import ReprocessOptions, ReprocessResult, run_campaign
 from holescan import cli
-from holescan_errors import InputError
-from sim import RubbleWorld, WorldAnchor
+from holescan.capture import FlightSummary
+from holescan.errors import InputError
+from holescan.ground import ReprocessOptions, ReprocessResult, run_campaign
+from holescan.sim import RubbleWorld, WorldAnchor
 
 ANCHOR = WorldAnchor(43.6532, -79.3832, 120.0)  # as in conftest.py
 

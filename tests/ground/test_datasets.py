@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from detect import CameraIntrinsics
-from ground._datasets import Sample, load_dataset, load_image_pair, write_dataset
-from holescan_errors import InputError
-from sim._synth import synth_dataset
+from holescan.detect import CameraIntrinsics
+from holescan.errors import InputError
+from holescan.ground._datasets import Sample, load_dataset, load_image_pair, write_dataset
+from holescan.sim._synth import synth_dataset
 
 CAM = CameraIntrinsics.xtion()
 
@@ -166,7 +166,7 @@ def _authors_folder(tmp_path: Path, layout: str = "flat") -> Path:
 
 
 def test_import_csv_authors_form(tmp_path: Path) -> None:
-    from ground import import_csv_dataset
+    from holescan.ground import import_csv_dataset
 
     src = _authors_folder(tmp_path)
     csv = tmp_path / "groundTruth.csv"
@@ -191,7 +191,7 @@ def test_import_csv_authors_form(tmp_path: Path) -> None:
 
 
 def test_import_csv_folders_header_and_zero_based(tmp_path: Path) -> None:
-    from ground import import_csv_dataset
+    from holescan.ground import import_csv_dataset
 
     src = _authors_folder(tmp_path, layout="folders")
     csv = tmp_path / "boxes.csv"
@@ -214,7 +214,7 @@ def test_import_csv_folders_header_and_zero_based(tmp_path: Path) -> None:
     ],
 )
 def test_import_csv_bad_rows_name_their_line(tmp_path: Path, rows: str, message: str) -> None:
-    from ground import import_csv_dataset
+    from holescan.ground import import_csv_dataset
 
     src = _authors_folder(tmp_path)
     csv = tmp_path / "gt.csv"

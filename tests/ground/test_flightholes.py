@@ -22,12 +22,12 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
-from capture import FlightLogWriter, Frame, LogOptions
-from detect import CameraIntrinsics, Detection, FeatureScores
-from geotag import Hole, VehiclePose
-from ground import flight_log_files, read_flight_holes
 from holescan import cli
-from missions import mavlink as mavlink2
+from holescan.capture import FlightLogWriter, Frame, LogOptions
+from holescan.detect import CameraIntrinsics, Detection, FeatureScores
+from holescan.geotag import Hole, VehiclePose
+from holescan.ground import flight_log_files, read_flight_holes
+from holescan.missions import mavlink as mavlink2
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavwp
@@ -166,7 +166,7 @@ Main = Callable[[Sequence[str] | None], int]
 @pytest.fixture
 def main(monkeypatch: pytest.MonkeyPatch) -> Main:
     # The real entry point with only this verb registered (other verbs are tested elsewhere).
-    monkeypatch.setattr(cli, "_COMMAND_MODULES", ("holescan._cmd_holes",))
+    monkeypatch.setattr(cli, "_COMMAND_MODULES", ("holescan.cli._cmd_holes",))
     return cli.main
 
 

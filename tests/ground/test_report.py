@@ -15,9 +15,9 @@ import numpy.typing as npt
 import pymap3d
 import pytest
 
-from geotag import Hole, VehiclePose
-from ground._report import SCORE_BANDS, render_report, score_band, thumbnails, write_report
-from holescan_errors import InputError
+from holescan.errors import InputError
+from holescan.geotag import Hole, VehiclePose
+from holescan.ground._report import SCORE_BANDS, render_report, score_band, thumbnails, write_report
 
 LAT0, LON0 = 47.3769, 8.5417
 CHROMIUM = Path("/usr/bin/chromium")

@@ -20,13 +20,13 @@ import pymap3d
 import pytest
 from mcap.reader import make_reader
 
-from capture import FlightSummary, log_info
-from detect import DetectParams
-from geotag import Hole
-from ground import Progress, ReprocessOptions, ReprocessResult, group_flights, match_points
-from ground import reprocess as _reprocess
 from holescan import cli
-from holescan_errors import InputError
+from holescan.capture import FlightSummary, log_info
+from holescan.detect import DetectParams
+from holescan.errors import InputError
+from holescan.geotag import Hole
+from holescan.ground import Progress, ReprocessOptions, ReprocessResult, group_flights, match_points
+from holescan.ground import reprocess as _reprocess
 
 Flown = tuple[list[Path], FlightSummary]
 
@@ -234,7 +234,7 @@ def test_stopped_run_resumes_from_the_cache(
 
 
 def b_params() -> DetectParams:
-    from detect import DEFAULT
+    from holescan.detect import DEFAULT
 
     return DEFAULT.with_searcher("dog")
 
@@ -284,7 +284,7 @@ def test_log_cut_right_after_its_header_is_an_empty_result(flight: Flown, tmp_pa
 
 def test_a_damaged_chunk_is_reported_and_the_rest_read(flight: Flown, tmp_path: Path) -> None:
     files, _summary = flight
-    from capture import read_log_layout
+    from holescan.capture import read_log_layout
 
     src = max(files, key=lambda p: p.stat().st_size)
     layout = read_log_layout(src)
@@ -335,7 +335,7 @@ def test_bad_inputs(flight: Flown, tmp_path: Path) -> None:
 def nan_params() -> DetectParams:
     import dataclasses
 
-    from detect import DEFAULT
+    from holescan.detect import DEFAULT
 
     return dataclasses.replace(DEFAULT, min_score=math.nan)
 

@@ -29,10 +29,10 @@ import gpxpy
 import numpy as np
 import pytest
 
-from geotag import Hole
-from ground import GroundOptions, GroundStation, StationState, state_document
 from holescan import cli
-from missions import HoleMissionServer, mavlink
+from holescan.geotag import Hole
+from holescan.ground import GroundOptions, GroundStation, StationState, state_document
+from holescan.missions import HoleMissionServer, mavlink
 
 NODE_COT = Path(__file__).parent / "cot"
 HOME = (43.6532, -79.3832)

@@ -10,8 +10,8 @@ from pathlib import Path
 import gpxpy
 import pytest
 
-from holescan_errors import InputError
-from missions import (
+from holescan.errors import InputError
+from holescan.missions import (
     MAV_CMD_DO_CHANGE_SPEED,
     MAV_CMD_NAV_RETURN_TO_LAUNCH,
     MAV_CMD_NAV_TAKEOFF,

@@ -8,9 +8,9 @@ import cv2
 import numpy as np
 import pytest
 
-from geotag import Hole
-from holescan_errors import InputError
-from missions import (
+from holescan.errors import InputError
+from holescan.geotag import Hole
+from holescan.missions import (
     CARD_PAYLOAD,
     CardAssembler,
     CardSender,
@@ -19,7 +19,7 @@ from missions import (
     parser,
     read_card,
 )
-from missions import mavlink as mav_dialect
+from holescan.missions import mavlink as mav_dialect
 
 
 def jpeg(seed: int = 0, size: tuple[int, int] = (72, 96)) -> bytes:
@@ -148,7 +148,7 @@ def test_newer_card_replaces_an_unsent_one_and_repeats_are_bounded() -> None:
 def test_candidates_are_marked_in_the_files_and_never_a_waypoint(tmp_path: Any) -> None:
     import json as _json
 
-    from missions import write_hole_file
+    from holescan.missions import write_hole_file
 
     strong = HOLE
     weak = Hole(

@@ -17,9 +17,9 @@ import gpxpy
 import numpy as np
 import pytest
 
-from geotag import Hole
-from holescan_errors import InputError
-from missions import (
+from holescan.errors import InputError
+from holescan.geotag import Hole
+from holescan.missions import (
     HOLE_FORMATS,
     MAV_FRAME_GLOBAL,
     hole_mission,

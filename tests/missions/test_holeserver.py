@@ -16,8 +16,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from geotag import Hole
-from missions._holeserver import (
+from holescan.geotag import Hole
+from holescan.missions._holeserver import (
     HoleMissionServer,
     MissionServerError,
     hole_statustext,
@@ -25,7 +25,7 @@ from missions._holeserver import (
 )
 
 os.environ.setdefault("MAVLINK20", "1")
-from missions import mavutil
+from holescan.missions import mavutil
 
 SYSID = 1
 

@@ -15,8 +15,8 @@ from typing import Any
 
 import pytest
 
-from geotag import Hole
-from missions import HoleMissionServer, open_link
+from holescan.geotag import Hole
+from holescan.missions import HoleMissionServer, open_link
 
 SYSID = 1
 _REST = (10**9, 2 * 10**9, 7, (1, 2, 3, 4), 0.7, 0.4)

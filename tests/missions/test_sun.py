@@ -17,7 +17,7 @@ import datetime as dt
 
 import pytest
 
-from missions import (
+from holescan.missions import (
     SunWindowError,
     check_flight,
     solar_elevation_deg,
@@ -161,7 +161,7 @@ def test_midnight_sun_gives_one_low_sun_window_over_midnight() -> None:
 
 
 def test_band_must_be_ordered() -> None:
-    from holescan_errors import InputError
+    from holescan.errors import InputError
 
     with pytest.raises(InputError, match="min < max"):
         sun_windows(40.0, -105.0, dt.date(2010, 6, 21), min_elev_deg=5.0, max_elev_deg=-5.0)

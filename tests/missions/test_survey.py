@@ -13,8 +13,8 @@ import shapely
 from shapely.geometry import Point, Polygon
 
 from holescan import cli
-from holescan_errors import InputError
-from missions import (
+from holescan.errors import InputError
+from holescan.missions import (
     MAV_CMD_DO_CHANGE_SPEED,
     MAV_CMD_NAV_RETURN_TO_LAUNCH,
     MAV_CMD_NAV_TAKEOFF,

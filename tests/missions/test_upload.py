@@ -17,7 +17,7 @@ from typing import Any
 import pytest
 
 from holescan import cli
-from missions import (
+from holescan.missions import (
     MAV_FRAME_GLOBAL,
     Area,
     MissionReceiver,

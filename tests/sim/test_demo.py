@@ -18,12 +18,12 @@ import pymap3d
 import pytest
 from shapely.geometry import Point, Polygon
 
-from capture import log_info
-from geotag import AnnounceGate, Hole
-from ground import read_flight_holes
 from holescan import cli
-from sim._demo import DEMO_SORTIE
-from sim._sortie import TrueHole, make_sortie_world, true_holes
+from holescan.capture import log_info
+from holescan.geotag import AnnounceGate, Hole
+from holescan.ground import read_flight_holes
+from holescan.sim._demo import DEMO_SORTIE
+from holescan.sim._sortie import TrueHole, make_sortie_world, true_holes
 
 CHROMIUM = Path("/usr/bin/chromium")
 SIZE = (6.0, 6.0)

@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from detect import CameraIntrinsics
-from sim import CameraPose, Conditions, make_world, render
-from sim._camera_model import project_points
+from holescan.detect import CameraIntrinsics
+from holescan.sim import CameraPose, Conditions, make_world, render
+from holescan.sim._camera_model import project_points
 
 CAM = CameraIntrinsics.xtion()
 
@@ -111,7 +111,7 @@ def test_tilted_view_marks_cut_holes_as_crowd(world) -> None:  # type: ignore[no
 
 def _flat_world(size_m: float = 6.0, step: bool = False):  # type: ignore[no-untyped-def]
     """A perfectly flat field at z = 0 (optionally a 0.5 m high block in the middle)."""
-    from sim import RubbleWorld
+    from holescan.sim import RubbleWorld
 
     n = round(size_m / 0.02) + 1
     height = np.zeros((n, n), np.float32)
@@ -123,8 +123,8 @@ def _flat_world(size_m: float = 6.0, step: bool = False):  # type: ignore[no-unt
 
 
 def test_rasteriser_and_ray_caster_agree(world) -> None:  # type: ignore[no-untyped-def]
-    from sim import render_exact
-    from sim._render import raycast_view
+    from holescan.sim import render_exact
+    from holescan.sim._render import raycast_view
 
     cam = CAM.scaled(0.5)
     hole = world.access_holes[1]
@@ -142,7 +142,7 @@ def test_rasteriser_and_ray_caster_agree(world) -> None:  # type: ignore[no-unty
 
 
 def test_exact_depth_of_a_flat_field_is_the_plane() -> None:
-    from sim import render_exact
+    from holescan.sim import render_exact
 
     flat = _flat_world()
     tilt = math.radians(10.0)
@@ -177,7 +177,7 @@ def test_depth_noise_matches_the_xtion_model() -> None:
 
 
 def test_projector_shadow_falls_left_of_a_raised_block() -> None:
-    from sim import render_exact
+    from holescan.sim import render_exact
 
     block = _flat_world(step=True)
     pose = CameraPose.looking_down(3.0, 3.0, 3.0)  # north up, east (+x) to the right
@@ -209,7 +209,7 @@ def test_render_is_reproducible_from_the_generator(world) -> None:  # type: igno
 
 
 def test_rays_from_above_hit_the_ground_below() -> None:
-    from sim._raycast import cast_rays
+    from holescan.sim._raycast import cast_rays
 
     flat = _flat_world(step=True)
     origins = np.array([[3, 3, 5], [1, 1, 5], [1.2, 3, 3], [1, 3, 3], [-1, 3, 5]], float)

@@ -14,7 +14,7 @@ import threading
 from pathlib import Path
 from types import FrameType
 
-from holescan._args import positive_float
+from holescan.cli._args import positive_float
 
 log = logging.getLogger("holescan.fly")
 
@@ -50,7 +50,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from capture import fly, format_report, load_fly_config
+    from holescan.capture import fly, format_report, load_fly_config
 
     cfg = load_fly_config(
         args.config,
@@ -75,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
     gate = cfg.flight.gate
     try:
         if cfg.sensor.kind == "sim":  # the simulator is loaded only when asked for
-            from sim import fly_sim, format_sim_report
+            from holescan.sim import fly_sim, format_sim_report
 
             print(format_sim_report(fly_sim(cfg, stop=stop), gate))
         else:

@@ -49,8 +49,8 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ground import GroundOptions, run_ground
-    from holescan_errors import InputError
+    from holescan.errors import InputError
+    from holescan.ground import GroundOptions, run_ground
 
     host, port = "127.0.0.1", None
     if args.http != "off":

@@ -7,8 +7,11 @@ import os
 from dataclasses import replace
 from pathlib import Path
 
-from capture import check_output, output_via_part
-from ground import (
+from holescan.capture import check_output, output_via_part
+from holescan.cli._args import Progress
+from holescan.cli._cmd_detect import add_detector_options, params_from_args
+from holescan.errors import InputError
+from holescan.ground import (
     EvalReport,
     brier_score,
     calibration_outcomes,
@@ -19,9 +22,6 @@ from ground import (
     run_detector,
     write_coco_results,
 )
-from holescan._args import Progress
-from holescan._cmd_detect import add_detector_options, params_from_args
-from holescan_errors import InputError
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -103,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
     if args.synthetic is not None:
         if args.dataset is not None:
             raise InputError("give either DATASET or --synthetic, not both")
-        from sim import synth_dataset
+        from holescan.sim import synth_dataset
 
         args.dataset = Path(f"holescan-synth-{args.synthetic}")
         args.compare = True

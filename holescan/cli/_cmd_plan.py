@@ -8,9 +8,9 @@ import logging
 import time
 from pathlib import Path
 
-from capture import check_output, output_via_part
-from holescan_errors import InputError
-from missions import (
+from holescan.capture import check_output, output_via_part
+from holescan.errors import InputError
+from holescan.missions import (
     SunWindowError,
     SurveyParams,
     check_flight,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from holescan._cmd_reprocess import add_engine_arguments, execute
+from holescan.cli._cmd_reprocess import add_engine_arguments, execute
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -25,6 +25,6 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ground import run_campaign
+    from holescan.ground import run_campaign
 
     return execute(args, run_campaign)

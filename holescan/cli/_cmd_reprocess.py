@@ -16,11 +16,11 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from holescan._args import EXIT_INTERRUPTED
-from missions import HOLE_FORMATS
+from holescan.cli._args import EXIT_INTERRUPTED
+from holescan.missions import HOLE_FORMATS
 
 if TYPE_CHECKING:
-    from ground import Progress, ReprocessOptions, ReprocessResult
+    from holescan.ground import Progress, ReprocessOptions, ReprocessResult
 
 
 def _score(text: str) -> float:
@@ -122,8 +122,8 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 def options(args: argparse.Namespace) -> ReprocessOptions:
     import dataclasses
 
-    from detect import DEFAULT, PAPER
-    from ground import ReprocessOptions
+    from holescan.detect import DEFAULT, PAPER
+    from holescan.ground import ReprocessOptions
 
     params = (PAPER if args.mode == "paper" else DEFAULT).with_searcher(args.searcher)
     if args.min_score is not None:
@@ -247,6 +247,6 @@ def execute(args: argparse.Namespace, fn: Callable[..., ReprocessResult]) -> int
 
 
 def run(args: argparse.Namespace) -> int:
-    from ground import reprocess
+    from holescan.ground import reprocess
 
     return execute(args, reprocess)

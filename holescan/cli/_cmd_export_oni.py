@@ -25,7 +25,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from capture import export_oni
+    from holescan.capture import export_oni
 
     n = export_oni(args.logs, args.out, fps=args.fps, force=args.force)
     print(f"{args.out}: {n} frames")

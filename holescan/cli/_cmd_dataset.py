@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from capture import check_folder
-from ground import import_csv_dataset, load_dataset, read_camera
-from holescan._args import Progress
+from holescan.capture import check_folder
+from holescan.cli._args import Progress
+from holescan.ground import import_csv_dataset, load_dataset, read_camera
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -42,7 +42,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
 
 def run_synth(args: argparse.Namespace) -> int:
-    from sim import synth_dataset
+    from holescan.sim import synth_dataset
 
     existing = args.out.absolute()
     while not existing.exists():  # the folders synth would create must be creatable

@@ -17,22 +17,22 @@ from collections.abc import Sequence
 os.environ.setdefault("OPENCV_LOG_LEVEL", "ERROR")
 
 from holescan import __version__
-from holescan._args import EXIT_INPUT, EXIT_INTERRUPTED, end_progress
-from holescan_errors import HolescanError
+from holescan.cli._args import EXIT_INPUT, EXIT_INTERRUPTED, end_progress
+from holescan.errors import HolescanError
 
 _COMMAND_MODULES = (
-    "holescan._cmd_detect",
-    "holescan._cmd_dataset",
-    "holescan._cmd_eval",
-    "holescan._cmd_log",
-    "holescan._cmd_export_oni",
-    "holescan._cmd_plan",
-    "holescan._cmd_holes",
-    "holescan._cmd_fly",
-    "holescan._cmd_reprocess",
-    "holescan._cmd_campaign",
-    "holescan._cmd_demo",
-    "holescan._cmd_ground",
+    "holescan.cli._cmd_detect",
+    "holescan.cli._cmd_dataset",
+    "holescan.cli._cmd_eval",
+    "holescan.cli._cmd_log",
+    "holescan.cli._cmd_export_oni",
+    "holescan.cli._cmd_plan",
+    "holescan.cli._cmd_holes",
+    "holescan.cli._cmd_fly",
+    "holescan.cli._cmd_reprocess",
+    "holescan.cli._cmd_campaign",
+    "holescan.cli._cmd_demo",
+    "holescan.cli._cmd_ground",
 )
 
 
@@ -73,6 +73,3 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _one_line(text: str) -> str:
     return " ".join(text.split())
 
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from missions import HOLE_FORMATS
+from holescan.missions import HOLE_FORMATS
 
 _CHOICES = (*HOLE_FORMATS, "all")
 
@@ -70,7 +70,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ground import export_flight_holes
+    from holescan.ground import export_flight_holes
 
     chosen = args.formats or ["gpx"]
     formats = list(HOLE_FORMATS) if "all" in chosen else chosen
