@@ -14,6 +14,7 @@ __all__ = [
     "attitude_from_attitude",
     "attitude_from_quaternion",
     "gps_from_gps_raw_int",
+    "home_from_home_position",
     "is_autopilot_heartbeat",
     "position_from_global_position_int",
     "telemetry_sample",
@@ -34,6 +35,11 @@ def position_from_global_position_int(msg: Any) -> PositionSample:
         ve=msg.vy * 1e-2,
         vd=msg.vz * 1e-2,
     )
+
+
+def home_from_home_position(msg: Any) -> tuple[float, float, float]:
+    """HOME_POSITION (degE7, mm MSL) -> (lat_deg, lon_deg, alt_m MSL)."""
+    return (msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3)
 
 
 def attitude_from_attitude(msg: Any) -> AttitudeSample:

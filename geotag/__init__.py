@@ -8,6 +8,7 @@ from holescan.geotag._camera import (
     rotation_ned_from_optical,
 )
 from holescan.geotag._local import LocalFrame, local_en_m
+from holescan.geotag._matching import nearest_pairs
 from holescan.geotag._merge import AnnounceGate, Hole, HoleTracker, MergeParams
 from holescan.geotag._project import (
     CIRCLE_95_PER_SIGMA,
@@ -36,6 +37,7 @@ __all__ = [
     "geotag_detection",
     "geotag_frame",
     "local_en_m",
+    "nearest_pairs",
     "project_to_pixel",
     "rotation_ned_from_optical",
 ]

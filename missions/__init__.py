@@ -47,7 +47,7 @@ from holescan.missions._holeserver import (
     hole_statustext,
     hole_waypoints,
 )
-from holescan.missions._link import mavlink, mavutil, open_link, parser
+from holescan.missions._link import MavConnection, mavlink, mavutil, open_link, parser
 from holescan.missions._protocol import (
     MAV_MISSION_ACCEPTED,
     MissionError,
@@ -116,6 +116,7 @@ __all__ = [
     "FlightCheck",
     "HoleFormat",
     "HoleMissionServer",
+    "MavConnection",
     "MissionError",
     "MissionReceiver",
     "MissionRejectedError",

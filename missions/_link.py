@@ -10,17 +10,59 @@ value (``mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT`` ...), never typed by hand.
 from __future__ import annotations
 
 import os
-from typing import Any
+from typing import Any, Protocol
 
 os.environ.setdefault("MAVLINK20", "1")  # before the first import of mavutil (see above)
 
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-__all__ = ["mavlink", "mavutil", "open_link", "parser"]
+__all__ = ["MavConnection", "mavlink", "mavutil", "open_link", "parser"]
 
 
-def open_link(connection: str, *, source_system: int, source_component: int, **kwargs: Any) -> Any:
+class MavConnection(Protocol):
+    """What the project uses of a pymavlink connection (``mavutil.mavfile``).
+
+    ``mav`` is the dialect's ``MAVLink`` encoder/decoder (``conn.mav.heartbeat_send(...)``);
+    its message methods are generated, so it stays ``Any``.
+    """
+
+    mav: Any
+    source_system: int
+    source_component: int
+    target_system: int
+    target_component: int
+    WIRE_PROTOCOL_VERSION: str
+
+    def recv_msg(self) -> Any: ...
+
+    def recv_match(
+        self,
+        condition: str | None = None,
+        type: str | list[str] | tuple[str, ...] | None = None,
+        blocking: bool = False,
+        timeout: float | None = None,
+    ) -> Any: ...
+
+    def select(self, timeout: float) -> bool: ...
+
+    def write(self, buf: bytes) -> int | None: ...
+
+    def setup_signing(
+        self,
+        secret_key: bytes,
+        sign_outgoing: bool = True,
+        allow_unsigned_callback: Any = None,
+        initial_timestamp: int | None = None,
+        link_id: int | None = None,
+    ) -> None: ...
+
+    def close(self) -> None: ...
+
+
+def open_link(
+    connection: str, *, source_system: int, source_component: int, **kwargs: Any
+) -> MavConnection:
     """A pymavlink connection (``udpin:``/``udpout:``/``tcp:``/serial device) speaking
     MAVLink 2 with robust parsing (garbage is skipped up to the next start byte).
 
@@ -35,7 +77,8 @@ def open_link(connection: str, *, source_system: int, source_component: int, **k
         conn.mav = mavlink.MAVLink(conn, srcSystem=source_system, srcComponent=source_component)
         conn.WIRE_PROTOCOL_VERSION = "2.0"
     conn.mav.robust_parsing = True
-    return conn
+    link: MavConnection = conn
+    return link
 
 
 def parser() -> Any:
