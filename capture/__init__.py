@@ -1,8 +1,12 @@
-"""The flight side: frame sources, telemetry, the MCAP flight log and the capture daemon."""
+"""The flight side: frame sources, telemetry, the MCAP flight log and the capture daemon.
 
-from holescan.capture._clock import ClockEstimate, ClockSync, ClockUnavailable
+Subpackages: :mod:`capture.flightlog` (the MCAP flight log: writing, reading, repairing) and
+:mod:`capture.openni` (the Xtion through OpenNI2, ``.oni`` recordings); errors in
+:mod:`capture.errors`. Everything other packages use is importable from here.
+"""
+
+from holescan.capture._clock import ClockEstimate, ClockSync
 from holescan.capture._daemon import Flight
-from holescan.capture._errors import CaptureError, SensorError
 from holescan.capture._flightrecords import FlightConfig, FlightCounters, FlightSummary
 from holescan.capture._fly import FlyReport, fly, format_report
 from holescan.capture._flyconfig import (
@@ -25,61 +29,10 @@ from holescan.capture._mavadapt import (
     position_from_global_position_int,
     telemetry_sample,
 )
-from holescan.capture._mavlink import (
-    DEFAULT_RATES_HZ,
-    Telemetry,
-    TelemetryError,
-    TelemetryStats,
-    TelemetryTimeoutError,
-)
+from holescan.capture._mavlink import DEFAULT_RATES_HZ, Telemetry, TelemetryStats
 from holescan.capture._mavrates import read_signing_key
-from holescan.capture._mcapchunks import (
-    ChunkDamagedError,
-    ChunkSpan,
-    LogLayout,
-    decode_messages,
-    errors_from_metadata,
-    mount_from_metadata,
-    open_log,
-    read_chunk,
-    read_log_layout,
-)
-from holescan.capture._mcapdetections import annotations_message, detection_json
-from holescan.capture._mcaplog import FlightLogError, FlightLogWriter, LogOptions, WriterStats
-from holescan.capture._mcapread import (
-    LoggedCalibration,
-    LoggedDetections,
-    LoggedFrame,
-    LoggedHealth,
-    LoggedHoles,
-    LoggedMavlink,
-    LoggedPose,
-    LogRecord,
-    McapSource,
-    TruncatedLogError,
-    read_flight_log,
-)
-from holescan.capture._mcapscan import DamagedRegion, ScanState, scan_records
-from holescan.capture._mcapschemas import (
-    JSON_SCHEMAS,
-    TOPIC_CAMERA_INFO,
-    TOPIC_COLOR,
-    TOPIC_DEPTH,
-    TOPIC_DETECTIONS,
-    TOPIC_FRAME_INFO,
-    TOPIC_HOLES,
-    TOPIC_MAVLINK_RAW,
-    TOPIC_POSE,
-    holes_geojson_message,
-    jsonable,
-    to_json,
-)
-from holescan.capture._mcaptools import LogInfo, RecoveryReport, TopicInfo, log_info, recover_log
-from holescan.capture._oni import OniInfo, OniStreamInfo, OniWriter, export_oni, scan_oni, write_oni
-from holescan.capture._openni import OniSource, OpenNI2Device
-from holescan.capture._openni2lib import camera_from_fov, openni2_library
+from holescan.capture._mavstream import MavlinkStream
 from holescan.capture._outpath import (
-    OutputPathError,
     atomic_output,
     check_folder,
     check_output,
@@ -91,12 +44,85 @@ from holescan.capture._posebuffer import (
     AttitudeSample,
     GpsFix,
     PoseBuffer,
-    PoseUnavailable,
     PositionSample,
+    quat_from_euler,
 )
 from holescan.capture._sensorsetup import PacedReplay, SensorSetup, open_sensor
 from holescan.capture._telemetryreplay import TelemetryReplay
 from holescan.capture._usb import UsbDeviceInfo, find_xtion, reset_xtion
+from holescan.capture._worker import DetectionWorker, WorkerResult
+from holescan.capture.errors import (
+    CaptureError,
+    ChunkDamagedError,
+    ClockUnavailable,
+    FlightLogError,
+    OutputPathError,
+    PoseUnavailable,
+    SensorError,
+    TelemetryError,
+    TelemetryTimeoutError,
+    TruncatedLogError,
+)
+from holescan.capture.flightlog import (
+    JSON_SCHEMAS,
+    TOPIC_CAMERA_INFO,
+    TOPIC_COLOR,
+    TOPIC_DEPTH,
+    TOPIC_DETECTIONS,
+    TOPIC_FRAME_INFO,
+    TOPIC_HOLES,
+    TOPIC_MAVLINK_RAW,
+    TOPIC_POSE,
+    ChunkSpan,
+    DamagedRegion,
+    FlightLogWriter,
+    LoggedCalibration,
+    LoggedDetections,
+    LoggedFrame,
+    LoggedHealth,
+    LoggedHoles,
+    LoggedMavlink,
+    LoggedPose,
+    LogInfo,
+    LogLayout,
+    LogOptions,
+    LogRecord,
+    McapFile,
+    McapSource,
+    RecoveryReport,
+    ScanState,
+    TopicInfo,
+    WriterStats,
+    annotations_message,
+    decode_detection,
+    decode_messages,
+    detection_json,
+    errors_from_metadata,
+    holes_geojson_message,
+    jsonable,
+    log_file_path,
+    log_info,
+    mount_from_metadata,
+    open_log,
+    read_chunk,
+    read_flight_log,
+    read_log_layout,
+    recover_log,
+    scan_records,
+    to_json,
+)
+from holescan.capture.openni import (
+    OniInfo,
+    OniSource,
+    OniStreamInfo,
+    OniWriter,
+    OpenNI2Device,
+    camera_from_fov,
+    export_oni,
+    openni2_library,
+    scan_oni,
+    write_oni,
+)
 
 __all__ = [
     "DEFAULT_RATES_HZ",
@@ -117,6 +143,7 @@ __all__ = [
     "ClockSync",
     "ClockUnavailable",
     "DamagedRegion",
+    "DetectionWorker",
     "Flight",
     "FlightConfig",
     "FlightCounters",
@@ -142,6 +169,8 @@ __all__ = [
     "LoggedHoles",
     "LoggedMavlink",
     "LoggedPose",
+    "MavlinkStream",
+    "McapFile",
     "McapSource",
     "OniInfo",
     "OniSource",
@@ -167,6 +196,7 @@ __all__ = [
     "TopicInfo",
     "TruncatedLogError",
     "UsbDeviceInfo",
+    "WorkerResult",
     "WriterStats",
     "annotations_message",
     "atomic_output",
@@ -178,6 +208,7 @@ __all__ = [
     "check_table",
     "commit_part",
     "crop_view",
+    "decode_detection",
     "decode_messages",
     "detection_json",
     "errors_from_metadata",
@@ -191,6 +222,7 @@ __all__ = [
     "is_autopilot_heartbeat",
     "jsonable",
     "load_fly_config",
+    "log_file_path",
     "log_info",
     "mount_from_metadata",
     "numbers",
@@ -201,6 +233,7 @@ __all__ = [
     "parse_fly_config",
     "part_path",
     "position_from_global_position_int",
+    "quat_from_euler",
     "read_chunk",
     "read_flight_log",
     "read_log_layout",

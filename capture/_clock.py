@@ -30,19 +30,15 @@ from typing import Literal
 
 import numpy as np
 
-from holescan.capture._errors import CaptureError
+from holescan.capture.errors import ClockUnavailable
 
-__all__ = ["ClockEstimate", "ClockSource", "ClockSync", "ClockUnavailable"]
+__all__ = ["ClockEstimate", "ClockSource", "ClockSync"]
 
 _log = logging.getLogger(__name__)
 
 ClockSource = Literal["timesync", "arrival", "none"]
 
 _NS_PER_S = 1_000_000_000
-
-
-class ClockUnavailable(CaptureError):  # noqa: N818 (reads as a state, like PoseUnavailable)
-    """No estimate yet: no TIMESYNC reply, no stamped message (or no SYSTEM_TIME for UTC)."""
 
 
 @dataclass(frozen=True)

@@ -5,7 +5,7 @@ Threads and processes of one flight:
 - **capture** (the caller's thread): reads frames from the source through a pump thread
   with a timeout, stamps each on the autopilot's clock, queues it to the log writer and
   offers it to the detection worker. Neither ever makes it wait.
-- **log writer** thread (:class:`capture._mcaplog.FlightLogWriter`).
+- **log writer** thread (:class:`capture.flightlog.FlightLogWriter`).
 - **telemetry** receiver thread (:class:`capture._mavlink.Telemetry`): every MAVLink
   message is logged raw; each position message also logs the interpolated pose.
 - **detection worker** process (:class:`capture._worker.DetectionWorker`).
@@ -23,31 +23,34 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
 import threading
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import replace
 from typing import Any
 
-import pymap3d
-
-from holescan.capture._clock import ClockUnavailable
-from holescan.capture._errors import SensorError
 from holescan.capture._flightrecords import (
     FlightConfig,
     FlightCounters,
     FlightSummary,
-    _close_quietly,
+    close_quietly,
     frames_with_timeout,
 )
 from holescan.capture._frame import Frame, FrameSource
 from holescan.capture._holepipeline import BestViews, HolePipeline, HoleView
-from holescan.capture._mavlink import Telemetry, TelemetryTimeoutError
-from holescan.capture._mcaplog import FlightLogError, FlightLogWriter
-from holescan.capture._posebuffer import PoseUnavailable
+from holescan.capture._mavlink import Telemetry
 from holescan.capture._worker import DetectionWorker, WorkerResult
+from holescan.capture.errors import (
+    ClockUnavailable,
+    FlightLogError,
+    PoseUnavailable,
+    SensorError,
+    TelemetryTimeoutError,
+)
+from holescan.capture.flightlog.writer import FlightLogWriter
 from holescan.detect import CameraIntrinsics
-from holescan.geotag import Hole, VehiclePose
+from holescan.geotag import Hole, VehiclePose, local_en_m
 
 log = logging.getLogger(__name__)
 
@@ -184,8 +187,8 @@ class Flight:
         last = self._announced.get(h.id)
         if last is None:
             return True
-        _, _, dist = pymap3d.geodetic2aer(h.lat_deg, h.lon_deg, 0.0, last[0], last[1], 0.0)
-        return bool(dist > 0.5 or h.score > last[2] + 0.05)
+        east, north = local_en_m(h.lat_deg, h.lon_deg, last[0], last[1])
+        return bool(math.hypot(east, north) > 0.5 or h.score > last[2] + 0.05)
 
     def _health(self) -> dict[str, Any]:
         assert self._writer is not None and self._worker is not None
@@ -283,16 +286,16 @@ class Flight:
                         self._finish()
                     if t_end is not None and time.monotonic() >= t_end:
                         self._finish()
-                _close_quietly(source)
+                close_quietly(source)
                 if not self.stop.is_set():
                     self._finished = True  # the recording ended by itself
                 return  # end of the recording
             except SensorError as err:
-                _close_quietly(source)
+                close_quietly(source)
                 self._sensor_failed(err, attempt)
                 attempt += 1
             except BaseException:
-                _close_quietly(source)
+                close_quietly(source)
                 raise
 
     def _finish(self) -> None:

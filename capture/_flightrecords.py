@@ -13,9 +13,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from holescan.capture._errors import SensorError
 from holescan.capture._frame import Frame, FrameSource
-from holescan.capture._mcaplog import LogOptions, WriterStats
+from holescan.capture.errors import SensorError
+from holescan.capture.flightlog.options import LogOptions, WriterStats
 from holescan.detect import DEFAULT, DetectParams
 from holescan.geotag import AnnounceGate, CameraMount, ErrorModel, Hole
 
@@ -148,7 +148,7 @@ def frames_with_timeout(
         yield item
 
 
-def _close_quietly(source: FrameSource, timeout_s: float = 3.0) -> None:
+def close_quietly(source: FrameSource, timeout_s: float = 3.0) -> None:
     """Close a (possibly hung) source without letting it hang the flight."""
 
     def close() -> None:

@@ -40,7 +40,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from holescan.capture._flightrecords import FlightConfig
-from holescan.capture._mcaplog import LogOptions
+from holescan.capture.flightlog.options import LogOptions
 from holescan.detect import DEFAULT, PAPER, SEARCHERS, DetectParams
 from holescan.errors import InputError
 from holescan.geotag import AnnounceGate, CameraMount, ErrorModel

@@ -15,9 +15,10 @@ import logging
 from collections.abc import Callable, Mapping
 from typing import Any
 
-from holescan.capture._clock import ClockSync, ClockUnavailable
+from holescan.capture._clock import ClockSync
 from holescan.capture._mavadapt import telemetry_sample
 from holescan.capture._posebuffer import AttitudeSample, GpsFix, PoseBuffer, PositionSample
+from holescan.capture.errors import ClockUnavailable
 
 _log = logging.getLogger("holescan.capture._mavlink")
 

@@ -35,17 +35,18 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from holescan.capture._clock import ClockSync, ClockUnavailable
+from holescan.capture._clock import ClockSync
 from holescan.capture._mavadapt import is_autopilot_heartbeat
 from holescan.capture._mavingest import VehicleState
-from holescan.capture._mavrates import (
-    RateMethod,
-    RateRequests,
+from holescan.capture._mavrates import RateMethod, RateRequests
+from holescan.capture._mavstream import MavlinkStream
+from holescan.capture._posebuffer import GpsFix, PoseBuffer
+from holescan.capture.errors import (
+    ClockUnavailable,
+    PoseUnavailable,
     TelemetryError,
     TelemetryTimeoutError,
 )
-from holescan.capture._mavstream import MavlinkStream
-from holescan.capture._posebuffer import GpsFix, PoseBuffer, PoseUnavailable
 from holescan.geotag import VehiclePose
 from holescan.missions import mavlink, open_link
 
@@ -55,9 +56,7 @@ __all__ = [
     "MessageCallback",
     "RateMethod",
     "Telemetry",
-    "TelemetryError",
     "TelemetryStats",
-    "TelemetryTimeoutError",
 ]
 
 _log = logging.getLogger(__name__)

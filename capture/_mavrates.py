@@ -13,14 +13,12 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal
 
-from holescan.capture._errors import CaptureError
+from holescan.capture.errors import TelemetryError, TelemetryTimeoutError
 from holescan.missions import mavlink
 
 __all__ = [
     "RateMethod",
     "RateRequests",
-    "TelemetryError",
-    "TelemetryTimeoutError",
     "read_signing_key",
 ]
 
@@ -36,14 +34,6 @@ _DATA_STREAM: Mapping[str, int] = {
     "GPS_RAW_INT": mavlink.MAV_DATA_STREAM_EXTENDED_STATUS,
     "SYSTEM_TIME": mavlink.MAV_DATA_STREAM_EXTRA3,
 }
-
-
-class TelemetryError(CaptureError):
-    """The MAVLink link could not be opened or used."""
-
-
-class TelemetryTimeoutError(TelemetryError, TimeoutError):
-    """Nothing (heartbeat, command acknowledgement) came in time."""
 
 
 def read_signing_key(path: str | os.PathLike[str]) -> bytes:

@@ -19,11 +19,9 @@ from collections.abc import Collection, Iterable, Iterator
 from pathlib import Path
 from typing import IO
 
-from holescan.capture._errors import CaptureError
-from holescan.errors import InputError
+from holescan.capture.errors import OutputPathError
 
 __all__ = [
-    "OutputPathError",
     "atomic_output",
     "check_folder",
     "check_output",
@@ -33,10 +31,6 @@ __all__ = [
 ]
 
 PathLike = str | os.PathLike[str]
-
-
-class OutputPathError(CaptureError, InputError):
-    """An output path that must not or cannot be written."""
 
 
 def _same(a: Path, b: Path) -> bool:

@@ -20,24 +20,19 @@ from typing import Generic, TypeVar
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from holescan.capture._errors import CaptureError
+from holescan.capture.errors import PoseUnavailable
 from holescan.geotag import VehiclePose
 
 __all__ = [
     "AttitudeSample",
     "GpsFix",
     "PoseBuffer",
-    "PoseUnavailable",
     "PositionSample",
     "quat_from_euler",
 ]
 
 _WGS84_A = 6_378_137.0
 _WGS84_E2 = 6.694379990141317e-3
-
-
-class PoseUnavailable(CaptureError):  # noqa: N818 (name from the design: "pose unavailable")
-    """No trustworthy pose at the requested time; the message says why."""
 
 
 @dataclass(frozen=True)

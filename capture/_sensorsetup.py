@@ -9,9 +9,9 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
-from holescan.capture._errors import SensorError
 from holescan.capture._flyconfig import FlyConfig
 from holescan.capture._frame import Frame, FrameSource
+from holescan.capture.errors import SensorError
 from holescan.detect import CameraIntrinsics
 from holescan.errors import InputError
 
@@ -85,7 +85,7 @@ def open_sensor(cfg: FlyConfig) -> SensorSetup:
     """
     spec = cfg.sensor
     if spec.kind == "openni2":
-        from holescan.capture._openni import OpenNI2Device
+        from holescan.capture.openni.device import OpenNI2Device
 
         uri = cfg.openni_uri
         timeout = cfg.flight.frame_timeout_s
@@ -94,14 +94,14 @@ def open_sensor(cfg: FlyConfig) -> SensorSetup:
         factory = lambda: OpenNI2Device(uri, timeout_s=timeout)  # noqa: E731
         return SensorSetup(factory, camera, cfg.mavlink, reset)
     if spec.kind == "oni":
-        from holescan.capture._openni import OniSource
+        from holescan.capture.openni.device import OniSource
 
         path = spec.path
         assert path is not None
         oni = OniSource(path)  # checks the file now
         return SensorSetup(lambda: OniSource(path, realtime=cfg.realtime), oni.camera, cfg.mavlink)
     if spec.kind == "mcap":
-        from holescan.capture._mcapread import McapSource
+        from holescan.capture.flightlog.reader import McapSource
 
         assert spec.path is not None
         if not spec.path.is_file():

@@ -2,8 +2,8 @@
 
 :class:`TelemetryReplay` is log replay's side of the one telemetry decoder: packets go
 through the project's MAVLink parser (:func:`missions.parser`), the autopilot is the first
-heartbeat of a real autopilot (:func:`capture._mavlink.is_autopilot_heartbeat`), and every
-message from it goes through :func:`capture._mavlink.telemetry_sample`, the function
+heartbeat of a real autopilot (:func:`capture.is_autopilot_heartbeat`), and every
+message from it goes through :func:`capture.telemetry_sample`, the function
 :class:`capture.Telemetry` calls on the live link. Pure: no clocks, files or sockets.
 """
 
@@ -12,14 +12,13 @@ from __future__ import annotations
 import logging
 from typing import Any, Final
 
-from holescan.capture._mavadapt import is_autopilot_heartbeat, telemetry_sample
-from holescan.capture._posebuffer import (
-    AttitudeSample,
-    GpsFix,
-    PoseBuffer,
-    PoseUnavailable,
-    PositionSample,
+from holescan.capture._mavadapt import (
+    home_from_home_position,
+    is_autopilot_heartbeat,
+    telemetry_sample,
 )
+from holescan.capture._posebuffer import AttitudeSample, GpsFix, PoseBuffer, PositionSample
+from holescan.capture.errors import PoseUnavailable
 from holescan.geotag import VehiclePose
 from holescan.missions import mavlink, parser
 
@@ -70,7 +69,7 @@ class TelemetryReplay:
         if src != self.target:
             return False
         if msg.get_type() == "HOME_POSITION":
-            self.home = (msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3)
+            self.home = home_from_home_position(msg)
             return False
         try:
             sample = telemetry_sample(msg, self._last_boot_ns)

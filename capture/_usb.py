@@ -10,7 +10,7 @@ import logging
 from dataclasses import dataclass
 from typing import Any, Final
 
-from holescan.capture._errors import SensorError
+from holescan.capture.errors import SensorError
 
 __all__ = ["XTION_PRODUCTS", "XTION_VENDOR_ID", "UsbDeviceInfo", "find_xtion", "reset_xtion"]
 

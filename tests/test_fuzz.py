@@ -27,20 +27,18 @@ from holescan.capture import (
     FlightLogWriter,
     Frame,
     LoggedFrame,
+    MavlinkStream,
+    attitude_from_attitude,
+    attitude_from_quaternion,
+    gps_from_gps_raw_int,
     log_info,
     parse_fly_config,
+    position_from_global_position_int,
     read_flight_log,
     recover_log,
     scan_oni,
     write_oni,
 )
-from holescan.capture._mavadapt import (
-    attitude_from_attitude,
-    attitude_from_quaternion,
-    gps_from_gps_raw_int,
-    position_from_global_position_int,
-)
-from holescan.capture._mavstream import MavlinkStream
 from holescan.detect import CameraIntrinsics
 from holescan.errors import HolescanError
 from holescan.ground import load_dataset, read_camera

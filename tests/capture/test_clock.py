@@ -6,7 +6,7 @@ import random
 
 import pytest
 
-from holescan.capture._clock import ClockSync, ClockUnavailable
+from holescan.capture import ClockSync, ClockUnavailable
 
 S = 1_000_000_000
 MS = 1_000_000

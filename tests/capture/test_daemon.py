@@ -11,9 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from holescan.capture import Flight, FlightConfig
-from holescan.capture._frame import Frame
-from holescan.capture._mcapread import read_flight_log
+from holescan.capture import Flight, FlightConfig, Frame, read_flight_log
 from holescan.detect import CameraIntrinsics
 from holescan.sim import SimAutopilot, SimPath
 
@@ -125,7 +123,7 @@ def test_sensor_fault_is_retried_with_reset(tmp_path: Path, fault: str) -> None:
 
 
 def test_silent_autopilot_at_start_still_logs_unposed_frames(tmp_path: Path) -> None:
-    from holescan.capture._mavlink import Telemetry
+    from holescan.capture import Telemetry
 
     port = free_port()
     cfg = FlightConfig(log_prefix=tmp_path / "flight", max_frames=45)

@@ -20,13 +20,13 @@ import pytest
 from holescan.capture import (
     Flight,
     FlightConfig,
+    Frame,
     LoggedFrame,
+    Telemetry,
     log_info,
     read_flight_log,
     recover_log,
 )
-from holescan.capture._frame import Frame
-from holescan.capture._mavlink import Telemetry
 from holescan.detect import CameraIntrinsics
 from holescan.sim import SimAutopilot, SimPath
 from tests.capture.test_shutdown import group_members, start_sim_flight

@@ -19,11 +19,21 @@ from typing import Any
 import numpy as np
 import pytest
 
-from holescan.capture import Flight, FlightConfig, write_oni
-from holescan.capture._flyconfig import FlyConfig, SensorSpec, load_fly_config, parse_fly_config
-from holescan.capture._frame import Frame
-from holescan.capture._mcapread import LoggedFrame, LoggedHealth, LoggedHoles, read_flight_log
-from holescan.capture._mcaptools import log_info
+from holescan.capture import (
+    Flight,
+    FlightConfig,
+    FlyConfig,
+    Frame,
+    LoggedFrame,
+    LoggedHealth,
+    LoggedHoles,
+    SensorSpec,
+    load_fly_config,
+    log_info,
+    parse_fly_config,
+    read_flight_log,
+    write_oni,
+)
 from holescan.detect import CameraIntrinsics
 from holescan.errors import InputError
 from holescan.sim import SimAutopilot, SimPath, sortie_params

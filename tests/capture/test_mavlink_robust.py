@@ -13,10 +13,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from holescan.capture import Telemetry, TelemetryError
-from holescan.capture._mavstream import MavlinkStream
+from holescan.capture import MavlinkStream, Telemetry, TelemetryError
 from holescan.missions import mavlink, parser
-from holescan.sim._autopilot import SimAutopilot, SimPath
+from holescan.sim import SimAutopilot, SimPath
 
 REPO = Path(__file__).resolve().parents[2]
 

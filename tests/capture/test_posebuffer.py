@@ -8,7 +8,7 @@ import pymap3d
 import pytest
 from scipy.spatial.transform import Rotation
 
-from holescan.capture._posebuffer import (
+from holescan.capture import (
     AttitudeSample,
     GpsFix,
     PoseBuffer,

@@ -14,8 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from holescan.capture import log_info, read_flight_log
-from holescan.capture._mcapread import LoggedHealth
+from holescan.capture import LoggedHealth, log_info, read_flight_log
 from tests.capture.test_fly import SIM_TOML, holescan
 
 pytestmark = pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc")
@@ -116,7 +115,7 @@ def test_worker_exits_when_its_parent_dies_without_prctl(tmp_path: Path) -> None
     child = textwrap.dedent(
         """
         import os, sys, time
-        from holescan.capture._worker import DetectionWorker
+        from holescan.capture import DetectionWorker
         from holescan.detect import DEFAULT, CameraIntrinsics
         w = DetectionWorker(CameraIntrinsics.xtion(64, 48), DEFAULT)
         w.start()

@@ -22,9 +22,7 @@ from typing import Any
 import pymap3d
 import pytest
 
-from holescan.capture._clock import ClockSync
-from holescan.capture._mavlink import Telemetry, TelemetryTimeoutError
-from holescan.capture._posebuffer import PoseUnavailable
+from holescan.capture import ClockSync, PoseUnavailable, Telemetry, TelemetryTimeoutError
 from holescan.geotag import VehiclePose
 from holescan.sim import SimAutopilot, SimPath
 
@@ -286,8 +284,7 @@ def test_no_autopilot_times_out() -> None:
 
 
 def test_sim_accepts_and_flies_an_uploaded_mission() -> None:
-    from holescan.missions import Waypoint
-    from holescan.missions._protocol import download_mission, upload_mission
+    from holescan.missions import Waypoint, download_mission, upload_mission
 
     home = SimPath()
     square = [(0.0, 0.0), (30.0, 0.0), (30.0, 30.0), (0.0, 30.0)]

@@ -6,8 +6,7 @@ import time
 
 import numpy as np
 
-from holescan.capture._frame import Frame
-from holescan.capture._worker import DetectionWorker
+from holescan.capture import DetectionWorker, Frame
 from holescan.detect import DEFAULT, CameraIntrinsics, detect_holes
 
 CAM = CameraIntrinsics.xtion()

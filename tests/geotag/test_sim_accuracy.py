@@ -29,8 +29,7 @@ import numpy as np
 import pymap3d
 import pytest
 
-from holescan.capture import Flight, FlightConfig
-from holescan.capture._mcapread import LoggedDetections, read_flight_log
+from holescan.capture import Flight, FlightConfig, LoggedDetections, read_flight_log
 from holescan.geotag import HoleSighting, geotag_frame
 from holescan.sim._sortie import SimSortie, SortieParams, TrueHole
 

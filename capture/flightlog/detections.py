@@ -12,7 +12,7 @@ from foxglove_schemas_protobuf.Point2_pb2 import Point2
 from foxglove_schemas_protobuf.PointsAnnotation_pb2 import PointsAnnotation
 from foxglove_schemas_protobuf.TextAnnotation_pb2 import TextAnnotation
 
-from holescan.capture._mcapschemas import _float, _opt_float, _stamp, jsonable
+from holescan.capture.flightlog.schemas import float_or_nan, float_or_none, jsonable, timestamp
 from holescan.detect import Detection, FeatureScores
 from holescan.errors import InputError
 
@@ -32,18 +32,20 @@ def decode_detection(obj: Mapping[str, Any]) -> Detection:
     x, y, w, h = (int(v) for v in obj["box"])
     return Detection(
         box=(x, y, w, h),
-        score=_float(obj["score"]),
-        features=FeatureScores(**{k: _float(f[k]) for k in FeatureScores.__dataclass_fields__}),
-        depth_rel_m=_float(obj["depth_rel_m"]),
-        major_m=_float(obj["major_m"]),
-        minor_m=_float(obj["minor_m"]),
-        rim_depth_m=_float(obj["rim_depth_m"]),
+        score=float_or_nan(obj["score"]),
+        features=FeatureScores(
+            **{k: float_or_nan(f[k]) for k in FeatureScores.__dataclass_fields__}
+        ),
+        depth_rel_m=float_or_nan(obj["depth_rel_m"]),
+        major_m=float_or_nan(obj["major_m"]),
+        minor_m=float_or_nan(obj["minor_m"]),
+        rim_depth_m=float_or_nan(obj["rim_depth_m"]),
         beyond_range=bool(obj.get("beyond_range", False)),
-        relative_brightness=_opt_float(obj.get("relative_brightness")),
-        p_hole=_opt_float(obj.get("p_hole")),
+        relative_brightness=float_or_none(obj.get("relative_brightness")),
+        p_hole=float_or_none(obj.get("p_hole")),
         opening_m=_opt_xyz(obj.get("opening_m")),
         rim_normal=_opt_xyz(obj.get("rim_normal")),
-        rim_seen=_opt_float(obj.get("rim_seen")),
+        rim_seen=float_or_none(obj.get("rim_seen")),
     )
 
 
@@ -52,7 +54,7 @@ def _opt_xyz(value: Any) -> tuple[float, float, float] | None:
         return None
     if not isinstance(value, list | tuple) or len(value) != 3:
         raise InputError(f"expected 3 numbers or null, got {value!r}")
-    x, y, z = (_float(v) for v in value)
+    x, y, z = (float_or_nan(v) for v in value)
     return (x, y, z)
 
 
@@ -63,7 +65,7 @@ def _score_color(score: float) -> Color:
 
 def annotations_message(detections: Sequence[Detection], t_unix_ns: int) -> ImageAnnotations:
     """Boxes as LINE_LOOP outlines (yellow -> red with the score) and the score as text."""
-    stamp = _stamp(t_unix_ns)
+    stamp = timestamp(t_unix_ns)
     msg = ImageAnnotations()
     for det in detections:
         x, y, w, h = det.box

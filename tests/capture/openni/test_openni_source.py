@@ -18,11 +18,11 @@ import numpy as np
 import pytest
 
 from holescan.capture import Frame, OniSource, write_oni
-from holescan.capture._openni2lib import _Pairer, _Raw
+from holescan.capture.openni import FramePairer, RawFrame
 from holescan.detect import CameraIntrinsics
 from holescan.errors import InputError
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 
 PLAYER = textwrap.dedent(
     """
@@ -194,12 +194,12 @@ def test_missing_truncated_and_corrupt_files_raise_input_error(tmp_path: Path) -
     assert src.camera == SMALL
 
 
-def raw(ts_us: int, index: int = 0) -> _Raw:
-    return _Raw(index, ts_us, 0, np.zeros((1, 1), np.uint16))
+def raw(ts_us: int, index: int = 0) -> RawFrame:
+    return RawFrame(index, ts_us, 0, np.zeros((1, 1), np.uint16))
 
 
 def test_pairer_matches_within_tolerance_and_drops_orphans() -> None:
-    p = _Pairer(tolerance_us=16_666)
+    p = FramePairer(tolerance_us=16_666)
     assert p.push(raw(1_000), is_depth=True) == []
     [(d, c)] = p.push(raw(1_005), is_depth=False)  # live sensors differ by a few us
     assert (d.ts_us, c.ts_us) == (1_000, 1_005)
@@ -283,7 +283,7 @@ def test_openni2_initialises_once_and_survives_an_unload(tmp_path: Path) -> None
     child = textwrap.dedent(
         """
         import sys
-        import holescan.capture._openni2lib as co
+        import holescan.capture.openni.library as co
         from holescan.capture import OniSource
         assert not co._init_lock.locked()
         lib = co.openni2_library()

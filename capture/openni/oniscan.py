@@ -10,19 +10,19 @@ import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from holescan.capture._oniformat import (
-    _CAMERA_PROPERTY,
-    _FILE_HEADER,
-    _FILE_MAGIC,
-    _FILE_VERSION,
-    _MAX_FIELDS_SIZE,
-    _MAX_PAYLOAD,
-    _NODE_KINDS,
-    _PROPERTY_RECORDS,
-    _RECORD_HEADER,
-    _RECORD_MAGIC,
-    _U64_MAX,
-    _Record,
+from holescan.capture.openni.oniformat import (
+    CAMERA_PROPERTY,
+    FILE_HEADER,
+    FILE_MAGIC,
+    FILE_VERSION,
+    MAX_FIELDS_SIZE,
+    MAX_PAYLOAD,
+    NODE_KINDS,
+    PROPERTY_RECORDS,
+    RECORD_HEADER,
+    RECORD_MAGIC,
+    U64_MAX,
+    RecordType,
 )
 from holescan.detect import CameraIntrinsics
 from holescan.errors import InputError
@@ -87,7 +87,7 @@ class _ScanNode:
     frame_count: int
     properties: dict[str, bytes] = field(default_factory=dict)
     frames_found: int = 0
-    min_ts: int = _U64_MAX
+    min_ts: int = U64_MAX
     max_ts: int = 0
 
 
@@ -119,33 +119,33 @@ def scan_oni(path: str | os.PathLike[str]) -> OniInfo:
         raise InputError(f"{p}: cannot read: {err.strerror}") from err
     with f:
         size = os.fstat(f.fileno()).st_size
-        head = f.read(_FILE_HEADER.size)
-        if len(head) < _FILE_HEADER.size or head[:4] != _FILE_MAGIC:
+        head = f.read(FILE_HEADER.size)
+        if len(head) < FILE_HEADER.size or head[:4] != FILE_MAGIC:
             raise InputError(f"{p}: not an OpenNI .oni recording (no NI10 header)")
-        _magic, major, minor, maint, build, max_ts, max_node = _FILE_HEADER.unpack(head)
-        if (major, minor, maint, build) != _FILE_VERSION:
+        _magic, major, minor, maint, build, max_ts, max_node = FILE_HEADER.unpack(head)
+        if (major, minor, maint, build) != FILE_VERSION:
             raise InputError(
                 f"{p}: .oni version {major}.{minor}.{maint}.{build} is not supported (want 1.0.1.0)"
             )
         nodes: dict[int, _ScanNode] = {}
-        pos = _FILE_HEADER.size
+        pos = FILE_HEADER.size
         while True:
-            rec = f.read(_RECORD_HEADER.size)
-            if len(rec) < _RECORD_HEADER.size:
+            rec = f.read(RECORD_HEADER.size)
+            if len(rec) < RECORD_HEADER.size:
                 raise InputError(
                     f"{p}: truncated at byte {pos} of {size} (no END record; "
                     f"{_frames_summary(nodes)}): the recording was not closed"
                 )
-            magic, rtype, node_id, fields_size, payload_size, _undo = _RECORD_HEADER.unpack(rec)
+            magic, rtype, node_id, fields_size, payload_size, _undo = RECORD_HEADER.unpack(rec)
             end = pos + fields_size + payload_size
-            if magic != _RECORD_MAGIC or not _RECORD_HEADER.size <= fields_size <= _MAX_FIELDS_SIZE:
+            if magic != RECORD_MAGIC or not RECORD_HEADER.size <= fields_size <= MAX_FIELDS_SIZE:
                 raise InputError(f"{p}: corrupt record at byte {pos}")
             if end > size:
                 raise InputError(
                     f"{p}: truncated at byte {size}: record at byte {pos} needs {end} bytes "
                     f"({_frames_summary(nodes)}): the recording was not closed"
                 )
-            fields = f.read(fields_size - _RECORD_HEADER.size)
+            fields = f.read(fields_size - RECORD_HEADER.size)
             try:
                 done = _scan_record(nodes, rtype, node_id, fields, payload_size, max_ts, max_node)
             except (ValueError, struct.error) as err:
@@ -180,41 +180,41 @@ def _scan_record(
     max_node: int,
 ) -> bool:
     """Account for one record; return True at the END record. Raises ValueError if bad."""
-    if rtype == _Record.END:
+    if rtype == RecordType.END:
         return True
-    if rtype in (_Record.NODE_ADDED, _Record.NODE_ADDED_1_0_0_5):
+    if rtype in (RecordType.NODE_ADDED, RecordType.NODE_ADDED_1_0_0_5):
         if not 0 < node_id <= max_node:
             raise ValueError(f"node id {node_id} outside 1..{max_node}")
         name, at = _read_string(fields, 0)
         node_type, codec, frames = struct.unpack_from("<III", fields, at)
         nodes[node_id] = _ScanNode(
             name=name,
-            kind=_NODE_KINDS.get(node_type, f"type{node_type}"),
+            kind=NODE_KINDS.get(node_type, f"type{node_type}"),
             codec=codec.to_bytes(4, "little").decode("ascii", "replace"),
             frame_count=frames,
         )
         return False
-    if rtype == _Record.NODE_ADDED_1_0_0_4:
+    if rtype == RecordType.NODE_ADDED_1_0_0_4:
         raise ValueError("OpenNI 1.0.0.4 recordings are not supported")
-    if rtype not in _Record._value2member_map_:
+    if rtype not in RecordType._value2member_map_:
         raise ValueError(f"unknown record type {rtype:#x}")
     if node_id not in nodes:
         raise ValueError(f"record type {rtype:#x} for unknown node {node_id}")
     node = nodes[node_id]
-    if rtype in _PROPERTY_RECORDS:
+    if rtype in PROPERTY_RECORDS:
         name, at = _read_string(fields, 0)
         (n,) = struct.unpack_from("<I", fields, at)
         data = fields[at + 4 : at + 4 + n]
         if len(data) != n:
             raise ValueError(f"property {name!r} is cut short")
         node.properties[name] = data
-    elif rtype == _Record.NEW_DATA:
+    elif rtype == RecordType.NEW_DATA:
         ts, frame_id = struct.unpack_from("<QI", fields, 0)
         if not 0 < frame_id <= node.frame_count:
             raise ValueError(f"{node.name} frame id {frame_id} outside 1..{node.frame_count}")
         if ts > max_ts:
             raise ValueError(f"{node.name} timestamp {ts} us beyond the file's maximum {max_ts}")
-        if payload_size > _MAX_PAYLOAD:
+        if payload_size > MAX_PAYLOAD:
             raise ValueError(f"{node.name} frame of {payload_size} bytes is too large")
         if node.codec == "NONE":
             expected = _expected_frame_bytes(node)
@@ -245,7 +245,7 @@ def _stream_info(node_id: int, n: _ScanNode) -> OniStreamInfo:
     if len(props.get("xnFOV", b"")) == 16:
         hfov, vfov = struct.unpack("<dd", props["xnFOV"])
     camera = None
-    raw = props.get(_CAMERA_PROPERTY, b"")
+    raw = props.get(CAMERA_PROPERTY, b"")
     if len(raw) == 32 and width > 0 and height > 0:
         fx, fy, cx, cy = struct.unpack("<dddd", raw)
         try:

@@ -31,10 +31,11 @@ from foxglove_schemas_protobuf.Quaternion_pb2 import Quaternion
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 from foxglove_schemas_protobuf.Vector3_pb2 import Vector3
 from google.protobuf.timestamp_pb2 import Timestamp
+from scipy.spatial.transform import Rotation
 
 from holescan.detect import CameraIntrinsics, FeatureScores
 from holescan.errors import InputError
-from holescan.geotag import CameraMount, ErrorModel, VehiclePose
+from holescan.geotag import VehiclePose, dcm_from_euler
 
 __all__ = [
     "BODY_FRAME",
@@ -58,6 +59,8 @@ __all__ = [
     "camera_from_calibration",
     "camera_mount_transform",
     "decode_pose",
+    "float_or_nan",
+    "float_or_none",
     "from_json",
     "holes_geojson_message",
     "image_from_raw",
@@ -67,6 +70,7 @@ __all__ = [
     "mavlink_json",
     "pose_json",
     "raw_image_message",
+    "timestamp",
     "to_json",
     "transform_message",
     "vehicle_transform",
@@ -225,23 +229,22 @@ def from_json(data: bytes) -> Any:
     return json.loads(data)
 
 
-def _float(value: Any) -> float:
+def float_or_nan(value: Any) -> float:
+    """A JSON number back as a float: ``null`` (how :func:`jsonable` writes NaN) is NaN."""
     return math.nan if value is None else float(value)
 
 
-def _opt_float(value: Any) -> float | None:
+def float_or_none(value: Any) -> float | None:
+    """An optional JSON number: ``null`` stays None."""
     return None if value is None else float(value)
 
 
 # ------------------------------------------------------------------------ frames, camera
 
 
-def _stamp(t_ns: int) -> Timestamp:
+def timestamp(t_ns: int) -> Timestamp:
+    """The protobuf ``Timestamp`` of ``t_ns`` nanoseconds since the Unix epoch."""
     return Timestamp(seconds=t_ns // 1_000_000_000, nanos=t_ns % 1_000_000_000)
-
-
-def _stamp_ns(ts: Timestamp) -> int:
-    return int(ts.seconds) * 1_000_000_000 + int(ts.nanos)
 
 
 def raw_image_message(image: npt.NDArray[Any], t_unix_ns: int) -> RawImage:
@@ -254,7 +257,7 @@ def raw_image_message(image: npt.NDArray[Any], t_unix_ns: int) -> RawImage:
         encoding, step = "16UC1", 2 * w
         data = np.ascontiguousarray(image, dtype="<u2").tobytes()
     return RawImage(
-        timestamp=_stamp(t_unix_ns),
+        timestamp=timestamp(t_unix_ns),
         frame_id=CAMERA_FRAME,
         width=w,
         height=h,
@@ -280,7 +283,7 @@ def calibration_message(camera: CameraIntrinsics, t_unix_ns: int) -> CameraCalib
     """``foxglove.CameraCalibration`` (pinhole, no distortion) of ``camera``."""
     fx, fy, cx, cy = camera.fx, camera.fy, camera.cx, camera.cy
     return CameraCalibration(
-        timestamp=_stamp(t_unix_ns),
+        timestamp=timestamp(t_unix_ns),
         frame_id=CAMERA_FRAME,
         width=camera.width,
         height=camera.height,
@@ -303,26 +306,6 @@ _FLU_FROM_FRD: Final = np.diag([1.0, -1.0, -1.0])
 _ENU_FROM_NED: Final = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 
 
-def _quat_xyzw(rot: npt.NDArray[np.float64]) -> tuple[float, float, float, float]:
-    """Unit quaternion (x, y, z, w) of a 3x3 rotation matrix (Shepperd's method)."""
-    m = rot
-    tr = m[0, 0] + m[1, 1] + m[2, 2]
-    if tr > 0:
-        s = 2.0 * math.sqrt(tr + 1.0)
-        q = ((m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, s / 4)
-    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
-        s = 2.0 * math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
-        q = (s / 4, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s, (m[2, 1] - m[1, 2]) / s)
-    elif m[1, 1] > m[2, 2]:
-        s = 2.0 * math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
-        q = ((m[0, 1] + m[1, 0]) / s, s / 4, (m[1, 2] + m[2, 1]) / s, (m[0, 2] - m[2, 0]) / s)
-    else:
-        s = 2.0 * math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
-        q = ((m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, s / 4, (m[1, 0] - m[0, 1]) / s)
-    n = math.sqrt(sum(c * c for c in q))
-    return (float(q[0] / n), float(q[1] / n), float(q[2] / n), float(q[3] / n))
-
-
 def transform_message(
     parent: str,
     child: str,
@@ -331,10 +314,10 @@ def transform_message(
     t_unix_ns: int,
 ) -> FrameTransform:
     """``foxglove.FrameTransform``: pose of ``child`` in ``parent`` (rotation parent<-child)."""
-    x, y, z, w = _quat_xyzw(np.asarray(rotation, dtype=np.float64))
+    x, y, z, w = (float(v) for v in Rotation.from_matrix(rotation).as_quat())
     tx, ty, tz = (float(v) for v in translation_m)
     return FrameTransform(
-        timestamp=_stamp(t_unix_ns),
+        timestamp=timestamp(t_unix_ns),
         parent_frame_id=parent,
         child_frame_id=child,
         translation=Vector3(x=tx, y=ty, z=tz),
@@ -351,25 +334,9 @@ def camera_mount_transform(
     return transform_message(BODY_FRAME, CAMERA_FRAME, offset, rot, t_unix_ns)
 
 
-def _rot_ned_frd(roll: float, pitch: float, yaw: float) -> npt.NDArray[np.float64]:
-    cr, sr, cp, sp, cy, sy = (
-        math.cos(roll),
-        math.sin(roll),
-        math.cos(pitch),
-        math.sin(pitch),
-        math.cos(yaw),
-        math.sin(yaw),
-    )
-    rz = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
-    ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
-    rx = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])
-    out: npt.NDArray[np.float64] = rz @ ry @ rx
-    return out
-
-
 def vehicle_transform(pose: VehiclePose, enu_m: Sequence[float], t_unix_ns: int) -> FrameTransform:
     """``world`` (ENU) -> ``base_link`` (FLU) from the vehicle's NED/FRD attitude."""
-    rot = _ENU_FROM_NED @ _rot_ned_frd(pose.roll, pose.pitch, pose.yaw) @ _FLU_FROM_FRD
+    rot = _ENU_FROM_NED @ dcm_from_euler(pose.roll, pose.pitch, pose.yaw) @ _FLU_FROM_FRD
     return transform_message(WORLD_FRAME, BODY_FRAME, enu_m, rot, t_unix_ns)
 
 
@@ -382,7 +349,7 @@ def location_message(pose: VehiclePose, t_unix_ns: int) -> LocationFix:
         cov = [var, 0.0, 0.0, 0.0, var, 0.0, 0.0, 0.0, 4.0 * var]
         cov_type = LocationFix.PositionCovarianceType.APPROXIMATED
     return LocationFix(
-        timestamp=_stamp(t_unix_ns),
+        timestamp=timestamp(t_unix_ns),
         frame_id=BODY_FRAME,
         latitude=pose.lat_deg,
         longitude=pose.lon_deg,
@@ -390,17 +357,6 @@ def location_message(pose: VehiclePose, t_unix_ns: int) -> LocationFix:
         position_covariance=cov,
         position_covariance_type=cov_type,
     )
-
-
-def mount_metadata(mount: CameraMount, errors: ErrorModel) -> dict[str, str]:
-    """The ``holescan.mount`` metadata record: the mount's rotation and offset, and the
-    attitude sigma of the sightings' error model (read back by ``mount_from_metadata`` and
-    ``errors_from_metadata``)."""
-    return {
-        "rotation_frd_from_camera": to_json(np.asarray(mount.rotation, np.float64)).decode(),
-        "offset_frd_m": to_json(tuple(float(v) for v in mount.offset_m)).decode(),
-        "attitude_sigma_deg": repr(math.degrees(errors.attitude_sigma_rad)),
-    }
 
 
 def pose_json(pose: VehiclePose) -> dict[str, Any]:
@@ -414,7 +370,9 @@ def decode_pose(obj: Mapping[str, Any]) -> VehiclePose:
     for f in dataclasses.fields(VehiclePose):
         if f.name in obj:
             value = obj[f.name]
-            kwargs[f.name] = int(value) if f.name in ("t_boot_ns", "age_ns") else _float(value)
+            kwargs[f.name] = (
+                int(value) if f.name in ("t_boot_ns", "age_ns") else float_or_nan(value)
+            )
     return VehiclePose(**kwargs)
 
 

@@ -11,7 +11,7 @@ import base64
 import dataclasses
 import logging
 import os
-from collections.abc import Collection, Iterable, Iterator
+from collections.abc import Collection, Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -19,11 +19,11 @@ from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 from mcap.records import Channel, Message, Metadata, Schema
 
-from holescan.capture import _mcapschemas as sch
+import holescan.capture.flightlog.schemas as sch
 from holescan.capture._frame import Frame
-from holescan.capture._mcapdetections import decode_detection
-from holescan.capture._mcaplog import FlightLogError
-from holescan.capture._mcapscan import ScanState, scan_records
+from holescan.capture.errors import FlightLogError, TruncatedLogError
+from holescan.capture.flightlog.detections import decode_detection
+from holescan.capture.flightlog.scan import ScanState, scan_records
 from holescan.detect import CameraIntrinsics, Detection
 from holescan.geotag import Hole, VehiclePose
 
@@ -37,15 +37,13 @@ __all__ = [
     "LoggedMavlink",
     "LoggedPose",
     "McapSource",
-    "TruncatedLogError",
+    "decode_message",
+    "log_files",
+    "read_camera",
     "read_flight_log",
 ]
 
 _log = logging.getLogger(__name__)
-
-
-class TruncatedLogError(FlightLogError):
-    """The file was cut off (crash, power loss) or damaged before its end."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -170,11 +168,11 @@ _TOPICS_BY_KIND: dict[type[Any], tuple[str, ...]] = {
 }
 
 
-def _depth_unit(metadata: dict[str, dict[str, str]]) -> float:
+def _depth_unit(metadata: Mapping[str, Mapping[str, str]]) -> float:
     return float(metadata.get("holescan.camera", {}).get("depth_unit_m", "0.001"))
 
 
-def _as_paths(paths: str | os.PathLike[str] | Iterable[str | os.PathLike[str]]) -> list[Path]:
+def log_files(paths: str | os.PathLike[str] | Iterable[str | os.PathLike[str]]) -> list[Path]:
     """The files of one flight, each once (the same file given twice is an error)."""
     if isinstance(paths, str | os.PathLike):
         return [Path(paths)]
@@ -213,11 +211,11 @@ def read_flight_log(
     """
     wanted = set(_TOPICS_BY_KIND) if kinds is None else set(kinds)
     topics = {t for kind in wanted for t in _TOPICS_BY_KIND.get(kind, ())}
-    for path in _as_paths(paths):
+    for path in log_files(paths):
         state = ScanState(path)
         pending: dict[int, dict[str, Any]] = {}
         for channel, schema, msg, metadata in _iter_messages(path, state, topics):
-            rec = _decode(channel.topic, schema, msg, metadata, pending)
+            rec = decode_message(channel.topic, schema, msg, metadata, pending)
             if rec is not None:
                 yield rec
         if pending:
@@ -234,13 +232,21 @@ def _check_schema(topic: str, schema: Schema | None, expected: str) -> None:
         raise FlightLogError(f"topic {topic} has schema {got}, expected {expected}")
 
 
-def _decode(
+def decode_message(
     topic: str,
     schema: Schema | None,
     msg: Message,
-    metadata: dict[str, dict[str, str]],
+    metadata: Mapping[str, Mapping[str, str]],
     pending: dict[int, dict[str, Any]],
 ) -> LogRecord | None:
+    """The typed record of one logged message on ``topic``, or None when it completes
+    nothing yet (a frame is three messages: its parts wait in ``pending``, keyed by
+    sequence, until the last one comes) or the topic is not one holescan reads.
+
+    metadata : the file's metadata records so far (``holescan.camera`` gives the depth
+    unit of a camera_info). Raises :class:`FlightLogError` on a schema other than the one
+    the topic is written with.
+    """
     t, seq = msg.publish_time, msg.sequence
     if topic in (sch.TOPIC_COLOR, sch.TOPIC_DEPTH, sch.TOPIC_FRAME_INFO):
         parts = pending.setdefault(seq, {})
@@ -309,7 +315,7 @@ class McapSource:
     """
 
     def __init__(self, paths: str | os.PathLike[str] | Iterable[str | os.PathLike[str]]):
-        self._paths = _as_paths(paths)
+        self._paths = log_files(paths)
         self.camera = read_camera(self._paths[0])
 
     def __enter__(self) -> McapSource:

@@ -5,7 +5,7 @@ on a bounded queue; a writer thread encodes (Foxglove protobuf / JSON), writes z
 chunks of ``chunk_size`` bytes, flushes and fsyncs about every ``sync_interval_s`` and
 rotates files by size and age (``PREFIX_0000.mcap``, ``PREFIX_0001.mcap``, ...). A full
 queue never blocks the caller: the record is dropped, counted, and its sequence number is
-left as a gap a reader can see. Topics and frames: see :mod:`capture._mcapschemas`.
+left as a gap a reader can see. Topics and frames: see :mod:`capture.flightlog.schemas`.
 """
 
 from __future__ import annotations
@@ -23,39 +23,22 @@ from pathlib import Path
 from typing import Any, Final
 
 import numpy as np
-import pymap3d
-from mcap.writer import CompressionType
 
-from holescan.capture import _mcapschemas as sch
+import holescan.capture.flightlog.schemas as sch
 from holescan.capture._frame import Frame
-from holescan.capture._mcapdetections import annotations_message, detection_json
-from holescan.capture._mcapfile import (
-    FlightLogError,
-    LogOptions,
-    WriterStats,
-    _File,
-    log_file_path,
-    mcap_version,
-)
+from holescan.capture.errors import FlightLogError
+from holescan.capture.flightlog.detections import annotations_message, detection_json
+from holescan.capture.flightlog.mcapfile import McapFile, mcap_version
+from holescan.capture.flightlog.metadata import mount_metadata
+from holescan.capture.flightlog.options import LogOptions, WriterStats, log_file_path
 from holescan.detect import CameraIntrinsics, Detection
 from holescan.errors import InputError
-from holescan.geotag import CameraMount, ErrorModel, VehiclePose
+from holescan.geotag import CameraMount, ErrorModel, LocalFrame, VehiclePose
 
-__all__ = [
-    "FlightLogError",
-    "FlightLogWriter",
-    "LogOptions",
-    "WriterStats",
-    "log_file_path",
-]
+__all__ = ["FlightLogWriter"]
 
 _log = logging.getLogger(__name__)
 
-_COMPRESSION: Final = {
-    "zstd": CompressionType.ZSTD,
-    "lz4": CompressionType.LZ4,
-    "none": CompressionType.NONE,
-}
 _FRAME_TOPICS: Final = (sch.TOPIC_FRAME_INFO, sch.TOPIC_COLOR, sch.TOPIC_DEPTH)
 
 
@@ -107,7 +90,7 @@ class FlightLogWriter:
             },
             "holescan.config": {k: sch.to_json(v).decode() for k, v in (config or {}).items()},
             "holescan.camera": {k: repr(v) for k, v in camera.to_dict().items()},
-            "holescan.mount": sch.mount_metadata(mount, errors or ErrorModel()),
+            "holescan.mount": mount_metadata(mount, errors or ErrorModel()),
         }
         self._queue: queue.Queue[tuple[Any, ...]] = queue.Queue(self.options.max_queued_messages)
         self._lock = threading.Lock()
@@ -124,8 +107,9 @@ class FlightLogWriter:
         self._enqueue_ns_max = 0
         self._bytes_closed = 0
         self._files: list[Path] = []
-        self._file: _File | None = None
-        self._origin: tuple[float, float, float] | None = None
+        self._file: McapFile | None = None
+        self._file_opened_ns = 0
+        self._origin: LocalFrame | None = None
         self._error: BaseException | None = None
         self._closing = threading.Event()
         self._closed = False
@@ -320,8 +304,9 @@ class FlightLogWriter:
         self, topic: str, proto: Any | None, data: bytes, seq: int, log_time: int, pub: int
     ) -> None:
         assert self._file is not None
-        cid = self._file.channel(topic, None if proto is None else type(proto))
-        self._file.writer.add_message(cid, log_time, data, pub, seq)
+        schema = sch.JSON_SCHEMAS[topic] if proto is None else type(proto)
+        cid = self._file.channel(topic, schema)
+        self._file.add_message(cid, log_time, data, pub, seq)
 
     def _proto(self, topic: str, msg: Any, seq: int, log_time: int, pub: int) -> None:
         self._write(topic, msg, msg.SerializeToString(), seq, log_time, pub)
@@ -374,9 +359,9 @@ class FlightLogWriter:
 
     def _on_pose(self, seq: int, log_time: int, pose: VehiclePose, t_unix_ns: int) -> None:
         if self._origin is None:
-            self._origin = (pose.lat_deg, pose.lon_deg, pose.alt_m)
+            self._origin = LocalFrame(pose.lat_deg, pose.lon_deg, pose.alt_m)
             self._write_origin()
-        enu = pymap3d.geodetic2enu(pose.lat_deg, pose.lon_deg, pose.alt_m, *self._origin)
+        enu = self._origin.to_enu(pose.lat_deg, pose.lon_deg, pose.alt_m)
         self._json(sch.TOPIC_POSE, sch.pose_json(pose), seq, log_time, t_unix_ns)
         loc_seq, tf_seq = self._own_seq(sch.TOPIC_LOCATION), self._own_seq(sch.TOPIC_TF)
         self._proto(
@@ -428,21 +413,28 @@ class FlightLogWriter:
     def _open_bytes(self) -> int:
         f = self._file
         try:
-            return 0 if f is None else f.stream.tell()
+            return 0 if f is None else f.bytes_written
         except ValueError:  # closed by a rotation meanwhile
             return 0
 
     def _open_next_file(self) -> None:
         path = log_file_path(self._prefix, len(self._files))
-        self._file = _File(path, self.options)
+        self._file = McapFile(
+            path,
+            library=f"holescan/{_dist_version('holescan')} mcap-python/{mcap_version()}",
+            compression=self.options.compression,
+            chunk_size=self.options.chunk_size,
+            via_part=False,  # the open file is the record: a crash leaves it readable
+        )
+        self._file_opened_ns = time.monotonic_ns()
         with self._lock:
             self._files.append(path)
         now = time.time_ns()
         meta = {**self._metadata["holescan"], "file_index": str(len(self._files) - 1)}
-        self._file.writer.add_metadata("holescan", meta)
+        self._file.add_metadata("holescan", meta)
         for name, values in self._metadata.items():
             if name != "holescan":
-                self._file.writer.add_metadata(name, values)
+                self._file.add_metadata(name, values)
         if self._origin is not None:
             self._write_origin()
         mount = sch.camera_mount_transform(self._mount_rot, self._mount_offset, now)
@@ -453,9 +445,14 @@ class FlightLogWriter:
     def _write_origin(self) -> None:
         assert self._file is not None
         assert self._origin is not None
-        lat, lon, alt = self._origin
-        values = {"lat_deg": repr(lat), "lon_deg": repr(lon), "alt_m": repr(alt), "frame": "ENU"}
-        self._file.writer.add_metadata("holescan.world_origin", values)
+        o = self._origin
+        values = {
+            "lat_deg": repr(o.lat0_deg),
+            "lon_deg": repr(o.lon0_deg),
+            "alt_m": repr(o.alt0_m),
+            "frame": "ENU",
+        }
+        self._file.add_metadata("holescan.world_origin", values)
 
     def _write_calibration(self, now: int) -> None:
         msg = sch.calibration_message(self.camera, now)
@@ -465,8 +462,8 @@ class FlightLogWriter:
     def _maybe_rotate(self) -> None:
         f = self._file
         assert f is not None
-        too_big = f.stream.tell() >= self.options.max_file_bytes
-        too_old = time.monotonic_ns() - f.opened_mono_ns >= self.options.max_file_s * 1e9
+        too_big = f.bytes_written >= self.options.max_file_bytes
+        too_old = time.monotonic_ns() - self._file_opened_ns >= self.options.max_file_s * 1e9
         if too_big or too_old:
             f.close()
             with self._lock:

@@ -9,7 +9,15 @@ next chunk: from the summary's chunk index when the file has an intact summary, 
 scanning for a chunk opcode followed by plausible lengths and a valid CRC. Schemas and
 channels lost with a damaged chunk are taken from the summary, when there is one.
 
-(mcap's own ``recover`` stopped at the first bad chunk: foxglove/mcap#1390.)
+Why not ``mcap``'s :class:`~mcap.stream_reader.StreamReader` for the top level: it stops at
+the first record that does not parse (mcap's own ``recover`` stopped at the first bad
+chunk: foxglove/mcap#1390), trusts a record's length (a corrupt one allocates gigabytes or
+swallows the rest of the file) and does not say where in the file a record lies, which
+the resync, the damage report and ``recover_log`` need. So the record framing is walked
+here; each record that fits is parsed by mcap's readers (:func:`format.parse_record`), the
+summary section by the StreamReader (:func:`format.read_summary`), and a chunk's content,
+once decompressed within bounds and its CRC checked, by mcap's
+:func:`~mcap.stream_reader.breakup_chunk`.
 """
 
 from __future__ import annotations
@@ -25,62 +33,42 @@ from pathlib import Path
 from typing import IO, Any
 
 import zstandard
-from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
 from mcap.records import (
-    Attachment,
-    AttachmentIndex,
     Channel,
     Chunk,
-    ChunkIndex,
     DataEnd,
     Footer,
-    Header,
     McapRecord,
     Message,
     MessageIndex,
-    Metadata,
-    MetadataIndex,
     Schema,
-    Statistics,
-    SummaryOffset,
+)
+from mcap.stream_reader import breakup_chunk
+
+from holescan.capture.errors import FlightLogError
+from holescan.capture.flightlog.format import (
+    CHUNK_FIELDS,
+    CHUNK_MIN_BYTES,
+    KNOWN_OPCODES,
+    MAGIC,
+    RECORD_HEADER,
+    RecordError,
+    Summary,
+    parse_record,
+    read_summary,
 )
 
-from holescan.capture._mcaplog import FlightLogError
+__all__ = ["DamagedRegion", "ScanState", "scan_records"]
 
-__all__ = ["MAGIC", "DamagedRegion", "ScanState", "scan_records"]
-
-MAGIC = b"\x89MCAP0\r\n"
-_HEAD = struct.Struct("<BQ")  # opcode, record length
-_FOOTER_RECORD = 9 + 20
 #: Records other than chunks and attachments are small; a longer one is a corrupt length.
 _SMALL_RECORD_LIMIT = 64 << 20
 #: A chunk never decompresses to more than this (the writer's chunks are ~1 MiB).
 _CHUNK_LIMIT = 1 << 30
 _SCAN_BLOCK = 8 << 20
 _DATA_CRC = "data section CRC mismatch"
-_CHUNK_MIN = 8 + 8 + 8 + 4 + 4 + 8  # chunk fields with an empty compression name
-
-_READERS: dict[int, Any] = {
-    Opcode.ATTACHMENT: Attachment.read,
-    Opcode.ATTACHMENT_INDEX: AttachmentIndex.read,
-    Opcode.CHANNEL: Channel.read,
-    Opcode.CHUNK: Chunk.read,
-    Opcode.CHUNK_INDEX: ChunkIndex.read,
-    Opcode.DATA_END: DataEnd.read,
-    Opcode.FOOTER: Footer.read,
-    Opcode.HEADER: Header.read,
-    Opcode.MESSAGE_INDEX: MessageIndex.read,
-    Opcode.METADATA: Metadata.read,
-    Opcode.METADATA_INDEX: MetadataIndex.read,
-    Opcode.SCHEMA: Schema.read,
-    Opcode.STATISTICS: Statistics.read,
-    Opcode.SUMMARY_OFFSET: SummaryOffset.read,
-}
-
-
-class _DamageError(Exception):
-    """A record that does not parse or check (internal: turned into a DamagedRegion)."""
+_HEAD = RECORD_HEADER.size
+_DATA_END_HEADER = RECORD_HEADER.pack(Opcode.DATA_END, 4)  # its body: the data CRC
 
 
 @dataclasses.dataclass(frozen=True)
@@ -179,30 +167,9 @@ def _open(path: str | os.PathLike[str]) -> tuple[IO[bytes], int]:
     return f, size
 
 
-def _parse(opcode: int, body: bytes) -> McapRecord | None:
-    """One record from exactly its bytes (inner lengths are bounded by ``body``)."""
-    reader = _READERS.get(opcode)
-    stream = ReadDataStream(io.BytesIO(body))
-    try:
-        if opcode == Opcode.MESSAGE:
-            if len(body) < 22:
-                raise _DamageError("message record too short")
-            return Message.read(stream, len(body))  # type: ignore[no-any-return]
-        if reader is None:
-            return None  # an unknown record type: skipped, as the spec says
-        record: McapRecord = reader(stream)
-    except _DamageError:
-        raise
-    except Exception as err:  # a parse error of damaged bytes, whatever the library raises
-        raise _DamageError(f"{Opcode(opcode).name.lower()} record does not parse ({err})") from err
-    if stream.count > len(body):  # pragma: no cover (BytesIO never reads past its end)
-        raise _DamageError("record longer than its length")
-    return record
-
-
 def _decompress(chunk: Chunk) -> bytes:
     if chunk.uncompressed_size > _CHUNK_LIMIT:
-        raise _DamageError(f"chunk claims {chunk.uncompressed_size} bytes uncompressed")
+        raise RecordError(f"chunk claims {chunk.uncompressed_size} bytes uncompressed")
     if chunk.compression == "zstd":
         try:
             reader = zstandard.ZstdDecompressor().stream_reader(io.BytesIO(chunk.data))
@@ -213,7 +180,7 @@ def _decompress(chunk: Chunk) -> bytes:
                     break
                 data += more
         except zstandard.ZstdError as err:
-            raise _DamageError(f"zstd: {err}") from err
+            raise RecordError(f"zstd: {err}") from err
     elif chunk.compression == "lz4":
         import lz4.frame  # type: ignore[import-not-found,unused-ignore]
 
@@ -221,117 +188,60 @@ def _decompress(chunk: Chunk) -> bytes:
             dec = lz4.frame.LZ4FrameDecompressor()
             data = dec.decompress(chunk.data, max_length=chunk.uncompressed_size + 1)
         except RuntimeError as err:
-            raise _DamageError(f"lz4: {err}") from err
+            raise RecordError(f"lz4: {err}") from err
     elif chunk.compression == "":
         data = chunk.data
     else:
-        raise _DamageError(f"unknown chunk compression {chunk.compression[:20]!r}")
+        raise RecordError(f"unknown chunk compression {chunk.compression[:20]!r}")
     if len(data) != chunk.uncompressed_size:
-        raise _DamageError(
-            f"chunk decompresses to {len(data)} bytes, not {chunk.uncompressed_size}"
-        )
+        raise RecordError(f"chunk decompresses to {len(data)} bytes, not {chunk.uncompressed_size}")
     if chunk.uncompressed_crc != 0 and zlib.crc32(data) != chunk.uncompressed_crc:
-        raise _DamageError("chunk CRC mismatch")
+        raise RecordError("chunk CRC mismatch")
     return bytes(data)
 
 
 def _chunk_content(chunk: Chunk) -> list[McapRecord]:
+    """Schema, Channel and Message records of a chunk, decompressed within bounds and its
+    CRC checked here (mcap's decompression trusts the sizes), parsed by mcap."""
     data = _decompress(chunk)
-    out: list[McapRecord] = []
-    pos = 0
-    while pos < len(data):
-        if len(data) - pos < 9:
-            raise _DamageError("chunk ends inside a record header")
-        opcode, length = _HEAD.unpack_from(data, pos)
-        if length > len(data) - pos - 9:
-            raise _DamageError("chunk record longer than the chunk")
-        body = data[pos + 9 : pos + 9 + length]
-        pos += 9 + length
-        if opcode in (Opcode.SCHEMA, Opcode.CHANNEL, Opcode.MESSAGE):
-            rec = _parse(opcode, body)
-            if rec is not None:
-                out.append(rec)
-    return out
-
-
-@dataclasses.dataclass
-class _Summary:
-    """What an intact summary section says (used to resync and to restore channels)."""
-
-    schemas: dict[int, Schema]
-    channels: dict[int, Channel]
-    chunk_starts: list[int]
-
-
-def _read_summary(f: IO[bytes], size: int) -> _Summary | None:
-    if size < 8 + 9 + _FOOTER_RECORD + 8:
-        return None
-    f.seek(size - 8 - _FOOTER_RECORD)
-    tail = f.read(_FOOTER_RECORD + 8)
-    if tail[-8:] != MAGIC:
-        return None
-    opcode, length = _HEAD.unpack_from(tail, 0)
-    if opcode != Opcode.FOOTER or length != 20:
-        return None
-    start, _offsets, crc = struct.unpack_from("<QQI", tail, 9)
-    end = size - 8 - _FOOTER_RECORD
-    if start == 0 or not 8 < start <= end:
-        return None
-    f.seek(start)
-    section = f.read(end - start)
-    if crc != 0 and zlib.crc32(section + tail[:25]) != crc:
-        return None
-    summary = _Summary({}, {}, [])
-    pos = 0
+    plain = dataclasses.replace(chunk, compression="", data=data)
     try:
-        while pos + 9 <= len(section):
-            opcode, length = _HEAD.unpack_from(section, pos)
-            if length > len(section) - pos - 9:
-                return None
-            rec = _parse(opcode, section[pos + 9 : pos + 9 + length])
-            pos += 9 + length
-            if isinstance(rec, Schema):
-                summary.schemas[rec.id] = rec
-            elif isinstance(rec, Channel):
-                summary.channels[rec.id] = rec
-            elif isinstance(rec, ChunkIndex) and 8 <= rec.chunk_start_offset < start:
-                summary.chunk_starts.append(rec.chunk_start_offset)
-    except _DamageError:
-        return None
-    summary.chunk_starts.sort()
-    return summary
+        return breakup_chunk(plain, validate_crc=False)  # the CRC was checked above
+    except Exception as err:  # the content of a chunk without a CRC, damaged
+        raise RecordError(f"chunk content does not parse ({type(err).__name__}: {err})") from err
 
 
 def _plausible_chunk_at(f: IO[bytes], at: int, size: int) -> bool:
+    """A chunk record header at ``at`` whose lengths add up (where a resync may restart)."""
     f.seek(at)
-    head = f.read(9 + _CHUNK_MIN)
-    if len(head) < 9 + _CHUNK_MIN or head[0] != Opcode.CHUNK:
+    head = f.read(_HEAD + CHUNK_MIN_BYTES)
+    if len(head) < _HEAD + CHUNK_MIN_BYTES or head[0] != Opcode.CHUNK:
         return False
-    (length,) = struct.unpack_from("<Q", head, 1)
-    if not _CHUNK_MIN <= length <= size - at - 9:
+    _opcode, length = RECORD_HEADER.unpack_from(head)
+    if not CHUNK_MIN_BYTES <= length <= size - at - _HEAD:
         return False
-    _t0, _t1, usize, _crc, clen = struct.unpack_from("<QQQII", head, 9)
+    _t0, _t1, usize, _crc, clen = CHUNK_FIELDS.unpack_from(head, _HEAD)
     if usize > _CHUNK_LIMIT or clen > 16:
         return False
-    f.seek(at + 9 + 32)
+    f.seek(at + _HEAD + CHUNK_FIELDS.size)
     tail = f.read(clen + 8)
     if len(tail) < clen + 8:
         return False
     (dlen,) = struct.unpack_from("<Q", tail, clen)
-    return bool(32 + clen + 8 + dlen == length)
+    return bool(CHUNK_FIELDS.size + clen + 8 + dlen == length)
 
 
-def _resync(f: IO[bytes], start: int, size: int, summary: _Summary | None) -> int | None:
+def _resync(f: IO[bytes], start: int, size: int, summary: Summary | None) -> int | None:
     """The offset of the next record that looks intact at or after ``start``."""
     if summary is not None:
-        for at in summary.chunk_starts:
-            if at >= start:
-                return at
+        for index in summary.chunk_indexes:
+            if index.chunk_start_offset >= start:
+                return index.chunk_start_offset
         return None  # nothing indexed after here: the summary itself follows
     pos = start
-    while pos < size - 9:
+    while pos < size - _HEAD:
         f.seek(pos)
-        block = f.read(_SCAN_BLOCK + 9)
+        block = f.read(_SCAN_BLOCK + _HEAD)
         i = 0
         while True:
             i = block.find(bytes([Opcode.CHUNK]), i)
@@ -340,7 +250,7 @@ def _resync(f: IO[bytes], start: int, size: int, summary: _Summary | None) -> in
             if _plausible_chunk_at(f, pos + i, size):
                 return pos + i
             i += 1
-        i = block.find(b"\x0f\x04\0\0\0\0\0\0\0")  # a DataEnd record
+        i = block.find(_DATA_END_HEADER)
         if 0 <= i < _SCAN_BLOCK:
             return pos + i
         pos += _SCAN_BLOCK
@@ -365,24 +275,24 @@ def scan_records(path: str | os.PathLike[str], state: ScanState | None = None) -
     f, size = _open(path)
     st.path, st.size = Path(path), size
     with f:
-        if f.read(8) != MAGIC:
+        if f.read(len(MAGIC)) != MAGIC:
             raise FlightLogError(f"{st.path}: not an MCAP file (bad magic)")
-        summary = _read_summary(f, size)
-        pos = st.good_bytes = 8
+        summary = read_summary(f, size)
+        pos = st.good_bytes = len(MAGIC)
         crc: int | None = zlib.crc32(MAGIC)
         seen_schemas: set[int] = set()
         seen_channels: set[int] = set()
         lost: DamagedRegion | None = None  # the damaged chunk whose indexes may follow
         while True:
             f.seek(pos)
-            head = f.read(9)
-            if len(head) < 9:
+            head = f.read(_HEAD)
+            if len(head) < _HEAD:
                 st.stop_reason = "file ends inside a record" if head else "file ends (no footer)"
                 return
-            opcode, length = _HEAD.unpack(head)
-            limit = size - pos - 9
+            opcode, length = RECORD_HEADER.unpack(head)
+            limit = size - pos - _HEAD
             why = None
-            if opcode not in _READERS and opcode != Opcode.MESSAGE:
+            if opcode not in KNOWN_OPCODES:
                 why = f"unknown record type 0x{opcode:02x}"
             elif length > limit:
                 why = f"record length {length} runs past the end of the file"
@@ -393,18 +303,18 @@ def scan_records(path: str | os.PathLike[str], state: ScanState | None = None) -
             if why is None:
                 body = f.read(length)
                 try:
-                    rec = _parse(opcode, body)
+                    rec = parse_record(opcode, body)
                     content = _chunk_content(rec) if isinstance(rec, Chunk) else []
-                except _DamageError as err:
+                except RecordError as err:
                     why = str(err)
                     if isinstance(rec, Chunk):  # the chunk's frame held: skip just it
                         lost = DamagedRegion(
-                            pos, 9 + length, why, rec.message_start_time,
+                            pos, _HEAD + length, why, rec.message_start_time,
                             rec.message_end_time, None,
                         )  # fmt: skip
                         st.damaged.append(lost)
                         crc = None
-                        pos += 9 + length
+                        pos += _HEAD + length
                         continue
             if why is not None:
                 nxt = _resync(f, pos + 1, size, summary)
@@ -422,22 +332,20 @@ def scan_records(path: str | os.PathLike[str], state: ScanState | None = None) -
             if isinstance(rec, MessageIndex) and lost is not None:
                 lost = dataclasses.replace(lost, messages=(lost.messages or 0) + len(rec.records))
                 st.damaged[-1] = lost
-                pos += 9 + length
+                pos += _HEAD + length
                 continue  # the index of a chunk not yielded
             lost = None
             if (
                 isinstance(rec, DataEnd)
                 and crc is not None
-                and rec.data_section_crc
-                not in (
-                    0,
-                    crc,
-                )
+                and rec.data_section_crc not in (0, crc)
             ):
-                st.damaged.append(DamagedRegion(8, pos - 8, _DATA_CRC, messages=0))
+                st.damaged.append(
+                    DamagedRegion(len(MAGIC), pos - len(MAGIC), _DATA_CRC, messages=0)
+                )
             if crc is not None:
                 crc = zlib.crc32(head + body, crc)
-            st.record_start, st.good_bytes = pos, pos + 9 + length
+            st.record_start, st.good_bytes = pos, pos + _HEAD + length
             pos = st.good_bytes
             if rec is None:
                 continue
@@ -458,7 +366,7 @@ def scan_records(path: str | os.PathLike[str], state: ScanState | None = None) -
                     seen_channels.add(item.id)
             if isinstance(rec, Footer):
                 f.seek(pos)
-                if f.read(8) != MAGIC:
+                if f.read(len(MAGIC)) != MAGIC:
                     st.stop_reason = "no closing magic after the footer"
                     return
                 st.complete = True
@@ -467,7 +375,7 @@ def scan_records(path: str | os.PathLike[str], state: ScanState | None = None) -
 
 
 def _restore_channel(
-    channel_id: int, summary: _Summary | None, seen_schemas: set[int]
+    channel_id: int, summary: Summary | None, seen_schemas: set[int]
 ) -> list[Schema | Channel]:
     if summary is None or channel_id not in summary.channels:
         return []

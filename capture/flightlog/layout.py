@@ -5,57 +5,60 @@ only the layout (:func:`read_log_layout`: where each chunk lies, the channels, t
 metadata records); each task then opens the log itself and reads its own byte ranges
 (:func:`read_chunk`), from a local path or any URL ``fsspec`` opens.
 
-A cleanly closed file gives its layout from its summary section (mcap's indexed reader).
-A file without a readable summary (cut off by a crash) is walked record header by record
-header up to its last complete record, and its chunks are opened until every channel the
-caller needs is known; ``complete`` is then False and ``stop_reason`` says where it ends.
+A cleanly closed file gives its layout from its summary section
+(:func:`format.read_summary`, CRC checked). A file without a readable summary (cut off by
+a crash) is walked record header by record header up to its last complete record (its own
+walk, not mcap's :class:`~mcap.stream_reader.StreamReader`: it must note each chunk's byte
+range and seek over the chunk bodies rather than read gigabytes, also from a URL), and
+its chunks are opened until every channel the caller needs is known; ``complete`` is then
+False and ``stop_reason`` says where it ends.
 """
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import hashlib
-import io
-import json
-import math
 import os
 import struct
 from collections.abc import Collection, Iterable, Iterator, Mapping
 from typing import IO, Any, Final
 
 import zstandard
-from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
-from mcap.reader import make_reader
 from mcap.records import Channel, Chunk, McapRecord, Message, Metadata, Schema
 from mcap.stream_reader import breakup_chunk
 
-from holescan.capture._mcaplog import FlightLogError
-from holescan.capture._mcapread import LogRecord, _decode
-from holescan.errors import InputError
-from holescan.geotag import CameraMount, ErrorModel
+from holescan.capture.errors import ChunkDamagedError, FlightLogError
+from holescan.capture.flightlog.format import (
+    CHUNK_FIELDS,
+    MAGIC,
+    RECORD_HEADER,
+    RecordError,
+    parse_record,
+    read_record_at,
+    read_summary,
+)
+from holescan.capture.flightlog.reader import LogRecord, decode_message
 
 __all__ = [
-    "ChunkDamagedError",
     "ChunkSpan",
     "LogLayout",
     "decode_messages",
-    "mount_from_metadata",
     "open_log",
     "read_chunk",
     "read_log_layout",
 ]
 
-_MAGIC: Final = b"\x89MCAP0\r\n"
-_FOOTER_BYTES: Final = 1 + 8 + 8 + 8 + 4
-_CHUNK_HEAD: Final = struct.Struct("<QQQII")  # start, end, uncompressed size, crc, len(name)
-_DAMAGE = (McapError, ValueError, struct.error, zstandard.ZstdError, RuntimeError, EOFError)
-
-
-class ChunkDamagedError(FlightLogError):
-    """A chunk's bytes are not a valid chunk (bad CRC, cut short, bad compression)."""
+_DAMAGE: Final = (
+    McapError,
+    RecordError,
+    ValueError,
+    struct.error,
+    zstandard.ZstdError,
+    RuntimeError,
+    EOFError,
+)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -138,7 +141,7 @@ def read_log_layout(
         head = f.read(4096)
         if size == 0:
             raise FlightLogError(f"{name}: empty file, not an MCAP flight log")
-        if not head.startswith(_MAGIC):
+        if not head.startswith(MAGIC):
             raise FlightLogError(f"{name}: not an MCAP file (bad magic)")
         digest = hashlib.blake2b(struct.pack("<Q", size) + head, digest_size=16)
         layout = _from_summary(f, name, size, digest)
@@ -146,29 +149,22 @@ def read_log_layout(
 
 
 def _from_summary(f: IO[bytes], name: str, size: int, digest: Any) -> LogLayout | None:
-    if size < len(_MAGIC) * 2 + _FOOTER_BYTES:
-        return None
-    f.seek(size - len(_MAGIC) - _FOOTER_BYTES)
-    tail = f.read(len(_MAGIC) + _FOOTER_BYTES)
-    if not tail.endswith(_MAGIC) or tail[0] != Opcode.FOOTER:
-        return None
-    (summary_start,) = struct.unpack_from("<Q", tail, 9)
-    if summary_start == 0 or summary_start >= size:
-        return None
     try:
-        f.seek(0)
-        reader = make_reader(f)
-        summary = reader.get_summary()
+        summary = read_summary(f, size)
         if summary is None:
             return None
-        metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+        metadata: dict[str, dict[str, str]] = {}
+        for index in summary.metadata_indexes:
+            record = read_record_at(f, index.offset, index.length)
+            if isinstance(record, Metadata):
+                metadata[record.name] = dict(record.metadata)
     except _DAMAGE:
         return None
-    f.seek(summary_start)
-    digest.update(f.read(size - summary_start))
+    f.seek(summary.start)
+    digest.update(f.read(size - summary.start))
     chunks = tuple(
         ChunkSpan(c.chunk_start_offset, c.chunk_length, c.message_start_time, c.message_end_time)
-        for c in sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+        for c in summary.chunk_indexes
     )
     return LogLayout(
         url=name,
@@ -189,23 +185,23 @@ def _walk(f: IO[bytes], name: str, size: int, digest: Any, wanted: set[str]) -> 
     channels: dict[int, Channel] = {}
     schemas: dict[int, Schema] = {}
     metadata: dict[str, dict[str, str]] = {}
-    pos = len(_MAGIC)
+    pos = len(MAGIC)
     stop: str | None = "file ends inside a record"
     complete = False
     while True:
         f.seek(pos)
-        header = f.read(9)
-        if len(header) < 9:
+        header = f.read(RECORD_HEADER.size)
+        if len(header) < RECORD_HEADER.size:
             break
-        opcode, length = header[0], struct.unpack_from("<Q", header, 1)[0]
-        end = pos + 9 + length
+        opcode, length = RECORD_HEADER.unpack(header)
+        end = pos + RECORD_HEADER.size + length
         if end > size:
             break
         if opcode == Opcode.CHUNK:
-            head = f.read(min(length, _CHUNK_HEAD.size))
-            if len(head) < _CHUNK_HEAD.size:
+            head = f.read(min(length, CHUNK_FIELDS.size))
+            if len(head) < CHUNK_FIELDS.size:
                 break
-            start_ns, end_ns, _, _, _ = _CHUNK_HEAD.unpack(head)
+            start_ns, end_ns, _, _, _ = CHUNK_FIELDS.unpack(head)
             digest.update(struct.pack("<QQ", pos, length) + head)
             chunks.append(ChunkSpan(pos, end - pos, start_ns, end_ns))
         elif opcode in (Opcode.METADATA, Opcode.SCHEMA, Opcode.CHANNEL):
@@ -237,16 +233,10 @@ def _walk(f: IO[bytes], name: str, size: int, digest: Any, wanted: set[str]) -> 
 
 
 def _parse(opcode: int, body: bytes) -> McapRecord | None:
-    stream = ReadDataStream(io.BytesIO(body))
-    reader = {
-        Opcode.METADATA: Metadata.read,
-        Opcode.SCHEMA: Schema.read,
-        Opcode.CHANNEL: Channel.read,
-    }
-    with contextlib.suppress(*_DAMAGE):
-        rec: McapRecord = reader[Opcode(opcode)](stream)
-        return rec
-    return None
+    try:
+        return parse_record(opcode, body)
+    except RecordError:
+        return None  # a damaged record costs itself only
 
 
 def _channels_from_chunks(
@@ -281,7 +271,8 @@ def read_chunk(f: IO[bytes], span: ChunkSpan) -> list[McapRecord]:
         got = f"{len(data)} of {span.length} bytes"
         raise ChunkDamagedError(f"no chunk at byte {span.offset} ({got})")
     try:
-        chunk = Chunk.read(ReadDataStream(io.BytesIO(data[9:])))
+        chunk = parse_record(Opcode.CHUNK, data[RECORD_HEADER.size :])
+        assert isinstance(chunk, Chunk)
         return breakup_chunk(chunk, validate_crc=True)
     except _DAMAGE as err:
         raise ChunkDamagedError(
@@ -297,40 +288,8 @@ def decode_messages(
     """Typed records (:class:`capture.LoggedFrame`, ...) of raw messages, through the flight
     log reader's own decoder (:func:`capture.read_flight_log`'s). ``pending`` holds the parts
     of frames not complete yet (keyed by sequence); pass the same dict for one stream."""
-    metadata = {name: dict(values) for name, values in layout.metadata.items()}
     for channel, msg in messages:
-        rec = _decode(channel.topic, layout.schemas.get(channel.schema_id), msg, metadata, pending)
+        schema = layout.schemas.get(channel.schema_id)
+        rec = decode_message(channel.topic, schema, msg, layout.metadata, pending)
         if rec is not None:
             yield rec
-
-
-def errors_from_metadata(metadata: Mapping[str, Mapping[str, str]]) -> ErrorModel:
-    """The sightings' error model of a log: its ``holescan.mount`` record's
-    ``attitude_sigma_deg`` (the default model for logs without one). Raises
-    :class:`FlightLogError` when the value cannot be read."""
-    value = metadata.get("holescan.mount", {}).get("attitude_sigma_deg")
-    if value is None:
-        return ErrorModel()
-    try:
-        return ErrorModel(attitude_sigma_rad=math.radians(float(value)))
-    except InputError as err:  # a ValueError too: first
-        raise FlightLogError(f"holescan.mount {err}") from err
-    except ValueError as err:
-        raise FlightLogError(f"unreadable holescan.mount attitude_sigma_deg: {value!r}") from err
-
-
-def mount_from_metadata(metadata: Mapping[str, Mapping[str, str]]) -> CameraMount:
-    """The camera mount a log's ``holescan.mount`` metadata record gives (default mount when
-    there is none). Raises :class:`FlightLogError` when the record cannot be read."""
-    md = metadata.get("holescan.mount")
-    if md is None:
-        return CameraMount()
-    try:
-        rot = json.loads(md["rotation_frd_from_camera"])
-        offset = tuple(float(v) for v in json.loads(md["offset_frd_m"]))
-        rotation = tuple(tuple(float(v) for v in row) for row in rot)
-        if len(offset) != 3 or len(rotation) != 3 or any(len(r) != 3 for r in rotation):
-            raise ValueError("a 3x3 rotation and a 3-vector offset are expected")
-        return CameraMount(rotation, offset)  # type: ignore[arg-type]
-    except (KeyError, ValueError, TypeError) as err:
-        raise FlightLogError(f"unreadable holescan.mount metadata: {err}") from err

@@ -32,34 +32,26 @@ from typing import BinaryIO
 import numpy as np
 
 from holescan.capture._frame import Frame
-from holescan.capture._oniformat import (
-    _FILE_HEADER,
-    _FILE_MAGIC,
-    _FILE_VERSION,
-    _MAX_PAYLOAD,
-    _NODES,
-    _SEEK_ENTRY,
-    _U32_MAX,
-    _U64_MAX,
-    _node_added,
-    _node_properties,
-    _NodeSpec,
-    _Record,
-    _record,
-)
-from holescan.capture._oniscan import OniInfo, OniStreamInfo, scan_oni
 from holescan.capture._outpath import check_output, commit_part, part_path
+from holescan.capture.openni.oniformat import (
+    FILE_HEADER,
+    FILE_MAGIC,
+    FILE_VERSION,
+    MAX_PAYLOAD,
+    NODES,
+    SEEK_ENTRY,
+    U32_MAX,
+    U64_MAX,
+    NodeSpec,
+    RecordType,
+    encode_record,
+    node_added_record,
+    node_property_records,
+)
 from holescan.detect import CameraIntrinsics
 from holescan.errors import InputError
 
-__all__ = [
-    "OniInfo",
-    "OniStreamInfo",
-    "OniWriter",
-    "export_oni",
-    "scan_oni",
-    "write_oni",
-]
+__all__ = ["OniWriter", "export_oni", "write_oni"]
 
 _log = logging.getLogger(__name__)
 
@@ -68,7 +60,7 @@ _log = logging.getLogger(__name__)
 
 @dataclass
 class _NodeState:
-    spec: _NodeSpec
+    spec: NodeSpec
     added_pos: int = 0
     last_data_pos: int = 0
     seek_table: list[tuple[int, int]] = field(default_factory=list)  # (timestamp us, position)
@@ -109,7 +101,7 @@ class OniWriter:
     ):
         if not 0 < fps <= 1000:
             raise InputError(f"fps must be in 1..1000, got {fps}")
-        if camera.width * camera.height * 3 > _MAX_PAYLOAD:
+        if camera.width * camera.height * 3 > MAX_PAYLOAD:
             raise InputError(
                 f"{camera.width}x{camera.height} is too large for OpenNI playback (max 1600x1200)"
             )
@@ -118,7 +110,7 @@ class OniWriter:
         self.camera = camera
         self.fps = fps
         self._partial = part_path(self.path)
-        self._nodes = [_NodeState(spec) for spec in _NODES]
+        self._nodes = [_NodeState(spec) for spec in NODES]
         self._frames = 0
         self._min_ts_us = 0
         self._last_ts_us = -1
@@ -170,21 +162,21 @@ class OniWriter:
         return self._file
 
     def _write_preamble(self) -> None:
-        header = _FILE_HEADER.pack(_FILE_MAGIC, *_FILE_VERSION, _U64_MAX, len(_NODES))
+        header = FILE_HEADER.pack(FILE_MAGIC, *FILE_VERSION, U64_MAX, len(NODES))
         self._append(header)
         for node in self._nodes:
             node.added_pos = self._pos
             self._append(
-                _node_added(node.spec, _U32_MAX, 0, _U64_MAX, 0),
-                _node_properties(node.spec, self.camera, self.fps),
+                node_added_record(node.spec, U32_MAX, 0, U64_MAX, 0),
+                node_property_records(node.spec, self.camera, self.fps),
             )
         for node in self._nodes:
             self._append(
-                _record(_Record.NODE_STATE_READY, node.spec.node_id),
-                _record(
-                    _Record.NODE_DATA_BEGIN,
+                encode_record(RecordType.NODE_STATE_READY, node.spec.node_id),
+                encode_record(
+                    RecordType.NODE_DATA_BEGIN,
                     node.spec.node_id,
-                    struct.pack("<IQ", _U32_MAX, _U64_MAX),
+                    struct.pack("<IQ", U32_MAX, U64_MAX),
                 ),
             )
 
@@ -221,8 +213,8 @@ class OniWriter:
         positions = []
         try:
             for node, payload in zip(self._nodes, payloads, strict=True):
-                head = _record(
-                    _Record.NEW_DATA,
+                head = encode_record(
+                    RecordType.NEW_DATA,
                     node.spec.node_id,
                     struct.pack("<QI", ts_us, frame_id),
                     payload_size=payload.nbytes,
@@ -273,23 +265,29 @@ class OniWriter:
             f.truncate()
             tail_positions = []
             for node in self._nodes:
-                f.write(_record(_Record.NODE_REMOVED, node.spec.node_id, undo=node.added_pos))
+                f.write(
+                    encode_record(RecordType.NODE_REMOVED, node.spec.node_id, undo=node.added_pos)
+                )
                 tail_positions.append(f.tell())
-                table = [_SEEK_ENTRY.pack(0, 0, 0)]
-                table += [_SEEK_ENTRY.pack(ts, 0, pos) for ts, pos in node.seek_table]
+                table = [SEEK_ENTRY.pack(0, 0, 0)]
+                table += [SEEK_ENTRY.pack(ts, 0, pos) for ts, pos in node.seek_table]
                 payload = b"".join(table)
-                f.write(_record(_Record.SEEK_TABLE, node.spec.node_id, payload_size=len(payload)))
+                f.write(
+                    encode_record(
+                        RecordType.SEEK_TABLE, node.spec.node_id, payload_size=len(payload)
+                    )
+                )
                 f.write(payload)
-            f.write(_record(_Record.END, 0))
+            f.write(encode_record(RecordType.END, 0))
             for node, seek_pos in zip(self._nodes, tail_positions, strict=True):
                 f.seek(node.added_pos)
                 f.write(
-                    _node_added(
+                    node_added_record(
                         node.spec, self._frames, self._min_ts_us, self._last_ts_us, seek_pos
                     )
                 )
             f.seek(0)
-            f.write(_FILE_HEADER.pack(_FILE_MAGIC, *_FILE_VERSION, self._last_ts_us, len(_NODES)))
+            f.write(FILE_HEADER.pack(FILE_MAGIC, *FILE_VERSION, self._last_ts_us, len(NODES)))
             f.flush()
             os.fsync(f.fileno())
         except OSError as err:
@@ -339,7 +337,7 @@ def export_oni(
     Sensor timestamps that jump back (the Xtion's clock restarts after a USB reset) are
     shifted to continue after the previous frame, by the companion clock's interval.
     """
-    from holescan.capture._mcapread import McapSource  # the MCAP stack, only when exporting
+    from holescan.capture.flightlog.reader import McapSource  # the MCAP stack, when exporting
 
     inputs = [logs] if isinstance(logs, str | os.PathLike) else list(logs)
     check_output(path, inputs=inputs, suffixes={".oni"}, force=force)

@@ -16,13 +16,21 @@ from typing import Any, Final
 import numpy as np
 import numpy.typing as npt
 
-from holescan.capture._errors import SensorError
+from holescan.capture.errors import SensorError
 from holescan.detect import CameraIntrinsics
 from holescan.errors import InputError
 
 _log = logging.getLogger(__name__)
 
-__all__ = ["camera_from_fov", "openni2_library"]
+__all__ = [
+    "FramePairer",
+    "RawFrame",
+    "camera_from_fov",
+    "copy_frame",
+    "error_text",
+    "openni2_library",
+    "openni_error_class",
+]
 
 _LIBRARY_NAME: Final = "libOpenNI2.so.0"
 _LIBRARY_DIRS: Final = (
@@ -32,8 +40,6 @@ _LIBRARY_DIRS: Final = (
     "/usr/lib",
     "/usr/local/lib",
 )
-_PIXEL_DEPTH_1_MM: Final = 100
-_PIXEL_RGB888: Final = 200
 _init_lock = threading.Lock()
 
 
@@ -73,12 +79,12 @@ def openni2_library() -> Any:
         try:
             openni2.initialize(dirs)
         except (InitializationError, OpenNIError) as err:
-            raise SensorError(f"OpenNI2 failed to initialise: {_message(err)}") from err
+            raise SensorError(f"OpenNI2 failed to initialise: {error_text(err)}") from err
         _log.debug("OpenNI2 %s initialised from %s", openni2.get_version(), dirs[0])
         return openni2
 
 
-def _message(err: BaseException) -> str:
+def error_text(err: BaseException) -> str:
     """The library's text from an OpenNIError (code, message, logfile) or any exception."""
     if len(err.args) >= 2:
         msg = err.args[1]
@@ -87,7 +93,8 @@ def _message(err: BaseException) -> str:
     return str(err)
 
 
-def _openni_error() -> type[Exception]:
+def openni_error_class() -> type[Exception]:
+    """The bindings' ``OpenNIError`` (imported when first needed: the bindings are optional)."""
     from openni.utils import OpenNIError
 
     return OpenNIError  # type: ignore[no-any-return]
@@ -111,7 +118,7 @@ def camera_from_fov(width: int, height: int, hfov: float, vfov: float) -> Camera
 
 
 @dataclass(frozen=True)
-class _Raw:
+class RawFrame:
     """One frame copied out of OpenNI2."""
 
     index: int  # OpenNI frameIndex
@@ -120,7 +127,7 @@ class _Raw:
     pixels: npt.NDArray[np.uint8] | npt.NDArray[np.uint16]
 
 
-def _copy_frame(frame: Any, width: int, height: int, channels: int, t_mono_ns: int) -> _Raw:
+def copy_frame(frame: Any, width: int, height: int, channels: int, t_mono_ns: int) -> RawFrame:
     """Copy an OpenNI VideoFrame's pixels (honouring its stride) into a new array."""
     if frame.width != width or frame.height != height:
         raise ValueError(f"frame is {frame.width}x{frame.height}, stream is {width}x{height}")
@@ -136,19 +143,19 @@ def _copy_frame(frame: Any, width: int, height: int, channels: int, t_mono_ns: i
         pixels: Any = rows.copy().view("<u2").astype(np.uint16, copy=False)
     else:
         pixels = rows.reshape(height, width, channels).copy()
-    return _Raw(int(frame.frameIndex), int(frame.timestamp), t_mono_ns, pixels)
+    return RawFrame(int(frame.frameIndex), int(frame.timestamp), t_mono_ns, pixels)
 
 
-class _Pairer:
+class FramePairer:
     """Match depth and colour frames whose timestamps lie within ``tolerance_us``."""
 
     def __init__(self, tolerance_us: int) -> None:
         self.tolerance_us = tolerance_us
-        self.depth: deque[_Raw] = deque()
-        self.image: deque[_Raw] = deque()
+        self.depth: deque[RawFrame] = deque()
+        self.image: deque[RawFrame] = deque()
         self.dropped = 0
 
-    def push(self, raw: _Raw, *, is_depth: bool) -> list[tuple[_Raw, _Raw]]:
+    def push(self, raw: RawFrame, *, is_depth: bool) -> list[tuple[RawFrame, RawFrame]]:
         (self.depth if is_depth else self.image).append(raw)
         pairs = []
         while self.depth and self.image:

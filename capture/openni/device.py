@@ -26,20 +26,19 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from holescan.capture._errors import SensorError
 from holescan.capture._frame import Frame
-from holescan.capture._oni import OniInfo, scan_oni
-from holescan.capture._openni2lib import (
-    _PIXEL_DEPTH_1_MM,
-    _PIXEL_RGB888,
-    _copy_frame,
-    _message,
-    _openni_error,
-    _Pairer,
-    camera_from_fov,
-    openni2_library,
-)
 from holescan.capture._usb import XTION_VENDOR_ID, find_xtion
+from holescan.capture.errors import SensorError
+from holescan.capture.openni.library import (
+    FramePairer,
+    camera_from_fov,
+    copy_frame,
+    error_text,
+    openni2_library,
+    openni_error_class,
+)
+from holescan.capture.openni.oniformat import ONI_PIXEL_FORMAT_DEPTH_1_MM, ONI_PIXEL_FORMAT_RGB888
+from holescan.capture.openni.oniscan import OniInfo, scan_oni
 from holescan.detect import CameraIntrinsics
 from holescan.errors import HolescanError, InputError
 
@@ -95,7 +94,7 @@ class _OpenNISource(abc.ABC):
         if self._device is not None:
             return
         lib = openni2_library()
-        openni_error = _openni_error()
+        openni_error = openni_error_class()
         device = self._open_device(lib)
         self._lib, self._device = lib, device
         try:
@@ -108,7 +107,7 @@ class _OpenNISource(abc.ABC):
             self._color.start()
         except openni_error as err:
             self.close()
-            raise self._error(f"{self._describe()}: {_message(err)}") from err
+            raise self._error(f"{self._describe()}: {error_text(err)}") from err
         except BaseException:
             self.close()
             raise
@@ -118,28 +117,28 @@ class _OpenNISource(abc.ABC):
         lib = self._lib
         # After OpenNI2 was unloaded (at interpreter exit) every handle is already closed.
         alive = lib is not None and lib.is_initialized()
-        openni_error = _openni_error() if lib is not None else Exception
+        openni_error = openni_error_class() if lib is not None else Exception
         for stream in (self._depth, self._color):
             if stream is not None and alive and stream:  # a false handle is closed
                 try:
                     stream.stop()
                     stream.close()
                 except openni_error as err:
-                    _log.warning("closing a stream of %s: %s", self._describe(), _message(err))
+                    _log.warning("closing a stream of %s: %s", self._describe(), error_text(err))
         self._depth = self._color = None
         if self._device is not None and alive and self._device:
             try:
                 self._device.close()
             except openni_error as err:
-                _log.warning("closing %s: %s", self._describe(), _message(err))
+                _log.warning("closing %s: %s", self._describe(), error_text(err))
         self._device = None
 
     def _check_modes(self) -> None:
         """Both streams are the same size and in the pixel formats Frame needs."""
         dm, cm = self._depth.get_video_mode(), self._color.get_video_mode()
-        if int(dm.pixelFormat.value) != _PIXEL_DEPTH_1_MM:
+        if int(dm.pixelFormat.value) != ONI_PIXEL_FORMAT_DEPTH_1_MM:
             raise self._error(f"{self._describe()}: depth is {dm.pixelFormat}, need DEPTH_1_MM")
-        if int(cm.pixelFormat.value) != _PIXEL_RGB888:
+        if int(cm.pixelFormat.value) != ONI_PIXEL_FORMAT_RGB888:
             raise self._error(f"{self._describe()}: colour is {cm.pixelFormat}, need RGB888")
         if (dm.resolutionX, dm.resolutionY) != (cm.resolutionX, cm.resolutionY):
             raise self._error(
@@ -161,9 +160,9 @@ class _OpenNISource(abc.ABC):
         if self._device is None:
             raise self._error(f"{self._describe()} is not open: use it in a with block")
         lib, depth, color = self._lib, self._depth, self._color
-        openni_error = _openni_error()
+        openni_error = openni_error_class()
         w, h = self._size
-        pairer = _Pairer(tolerance_us=500_000 // self._fps)
+        pairer = FramePairer(tolerance_us=500_000 // self._fps)
         counts = [0, 0]
         extra = 0
         clock_start: tuple[int, int] | None = None  # (monotonic ns, sensor us) for pacing
@@ -173,17 +172,17 @@ class _OpenNISource(abc.ABC):
             try:
                 ready = lib.wait_for_any_stream([depth, color], self.timeout_s)
             except openni_error as err:
-                raise self._error(f"{self._describe()}: {_message(err)}") from err
+                raise self._error(f"{self._describe()}: {error_text(err)}") from err
             if ready is None:
                 raise self._stalled(counts)
             is_depth = ready is depth
             try:
                 vf = ready.read_frame()
             except openni_error as err:
-                raise self._error(f"{self._describe()}: {_message(err)}") from err
+                raise self._error(f"{self._describe()}: {error_text(err)}") from err
             t_mono_ns = time.monotonic_ns()
             try:
-                raw = _copy_frame(vf, w, h, 1 if is_depth else 3, t_mono_ns)
+                raw = copy_frame(vf, w, h, 1 if is_depth else 3, t_mono_ns)
             except ValueError as err:
                 raise self._error(f"{self._describe()}: {err}") from err
             finally:
@@ -282,8 +281,8 @@ class OniSource(_OpenNISource):
     def _open_device(self, lib: Any) -> Any:
         try:
             return lib.Device.open_file(os.fsencode(self.path))
-        except _openni_error() as err:
-            raise InputError(f"{self.path}: OpenNI2 cannot play it: {_message(err)}") from err
+        except openni_error_class() as err:
+            raise InputError(f"{self.path}: OpenNI2 cannot play it: {error_text(err)}") from err
 
     def _configure(self, device: Any, depth: Any, color: Any) -> None:
         device.playback.repeat = True  # stop at the frame count instead (FIELD-NOTES.md)
@@ -373,8 +372,8 @@ class OpenNI2Device(_OpenNISource):
     def _open_device(self, lib: Any) -> Any:
         try:
             device = lib.Device(self.uri.encode() if self.uri else None)
-        except _openni_error() as err:
-            raise SensorError(f"OpenNI2 cannot open {self._describe()}: {_message(err)}") from err
+        except openni_error_class() as err:
+            raise SensorError(f"OpenNI2 cannot open {self._describe()}: {error_text(err)}") from err
         if device.is_file():
             device.close()
             raise InputError(f"{self.uri} is a recording: use OniSource")
@@ -383,7 +382,7 @@ class OpenNI2Device(_OpenNISource):
     def _configure(self, device: Any, depth: Any, color: Any) -> None:
         lib = self._lib
         w, h, fps = self._mode
-        for stream, fmt in ((depth, _PIXEL_DEPTH_1_MM), (color, _PIXEL_RGB888)):
+        for stream, fmt in ((depth, ONI_PIXEL_FORMAT_DEPTH_1_MM), (color, ONI_PIXEL_FORMAT_RGB888)):
             modes = stream.get_sensor_info().videoModes
             match = [
                 m

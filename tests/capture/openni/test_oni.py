@@ -18,7 +18,7 @@ from holescan.detect import CameraIntrinsics
 from holescan.errors import InputError
 
 CAM = CameraIntrinsics(64, 48, 57.3, 58.1, 31.0, 24.5)
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 
 
 def make_frames(n: int, cam: CameraIntrinsics = CAM, seed: int = 0, t0_ns: int = 5_000_000_000):
@@ -339,12 +339,9 @@ def test_export_oni_continues_time_across_a_sensor_clock_reset(tmp_path: Path) -
 
 
 def test_export_oni_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    import argparse
+    from holescan.cli import build_parser
 
-    from holescan import _cmd_export_oni
-
-    parser = argparse.ArgumentParser(prog="holescan")
-    _cmd_export_oni.register(parser.add_subparsers(dest="verb", required=True))
+    parser = build_parser()
     log = write_flight_log(tmp_path / "cli", make_frames(3))
     out = tmp_path / "cli.oni"
     args = parser.parse_args(["export-oni", str(log), str(out), "--fps", "15"])

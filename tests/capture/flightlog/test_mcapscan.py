@@ -25,7 +25,7 @@ from holescan.capture import (
     scan_records,
 )
 from holescan.errors import HolescanError
-from tests.capture.test_mcaplog import (
+from tests.capture.flightlog.test_mcaplog import (
     SMALL,
     T0_UNIX_NS,
     frames_equal,

@@ -42,14 +42,13 @@ from holescan.capture import (
     read_flight_log,
     recover_log,
 )
-from holescan.capture._mcapdetections import decode_detection, detection_json
-from holescan.capture._mcaplog import log_file_path
+from holescan.capture.flightlog import decode_detection, detection_json, log_file_path
 from holescan.detect import CameraIntrinsics, Detection, FeatureScores
 from holescan.errors import HolescanError, InputError
 from holescan.geotag import CameraMount, Hole, VehiclePose
 from holescan.missions import mavlink as mavlink2
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 SMALL = CameraIntrinsics(80, 60, 71.3, 71.3, 39.5, 29.5)
 VGA = CameraIntrinsics.xtion()
 T0_UNIX_NS = 1_750_000_000_123_456_789
@@ -652,7 +651,7 @@ _CHILD = textwrap.dedent(
     """
     import sys, time
     from holescan.capture import FlightLogWriter
-    from tests.capture.test_mcaplog import VGA, make_frame
+    from tests.capture.flightlog.test_mcaplog import VGA, make_frame
 
     w = FlightLogWriter(sys.argv[1], VGA)
     t0 = time.monotonic()
@@ -750,7 +749,7 @@ _DISK_FULL_CHILD = textwrap.dedent(
     """
     import json, resource, signal, sys, time
     from holescan.capture import FlightLogError, FlightLogWriter, LogOptions
-    from tests.capture.test_mcaplog import SMALL, make_frame
+    from tests.capture.flightlog.test_mcaplog import SMALL, make_frame
 
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # writes past the limit fail with EFBIG
     resource.setrlimit(resource.RLIMIT_FSIZE, (300_000, 300_000))
