@@ -36,6 +36,14 @@ class MavConnection(Protocol):
 
     def recv_msg(self) -> Any: ...
 
+    def recv(self, n: int | None = None) -> bytes:
+        """Raw bytes from the link (a datagram's worth on UDP), b"" when none are waiting."""
+        ...
+
+    def post_message(self, msg: Any) -> None:
+        """Account a message parsed outside pymavlink (sequence losses, last messages)."""
+        ...
+
     def recv_match(
         self,
         condition: str | None = None,
