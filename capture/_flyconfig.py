@@ -58,66 +58,6 @@ _log = logging.getLogger(__name__)
 
 SensorKind = Literal["openni2", "oni", "mcap", "sim"]
 
-# key -> (type(s), default) per table; None default = optional.
-_NUM = (int, float)
-_RENAMED = {
-    "announce_min_score": "the gate now takes a probability, announce_min_p_hole "
-    "(README, 'What is announced'; p_hole 0.5 is a best score of 0.37)",
-}
-_TOP: dict[str, tuple[tuple[type, ...], Any]] = {
-    "sensor": ((str,), "openni2"),
-    "mavlink": ((str,), None),
-    "baud": ((int,), 921_600),
-    "log_dir": ((str,), None),
-    "gcs": ((str,), None),
-    "sysid": ((int,), 1),
-    "duration_s": (_NUM, None),
-    "max_frames": ((int,), None),
-}
-_TABLES: dict[str, dict[str, tuple[tuple[type, ...], Any]]] = {
-    "capture": {
-        "frame_timeout_s": (_NUM, 3.0),
-        "retry_backoff_s": ((list,), [0.5, 1.0, 2.0, 4.0, 8.0]),
-        "startup_sync_s": (_NUM, 3.0),
-        "pose_wait_s": (_NUM, 0.15),
-        "health_period_s": (_NUM, 1.0),
-        "usb_reset": ((bool,), True),
-        "openni_uri": ((str,), None),
-        "realtime": ((bool,), True),
-    },
-    "detect": {
-        "mode": ((str,), "default"),
-        "searcher": ((str,), "human"),
-        "superpixels": ((int,), 9),
-        "min_score": (_NUM, None),
-        "max_range_m": (_NUM, None),
-    },
-    "mount": {
-        "roll_deg": (_NUM, 0.0),
-        "pitch_deg": (_NUM, -90.0),
-        "yaw_deg": (_NUM, 0.0),
-        "offset_m": ((list,), [0.0, 0.0, 0.0]),
-        "attitude_sigma_deg": (_NUM, 1.0),
-    },
-    "log": {
-        "compression": ((str,), "zstd"),
-        "chunk_size": ((int,), 1 << 20),
-        "max_file_bytes": ((int,), 1 << 30),
-        "max_file_s": (_NUM, 60.0),
-        "sync_interval_s": (_NUM, 1.0),
-        "max_queued_frames": ((int,), 60),
-        "max_queued_messages": ((int,), 20_000),
-    },
-    "holes": {
-        "announce_min_p_hole": (_NUM, AnnounceGate.min_p_hole),
-        "announce_min_sightings": ((int,), AnnounceGate.min_sightings),
-        "announce_min_span_s": (_NUM, AnnounceGate.min_span_s),
-        "card_bytes_per_s": (_NUM, 1000.0),
-        "rel_alt_m": (_NUM, 10.0),
-        "clearance_m": (_NUM, 5.0),
-    },
-}
-
 
 @dataclass(frozen=True)
 class SensorSpec:
@@ -201,6 +141,81 @@ class FlyConfig:
             max_frames=self.max_frames,
             config_record=dict(self.record),
         )
+
+
+# key -> (type(s), default) per table; None default = optional. A default the daemon, the log
+# writer or this module's FlyConfig also has is taken from there: each default is written once.
+_NUM = (int, float)
+_RENAMED = {
+    "announce_min_score": "the gate now takes a probability, announce_min_p_hole "
+    "(README, 'What is announced'; p_hole 0.5 is a best score of 0.37)",
+}
+
+
+def _default(cls: type[Any], name: str) -> Any:
+    """The default of dataclass ``cls``'s field ``name`` (a list for a tuple, as TOML has)."""
+    (f,) = (f for f in dataclasses.fields(cls) if f.name == name)
+    value = f.default_factory() if f.default_factory is not dataclasses.MISSING else f.default
+    return list(value) if isinstance(value, tuple) else value
+
+
+def _from(cls: type[Any], types: tuple[type, ...], name: str) -> tuple[tuple[type, ...], Any]:
+    return (types, _default(cls, name))
+
+
+_TOP: dict[str, tuple[tuple[type, ...], Any]] = {
+    "sensor": ((str,), "openni2"),
+    "mavlink": ((str,), None),
+    "baud": _from(FlyConfig, (int,), "baud"),
+    "log_dir": ((str,), None),
+    "gcs": ((str,), None),
+    "sysid": _from(FlyConfig, (int,), "sysid"),
+    "duration_s": (_NUM, None),
+    "max_frames": ((int,), None),
+}
+_TABLES: dict[str, dict[str, tuple[tuple[type, ...], Any]]] = {
+    "capture": {
+        "frame_timeout_s": _from(FlightConfig, _NUM, "frame_timeout_s"),
+        "retry_backoff_s": _from(FlightConfig, (list,), "retry_backoff_s"),
+        "startup_sync_s": _from(FlightConfig, _NUM, "startup_sync_s"),
+        "pose_wait_s": _from(FlightConfig, _NUM, "pose_wait_s"),
+        "health_period_s": _from(FlightConfig, _NUM, "health_period_s"),
+        "usb_reset": _from(FlyConfig, (bool,), "usb_reset"),
+        "openni_uri": ((str,), None),
+        "realtime": _from(FlyConfig, (bool,), "realtime"),
+    },
+    "detect": {
+        "mode": ((str,), "default"),
+        "searcher": ((str,), "human"),
+        "superpixels": ((int,), 9),
+        "min_score": (_NUM, None),
+        "max_range_m": (_NUM, None),
+    },
+    "mount": {
+        "roll_deg": (_NUM, 0.0),
+        "pitch_deg": (_NUM, -90.0),
+        "yaw_deg": (_NUM, 0.0),
+        "offset_m": ((list,), [0.0, 0.0, 0.0]),
+        "attitude_sigma_deg": _from(FlightConfig, _NUM, "attitude_sigma_deg"),
+    },
+    "log": {
+        "compression": _from(LogOptions, (str,), "compression"),
+        "chunk_size": _from(LogOptions, (int,), "chunk_size"),
+        "max_file_bytes": _from(LogOptions, (int,), "max_file_bytes"),
+        "max_file_s": _from(LogOptions, _NUM, "max_file_s"),
+        "sync_interval_s": _from(LogOptions, _NUM, "sync_interval_s"),
+        "max_queued_frames": _from(LogOptions, (int,), "max_queued_frames"),
+        "max_queued_messages": _from(LogOptions, (int,), "max_queued_messages"),
+    },
+    "holes": {
+        "announce_min_p_hole": (_NUM, AnnounceGate.min_p_hole),
+        "announce_min_sightings": ((int,), AnnounceGate.min_sightings),
+        "announce_min_span_s": (_NUM, AnnounceGate.min_span_s),
+        "card_bytes_per_s": _from(FlyConfig, _NUM, "hole_card_bytes_per_s"),
+        "rel_alt_m": _from(FlyConfig, _NUM, "hole_rel_alt_m"),
+        "clearance_m": _from(FlyConfig, _NUM, "hole_clearance_m"),
+    },
+}
 
 
 TableSpec = Mapping[str, tuple[tuple[type, ...], Any]]

@@ -48,7 +48,7 @@ from holescan.capture.errors import (
     TelemetryTimeoutError,
 )
 from holescan.geotag import VehiclePose
-from holescan.missions import mavlink, open_link
+from holescan.missions import MavConnection, mavlink, open_link
 
 __all__ = [
     "COMPANION_COMPONENT",
@@ -165,7 +165,7 @@ class Telemetry(RateRequests):
         self._cmd_retries = command_retries
         self._on_message = on_message
 
-        self._conn: Any = None
+        self._conn: MavConnection | None = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self._send_lock = threading.Lock()
@@ -192,7 +192,7 @@ class Telemetry(RateRequests):
 
     def __enter__(self) -> Telemetry:
         try:
-            self._conn = open_link(
+            conn = open_link(
                 self.connection,
                 baud=self._baud,
                 source_system=self._want_sysid if self._want_sysid is not None else 255,
@@ -201,8 +201,9 @@ class Telemetry(RateRequests):
             )
         except Exception as err:  # pymavlink raises OSError, SerialException, ValueError...
             raise TelemetryError(f"cannot open MAVLink link {self.connection!r}: {err}") from err
+        self._conn = conn
         if self._signing_key is not None:  # unsigned or badly signed packets: bad packets
-            self._conn.setup_signing(self._signing_key, sign_outgoing=True)
+            conn.setup_signing(self._signing_key, sign_outgoing=True)
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, name="telemetry-rx", daemon=True)
         self._thread.start()
@@ -327,7 +328,7 @@ class Telemetry(RateRequests):
     # -- receiver thread -------------------------------------------------------------------
 
     def _run(self) -> None:
-        conn = self._conn
+        conn = self._link
         kind = type(conn).__name__
         stream: MavlinkStream | None = None
         if kind in _STREAM_LINKS or kind in _DATAGRAM_LINKS:
@@ -361,7 +362,7 @@ class Telemetry(RateRequests):
                 except Exception:  # one bad message must not kill the link
                     _log.exception("failed to handle %s", msg.get_type())
 
-    def _receive(self, conn: Any, stream: MavlinkStream | None) -> list[Any]:
+    def _receive(self, conn: MavConnection, stream: MavlinkStream | None) -> list[Any]:
         """Messages now available: a datagram's or a read's worth."""
         if stream is None:
             msg = conn.recv_msg()
@@ -379,7 +380,7 @@ class Telemetry(RateRequests):
 
     def _send_heartbeat(self) -> None:
         with self._send_lock:
-            self._conn.mav.heartbeat_send(
+            self._link.mav.heartbeat_send(
                 mavlink.MAV_TYPE_ONBOARD_CONTROLLER,
                 mavlink.MAV_AUTOPILOT_INVALID,
                 0,
@@ -390,7 +391,7 @@ class Telemetry(RateRequests):
     def _send_timesync(self) -> None:
         with self._send_lock:
             t0 = time.monotonic_ns()
-            self._conn.mav.timesync_send(0, t0)
+            self._link.mav.timesync_send(0, t0)
         self._state.timesync_request(t0)
 
     def _notify(self) -> None:
@@ -440,9 +441,10 @@ class Telemetry(RateRequests):
         if self._want_compid is not None and src[1] != self._want_compid:
             return
         with self._send_lock:
-            self._conn.target_system, self._conn.target_component = src
-            self._conn.mav.srcSystem = src[0]  # a companion takes its vehicle's system id
-            self._conn.mav.srcComponent = COMPANION_COMPONENT
+            link = self._link
+            link.target_system, link.target_component = src
+            link.mav.srcSystem = src[0]  # a companion takes its vehicle's system id
+            link.mav.srcComponent = COMPANION_COMPONENT
         with self._cond:
             self._target = src
             self._cond.notify_all()
@@ -475,13 +477,13 @@ class Telemetry(RateRequests):
     def _on_timesync(self, msg: Any, t_mono_ns: int) -> None:
         if msg.tc1 == 0:  # the autopilot asks us: answer with our clock
             with self._send_lock:
-                self._conn.mav.timesync_send(time.monotonic_ns(), msg.ts1)
+                self._link.mav.timesync_send(time.monotonic_ns(), msg.ts1)
             return
         self._state.timesync_reply(msg, t_mono_ns)
 
     def _on_command_ack(self, msg: Any) -> None:
         target = (getattr(msg, "target_system", 0), getattr(msg, "target_component", 0))
-        ours = (self._conn.mav.srcSystem, COMPANION_COMPONENT)
+        ours = (self._link.mav.srcSystem, COMPANION_COMPONENT)
         if target != (0, 0) and target != ours:  # an answer to someone else's command
             return
         with self._cond:

@@ -9,12 +9,13 @@ import math
 import os
 import threading
 import time
+from collections import deque
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
 
 from holescan.capture.errors import TelemetryError, TelemetryTimeoutError
-from holescan.missions import mavlink
+from holescan.missions import MavConnection, mavlink
 
 __all__ = [
     "RateMethod",
@@ -57,7 +58,7 @@ def read_signing_key(path: str | os.PathLike[str]) -> bytes:
 class RateRequests(abc.ABC):
     """Commands and message rates; the receiver thread fills ``_acks`` from COMMAND_ACKs."""
 
-    _conn: Any
+    _conn: MavConnection | None
     _cond: threading.Condition
     _send_lock: threading.Lock
     _acks: dict[int, int]
@@ -67,8 +68,16 @@ class RateRequests(abc.ABC):
     _target: tuple[int, int] | None
     _last_hb_ns: int | None
     _last_rate_request_ns: int
-    _arrivals: dict[str, Any]
+    _arrivals: dict[str, deque[int]]
     rate_method: RateMethod
+
+    @property
+    def _link(self) -> MavConnection:
+        """The open connection; :class:`TelemetryError` once the link is closed."""
+        conn = self._conn
+        if conn is None:
+            raise TelemetryError("telemetry link is not open (use it as a context manager)")
+        return conn
 
     @abc.abstractmethod
     def _require_target(self) -> tuple[int, int]:
@@ -86,7 +95,7 @@ class RateRequests(abc.ABC):
             with self._cond:
                 self._acks.pop(command, None)
             with self._send_lock:
-                self._conn.mav.command_long_send(sysid, compid, command, attempt, *p)
+                self._link.mav.command_long_send(sysid, compid, command, attempt, *p)
             deadline = time.monotonic() + self._cmd_timeout_s
             with self._cond:
                 while True:
@@ -152,7 +161,7 @@ class RateRequests(abc.ABC):
         for _ in range(2):  # no acknowledgement exists: send twice against loss
             for stream, hz in streams.items():
                 with self._send_lock:
-                    self._conn.mav.request_data_stream_send(sysid, compid, stream, hz, int(hz > 0))
+                    self._link.mav.request_data_stream_send(sysid, compid, stream, hz, int(hz > 0))
 
     def _rerequest_rates_soon(self) -> None:
         """Ask for the rates again from another thread (the ACKs come through this one)."""

@@ -21,7 +21,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from holescan.capture.errors import PoseUnavailable
-from holescan.geotag import VehiclePose
+from holescan.geotag import LocalFrame, VehiclePose
 
 __all__ = [
     "AttitudeSample",
@@ -30,9 +30,6 @@ __all__ = [
     "PositionSample",
     "quat_from_euler",
 ]
-
-_WGS84_A = 6_378_137.0
-_WGS84_E2 = 6.694379990141317e-3
 
 
 @dataclass(frozen=True)
@@ -318,20 +315,13 @@ def _lerp_position(a: PositionSample, b: PositionSample, f: float) -> PositionSa
 
 
 def _dr(s: PositionSample, dt_ns: int) -> PositionSample:
-    """Dead-reckon ``dt_ns`` ahead at constant NED velocity on the WGS84 ellipsoid."""
+    """Dead-reckon ``dt_ns`` ahead at constant NED velocity, in the local frame at ``s``."""
     dt = dt_ns / 1e9
-    lat = math.radians(s.lat_deg)
-    k = 1.0 - _WGS84_E2 * math.sin(lat) ** 2
-    m = _WGS84_A * (1.0 - _WGS84_E2) / k**1.5  # meridian radius of curvature
-    n = _WGS84_A / math.sqrt(k)  # prime vertical radius
-    h = s.alt_m
-    dlat = s.vn * dt / (m + h)
-    dlon = s.ve * dt / ((n + h) * max(math.cos(lat), 1e-9))
-    lon = (s.lon_deg + math.degrees(dlon) + 180.0) % 360.0 - 180.0
+    lat, lon = LocalFrame(s.lat_deg, s.lon_deg, s.alt_m).to_geodetic(s.ve * dt, s.vn * dt)
     return PositionSample(
         t_boot_ns=s.t_boot_ns + dt_ns,
-        lat_deg=s.lat_deg + math.degrees(dlat),
-        lon_deg=lon,
+        lat_deg=float(lat),
+        lon_deg=float(lon),
         alt_m=s.alt_m - s.vd * dt,
         rel_alt_m=s.rel_alt_m - s.vd * dt,
         vn=s.vn,
