@@ -36,6 +36,14 @@ def group_members(pgid: int) -> list[int]:
     return out
 
 
+#: Children leave within ~0.1 s of the daemon (the worker polls its parent every 0.1 s): a
+#: process still there after 10 s (100 times that) is an orphan, not a slow machine.
+GONE_S = 10.0
+#: ``fly`` ends ~0.6 s after SIGTERM/SIGINT (detector drained, log closed); systemd waits
+#: 90 s before it kills. More than 10 s is a hang, not a busy machine.
+STOP_S = 10.0
+
+
 def wait_gone(pgid: int, timeout_s: float) -> float:
     """Seconds until no process of the group is left (raises after ``timeout_s``)."""
     t0 = time.monotonic()
@@ -83,10 +91,10 @@ def test_signal_to_the_whole_group_ends_the_flight_in_seconds(
         _out, err = proc.communicate()
         pytest.fail(f"{sig.name} to the group: still running after 30 s:\n{err[-3000:]}")
     stop_s = time.monotonic() - t0
-    gone_s = wait_gone(proc.pid, 2.0)
+    gone_s = wait_gone(proc.pid, GONE_S)
     print(f"\n{sig.name} to the group: flight ended in {stop_s:.2f} s, all gone +{gone_s:.2f} s")
     assert proc.returncode == 0, err[-3000:]
-    assert stop_s < 5.0
+    assert stop_s < STOP_S
     assert f"{sig.name}: finishing the flight" in err
     assert "Traceback" not in err and "KeyboardInterrupt" not in err, err[-3000:]
     files = sorted(logs.glob("*.mcap"))
@@ -103,7 +111,7 @@ def test_sigkill_of_the_daemon_leaves_no_process_behind(tmp_path: Path) -> None:
     assert len(members) >= 3  # daemon, detection worker, resource tracker
     proc.send_signal(signal.SIGKILL)
     proc.communicate(timeout=10)
-    gone_s = wait_gone(proc.pid, 2.0)
+    gone_s = wait_gone(proc.pid, GONE_S)
     print(f"\nSIGKILL: {len(members) - 1} child processes gone {gone_s:.2f} s after the daemon")
     # The log is recoverable up to its last synced chunk.
     info = log_info(sorted(logs.glob("*.mcap")), allow_truncated=True)
@@ -130,7 +138,7 @@ def test_worker_exits_when_its_parent_dies_without_prctl(tmp_path: Path) -> None
     )  # fmt: skip
     out, _ = proc.communicate(timeout=120)
     worker_pid = int(out.split()[0])
-    wait_gone(proc.pid, 2.0)
+    wait_gone(proc.pid, GONE_S)
     assert (
         not Path(f"/proc/{worker_pid}").exists()
         or "Z" in Path(f"/proc/{worker_pid}/stat").read_text().split(")")[1][:3]

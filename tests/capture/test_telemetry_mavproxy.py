@@ -193,12 +193,14 @@ def test_silent_link_refuses_poses_quickly(flight: Flight) -> None:
         t0 = time.monotonic()
         with pytest.raises(PoseUnavailable, match="old"):
             tel.pose_at_mono(time.monotonic_ns(), wait_s=0.1)
-        assert time.monotonic() - t0 < 0.5
+        # It waits its 0.1 s, not for telemetry that does not come: 10x that is a hang.
+        assert time.monotonic() - t0 < 1.0
         with pytest.raises(PoseUnavailable):
             tel.pose_at_mono(time.monotonic_ns())
     finally:
         sim.silent = False
-    deadline = time.monotonic() + 3.0
+    # Messages arrive at 10-50 Hz: poses are back within ~0.1 s; 10 s means they never are.
+    deadline = time.monotonic() + 10.0
     while True:  # telemetry resumes: poses come back
         try:
             tel.pose_at_mono(time.monotonic_ns() - 50 * MS)
@@ -219,7 +221,8 @@ def test_fallback_to_request_data_stream_at_10hz() -> None:
         Telemetry(f"udpin:127.0.0.1:{port}", rates_hz=rates) as tel,
     ):
         assert tel.rate_method == "data_stream"  # no ACK exists: wait for the streams
-        deadline = time.monotonic() + 2.0
+        # The streams start with the first REQUEST_DATA_STREAM (~0.1 s); 10 s: they never do.
+        deadline = time.monotonic() + 10.0
         while sim.rates_hz().get("ATTITUDE") != 10.0:
             assert time.monotonic() < deadline, sim.rates_hz()
             time.sleep(0.01)
@@ -277,7 +280,7 @@ def test_no_autopilot_times_out() -> None:
     t0 = time.monotonic()
     with pytest.raises(TelemetryTimeoutError, match="no autopilot heartbeat"), tel:
         pass
-    assert time.monotonic() - t0 < 2.0
+    assert time.monotonic() - t0 < 5.0  # the 0.5 s timeout holds (10x: it never ends)
     assert isinstance(tel.clock, ClockSync)
     with pytest.raises(PoseUnavailable):
         tel.pose_at_mono(time.monotonic_ns())

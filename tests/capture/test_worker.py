@@ -28,7 +28,10 @@ def test_worker_matches_in_process_detection_and_skips_stale_frames() -> None:
         offer_s = time.perf_counter() - t0
         results = worker.drain(timeout=30.0)
         stats = worker.stats()
-    assert offer_s < 0.5  # offering never waited for detection
+    # Offering never waits for detection: 12 copies into shared memory take ~5 ms. The
+    # bound (hundreds of times that) only catches an offer that hangs on the worker; the
+    # skipped frames below are the evidence that offers outran detection.
+    assert offer_s < 2.0
     assert stats.offered == 12
     assert stats.done + stats.skipped == 12  # every frame either detected or counted skipped
     assert stats.skipped > 0

@@ -714,35 +714,27 @@ def test_sigkilled_writer_loses_at_most_about_a_second(tmp_path: Path) -> None:
     assert lost <= 30  # at most ~1 s at 30 fps
 
 
-def test_writer_keeps_up_at_30_fps(tmp_path: Path) -> None:
+def test_paced_vga_frames_are_all_written_and_enqueueing_never_stalls(tmp_path: Path) -> None:
+    """3 s of VGA frames at 30 fps. How fast the writer is (ms per frame, queue depth) is
+    measured by ``benchmarks/bench_log_writer.py``, not asserted here: a busy machine makes
+    timings fail."""
     frames = [make_frame(i, VGA) for i in range(6)]
-    lateness, calls = [], []
+    calls = []
     with FlightLogWriter(tmp_path / "speed", VGA) as w:
         t0 = time.monotonic()
         for i in range(90):
-            target = t0 + i / 30
-            delay = target - time.monotonic()
+            delay = t0 + i / 30 - time.monotonic()
             if delay > 0:
                 time.sleep(delay)
-            lateness.append(time.monotonic() - target)
             c0 = time.perf_counter()
             w.write_frame(frames[i % 6], time.time_ns())
             calls.append(time.perf_counter() - c0)
-        st = w.stats()
-        depth_at_end = st.queue_depth
     final = w.stats()
-    print(
-        f"VGA RGB-D at 30 fps: writer {final.frame_write_ms_mean:.1f} ms/pair mean, "
-        f"{final.frame_write_ms_max:.1f} ms max; write_frame {1e3 * max(calls):.2f} ms max; "
-        f"loop lateness p50 {1e3 * float(np.median(lateness)):.1f} ms, "
-        f"max {1e3 * max(lateness):.1f} ms; queue max {final.frames_queued_max} frames, "
-        f"{depth_at_end} at the end; {final.bytes_written / 90 / 1e6:.2f} MB/frame"
-    )
     assert final.dropped == {}
     assert final.written["frames"] == 90
-    assert final.frames_queued_max <= 20  # of 60: it never comes close to filling
-    assert max(calls) < 0.05  # enqueueing never stalls capture
-    assert final.frame_write_ms_mean < 33.3  # keeps up with 30 fps
+    # write_frame only stamps and queues (~0.1 ms): 50 ms, hundreds of times that, is a
+    # stall (waiting for the writer), not a slow machine.
+    assert max(calls) < 0.05
 
 
 _DISK_FULL_CHILD = textwrap.dedent(
