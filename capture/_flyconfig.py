@@ -40,6 +40,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from holescan.capture._flightrecords import FlightConfig
+from holescan.capture._mavlink import DEFAULT_BAUD
 from holescan.capture.flightlog.options import LogOptions
 from holescan.detect import DEFAULT, PAPER, SEARCHERS, DetectParams
 from holescan.errors import InputError
@@ -104,7 +105,7 @@ class FlyConfig:
     sensor: SensorSpec
     log_dir: Path
     mavlink: str | None = None
-    baud: int = 921_600
+    baud: int = DEFAULT_BAUD
     gcs: str | None = None
     sysid: int = 1
     duration_s: float | None = None

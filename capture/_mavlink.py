@@ -33,7 +33,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Final
 
 from holescan.capture._clock import ClockSync
 from holescan.capture._mavadapt import is_autopilot_heartbeat
@@ -52,6 +52,7 @@ from holescan.missions import MavConnection, mavlink, open_link
 
 __all__ = [
     "COMPANION_COMPONENT",
+    "DEFAULT_BAUD",
     "DEFAULT_RATES_HZ",
     "MessageCallback",
     "RateMethod",
@@ -62,6 +63,7 @@ __all__ = [
 _log = logging.getLogger(__name__)
 
 COMPANION_COMPONENT = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER  # 191
+DEFAULT_BAUD: Final = 921_600  # the flight controller's TELEM port (also ``fly``'s default)
 
 DEFAULT_RATES_HZ: Mapping[str, float] = {
     "GLOBAL_POSITION_INT": 10.0,
@@ -133,7 +135,7 @@ class Telemetry(RateRequests):
         self,
         connection: str,
         *,
-        baud: int = 921_600,
+        baud: int = DEFAULT_BAUD,
         target_system: int | None = None,
         target_component: int | None = None,
         rates_hz: Mapping[str, float] = DEFAULT_RATES_HZ,
