@@ -11,7 +11,8 @@
     ├── OutputPathError          an output that must not or cannot be written (an InputError)
     └── FlightLogError           a flight log cannot be written or read (an InputError)
         ├── TruncatedLogError        ... it was cut off or damaged before its end
-        └── ChunkDamagedError        ... one chunk's bytes are not a valid chunk
+        ├── ChunkDamagedError        ... one chunk's bytes are not a valid chunk
+        └── RecordError              ... bytes are not the record their header says
 
 Imports nothing of capture's: every module of the package can raise these. Third-party
 errors are wrapped where they happen (``raise FlightLogError(...) from err``).
@@ -28,6 +29,7 @@ __all__ = [
     "FlightLogError",
     "OutputPathError",
     "PoseUnavailable",
+    "RecordError",
     "SensorError",
     "TelemetryError",
     "TelemetryTimeoutError",
@@ -76,3 +78,8 @@ class TruncatedLogError(FlightLogError):
 
 class ChunkDamagedError(FlightLogError):
     """A chunk's bytes are not a valid chunk (bad CRC, cut short, bad compression)."""
+
+
+class RecordError(FlightLogError):
+    """Bytes of a log that are not the record their header says (a damaged record: the
+    scanner skips it and reports the bytes lost)."""

@@ -45,7 +45,7 @@ from mcap.records import (
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType
 
-from holescan.capture.errors import FlightLogError
+from holescan.capture.errors import RecordError
 
 __all__ = [
     "CHUNK_FIELDS",
@@ -56,7 +56,6 @@ __all__ = [
     "MAGIC",
     "MESSAGE_MIN_BYTES",
     "RECORD_HEADER",
-    "RecordError",
     "Summary",
     "compression_type",
     "parse_record",
@@ -103,10 +102,6 @@ _READERS: Final[Mapping[int, Callable[[ReadDataStream], Any]]] = {
 }
 #: Every opcode the spec defines (a record of another opcode is skipped, as it says).
 KNOWN_OPCODES: Final = frozenset({*_READERS, Opcode.MESSAGE})
-
-
-class RecordError(FlightLogError):
-    """Bytes that are not the record their header says (a damaged record)."""
 
 
 def compression_type(name: str) -> CompressionType:

@@ -29,12 +29,11 @@ from mcap.opcode import Opcode
 from mcap.records import Channel, Chunk, McapRecord, Message, Metadata, Schema
 from mcap.stream_reader import breakup_chunk
 
-from holescan.capture.errors import ChunkDamagedError, FlightLogError
+from holescan.capture.errors import ChunkDamagedError, FlightLogError, RecordError
 from holescan.capture.flightlog.format import (
     CHUNK_FIELDS,
     MAGIC,
     RECORD_HEADER,
-    RecordError,
     parse_record,
     read_record_at,
     read_summary,

@@ -46,14 +46,13 @@ from mcap.records import (
 )
 from mcap.stream_reader import breakup_chunk
 
-from holescan.capture.errors import FlightLogError
+from holescan.capture.errors import FlightLogError, RecordError
 from holescan.capture.flightlog.format import (
     CHUNK_FIELDS,
     CHUNK_MIN_BYTES,
     KNOWN_OPCODES,
     MAGIC,
     RECORD_HEADER,
-    RecordError,
     Summary,
     parse_record,
     read_summary,
