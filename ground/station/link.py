@@ -6,7 +6,7 @@ or a serial radio, :class:`VehicleLink` (one thread) takes from the stream:
 * ``STATUSTEXT`` ``HOLE <id> <score> <lat> <lon>`` from the companion computer: a hole,
   at once;
 * the image transmission protocol from component 191 (``DATA_TRANSMISSION_HANDSHAKE`` +
-  ``ENCAPSULATED_DATA``): hole cards, picture and facts (:mod:`missions._holecards`);
+  ``ENCAPSULATED_DATA``): hole cards, picture and facts (:func:`missions.read_card`);
 * ``GLOBAL_POSITION_INT`` / ``ATTITUDE`` from the autopilot: the track (1 point/s kept),
   decoded by capture's one MAVLink adapter (:func:`capture.position_from_global_position_int`);
 * the hole mission of component 191, downloaded by this thread itself (the MAVLink

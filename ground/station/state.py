@@ -124,7 +124,7 @@ class GroundHole:
                 d.setdefault(new, d.pop(old))
         for old, new in _OLD_SECONDS.items():
             if old in d:
-                d.setdefault(new, round(float(d.pop(old)) * _NS_PER_S))
+                d.setdefault(new, _ns_of_seconds(d.pop(old)))
         names = {f.name for f in dataclasses.fields(cls)}
         h = cls(**{k: v for k, v in d.items() if k in names})
         h.t_first_unix_ns, h.t_updated_unix_ns = int(h.t_first_unix_ns), int(h.t_updated_unix_ns)
@@ -147,7 +147,7 @@ class TrackPoint:
     def from_json(cls, row: list[Any], file_format: str = FORMAT) -> TrackPoint:
         """A track row of the state file (``holescan-ground-1``: time in float seconds)."""
         t, lat, lon, rel_alt, yaw = row
-        t_ns = round(float(t) * _NS_PER_S) if file_format == _FORMAT_1 else int(t)
+        t_ns = _ns_of_seconds(t) if file_format == _FORMAT_1 else int(t)
         return cls(t_ns, float(lat), float(lon), float(rel_alt), float(yaw))
 
 
@@ -360,6 +360,16 @@ def _candidates(
         for j in range(len(holes))
         if d[i, j] <= match_m
     ]
+
+
+def _ns_of_seconds(t_s: Any) -> int:
+    """A ``holescan-ground-1`` time (float seconds of ``time.time()``) in ns: to the
+    microsecond, all a float of today's Unix seconds holds.
+
+    >>> _ns_of_seconds(1_700_000_000.25)
+    1700000000250000000
+    """
+    return round(float(t_s) * 1_000_000) * 1000
 
 
 def _opt(v: Any) -> float | None:

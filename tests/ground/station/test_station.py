@@ -58,6 +58,12 @@ def picture(seed: int) -> bytes:
 
 
 def wait_for(cond: Callable[[], bool], timeout_s: float, what: str) -> float:
+    """Poll ``cond`` until true; return the seconds it took.
+
+    Every timeout given is a liveness bound, 10x or more what the wait takes on an idle
+    machine (a STATUSTEXT ~0.05 s, a card and the mission ~2-5 s): reaching it means the
+    thing never came, not that it was slow. How fast is measured by benchmarks/.
+    """
     t0 = time.monotonic()
     while time.monotonic() - t0 < timeout_s:
         if cond():
@@ -200,10 +206,18 @@ def parse_tak(data: list[bytes]) -> list[Any]:
 def test_holes_pictures_files_and_cot(rig: dict[str, Any]) -> None:
     station, server, rx = rig["station"], rig["server"], rig["rx"]
     holes = [hole(1), hole(2, score=0.71, sigma=0.5)]
-    t0 = time.monotonic()
+    first_rev: dict[int, int] = {}  # hole id -> its card revision when the ground first had it
+
+    def on_change(_version: int) -> None:
+        for g in station.state.snapshot()[1]:
+            first_rev.setdefault(g.id, g.card_rev)
+
+    station.state.listeners.append(on_change)
     announce(server, holes)
-    wait_for(lambda: len(station.state.holes) == 2, 2.0, "both STATUSTEXTs")
-    assert time.monotonic() - t0 < 2.0
+    # Liveness only (the latency is benchmarks/bench_station.py's: ~5 ms over loopback):
+    # 20 s is far beyond it, and the holes must come from the STATUSTEXTs, ahead of any card.
+    wait_for(lambda: len(first_rev) == 2, 20.0, "both STATUSTEXTs")
+    assert first_rev == {1: 0, 2: 0}
     wait_for(complete(station, {1, 2}), 30.0, "pictures and the hole mission")
     _, got, _ = station.state.snapshot()
     for g, h in zip(got, holes, strict=True):
@@ -280,7 +294,7 @@ def test_link_cut_for_10_s_loses_no_hole(rig: dict[str, Any]) -> None:
     time.sleep(10.0)
     assert set(station.state.holes) == {1}
     relay.cut = False
-    wait_for(complete(station, {1, 2, 3}), 45.0, "holes 2 and 3 after the cut")
+    wait_for(complete(station, {1, 2, 3}), 60.0, "holes 2 and 3 after the cut")
     assert station.link is not None and station.link.resync_requests >= 1
 
 
@@ -291,7 +305,7 @@ def test_restart_resumes_ids_marks_and_pictures(tmp_path: Path) -> None:
     )
     with GroundStation(opts) as station, HoleMissionServer(f"udpout:127.0.0.1:{port}", 1) as srv:
         announce(srv, [hole(4), hole(5)])
-        wait_for(complete(station, {4, 5}), 30.0, "holes 4, 5")
+        wait_for(complete(station, {4, 5}), 60.0, "holes 4, 5")
         station.mark(4, "visited")
     state = StationState.open(tmp_path / "st")
     assert {h.id: h.mark for h in state.holes.values()} == {4: "visited", 5: "new"}
@@ -328,7 +342,7 @@ def test_bad_link_and_garbage_keep_the_station_going(
         junk.close()
         announce(srv, [hole(1)])
         srv.send_with(lambda mav: mav.statustext_send(5, b"HOLE 99 7.5 999 999"))  # nonsense
-        wait_for(complete(station, {1}), 30.0, "hole 1 despite the garbage")
+        wait_for(complete(station, {1}), 60.0, "hole 1 despite the garbage")
         assert set(station.state.holes) == {1}
     # the CLI: a bad option is one line and exit code 2
     assert (
