@@ -37,6 +37,7 @@ from holescan.capture._outpath import (
     check_folder,
     check_output,
     commit_part,
+    folder_via_part,
     output_via_part,
     part_path,
 )
@@ -215,6 +216,7 @@ __all__ = [
     "export_oni",
     "find_xtion",
     "fly",
+    "folder_via_part",
     "format_report",
     "gps_from_gps_raw_int",
     "holes_geojson_message",

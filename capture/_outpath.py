@@ -15,6 +15,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
+import shutil
 from collections.abc import Collection, Iterable, Iterator
 from pathlib import Path
 from typing import IO
@@ -26,6 +27,7 @@ __all__ = [
     "check_folder",
     "check_output",
     "commit_part",
+    "folder_via_part",
     "output_via_part",
     "part_path",
 ]
@@ -168,15 +170,24 @@ def output_via_part(
     inputs: Iterable[PathLike] = (),
     suffixes: Collection[str] | None = None,
     force: bool = False,
+    fsync: bool = False,
 ) -> Iterator[Path]:
     """Like :func:`atomic_output` for writers that take a file name (cv2, matplotlib):
-    yields the ``.part`` path to write; renamed on success, removed on error."""
+    yields the ``.part`` path to write; renamed on success, removed on error. ``fsync``:
+    flush the written file to the disk before the rename (as :func:`atomic_output` does),
+    for files rewritten while a program runs, that a power cut must not leave empty."""
     p = check_output(path, inputs=inputs, suffixes=suffixes, force=force)
     tmp = part_path(p)
     try:
         yield tmp
         if not tmp.exists():
             raise OutputPathError(f"cannot write {p}: nothing was written")
+        if fsync:
+            fd = os.open(tmp, os.O_RDONLY)
+            try:
+                os.fsync(fd)
+            finally:
+                os.close(fd)
     except OSError as err:
         tmp.unlink(missing_ok=True)
         raise _os_error(p, err) from err
@@ -184,3 +195,36 @@ def output_via_part(
         tmp.unlink(missing_ok=True)
         raise
     commit_part(tmp, p, force=force)
+
+
+@contextlib.contextmanager
+def folder_via_part(path: PathLike, *, inputs: Iterable[PathLike] = ()) -> Iterator[Path]:
+    """A new output folder (a dataset ...), the rule of :func:`output_via_part` for folders:
+    checked at once (an existing ``path`` is refused, never replaced; ``inputs`` must not lie
+    in it; its parent must be writable), then yields ``.NAME.part`` (created, empty; one
+    left by an interrupted run is removed first) to fill, renamed to ``path`` on success,
+    removed with its contents on any error."""
+    p = Path(path)
+    if str(path) == "" or p.name in ("", ".", ".."):
+        raise OutputPathError(f"{str(path)!r} is not a folder name")
+    if p.exists() or p.is_symlink():
+        raise OutputPathError(f"{p} already exists: choose a new folder (it is never replaced)")
+    for i in inputs:
+        if p.resolve() in Path(i).resolve().parents:
+            raise OutputPathError(f"{i} is an input inside {p}: choose another output folder")
+    check_folder(p.parent, for_file=p)
+    tmp = part_path(p)
+    try:
+        if tmp.is_dir() and not tmp.is_symlink():
+            shutil.rmtree(tmp)  # left by an interrupted run
+        tmp.mkdir()
+        yield tmp
+        if p.exists():
+            raise OutputPathError(f"{p} appeared while writing: kept it, output discarded")
+        tmp.rename(p)
+    except OSError as err:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise _os_error(p, err) from err
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise

@@ -57,6 +57,7 @@ from holescan.missions._protocol import (
     connect,
     download_mission,
     upload_mission,
+    waypoint_from_mission_item,
 )
 from holescan.missions._qgcfiles import read_plan, read_wpl, write_plan, write_wpl
 from holescan.missions._sun import (
@@ -163,6 +164,7 @@ __all__ = [
     "sun_windows",
     "sunrise_sunset",
     "upload_mission",
+    "waypoint_from_mission_item",
     "write_geojson",
     "write_gpx",
     "write_hole_file",

@@ -36,6 +36,7 @@ __all__ = [
     "connect",
     "download_mission",
     "upload_mission",
+    "waypoint_from_mission_item",
 ]
 
 log = logging.getLogger(__name__)
@@ -123,6 +124,12 @@ def _waypoint_from_message(msg: Any) -> Waypoint:
         params=(float(msg.param1), float(msg.param2), float(msg.param3), float(msg.param4)),
         autocontinue=bool(msg.autocontinue),
     )
+
+
+def waypoint_from_mission_item(msg: Any) -> Waypoint:
+    """A received MISSION_ITEM_INT (or MISSION_ITEM) as the one item record, degE7 converted
+    here: for code that runs the mission protocol on its own link (the ground station)."""
+    return _waypoint_from_message(msg)
 
 
 def _home_item(home: Waypoint) -> Waypoint:

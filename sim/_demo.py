@@ -219,7 +219,9 @@ class _Ground:
         _, holes, _ = self.station.state.snapshot()
         new = [h for h in holes if h.id not in self._told]
         self._told.update(h.id for h in new)
-        return tuple(f"hole {h.id} score {h.score:.2f} at {h.lat:.7f}, {h.lon:.7f}" for h in new)
+        return tuple(
+            f"hole {h.id} score {h.score:.2f} at {h.lat_deg:.7f}, {h.lon_deg:.7f}" for h in new
+        )
 
     def wait_complete(self, ids: set[int], timeout_s: float) -> bool:
         """Wait until every hole of ``ids`` is at the ground with its picture, in the

@@ -16,7 +16,7 @@ from typing import Any
 
 import pymap3d
 
-from holescan.geotag import Hole
+from holescan.geotag import Hole, nearest_pairs
 from holescan.sim._render import GtBox
 from holescan.sim._sortie import TrueHole
 from holescan.sim._world import RubbleWorld
@@ -108,12 +108,8 @@ def score_holes(
             d = math.hypot(x - t.x_m, y - t.y_m)
             if d <= match_m or opening.contains(Point(x, y)):
                 pairs.append((d, i, j))
-    matched: dict[int, tuple[int, float]] = {}
-    used: set[int] = set()
-    for d, i, j in sorted(pairs):
-        if i not in matched and j not in used:
-            matched[i] = (j, d)
-            used.add(j)
+    matched = nearest_pairs(pairs)
+    used = {j for j, _ in matched.values()}
     rows = []
     for i, t in enumerate(truth):
         frames = in_view.get(t.id, 0)

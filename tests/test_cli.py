@@ -13,7 +13,7 @@ import pytest
 
 from holescan.cli import main
 from holescan.detect import CameraIntrinsics
-from holescan.ground._datasets import Sample, write_dataset
+from holescan.ground import Sample, write_dataset
 
 CAM = CameraIntrinsics.xtion()
 

@@ -72,7 +72,8 @@ def test_an_install_adds_no_import_name_but_holescan(tmp_path: Path) -> None:
     # Every subpackage is inside, with its data files.
     for sub in ("capture", "detect", "geotag", "missions", "ground", "sim", "cli"):
         assert f"holescan/{sub}/__init__.py" in names, sub
-    assert "holescan/ground/station.html" in names
+    assert "holescan/ground/station/station.html" in names
+    assert "holescan/ground/report/report.css" in names
 
 
 def _private_imports(path: Path) -> Iterator[str]:

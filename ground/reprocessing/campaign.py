@@ -1,0 +1,154 @@
+"""Holes merged across the flights of an operation: one id per hole, sightings per flight.
+
+Every frame merged in a flight (:class:`ground.reprocessing.merge.FlightMerger`) also hands its
+sightings, geotagged by that flight's :class:`capture.HolePipeline`, to one campaign-wide
+:class:`geotag.HoleTracker`: the same gate as in flight (position, each sighting's
+uncertainty, the GPS error that drifts between sorties), so a hole seen on two sorties or
+by two vehicles is one hole. Sightings are put on the Unix clock first (each vehicle's
+autopilot boot clock is its own), and flights are merged in the order they started.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from holescan.capture import FrameHoles
+from holescan.geotag import Hole, HoleTracker, LocalFrame, VehiclePose
+from holescan.ground.reprocessing.merge import box_of, read_views
+from holescan.ground.reprocessing.plan import PartitionTask
+from holescan.ground.reprocessing.task import Box, FrameResult, View
+
+__all__ = [
+    "CampaignHole",
+    "CampaignMerge",
+    "FlightSightings",
+    "campaign_summary",
+    "track_coverage",
+]
+
+
+@dataclasses.dataclass(frozen=True)
+class FlightSightings:
+    """One flight's part in a campaign hole: frames it was seen in, first and last seen
+    (Unix ns)."""
+
+    flight: str
+    sightings: int
+    first_seen_unix_ns: int
+    last_seen_unix_ns: int
+
+
+@dataclasses.dataclass(frozen=True)
+class CampaignHole:
+    """A hole of the campaign. ``hole`` is the fused hole (its ``t_first_boot_ns`` and
+    ``t_last_boot_ns`` are Unix ns here); ``flights`` in the order they first saw it."""
+
+    hole: Hole
+    flights: tuple[FlightSightings, ...]
+
+    @property
+    def id(self) -> int:
+        return self.hole.id
+
+    def summary(self) -> dict[str, Any]:
+        h = self.hole
+        return {
+            "id": h.id,
+            "lat_deg": h.lat_deg,
+            "lon_deg": h.lon_deg,
+            "alt_m": h.alt_m,
+            "sigma_h_m": h.sigma_h_m,
+            "score": h.score,
+            "sightings": h.sightings,
+            "major_m": h.major_m,
+            "minor_m": h.minor_m,
+            "first_seen_unix_ns": h.t_first_boot_ns,
+            "last_seen_unix_ns": h.t_last_boot_ns,
+            "flights": [dataclasses.asdict(f) for f in self.flights],
+        }
+
+
+class CampaignMerge:
+    """Feed :meth:`on_frame` every merged frame of every flight (flights in start order)."""
+
+    def __init__(self) -> None:
+        self.tracker = HoleTracker()
+        self.best: dict[int, tuple[PartitionTask, int, Box]] = {}
+        self._seen: dict[int, dict[str, list[int]]] = {}  # id -> flight -> [n, first, last]
+
+    def on_frame(self, flight: str, fr: FrameResult, step: FrameHoles, task: PartitionTask) -> None:
+        if not step.sightings:
+            return
+        t = fr.t_unix_ns
+        sightings = [dataclasses.replace(s, t_boot_ns=t) for s in step.sightings]
+        # one sighting per hole and frame at most; each flight's GPS error is its own
+        for h in self.tracker.update(sightings, source=flight):
+            stats = self._seen.setdefault(h.id, {}).setdefault(flight, [0, t, t])
+            stats[0] += 1
+            stats[1], stats[2] = min(stats[1], t), max(stats[2], t)
+            if h.best_frame_index == fr.index:
+                self.best[h.id] = (task, fr.index, box_of(h.best_box))
+
+    def views(self, ids: set[int]) -> dict[int, View]:
+        """The best views of holes ``ids``, read again from the logs."""
+        return read_views({i: self.best[i] for i in ids if i in self.best})
+
+    def holes(self, min_sightings: int = 1) -> list[CampaignHole]:
+        """The campaign's holes seen at least ``min_sightings`` times, by id."""
+        out = []
+        for h in self.tracker.holes():
+            if h.sightings < min_sightings:
+                continue
+            per = self._seen.get(h.id, {})
+            flights = sorted(
+                (FlightSightings(name, n, first, last) for name, (n, first, last) in per.items()),
+                key=lambda f: f.first_seen_unix_ns,
+            )
+            out.append(CampaignHole(h, tuple(flights)))
+        return out
+
+
+def track_coverage(track: Sequence[VehiclePose]) -> tuple[float, float]:
+    """(length_m, duration_s) of a flight's track (horizontal, poses in time order).
+
+    Examples
+    --------
+    >>> track_coverage([])
+    (0.0, 0.0)
+    """
+    pts = [p for p in track if math.isfinite(p.lat_deg) and math.isfinite(p.lon_deg)]
+    if len(pts) < 2:
+        return 0.0, 0.0
+    frame = LocalFrame(pts[0].lat_deg, pts[0].lon_deg)
+    e, n = frame.to_en([p.lat_deg for p in pts], [p.lon_deg for p in pts])
+    length = float(np.sum(np.hypot(np.diff(e), np.diff(n))))
+    return length, (pts[-1].t_boot_ns - pts[0].t_boot_ns) * 1e-9
+
+
+def campaign_summary(
+    holes: Sequence[CampaignHole], flights: Mapping[str, Sequence[VehiclePose]]
+) -> dict[str, Any]:
+    """The ``holes`` part of a campaign's ``summary.json``, and per flight its coverage
+    (track length and duration), how many holes it saw and how many of those another flight
+    saw too."""
+    per_flight = {}
+    for name, track in flights.items():
+        length, duration = track_coverage(track)
+        per_flight[name] = {
+            "track_length_m": round(length, 1),
+            "track_duration_s": round(duration, 1),
+            "holes_seen": sum(any(f.flight == name for f in h.flights) for h in holes),
+            "also_seen_by_another_flight": sum(
+                any(f.flight == name for f in h.flights) and len(h.flights) > 1 for h in holes
+            ),
+        }
+    return {
+        "holes": [h.summary() for h in holes],
+        "holes_seen_by_several_flights": sum(len(h.flights) > 1 for h in holes),
+        "per_flight": per_flight,
+    }

@@ -1,0 +1,198 @@
+"""Files a reprocessed flight (or a campaign) leaves for the ground crew and for people.
+
+:func:`write_hole_outputs` writes the hole files (``NAME_holes.gpx|.kml|.geojson|.plan``,
+the ground crew's formats, :func:`missions.write_hole_file`) and the HTML report
+(:func:`ground.write_report`); :class:`FlightResult` is one flight's numbers, also
+written as ``NAME_reprocess.json``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from holescan.capture import jsonable, output_via_part
+from holescan.geotag import Hole, VehiclePose
+from holescan.ground.flightholes.views import render_thumbnail
+from holescan.ground.report.page import write_report
+from holescan.ground.reprocessing.options import HoleMatch, ReprocessOptions
+from holescan.missions import HOLE_SUFFIXES, write_hole_file
+
+__all__ = ["FlightResult", "write_hole_outputs"]
+
+_Box = tuple[int, int, int, int]
+
+
+@dataclasses.dataclass(frozen=True)
+class FlightResult:
+    """What reprocessing did for one flight.
+
+    name : the flight's name (log prefix). sources : its log files. outputs : the sidecar
+    MCAP written. files : (kind, path) of the hole files, report and JSON summary.
+    frames_read : complete frames in the log; frames_detected : frames detected and merged;
+    frames_unposed : of those with detections, frames no pose could be found for.
+    holes : every hole (sorted by id); confirmed : seen in >= ``min_sightings`` frames.
+    flight_holes : the log's own final hole list (what the flight found).
+    flight_matches : each confirmed flight hole and the reprocessed hole nearest to it
+        (indices into the confirmed lists); flight_same_ids : pairs with the same id.
+    truncated : files cut off or damaged, in words (read up to their last good chunk).
+    interrupted : stopped early; the outputs hold what was done.
+    partitions, partitions_cached : tasks of this flight, and how many came from the cache.
+    detect_ms_mean : worker time per frame. elapsed_s : wall clock of the whole run up to
+    this flight's end.
+    """
+
+    name: str
+    sources: tuple[Path | str, ...]
+    outputs: tuple[Path, ...]
+    files: tuple[tuple[str, Path], ...]
+    frames_read: int
+    frames_detected: int
+    frames_unposed: int
+    detections: int
+    detect_errors: int
+    holes: tuple[Hole, ...]
+    confirmed: tuple[Hole, ...]
+    flight_holes: tuple[Hole, ...]
+    flight_matches: tuple[HoleMatch, ...]
+    flight_same_ids: int
+    truncated: tuple[str, ...]
+    interrupted: bool
+    partitions: int
+    partitions_cached: int
+    detect_ms_mean: float
+    elapsed_s: float
+
+    @property
+    def frames_per_s(self) -> float:
+        return self.frames_detected / self.elapsed_s if self.elapsed_s > 0 else 0.0
+
+    def summary(self) -> dict[str, Any]:
+        """The numbers, as JSON-ready values."""
+        found = [m for m in self.flight_matches if m.found is not None]
+        return {
+            "flight": self.name,
+            "sources": [str(p) for p in self.sources],
+            "outputs": [str(p) for p in self.outputs],
+            "files": {kind: str(path) for kind, path in self.files},
+            "frames_read": self.frames_read,
+            "frames_detected": self.frames_detected,
+            "frames_unposed": self.frames_unposed,
+            "detections": self.detections,
+            "detect_errors": self.detect_errors,
+            "holes": len(self.holes),
+            "confirmed": len(self.confirmed),
+            "flight_confirmed": len(self.flight_matches),
+            "flight_reproduced": len(found),
+            "flight_same_ids": self.flight_same_ids,
+            "flight_max_offset_m": max((m.distance_m for m in found), default=None),
+            "truncated": list(self.truncated),
+            "interrupted": self.interrupted,
+            "partitions": self.partitions,
+            "partitions_cached": self.partitions_cached,
+            "detect_ms_mean": round(self.detect_ms_mean, 2),
+            "elapsed_s": round(self.elapsed_s, 2),
+            "confirmed_holes": [jsonable(h) for h in self.confirmed],
+        }
+
+    def lines(self) -> list[str]:
+        """A short human summary."""
+        cut = f", {len(self.truncated)} file(s) cut off or damaged" if self.truncated else ""
+        stop = " INTERRUPTED" if self.interrupted else ""
+        found = [m for m in self.flight_matches if m.found is not None]
+        worst = max((m.distance_m for m in found), default=math.nan)
+        out = [
+            f"{self.name}:{stop} {self.frames_detected}/{self.frames_read} frames "
+            f"({self.partitions_cached}/{self.partitions} partitions from the cache){cut}; "
+            f"{len(self.confirmed)} holes seen >= 2 times ({len(self.holes)} in all)",
+            f"  in-flight holes reproduced: {len(found)}/{len(self.flight_matches)}"
+            + (f" (same id {self.flight_same_ids}, farthest {worst:.2f} m)" if found else ""),
+        ]
+        out += [f"  {t}" for t in self.truncated]
+        out += [f"  wrote {path} ({kind})" for kind, path in self.files]
+        out += [f"  wrote {p} (sidecar mcap: open it with the logs)" for p in self.outputs]
+        return out
+
+
+def _hole_files(
+    out: Path,
+    name: str,
+    holes: Sequence[Hole],
+    opts: ReprocessOptions,
+    thumbnails: Mapping[int, bytes],
+    home: tuple[float, float, float] | None,
+    boot_to_unix_ns: int | None,
+) -> list[tuple[str, Path]]:
+    written: list[tuple[str, Path]] = []
+    if not holes:
+        return written
+    for fmt in opts.formats:
+        path = out / f"{name}_holes{HOLE_SUFFIXES[fmt]}"
+        with output_via_part(path, force=True, fsync=True) as tmp:  # a rerun replaces it
+            write_hole_file(
+                tmp,
+                holes,
+                fmt,
+                home=home,
+                thumbnails=thumbnails,
+                boot_to_unix_ns=boot_to_unix_ns,
+                rel_alt_m=opts.rel_alt_m,
+                clearance_m=opts.clearance_m,
+                name=f"holescan holes: {name}",
+            )
+        written.append((fmt, path))
+    return written
+
+
+def write_hole_outputs(
+    out: Path,
+    name: str,
+    holes: Sequence[Hole],
+    views: Mapping[int, tuple[npt.NDArray[np.uint8], npt.NDArray[np.uint16], _Box]],
+    track: Sequence[VehiclePose],
+    *,
+    opts: ReprocessOptions | None = None,
+    home: tuple[float, float, float] | None = None,
+    boot_to_unix_ns: int | None = None,
+    truth: Sequence[tuple[str, float, float]] = (),
+    facts: Mapping[str, str] | None = None,
+    title: str | None = None,
+    track_breaks: Sequence[int] = (),
+) -> list[tuple[str, Path]]:
+    """Write a flight's hole files (``NAME_holes.*``) and report (``NAME_report.html``).
+
+    holes : the holes to write (confirmed ones). views : hole id -> (rgb, depth, box) of
+    its best view, the box (x, y, w, h) in that picture's pixels. track : vehicle poses.
+    truth : (name, lat_deg, lon_deg) drawn on the report's map. track_breaks : where in
+    ``track`` another flight starts (a campaign). Returns (kind, path) pairs.
+    """
+    opts = opts or ReprocessOptions()
+    wanted = {h.id for h in holes}
+    jpegs = {
+        hid: render_thumbnail(rgb, depth, box)[0]
+        for hid, (rgb, depth, box) in views.items()
+        if hid in wanted
+    }
+    written = _hole_files(out, name, holes, opts, jpegs, home, boot_to_unix_ns)
+    report_holes = [
+        dataclasses.replace(h, best_box=views[h.id][2]) if h.id in views else h for h in holes
+    ]
+    report_views = {h.id: (views[h.id][0], views[h.id][1]) for h in holes if h.id in views}
+    path = write_report(
+        out / f"{name}_report.html",
+        title=title or f"holescan flight report: {name}",
+        holes=report_holes,
+        track=track,
+        views=report_views,
+        truth=truth,
+        facts=facts,
+        track_breaks=track_breaks,
+    )
+    written.append(("report", path))
+    return written

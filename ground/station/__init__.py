@@ -1,0 +1,52 @@
+"""``holescan ground``: the live ground station app beside the main ground station.
+
+* :mod:`.app` - :class:`GroundStation` / :func:`run_ground`, the app composed;
+* :mod:`.link` - :class:`VehicleLink`, the vehicle's MAVLink stream (holes, cards, the hole
+  mission, the track);
+* :mod:`.state` - :class:`StationState`, everything learnt, kept in ``DIR/station.json``;
+* :mod:`.files` - KML/GeoJSON/GPX always current; :mod:`.cot` - holes as TAK CoT;
+* :mod:`.web` - the live page (``station.html``) and its state document.
+"""
+
+from holescan.ground.station.app import GroundOptions, GroundStation, run_ground
+from holescan.ground.station.cot import (
+    COT_TYPE,
+    DEFAULT_COT_URL,
+    CotError,
+    CotPublisher,
+    hole_cot,
+    withdraw_cot,
+)
+from holescan.ground.station.files import hole_summary, hole_waypoint, write_station_files
+from holescan.ground.station.link import VehicleLink
+from holescan.ground.station.state import (
+    MARKS,
+    GroundHole,
+    StationState,
+    TrackPoint,
+    parse_hole_statustext,
+)
+from holescan.ground.station.web import StationWeb, state_document
+
+__all__ = [
+    "COT_TYPE",
+    "DEFAULT_COT_URL",
+    "MARKS",
+    "CotError",
+    "CotPublisher",
+    "GroundHole",
+    "GroundOptions",
+    "GroundStation",
+    "StationState",
+    "StationWeb",
+    "TrackPoint",
+    "VehicleLink",
+    "hole_cot",
+    "hole_summary",
+    "hole_waypoint",
+    "parse_hole_statustext",
+    "run_ground",
+    "state_document",
+    "withdraw_cot",
+    "write_station_files",
+]

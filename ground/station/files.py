@@ -1,0 +1,135 @@
+"""The ground station's files, rewritten after every change (each atomically).
+
+In the station folder:
+
+* ``holes.kml`` - one placemark per hole not rejected, its picture (``cards/``), size,
+  score, the detector's "why" and the operator's mark (Google Earth, CalTopo, ATAK);
+* ``holes_live.kml`` - a NetworkLink to ``holes.kml`` that Google Earth reloads every
+  ``refresh_s`` seconds: open it once, the map follows the flight;
+* ``holes.geojson`` - the same points (CalTopo/SARTopo import, QGIS);
+* ``holes.gpx`` - waypoints for handheld GPS units.
+
+Written with the project's waypoint writers (:func:`missions.write_kml`,
+:func:`missions.write_geojson`, :func:`missions.write_gpx`) from one
+:class:`missions.Waypoint` per hole, through capture's output rule
+(:func:`capture.output_via_part`: ``.NAME.part.EXT``, fsynced, renamed).
+"""
+
+from __future__ import annotations
+
+import html
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from holescan.capture import atomic_output, output_via_part
+from holescan.ground.station.state import GroundHole
+from holescan.missions import (
+    MAV_FRAME_GLOBAL,
+    MAV_FRAME_GLOBAL_RELATIVE_ALT,
+    Waypoint,
+    write_geojson,
+    write_gpx,
+    write_kml,
+)
+
+__all__ = ["hole_summary", "hole_waypoint", "write_station_files"]
+
+
+def hole_summary(h: GroundHole) -> str:
+    """One line: size, depth reason, score, sightings, uncertainty, operator's mark."""
+    parts = [f"hole {h.id}", f"score {h.score:.2f}"]
+    if h.major_m is not None and h.minor_m is not None:
+        parts.append(f"opening {h.major_m:.2f} x {h.minor_m:.2f} m")
+    if h.sightings:
+        parts.append(f"seen {h.sightings}x")
+    if h.sigma_h_m is not None:
+        parts.append(f"+-{h.sigma_h_m:.2f} m (1 sigma)")
+    parts.append(f"operator: {h.mark}")
+    text = ", ".join(parts)
+    return f"{text}. {h.why}" if h.why else text
+
+
+def hole_waypoint(h: GroundHole, image_src: str | None = None) -> Waypoint:
+    """The hole as the project's waypoint record (MSL altitude when known)."""
+    props: dict[str, Any] = {
+        "hole_id": h.id,
+        "score": round(h.score, 3),
+        "mark": h.mark,
+        "sightings": h.sightings,
+        "sigma_h_m": h.sigma_h_m,
+        "major_m": h.major_m,
+        "minor_m": h.minor_m,
+        "why": h.why,
+    }
+    desc = hole_summary(h)
+    if image_src is not None:
+        props["picture"] = image_src
+    return Waypoint(
+        h.lat_deg,
+        h.lon_deg,
+        h.alt_m if h.alt_m is not None else 0.0,
+        name=f"hole {h.id} ({h.mark})",
+        description=desc,
+        properties=props,
+        frame=MAV_FRAME_GLOBAL if h.alt_m is not None else MAV_FRAME_GLOBAL_RELATIVE_ALT,
+    )
+
+
+def _replace(path: Path, write: Callable[[Path], object]) -> None:
+    """Rewrite one of the station's files (they are its own: replaced every time)."""
+    with output_via_part(path, force=True, fsync=True) as part:
+        write(part)
+
+
+def write_station_files(
+    folder: Path, holes: Sequence[GroundHole], *, refresh_s: float = 5.0
+) -> list[Path]:
+    """Write the station's hole files (see the module docstring); return their paths."""
+    shown = [h for h in holes if h.mark != "rejected"]
+    points = []
+    for h in shown:
+        src = f"cards/hole-{h.id}.jpg" if h.has_picture else None
+        points.append(hole_waypoint(h, src))
+    kml, live = folder / "holes.kml", folder / "holes_live.kml"
+    gj, gpx = folder / "holes.geojson", folder / "holes.gpx"
+    kml_points = [
+        Waypoint(
+            w.lat_deg,
+            w.lon_deg,
+            w.alt_m,
+            name=w.name,
+            description=(
+                f'<img src="{html.escape(str(w.properties["picture"]))}" width="160"/><br/>'
+                if "picture" in w.properties
+                else ""
+            )
+            + html.escape(w.description),
+            properties=w.properties,
+            frame=w.frame,
+        )
+        for w in points
+    ]
+    _replace(kml, lambda p: write_kml(p, kml_points, document_name="holescan holes (live)"))
+    _replace(gj, lambda p: write_geojson(p, points, altitude=False))
+    _replace(gpx, lambda p: write_gpx(p, points))
+    if not live.exists():
+        with atomic_output(live, force=True) as f:
+            f.write(_network_link(refresh_s).encode())
+    return [kml, live, gj, gpx]
+
+
+def _network_link(refresh_s: float) -> str:
+    return f"""<?xml version="1.0" encoding="UTF-8"?>
+<kml xmlns="http://www.opengis.net/kml/2.2">
+  <NetworkLink>
+    <name>holescan holes (live)</name>
+    <refreshVisibility>0</refreshVisibility>
+    <Link>
+      <href>holes.kml</href>
+      <refreshMode>onInterval</refreshMode>
+      <refreshInterval>{refresh_s:g}</refreshInterval>
+    </Link>
+  </NetworkLink>
+</kml>
+"""

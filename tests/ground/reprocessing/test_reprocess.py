@@ -1,0 +1,413 @@
+"""``holescan reprocess`` on the Dask engine: a real short flight (``conftest.flight``)
+reprocessed in this process and on a local cluster of 2 worker processes (identical
+results), with a worker killed mid-run, stopped and resumed from the partition cache;
+sidecars read back with mcap's indexed reader; logs cut off or damaged; bad inputs; CLI."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections import defaultdict
+from pathlib import Path
+
+import pymap3d
+import pytest
+from mcap.reader import make_reader
+
+from holescan import cli
+from holescan.capture import FlightSummary, log_info
+from holescan.detect import DetectParams
+from holescan.errors import InputError
+from holescan.geotag import Hole
+from holescan.ground import Progress, ReprocessOptions, ReprocessResult, group_flights, match_points
+from holescan.ground import reprocess as _reprocess
+
+Flown = tuple[list[Path], FlightSummary]
+
+SMALL = 0.15  # MiB per partition: a dozen partitions in the 40-frame flight
+
+
+def opts(**kw: object) -> ReprocessOptions:
+    kw.setdefault("workers", 0)
+    kw.setdefault("partition_mib", SMALL)
+    return ReprocessOptions(**kw)  # type: ignore[arg-type]
+
+
+def reprocess(files: list[Path], out: Path, o: ReprocessOptions, **kw: object) -> ReprocessResult:
+    return _reprocess(files, out, o, **kw)  # type: ignore[arg-type]
+
+
+def sidecar(path: Path) -> dict[str, list[tuple[int, int, bytes]]]:
+    """topic -> [(log_time, sequence, data)] in the order written, via mcap's indexed reader
+    (a flight's Unix times need not grow with the frame index: the clock estimate steps)."""
+    out: dict[str, list[tuple[int, int, bytes]]] = defaultdict(list)
+    with open(path, "rb") as fh:
+        reader = make_reader(fh)
+        for _, channel, msg in reader.iter_messages(log_time_order=False):
+            out[channel.topic].append((msg.log_time, msg.sequence, bytes(msg.data)))
+        stats = reader.get_summary().statistics
+        assert stats.message_count == sum(len(v) for v in out.values())
+    return dict(out)
+
+
+def same_holes(a: tuple[Hole, ...], b: tuple[Hole, ...], tol_m: float) -> None:
+    assert [h.id for h in a] == [h.id for h in b]
+    for x, y in zip(a, b, strict=True):
+        e, n, _ = pymap3d.geodetic2enu(x.lat_deg, x.lon_deg, 0, y.lat_deg, y.lon_deg, 0)
+        assert math.hypot(e, n) < tol_m, (x, y)
+        assert x.sightings == y.sightings and x.best_frame_index == y.best_frame_index
+
+
+@pytest.fixture(scope="module")
+def reference(flight: Flown, tmp_path_factory: pytest.TempPathFactory) -> ReprocessResult:
+    """Every frame, in this process (no cluster), no cache."""
+    files, _ = flight
+    return reprocess(files, tmp_path_factory.mktemp("ref"), opts(cache=False))
+
+
+def test_in_process_run_reads_every_frame_and_writes_a_sidecar(
+    flight: Flown, reference: ReprocessResult
+) -> None:
+    _files, summary = flight
+    (f,) = reference.flights
+    assert f.frames_read == f.frames_detected == summary.frames_logged
+    assert f.partitions >= 6 and f.partitions_cached == 0
+    confirmed = [h for h in summary.holes if h.sightings >= 2]
+    assert len(f.flight_matches) == len(confirmed) >= 1
+    for m in f.flight_matches:  # every confirmed in-flight hole found again, in place
+        assert m.found is not None and m.distance_m < 0.3, m
+    (path,) = f.outputs
+    assert path.name == "sortie_reprocess.mcap"
+    new = sidecar(path)
+    assert set(new) == {f"/reprocess/{t}" for t in ("detections", "detections/annotations")} | (
+        {"/reprocess/holes", "/reprocess/holes/geojson"} if f.holes else set()
+    )
+    frames = [json.loads(d)["frame_index"] for _, _, d in new["/reprocess/detections"]]
+    assert frames == sorted(frames) and len(frames) == summary.frames_logged
+    last = json.loads(new["/reprocess/holes"][-1][2])["holes"]
+    assert [h["id"] for h in last] == [h.id for h in f.holes]
+    info = log_info(path)  # every CRC; summary counts against the content
+    assert not info.truncated and info.metadata["ground.reprocess"]["frames"] == "all"
+    kinds = dict(f.files)
+    assert set(kinds) == {"gpx", "kml", "geojson", "plan", "report", "summary"}
+    assert kinds["kml"].read_text().count("data:image/jpeg;base64,") == len(f.confirmed)
+    doc = json.loads(reference.summary_path.read_text())
+    assert doc["flights"][0] == json.loads(kinds["summary"].read_text())
+
+
+def test_flight_frames_reproduce_the_flights_holes(flight: Flown, tmp_path: Path) -> None:
+    files, summary = flight
+    res = reprocess(files, tmp_path, opts(frames="flight", cache=False))
+    (f,) = res.flights
+    c = summary.counters
+    assert f.frames_read == summary.frames_logged
+    assert f.frames_detected == c.frames_detected - c.detect_errors
+    assert f.flight_holes == summary.holes  # the log's own final list, read back
+    assert f.flight_matches and all(
+        m.found is not None and m.distance_m < 0.05 for m in f.flight_matches
+    ), f.flight_matches
+    if c.pose_refusals == 0 and c.frames_unposed < c.frames_captured:
+        same_holes(f.holes, summary.holes, tol_m=0.01)
+        assert f.flight_same_ids == len(f.flight_matches)
+
+
+def test_two_worker_processes_give_what_one_process_gives(
+    flight: Flown, reference: ReprocessResult, tmp_path: Path
+) -> None:
+    files, _ = flight
+    seen: list[Progress] = []
+    res = reprocess(files, tmp_path, opts(workers=2, cache=False), progress=seen.append)
+    assert res.engine.workers == 2 and res.engine.computed == reference.engine.computed
+    (a,), (b,) = res.flights, reference.flights
+    assert a.holes == b.holes  # same holes, same ids, same numbers
+    assert sidecar(a.outputs[0]) == sidecar(b.outputs[0])  # same detections, same records
+    assert seen[-1].partitions_done == seen[-1].partitions_total == a.partitions
+    assert seen[-1].frames_done == a.frames_read
+
+
+def test_a_worker_killed_mid_run_loses_nothing(
+    flight: Flown, reference: ReprocessResult, tmp_path: Path
+) -> None:
+    """A cluster started as the README says (``dask scheduler``, ``dask worker``), used with
+    ``--scheduler``; one worker process is SIGKILLed mid-run (its nanny starts another)."""
+    import psutil
+
+    files, _ = flight
+    port = free_port()
+    bin_dir = Path(sys.executable).parent
+    dask = (
+        [str(bin_dir / "dask")] if (bin_dir / "dask").exists() else [sys.executable, "-m", "dask"]
+    )
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[3])}
+    procs = [
+        subprocess.Popen(
+            [*dask, "scheduler", "--port", str(port), "--no-dashboard"],
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+    ]
+    try:
+        time.sleep(1.0)
+        procs.append(
+            subprocess.Popen(
+                [
+                    *dask,
+                    "worker",
+                    f"tcp://127.0.0.1:{port}",
+                    "--nworkers",
+                    "2",
+                    "--nthreads",
+                    "1",
+                    "--no-dashboard",
+                ],
+                env=env,
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+            )
+        )
+        killed: list[int] = []
+
+        def progress(p: Progress) -> None:
+            if p.partitions_done >= 2 and not killed:
+                leaves = [
+                    c
+                    for c in psutil.Process(procs[1].pid).children(recursive=True)
+                    if not c.children()
+                ]
+                killed.append(leaves[0].pid)
+                os.kill(leaves[0].pid, signal.SIGKILL)  # its running and queued tasks are lost
+
+        o = opts(scheduler=f"tcp://127.0.0.1:{port}", cache=False)
+        res = reprocess(files, tmp_path, o, progress=progress)
+    finally:
+        for proc in reversed(procs):
+            proc.terminate()
+            proc.wait(timeout=30)
+    assert killed
+    (a,), (b,) = res.flights, reference.flights
+    assert res.engine.computed == a.partitions  # each partition used once
+    assert a.frames_read == b.frames_read and a.holes == b.holes
+    assert sidecar(a.outputs[0]) == sidecar(b.outputs[0])
+
+
+def free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def test_stopped_run_resumes_from_the_cache(
+    flight: Flown, reference: ReprocessResult, tmp_path: Path
+) -> None:
+    files, _ = flight
+    stop = threading.Event()
+    total = reference.flights[0].partitions
+
+    def progress(p: Progress) -> None:
+        if p.partitions_done >= total // 2:
+            stop.set()
+
+    first = reprocess(files, tmp_path, opts(), progress=progress, stop=stop)
+    assert first.interrupted and first.engine.stopped
+    done = first.engine.computed
+    assert total // 2 <= done < total
+    assert json.loads(first.summary_path.read_text())["flights"][0]["interrupted"]
+    assert not log_info(first.flights[0].outputs[0]).truncated  # a valid, shorter sidecar
+    second = reprocess(files, tmp_path, opts())
+    assert (second.engine.cached, second.engine.computed) == (done, total - done)
+    (a,), (b,) = second.flights, reference.flights
+    assert not a.interrupted and a.holes == b.holes
+    assert sidecar(a.outputs[0]) == sidecar(b.outputs[0])
+    third = reprocess(files, tmp_path, opts())  # all of it from the cache
+    assert (third.engine.cached, third.engine.computed) == (total, 0)
+    other = reprocess(files, tmp_path, opts(params=b_params()))  # new settings: new work
+    assert other.engine.cached == 0
+
+
+def b_params() -> DetectParams:
+    from holescan.detect import DEFAULT
+
+    return DEFAULT.with_searcher("dog")
+
+
+def test_logs_at_urls_are_read_through_fsspec(
+    flight: Flown, reference: ReprocessResult, tmp_path: Path
+) -> None:
+    import fsspec
+
+    files, _ = flight
+    fs = fsspec.filesystem("memory")
+    urls = []
+    for p in files:
+        fs.pipe(f"/flights/{p.name}", p.read_bytes())
+        urls.append(f"memory://flights/{p.name}")
+    try:
+        res = _reprocess(urls, tmp_path, opts(cache=False))  # in process: memory:// is local
+    finally:
+        fs.rm("/flights", recursive=True)
+    (a,), (b,) = res.flights, reference.flights
+    assert a.name == "sortie" and a.sources == tuple(urls)
+    assert a.holes == b.holes and sidecar(a.outputs[0]) == sidecar(b.outputs[0])
+
+
+def test_log_cut_off_mid_write(flight: Flown, tmp_path: Path) -> None:
+    files, summary = flight
+    cut = tmp_path / "crash.mcap"
+    data = max(files, key=lambda p: p.stat().st_size).read_bytes()  # the part with most frames
+    cut.write_bytes(data[: int(len(data) * 0.6)])
+    (f,) = reprocess([cut], tmp_path / "out", opts()).flights
+    assert f.truncated and "crash.mcap" in f.truncated[0]
+    assert 0 < f.frames_read < summary.frames_logged
+    assert f.frames_detected == f.frames_read
+    n = len(sidecar(f.outputs[0])["/reprocess/detections"])
+    assert n == f.frames_detected
+
+
+def test_log_cut_right_after_its_header_is_an_empty_result(flight: Flown, tmp_path: Path) -> None:
+    files, _ = flight
+    cut = tmp_path / "early.mcap"
+    data = files[0].read_bytes()
+    cut.write_bytes(data[:200])  # magic, header, part of the first chunk
+    (f,) = reprocess([cut], tmp_path / "out", opts()).flights
+    assert f.frames_read == 0 and not f.holes
+    assert any("nothing to reprocess" in t for t in f.truncated), f.truncated
+
+
+def test_a_damaged_chunk_is_reported_and_the_rest_read(flight: Flown, tmp_path: Path) -> None:
+    files, _summary = flight
+    from holescan.capture import read_log_layout
+
+    src = max(files, key=lambda p: p.stat().st_size)
+    layout = read_log_layout(src)
+    span = layout.chunks[len(layout.chunks) // 2]
+    data = bytearray(src.read_bytes())
+    data[span.offset + span.length - 100] ^= 0xFF  # inside the compressed records
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(bytes(data))
+    (f,) = reprocess([bad], tmp_path / "out", opts()).flights
+    assert any("damaged chunk" in t for t in f.truncated), f.truncated
+    assert f.frames_read > 0
+
+
+def test_bad_inputs(flight: Flown, tmp_path: Path) -> None:
+    files, _ = flight
+    junk = tmp_path / "junk.mcap"
+    junk.write_bytes(b"not an mcap file at all" * 10)
+    with pytest.raises(InputError, match="not an MCAP"):
+        reprocess([junk], tmp_path / "o1", opts())
+    assert not (tmp_path / "o1").exists()  # nothing written either
+    with pytest.raises(InputError, match="no such file"):
+        reprocess([files[0], tmp_path / "missing.mcap"], tmp_path / "o2", opts())
+    assert not (tmp_path / "o2").exists()  # nothing was started
+    with pytest.raises(InputError, match="is a source log"):
+        reprocess([files[0]], files[0].parent, opts())
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    with pytest.raises(InputError, match="is a file"):
+        reprocess([files[0]], afile, opts())
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o500)
+    try:
+        if not os.access(ro, os.W_OK):  # root may write anyway
+            with pytest.raises(InputError, match="cannot write"):
+                reprocess([files[0]], ro, opts())
+    finally:
+        ro.chmod(0o700)
+    (f,) = reprocess([files[0]], tmp_path / "o3", opts()).flights
+    with pytest.raises(InputError, match="reprocess the original flight log"):
+        reprocess([f.outputs[0]], tmp_path / "o4", opts())
+    with pytest.raises(InputError, match="NaN"):
+        opts(params=nan_params())
+    with pytest.raises(InputError):
+        ReprocessOptions(workers=-1)
+
+
+def nan_params() -> DetectParams:
+    import dataclasses
+
+    from holescan.detect import DEFAULT
+
+    return dataclasses.replace(DEFAULT, min_score=math.nan)
+
+
+def test_flights_are_grouped_and_named(flight: Flown, tmp_path: Path) -> None:
+    files, _ = flight
+    other = tmp_path / "logs" / "second.mcap"
+    other.parent.mkdir()
+    other.write_bytes(files[0].read_bytes())
+    assert group_flights([*files, other]) == [tuple(files), (other,)]
+    res = reprocess([*files, other], tmp_path / "out", opts())
+    assert sorted(r.name for r in res.flights) == ["second", "sortie"]
+    assert (tmp_path / "out" / "second" / "second_reprocess.mcap").is_file()
+
+
+def test_cli(flight: Flown, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    files, _ = flight
+    out = tmp_path / "cli"
+    argv = ["reprocess", str(files[0]), "--out", str(out), "--workers", "0"]
+    rc = cli.main([*argv, "--searcher", "dog", "-f", "gpx", "--partition-mib", "0.2"])
+    text = capsys.readouterr()
+    assert rc == 0, text.err
+    assert "frames/s" in text.out and "summary:" in text.out
+    doc = json.loads((out / "summary.json").read_text())["flights"][0]
+    assert set(doc["files"]) == {"report", "summary"} | ({"gpx"} if doc["confirmed"] else set())
+    meta = log_info(out / "sortie_reprocess.mcap").metadata["ground.reprocess"]
+    assert json.loads(meta["params"])["searcher"]["name"] == "dog"
+    assert cli.main(["reprocess", str(tmp_path / "nope.mcap"), "--out", str(out)]) == 2
+    assert "no such file" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:  # argparse: one line, exit code 2
+        cli.main([*argv, "--min-score", "nan"])
+    assert exc.value.code == 2 and "min-score" in capsys.readouterr().err
+
+
+def test_ctrl_c_stops_cleanly_and_keeps_what_is_done(flight: Flown, tmp_path: Path) -> None:
+    files, summary = flight
+    out = tmp_path / "out"
+    argv = [sys.executable, "-m", "holescan.cli", "reprocess", *map(str, files)]
+    argv += ["--out", str(out), "--mode", "paper", "--workers", "0", "--partition-mib", "0.1"]
+    proc = subprocess.Popen(
+        argv,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=Path(__file__).resolve().parents[3],
+    )
+    assert proc.stderr is not None
+    first = proc.stderr.readline()  # the first progress line: the work has started
+    assert "partitions" in first, first
+    time.sleep(2.0)
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=180)
+    assert proc.returncode == 130, stderr[-2000:]
+    assert "INTERRUPTED" in stdout and "Traceback" not in stderr
+    doc = json.loads((out / "summary.json").read_text())["flights"][0]
+    assert doc["interrupted"] and doc["frames_detected"] < summary.frames_logged
+    (copy,) = (Path(p) for p in doc["outputs"])
+    assert not log_info(copy).truncated
+
+
+def test_match_points() -> None:
+    lat0, lon0 = 43.0, -79.0
+
+    def at(e: float, n: float) -> tuple[float, float]:
+        lat, lon, _ = pymap3d.enu2geodetic(e, n, 0.0, lat0, lon0, 0.0)
+        return float(lat), float(lon)
+
+    ref = [at(0, 0), at(5, 0), at(20, 0)]
+    found = [at(5.2, 0), at(0.1, 0), at(0.3, 0)]
+    m = match_points(ref, found, 1.0)
+    assert [x.found for x in m] == [1, 0, None]
+    assert m[0].distance_m == pytest.approx(0.1, abs=1e-6)
+    assert m[1].distance_m == pytest.approx(0.2, abs=1e-6)
+    assert math.isnan(m[2].distance_m)
+    assert match_points([], found, 1.0) == []

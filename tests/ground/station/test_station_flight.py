@@ -1,0 +1,299 @@
+"""A simulated flight to the ground crew with real parts in between.
+
+``holescan fly --sensor sim --gcs udpout:...`` (simulated autopilot, Xtion, daemon, hole
+server) -> the real MAVProxy (``--master udpin`` ``--out udpout``) -> a UDP relay that cuts
+the link for 10 s mid-flight -> ``holescan ground`` (a separate process) -> CoT over UDP
+to a real pytak client (TAK protocol v1, decoded by takproto) and the live page in headless
+Chromium (driven over the DevTools protocol: it must show a new hole within 2 s of the
+vehicle's announcement; a click on "confirmed" must reach the state, TAK and the KML).
+
+The screenshot is kept (``HOLESCAN_ARTEFACTS`` folder if set, else the test's tmp dir).
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import time
+import urllib.request
+from pathlib import Path
+from typing import Any
+
+import pytest
+from test_station import PytakReceiver, Relay, free_port, parse_tak, wait_for
+
+CHROMIUM = Path("/usr/bin/chromium")
+ROOT = Path(__file__).resolve().parents[3]
+SIM_TOML = """
+sensor = "sim"
+[capture]
+startup_sync_s = 5.0
+[sim]
+size_m = [4.0, 4.0]
+world_seed = 15
+n_access_holes = 4
+fps = 10.0
+"""
+
+
+def holescan(*args: str, log: Path) -> subprocess.Popen[str]:
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.Popen(
+        [sys.executable, "-m", "holescan.cli", *args],
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=open(log, "w"),
+        text=True,
+    )
+
+
+class Chromium:
+    """Headless Chromium driven over the DevTools protocol (websocket-client)."""
+
+    def __init__(self, url: str, profile: Path) -> None:
+        import websocket
+
+        port = free_port()
+        self.proc = subprocess.Popen(
+            [
+                str(CHROMIUM),
+                "--headless",
+                "--no-sandbox",
+                "--disable-gpu",
+                "--disable-background-networking",
+                "--disable-component-update",
+                "--disable-sync",
+                "--no-first-run",
+                f"--user-data-dir={profile}",
+                f"--remote-debugging-port={port}",
+                "--window-size=1280,800",
+                url,
+            ],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+        targets: list[dict[str, Any]] = []
+
+        def page_up() -> bool:
+            nonlocal targets
+            try:
+                with urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list", timeout=2) as r:
+                    targets = [t for t in json.loads(r.read()) if t.get("type") == "page"]
+            except OSError:
+                return False
+            return bool(targets)
+
+        wait_for(page_up, 30.0, "Chromium's DevTools endpoint")
+        self.ws = websocket.create_connection(targets[0]["webSocketDebuggerUrl"], timeout=20)
+        self._id = 0
+
+    def call(self, method: str, **params: Any) -> dict[str, Any]:
+        self._id += 1
+        self.ws.send(json.dumps({"id": self._id, "method": method, "params": params}))
+        while True:
+            msg = json.loads(self.ws.recv())
+            if msg.get("id") == self._id:
+                if "error" in msg:
+                    raise AssertionError(msg["error"])
+                return dict(msg["result"])
+
+    def js(self, expr: str) -> Any:
+        r = self.call("Runtime.evaluate", expression=expr, returnByValue=True, awaitPromise=True)
+        return r["result"].get("value")
+
+    def screenshot(self, path: Path) -> None:
+        import base64
+
+        data = self.call("Page.captureScreenshot", format="png")["data"]
+        path.write_bytes(base64.b64decode(data))
+
+    def close(self) -> None:
+        self.ws.close()
+        self.proc.terminate()
+        try:
+            self.proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+
+
+def announced_at(log: Path) -> dict[int, float]:
+    """Hole id -> wall time (unix s) of its first announcement, from the flight's log."""
+    out: dict[int, float] = {}
+    pat = re.compile(r"^(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d),(\d{3}) .*announced HOLE (\d+) ")
+    for line in log.read_text().splitlines():
+        m = pat.match(line)
+        if m and int(m[3]) not in out:
+            t = dt.datetime.strptime(m[1], "%Y-%m-%d %H:%M:%S").timestamp() + int(m[2]) / 1000
+            out[int(m[3])] = t
+    return out
+
+
+def stop(proc: subprocess.Popen[str], sig: int = signal.SIGINT, timeout: float = 60.0) -> str:
+    if proc.poll() is None:
+        proc.send_signal(sig)
+    try:
+        out, _ = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, _ = proc.communicate()
+    return out or ""
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(420)
+@pytest.mark.skipif(not CHROMIUM.exists(), reason="needs Debian chromium (/usr/bin/chromium)")
+def test_flight_mavproxy_ground_page_tak(tmp_path: Path) -> None:
+    mavproxy = shutil.which("mavproxy.py")
+    if mavproxy is None:
+        pytest.skip("MAVProxy is not installed (a test dependency)")
+    art = Path(os.environ.get("HOLESCAN_ARTEFACTS", tmp_path))
+    art.mkdir(parents=True, exist_ok=True)
+    gcs, ground_port = free_port(), free_port()
+    http, cot = free_port(), free_port()
+    relay = Relay(ground_port)
+    relay_in = relay.port
+    rx = PytakReceiver(f"udp+ro://127.0.0.1:{cot}")
+    station_dir = tmp_path / "station"
+    ground = holescan(
+        "ground",
+        "--mavlink",
+        f"udpin:127.0.0.1:{ground_port}",
+        "-o",
+        str(station_dir),
+        "--http",
+        f"127.0.0.1:{http}",
+        "--cot",
+        f"udp+wo://127.0.0.1:{cot}",
+        "--cot-proto",
+        "1",
+        log=tmp_path / "ground.log",
+    )
+    mav = subprocess.Popen(
+        [
+            mavproxy,
+            f"--master=udpin:127.0.0.1:{gcs}",
+            f"--out=udpout:127.0.0.1:{relay_in}",
+            "--daemon",
+            "--streamrate=-1",
+            f"--state-basedir={tmp_path}",
+            "--target-system",
+            "1",
+            "--target-component",
+            "191",
+        ],
+        cwd=tmp_path,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        stdin=subprocess.DEVNULL,
+    )
+    cfg = tmp_path / "fly.toml"
+    cfg.write_text(SIM_TOML)
+    browser: Chromium | None = None
+    fly: subprocess.Popen[str] | None = None
+    try:
+        page = f"http://127.0.0.1:{http}/"
+        wait_for(lambda: _up(page), 30.0, "the ground station's page")
+        browser = Chromium(page, tmp_path / "profile")
+        wait_for(lambda: browser.js("document.readyState") == "complete", 20.0, "page load")
+        fly = holescan(
+            "fly",
+            "--config",
+            str(cfg),
+            "--log-dir",
+            str(tmp_path / "logs"),
+            "--gcs",
+            f"udpout:127.0.0.1:{gcs}",
+            "--duration",
+            "75",
+            log=tmp_path / "fly.log",
+        )
+        # the first hole appears on the page without a reload
+        wait_for(lambda: browser.js("document.querySelectorAll('.hole').length") > 0, 120, "hole")
+        t_seen = time.time()
+        first = announced_at(tmp_path / "fly.log")
+        assert first, (tmp_path / "fly.log").read_text()[-3000:]
+        latency = t_seen - min(first.values())
+        # reported, not asserted: the 2 s goal is benchmarks/bench_station.py's (a wall-clock
+        # bound fails on a loaded machine); the wait above is the liveness check
+        print(f"page showed the first hole {latency:.2f} s after the vehicle announced it")
+        # cut the link for 10 s mid-flight
+        relay.cut = True
+        time.sleep(10.0)
+        relay.cut = False
+        fly_out, _ = fly.communicate(timeout=200)
+        code = fly.returncode
+        assert code == 0, (tmp_path / "fly.log").read_text()[-3000:]
+        announced = announced_at(tmp_path / "fly.log")
+        state_path = station_dir / "station.json"
+
+        def all_there() -> bool:
+            doc = json.loads(state_path.read_text())
+            got = {h["id"]: h for h in doc["holes"]}
+            return all(i in got and got[i]["has_picture"] for i in announced)
+
+        wait_for(all_there, 60.0, f"every announced hole {sorted(announced)} with its picture")
+        n = browser.js("document.querySelectorAll('.hole').length")
+        assert n == len(json.loads(state_path.read_text())["holes"]) >= len(announced)
+        # the operator confirms the first hole with a click on the page
+        hid = min(announced)
+        n_cot = len(rx.got)
+        browser.js(
+            f'document.querySelector(\'button[data-id="{hid}"][data-mark="confirmed"]\').click()'
+        )
+        wait_for(
+            lambda: any(
+                h["id"] == hid and h["mark"] == "confirmed"
+                for h in json.loads(state_path.read_text())["holes"]
+            ),
+            5.0,
+            "the mark in the state file",
+        )
+        wait_for(lambda: len(rx.got) > n_cot, 5.0, "CoT after the click")
+        ev = [e for e in parse_tak(rx.got[n_cot:]) if e.uid == f"holescan-ground-hole-{hid}"][-1]
+        assert "operator: confirmed" in ev.detail.xmlDetail
+        kml = (station_dir / "holes.kml").read_text()
+        assert f"hole {hid} (confirmed)" in kml
+        wait_for(
+            lambda: (
+                browser.js(f"document.getElementById('hole-{hid}').dataset.mark") == "confirmed"
+            ),
+            5.0,
+            "the page to show the mark",
+        )
+        browser.screenshot(art / "ground-station.png")
+        assert (art / "ground-station.png").stat().st_size > 10_000
+        # the pictures stayed inside the byte budget
+        m = re.search(r"hole pictures: (\d+) sent, (\d+) B \((\d+) B/s", fly_out)
+        assert m is not None, fly_out[-2000:]
+        print("fly:", m[0], "announced", sorted(announced))
+        assert int(m[3]) <= 1000
+    finally:
+        if browser is not None:
+            browser.close()
+        if fly is not None and fly.poll() is None:
+            stop(fly)
+        stop(ground)
+        mav.send_signal(signal.SIGINT)
+        try:
+            mav.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            mav.kill()
+        rx.close()
+        relay.close()
+    log = (tmp_path / "ground.log").read_text()
+    assert "Traceback" not in log, log[-3000:]
+
+
+def _up(url: str) -> bool:
+    try:
+        with urllib.request.urlopen(url, timeout=2) as r:
+            return bool(r.status == 200)
+    except OSError:
+        return False

@@ -1,0 +1,101 @@
+"""The station's state file: round trips, an older station's folder, mission matching."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from holescan.errors import InputError
+from holescan.geotag import LocalFrame
+from holescan.ground import GroundHole, StationFileError, StationState, TrackPoint
+
+HOME = (43.6532, -79.3832)
+T_NS = 1_700_000_000_250_000_000
+
+
+def at(east_m: float, north_m: float) -> tuple[float, float]:
+    lat, lon = LocalFrame(*HOME).to_geodetic(east_m, north_m)
+    return float(lat), float(lon)
+
+
+def test_round_trip_keeps_every_fact_and_the_track(tmp_path: Path) -> None:
+    state = StationState.open(tmp_path / "st")
+    state.clock = lambda: T_NS
+    assert state.on_statustext("HOLE 3 0.88 43.6533100 -79.3831200") is not None
+    state.on_position(TrackPoint(T_NS, *HOME, 3.0, 0.5))
+    state.mark(3, "confirmed")
+    doc = json.loads(state.path.read_text())
+    assert doc["format"] == "holescan-ground-2"
+    (h,) = doc["holes"]
+    assert (h["lat_deg"], h["lon_deg"], h["t_first_unix_ns"]) == (43.65331, -79.38312, T_NS)
+    assert "lat" not in h and "first_unix" not in h
+    again = StationState.open(tmp_path / "st")
+    assert again.holes == state.holes and again.track == state.track
+    assert isinstance(again.track[0].t_unix_ns, int)
+
+
+def test_an_older_station_folder_is_read(tmp_path: Path) -> None:
+    """``holescan-ground-1``: lat/lon/alt/sigma_m and times in float seconds."""
+    folder = tmp_path / "old"
+    folder.mkdir()
+    old_hole = json.loads(
+        '{"id": 7, "lat": 43.65331, "lon": -79.38312, "score": 0.8, "alt": 121.5, '
+        '"sigma_m": 0.4, "sightings": 5, "major_m": 1.1, "minor_m": 0.7, "why": "dark", '
+        '"card_rev": 2, "has_picture": true, "mark": "visited", "seq": 1, '
+        '"first_unix": 1700000000.25, "updated_unix": 1700000002.5}'
+    )
+    doc = {
+        "format": "holescan-ground-1",
+        "version": 12,
+        "holes": [old_hole],
+        "track": [[1_700_000_000.25, 43.6532, -79.3832, 3.0, 0.5]],
+    }
+    (folder / "station.json").write_text(json.dumps(doc))
+    state = StationState.open(folder)
+    assert state.holes == {
+        7: GroundHole(
+            7,
+            43.65331,
+            -79.38312,
+            0.8,
+            alt_m=121.5,
+            sigma_h_m=0.4,
+            sightings=5,
+            major_m=1.1,
+            minor_m=0.7,
+            why="dark",
+            card_rev=2,
+            has_picture=True,
+            mark="visited",
+            seq=1,
+            t_first_unix_ns=1_700_000_000_250_000_000,
+            t_updated_unix_ns=1_700_000_002_500_000_000,
+        )
+    }
+    assert state.track == [TrackPoint(1_700_000_000_250_000_000, 43.6532, -79.3832, 3.0, 0.5)]
+    assert state.version == 12
+    state.mark(7, "confirmed")  # the next change writes the current format
+    assert json.loads(state.path.read_text())["format"] == "holescan-ground-2"
+    assert StationState.open(folder).holes[7].t_first_unix_ns == 1_700_000_000_250_000_000
+
+
+def test_a_foreign_state_file_is_named(tmp_path: Path) -> None:
+    (tmp_path / "station.json").write_text('{"holes": [{"lat": 1}]}')
+    with pytest.raises(StationFileError, match="not a holescan ground station file"):
+        StationState.open(tmp_path)
+    assert issubclass(StationFileError, InputError)  # the CLI's exit code 2
+
+
+def test_mission_items_pair_with_holes_nearest_first(tmp_path: Path) -> None:
+    state = StationState.open(tmp_path)
+    for hid, (e, n) in {1: (0.0, 0.0), 2: (1.0, 0.0), 3: (20.0, 0.0)}.items():
+        lat, lon = at(e, n)
+        assert state.on_statustext(f"HOLE {hid} 0.80 {lat:.7f} {lon:.7f}") is not None
+    # item 1 lies 0.3 m from hole 1 (0.7 m from hole 2), item 2 0.1 m from hole 1: the nearest
+    # pair goes first, so item 2 is hole 1 and item 1 hole 2 (items taken in order would give
+    # hole 1 to item 1)
+    items = [(1, *at(0.3, 0.0)), (2, *at(0.1, 0.0)), (3, *at(50.0, 0.0))]
+    assert state.on_mission(items) == 1  # item 3 matches no hole
+    assert {h.id: h.seq for h in state.holes.values()} == {1: 2, 2: 1, 3: None}
