@@ -78,6 +78,7 @@ def posed_times(files: tuple[Path, ...]) -> list[tuple[float, bool]]:
     return out
 
 
+@pytest.mark.slow
 def test_link_gone_10_s_then_a_rebooted_autopilot(tmp_path: Path) -> None:
     port = free_port()
     cfg = FlightConfig(log_prefix=tmp_path / "f", max_duration_s=26.0, startup_sync_s=5.0)
@@ -128,6 +129,7 @@ def test_link_gone_10_s_then_a_rebooted_autopilot(tmp_path: Path) -> None:
     assert summary.frames_logged == len(frames)  # type: ignore[attr-defined]
 
 
+@pytest.mark.slow
 def test_sensor_stops_and_comes_back(tmp_path: Path) -> None:
     pause = threading.Event()
     cfg = FlightConfig(
@@ -161,6 +163,7 @@ def test_sensor_stops_and_comes_back(tmp_path: Path) -> None:
 
 
 @pytest.mark.skipif(os.geteuid() != 0 or shutil.which("mount") is None, reason="needs root")
+@pytest.mark.slow
 def test_disk_full_while_logging(tmp_path: Path) -> None:
     logs = tmp_path / "small"
     logs.mkdir()
@@ -205,6 +208,7 @@ def test_disk_full_while_logging(tmp_path: Path) -> None:
         subprocess.run(["umount", "-l", str(logs)], check=False)
 
 
+@pytest.mark.slow
 def test_sigkill_loses_only_the_last_moments(tmp_path: Path) -> None:
     proc, logs = start_sim_flight(tmp_path)
     time.sleep(3.0)

@@ -305,6 +305,7 @@ def floor_frames(n: int, camera: CameraIntrinsics) -> list[Frame]:
     return out
 
 
+@pytest.mark.slow
 def test_fly_replays_oni_then_its_own_log_and_stops_cleanly_on_sigterm(tmp_path: Path) -> None:
     """oni -> fly -> MCAP -> fly (SIGTERM mid-way) -> MCAP: every frame intact, logs valid."""
     n = 100

@@ -106,6 +106,7 @@ def test_fuzz_datagrams_never_raise_and_never_buffer(datagrams: list[bytes]) -> 
 PATH = SimPath(waypoints_enu=((0.0, 0.0, 2.5), (3.0, 0.0, 2.5), (3.0, 3.0, 2.5)), speed_m_s=0.5)
 
 
+@pytest.mark.slow
 def test_random_datagrams_on_udp_cost_no_telemetry() -> None:
     import sys
 

@@ -37,6 +37,7 @@ def hard_frames(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return out
 
 
+@pytest.mark.slow
 def test_hard_scenes_truth_is_the_opening_centre(hard_frames: Path) -> None:
     """The generator's centre projects inside the box of every wholly visible opening."""
     coco = json.loads((hard_frames / "annotations.json").read_text())

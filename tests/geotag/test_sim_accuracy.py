@@ -63,6 +63,7 @@ def pct(values: list[float], q: float) -> float:
 
 
 @pytest.mark.timeout(150)
+@pytest.mark.slow
 def test_pipeline_geotag_error_and_every_hole_once(
     tmp_path: Path, caplog: pytest.LogCaptureFixture
 ) -> None:

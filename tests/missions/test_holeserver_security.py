@@ -54,6 +54,7 @@ def download(port: int) -> list[tuple[int, int]]:
         gcs.close()
 
 
+@pytest.mark.slow
 def test_mavproxy_upload_and_clear_leave_the_holes_unchanged(tmp_path: Path) -> None:
     mavproxy = shutil.which("mavproxy.py")
     if mavproxy is None:

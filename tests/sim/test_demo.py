@@ -51,6 +51,7 @@ def demo(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
     return out, proc.stdout
 
 
+@pytest.mark.slow
 def test_printed_score_is_the_truth(demo: tuple[Path, str]) -> None:
     out, text = demo
     sortie = dataclasses.replace(DEMO_SORTIE, size_m=SIZE)

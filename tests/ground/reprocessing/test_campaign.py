@@ -51,6 +51,7 @@ def campaign(
     )
 
 
+@pytest.mark.slow
 def test_a_hole_seen_on_both_sorties_is_one_hole(
     campaign: ReprocessResult, world: RubbleWorld
 ) -> None:

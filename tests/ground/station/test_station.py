@@ -285,6 +285,7 @@ def test_track_and_footprints_from_the_autopilot(rig: dict[str, Any]) -> None:
     assert w == pytest.approx(2 * 3.0 * np.tan(np.radians(29.0)), abs=0.02)
 
 
+@pytest.mark.slow
 def test_link_cut_for_10_s_loses_no_hole(rig: dict[str, Any]) -> None:
     station, server, relay = rig["station"], rig["server"], rig["relay"]
     announce(server, [hole(1)])
