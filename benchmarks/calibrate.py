@@ -246,9 +246,10 @@ def main(argv: list[str] | None = None) -> int:
         gap = abs(mp - obs)
         print(f"| {lo:.1f}-{lo + 0.1:.1f} | {mp:.3f} | {obs:.3f} | {n} | {gap:.3f}{flag} |")
     if args.write:
-        from holescan.detect import _calibration
+        import holescan.detect
 
-        path = Path(_calibration.__file__).with_name("_calibration_table.py")
+        # the fitted table is a source file of the detector package (not an import of it)
+        path = Path(holescan.detect.__file__).with_name("_calibration_table.py")
         names = ", ".join(p.name for p in args.datasets)
         path.write_text(
             '"""Fitted by ``python benchmarks/calibrate.py`` (do not edit by hand).\n\n'

@@ -97,10 +97,10 @@ def ers_superpixels(
         raise InputError(f"sigma must be a finite number > 0, got {sigma!r}")
 
     ea, eb, dist = _grid_edges(img)
-    from holescan.detect._ers_jit import _lazy_greedy, _normalised_weights  # numba: paper mode only
+    from holescan.detect._ers_jit import lazy_greedy, normalised_weights  # numba: paper mode only
 
-    w, loop = _normalised_weights(n, ea, eb, dist, float(sigma))
-    roots, clusters = _lazy_greedy(n, ea, eb, w, loop, k, lam * k)
+    w, loop = normalised_weights(n, ea, eb, dist, float(sigma))
+    roots, clusters = lazy_greedy(n, ea, eb, w, loop, k, lam * k)
     if clusters != k:  # impossible on a connected grid; guard against silent truncation
         raise HolescanError(f"ERS stopped at {clusters} clusters instead of {k}")
     _, labels = np.unique(roots, return_inverse=True)

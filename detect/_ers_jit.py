@@ -13,7 +13,7 @@ _LN2 = math.log(2.0)
 
 
 @numba.njit(cache=True)
-def _normalised_weights(
+def normalised_weights(
     n: int,
     ea: npt.NDArray[np.int64],
     eb: npt.NDArray[np.int64],
@@ -134,7 +134,7 @@ def _remove_root(heap: npt.NDArray[np.float64], size: int) -> int:
 
 
 @numba.njit(cache=True)
-def _lazy_greedy(
+def lazy_greedy(
     n: int,
     ea: npt.NDArray[np.int64],
     eb: npt.NDArray[np.int64],

@@ -17,9 +17,9 @@ from typing import Any
 
 from holescan.errors import InputError
 from holescan.missions._geofiles import (
-    _ns_of,
-    _parse_coord_text,
-    _parse_kml,
+    ns_of,
+    parse_coord_text,
+    parse_kml,
     read_geojson,
     read_gpx,
     read_kml,
@@ -28,7 +28,7 @@ from holescan.missions._geofiles import (
     write_kml,
 )
 from holescan.missions._qgcfiles import read_plan, read_wpl, write_plan, write_wpl
-from holescan.missions._waypoint import Area, Waypoint, _open_text
+from holescan.missions._waypoint import Area, Waypoint, open_text
 
 __all__ = ["read_area", "read_waypoints", "write_waypoints"]
 
@@ -143,7 +143,7 @@ def _area_from_geojson(doc: Any, where: str) -> Area:
 
 
 def _area_from_kml(root: ET.Element, where: str) -> Area:
-    ns = _ns_of(root)
+    ns = ns_of(root)
     q = (lambda t: f"{{{ns}}}{t}") if ns else (lambda t: t)
     polys = list(root.iter(q("Polygon")))
     if not polys:
@@ -153,7 +153,7 @@ def _area_from_kml(root: ET.Element, where: str) -> Area:
 
     def ring(elem: ET.Element | None) -> tuple[tuple[float, float], ...]:
         text = elem.findtext(f"{q('LinearRing')}/{q('coordinates')}") if elem is not None else ""
-        return _ring_from_lonlat(_parse_coord_text(text, where), where)
+        return _ring_from_lonlat(parse_coord_text(text, where), where)
 
     poly = polys[0]
     holes = tuple(ring(e) for e in poly.findall(q("innerBoundaryIs")))
@@ -194,10 +194,10 @@ def read_area(source: str | Path) -> Area:
     suffix = path.suffix.lower()
     if suffix in {".geojson", ".json"}:
         try:
-            doc = json.loads(_open_text(path))
+            doc = json.loads(open_text(path))
         except json.JSONDecodeError as err:
             raise InputError(f"{path}: not JSON ({err})") from err
         return _area_from_geojson(doc, str(path))
     if suffix == ".kml":
-        return _area_from_kml(_parse_kml(path), str(path))
-    return _area_from_text(_open_text(path), str(path))
+        return _area_from_kml(parse_kml(path), str(path))
+    return _area_from_text(open_text(path), str(path))

@@ -11,17 +11,17 @@ from typing import Any
 
 from holescan.errors import InputError
 from holescan.missions._waypoint import (
-    _KML_NS,
+    KML_NS,
     MAV_CMD_NAV_WAYPOINT,
     MAV_FRAME_GLOBAL,
     MAV_FRAME_GLOBAL_RELATIVE_ALT,
     Area,
     Waypoint,
-    _fmt_ll,
-    _json_safe,
-    _open_text,
-    _positioned,
-    _round_ll,
+    fmt_ll,
+    json_safe,
+    open_text,
+    positioned,
+    round_ll,
 )
 
 __all__ = ["read_geojson", "read_gpx", "read_kml", "write_geojson", "write_gpx", "write_kml"]
@@ -38,7 +38,7 @@ def _feature_properties(w: Waypoint, seq: int) -> dict[str, Any]:
         "frame": w.frame,
         "alt_m": w.alt_m,
     }
-    props.update(_json_safe(dict(w.properties)))
+    props.update(json_safe(dict(w.properties)))
     return props
 
 
@@ -68,7 +68,7 @@ def write_geojson(
                 "geometry": {
                     "type": "LineString",
                     "coordinates": [
-                        [_round_ll(w.lon_deg), _round_ll(w.lat_deg), w.alt_m] for _, w in pts
+                        [round_ll(w.lon_deg), round_ll(w.lat_deg), w.alt_m] for _, w in pts
                     ],
                 },
                 "properties": {"name": path_name, "kind": "path"},
@@ -80,7 +80,7 @@ def write_geojson(
                 "type": "Feature",
                 "geometry": {
                     "type": "Point",
-                    "coordinates": [_round_ll(w.lon_deg), _round_ll(w.lat_deg)]
+                    "coordinates": [round_ll(w.lon_deg), round_ll(w.lat_deg)]
                     + ([w.alt_m] if altitude else []),
                 },
                 "properties": _feature_properties(w, i),
@@ -98,7 +98,7 @@ def read_geojson(path: str | Path) -> list[Waypoint]:
     """Read the Point features of a GeoJSON file as waypoints (path lines are skipped)."""
     path = Path(path)
     try:
-        doc = json.loads(_open_text(path))
+        doc = json.loads(open_text(path))
     except json.JSONDecodeError as err:
         raise InputError(f"{path}: not JSON ({err})") from err
     feats = doc.get("features", [doc] if doc.get("type") == "Feature" else [])
@@ -129,11 +129,11 @@ def read_geojson(path: str | Path) -> list[Waypoint]:
 
 
 def _kml(tag: str) -> str:
-    return f"{{{_KML_NS}}}{tag}"
+    return f"{{{KML_NS}}}{tag}"
 
 
 def _kml_coords(points: Sequence[Waypoint]) -> str:
-    return " ".join(f"{_fmt_ll(w.lon_deg)},{_fmt_ll(w.lat_deg)},{w.alt_m:.3f}" for w in points)
+    return " ".join(f"{fmt_ll(w.lon_deg)},{fmt_ll(w.lat_deg)},{w.alt_m:.3f}" for w in points)
 
 
 def write_kml(
@@ -150,7 +150,7 @@ def write_kml(
     waypoint's ``properties`` go into ``ExtendedData`` (values as JSON text).
     """
     path = Path(path)
-    ET.register_namespace("", _KML_NS)
+    ET.register_namespace("", KML_NS)
     root = ET.Element(_kml("kml"))
     doc = ET.SubElement(root, _kml("Document"))
     ET.SubElement(doc, _kml("name")).text = document_name
@@ -163,9 +163,9 @@ def write_kml(
             lr = ET.SubElement(ET.SubElement(poly, _kml(tag)), _kml("LinearRing"))
             closed = [*ring, ring[0]]
             ET.SubElement(lr, _kml("coordinates")).text = " ".join(
-                f"{_fmt_ll(lon)},{_fmt_ll(lat)},0" for lat, lon in closed
+                f"{fmt_ll(lon)},{fmt_ll(lat)},0" for lat, lon in closed
             )
-    pts = _positioned(items)
+    pts = positioned(items)
     if path_name is not None and len(pts) >= 2:
         pm = ET.SubElement(doc, _kml("Placemark"))
         ET.SubElement(pm, _kml("name")).text = path_name
@@ -181,7 +181,7 @@ def write_kml(
             ET.SubElement(pm, _kml("description")).text = w.description
         ext = ET.SubElement(pm, _kml("ExtendedData"))
         extra = {"seq": seq, "command": w.command, "frame": w.frame}
-        extra.update(_json_safe(dict(w.properties)))
+        extra.update(json_safe(dict(w.properties)))
         for key, value in extra.items():
             data = ET.SubElement(ext, _kml("Data"), name=str(key))
             ET.SubElement(data, _kml("value")).text = json.dumps(value)
@@ -194,19 +194,19 @@ def write_kml(
     return path
 
 
-def _parse_kml(path: Path) -> ET.Element:
+def parse_kml(path: Path) -> ET.Element:
     try:
-        return ET.fromstring(_open_text(path))
+        return ET.fromstring(open_text(path))
     except ET.ParseError as err:
         raise InputError(f"{path}: not valid KML/XML ({err})") from err
 
 
-def _ns_of(root: ET.Element) -> str:
+def ns_of(root: ET.Element) -> str:
     match = re.match(r"\{([^}]*)\}", root.tag)
     return match.group(1) if match else ""
 
 
-def _parse_coord_text(text: str | None, where: str) -> list[tuple[float, float, float]]:
+def parse_coord_text(text: str | None, where: str) -> list[tuple[float, float, float]]:
     out = []
     for tok in (text or "").split():
         parts = tok.split(",")
@@ -222,15 +222,15 @@ def _parse_coord_text(text: str | None, where: str) -> list[tuple[float, float, 
 def read_kml(path: str | Path) -> list[Waypoint]:
     """Read the Point placemarks of a KML file as waypoints (lines/polygons skipped)."""
     path = Path(path)
-    root = _parse_kml(path)
-    ns = _ns_of(root)
+    root = parse_kml(path)
+    ns = ns_of(root)
     q = (lambda t: f"{{{ns}}}{t}") if ns else (lambda t: t)
     out = []
     for pm in root.iter(q("Placemark")):
         point = pm.find(q("Point"))
         if point is None:
             continue
-        coords = _parse_coord_text(point.findtext(q("coordinates")), str(path))
+        coords = parse_coord_text(point.findtext(q("coordinates")), str(path))
         if not coords:
             continue
         lon, lat, alt = coords[0]
@@ -275,11 +275,11 @@ def write_gpx(
     gpx = gpxpy.gpx.GPX()
     gpx.creator = "holescan"
     route = gpxpy.gpx.GPXRoute(name=route_name) if route_name is not None else None
-    for w in _positioned(items):
+    for w in positioned(items):
         ele = w.alt_m if w.frame == MAV_FRAME_GLOBAL else None
         kwargs: dict[str, Any] = {
-            "latitude": _round_ll(w.lat_deg),
-            "longitude": _round_ll(w.lon_deg),
+            "latitude": round_ll(w.lat_deg),
+            "longitude": round_ll(w.lon_deg),
             "elevation": ele,
             "name": w.name or None,
             "description": w.description or None,
@@ -300,7 +300,7 @@ def read_gpx(path: str | Path) -> list[Waypoint]:
 
     path = Path(path)
     try:
-        gpx = gpxpy.parse(_open_text(path))
+        gpx = gpxpy.parse(open_text(path))
     except gpxpy.gpx.GPXException as err:
         raise InputError(f"{path}: not a GPX file ({err})") from err
     out = []

@@ -85,7 +85,7 @@ def connect(link: str, *, source_system: int = 255, source_component: int = 190)
         raise MissionError(f"cannot open MAVLink link {link!r}: {err}") from err
 
 
-def _item_message(
+def item_message(
     w: Waypoint,
     seq: int,
     target: tuple[int, int],
@@ -108,7 +108,7 @@ def _item_message(
     )  # fmt: skip
 
 
-def _waypoint_from_message(msg: Any) -> Waypoint:
+def waypoint_from_message(msg: Any) -> Waypoint:
     """MISSION_ITEM_INT / MISSION_ITEM -> Waypoint (degE7 converted here, once)."""
     positioned = msg.frame not in _MISSION_FRAMES_WITHOUT_POSITION
     if msg.get_type() == "MISSION_ITEM_INT":
@@ -129,7 +129,7 @@ def _waypoint_from_message(msg: Any) -> Waypoint:
 def waypoint_from_mission_item(msg: Any) -> Waypoint:
     """A received MISSION_ITEM_INT (or MISSION_ITEM) as the one item record, degE7 converted
     here: for code that runs the mission protocol on its own link (the ground station)."""
-    return _waypoint_from_message(msg)
+    return waypoint_from_message(msg)
 
 
 def _home_item(home: Waypoint) -> Waypoint:
@@ -298,7 +298,7 @@ def upload_mission(
                 )
             use_int = msg.get_type() == "MISSION_REQUEST_INT"
             legacy += 0 if use_int else 1
-            last = _item_message(
+            last = item_message(
                 rows[seq], seq, target, use_int=use_int, current=int(seq == 0 and home is not None)
             )
             conn.mav.send(last)
@@ -357,7 +357,7 @@ def download_mission(
                     count = int(msg.count)
                     expect = ["MISSION_ITEM_INT", "MISSION_COUNT"]
             elif int(msg.seq) == len(items):
-                items.append(_waypoint_from_message(msg))
+                items.append(waypoint_from_message(msg))
             if count is not None and len(items) < count:
                 request = m.MAVLink_mission_request_int_message(
                     target_system, target_component, len(items), 0

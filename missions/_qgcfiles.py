@@ -11,17 +11,17 @@ from typing import Any
 
 from holescan.errors import InputError
 from holescan.missions._waypoint import (
-    _PLAN_DATA_KEY,
     MAV_CMD_NAV_WAYPOINT,
     MAV_FRAME_GLOBAL,
     MAV_FRAME_GLOBAL_RELATIVE_ALT,
+    PLAN_DATA_KEY,
     Waypoint,
-    _default_home,
-    _fmt_ll,
-    _fmt_num,
-    _json_safe,
-    _open_text,
-    _round_ll,
+    default_home,
+    fmt_ll,
+    fmt_num,
+    json_safe,
+    open_text,
+    round_ll,
 )
 
 __all__ = ["read_plan", "read_wpl", "write_plan", "write_wpl"]
@@ -42,7 +42,7 @@ def write_wpl(path: str | Path, items: Sequence[Waypoint], home: Waypoint | None
     home : home position; defaults to the first positioned item at altitude 0.
     """
     path = Path(path)
-    home = home if home is not None else _default_home(items)
+    home = home if home is not None else default_home(items)
     lines = ["QGC WPL 110"]
     rows = [replace(home, frame=MAV_FRAME_GLOBAL, command=MAV_CMD_NAV_WAYPOINT), *items]
     for seq, w in enumerate(rows):
@@ -52,10 +52,10 @@ def write_wpl(path: str | Path, items: Sequence[Waypoint], home: Waypoint | None
             "1" if seq == 0 else "0",
             str(w.frame),
             str(w.command),
-            *(_fmt_num(p) for p in w.params),
-            _fmt_ll(lat),
-            _fmt_ll(lon),
-            _fmt_num(w.alt_m if w.has_position else 0.0),
+            *(fmt_num(p) for p in w.params),
+            fmt_ll(lat),
+            fmt_ll(lon),
+            fmt_num(w.alt_m if w.has_position else 0.0),
             "1" if w.autocontinue else "0",
         ]
         lines.append("\t".join(fields))
@@ -66,7 +66,7 @@ def write_wpl(path: str | Path, items: Sequence[Waypoint], home: Waypoint | None
 def read_wpl(path: str | Path) -> tuple[Waypoint, list[Waypoint]]:
     """Read a QGC WPL 110 file; returns ``(home, items)`` (items are seq 1..N)."""
     path = Path(path)
-    text = _open_text(path)
+    text = open_text(path)
     lines = [ln for ln in text.splitlines() if ln.strip()]
     if not lines or not lines[0].startswith("QGC WPL 110"):
         raise InputError(f"{path}: not a QGC WPL 110 file (first line must be 'QGC WPL 110')")
@@ -105,7 +105,7 @@ def read_wpl(path: str | Path) -> tuple[Waypoint, list[Waypoint]]:
 def _plan_item(w: Waypoint, jump_id: int, item_data: bool = False) -> dict[str, Any]:
     params: list[float | None] = [None if math.isnan(p) else p for p in w.params]
     if w.has_position:
-        params += [_round_ll(w.lat_deg), _round_ll(w.lon_deg), w.alt_m]
+        params += [round_ll(w.lat_deg), round_ll(w.lon_deg), w.alt_m]
     else:
         params += [0.0, 0.0, 0.0]
     item: dict[str, Any] = {
@@ -121,10 +121,10 @@ def _plan_item(w: Waypoint, jump_id: int, item_data: bool = False) -> dict[str, 
     elif w.frame == MAV_FRAME_GLOBAL:
         item.update({"AMSLAltAboveTerrain": None, "Altitude": w.alt_m, "AltitudeMode": 2})
     if item_data:
-        item[_PLAN_DATA_KEY] = {
+        item[PLAN_DATA_KEY] = {
             "name": w.name,
             "description": w.description,
-            "properties": _json_safe(dict(w.properties)),
+            "properties": json_safe(dict(w.properties)),
         }
     return item
 
@@ -156,10 +156,10 @@ def write_plan(
         them back).
     """
     path = Path(path)
-    home = home if home is not None else _default_home(items)
+    home = home if home is not None else default_home(items)
     polygons = []
     if fence:
-        ring = [[_round_ll(lat), _round_ll(lon)] for lat, lon in fence]
+        ring = [[round_ll(lat), round_ll(lon)] for lat, lon in fence]
         polygons.append({"inclusion": True, "polygon": ring, "version": 1})
     doc = {
         "fileType": "Plan",
@@ -172,8 +172,8 @@ def write_plan(
             "hoverSpeed": hover_speed_m_s,
             "items": [_plan_item(w, i, item_data) for i, w in enumerate(items, start=1)],
             "plannedHomePosition": [
-                _round_ll(home.lat_deg),
-                _round_ll(home.lon_deg),
+                round_ll(home.lat_deg),
+                round_ll(home.lon_deg),
                 home.alt_m,
             ],
             "vehicleType": vehicle_type,
@@ -193,7 +193,7 @@ def read_plan(path: str | Path) -> tuple[Waypoint, list[Waypoint]]:
     """
     path = Path(path)
     try:
-        doc = json.loads(_open_text(path))
+        doc = json.loads(open_text(path))
         if doc.get("fileType") != "Plan":
             raise InputError(f"{path}: not a QGroundControl plan (fileType is not 'Plan')")
         mission = doc["mission"]
@@ -206,7 +206,7 @@ def read_plan(path: str | Path) -> tuple[Waypoint, list[Waypoint]]:
             if item.get("type") != "SimpleItem":
                 raise InputError(f"{path}: item {n} is a {item.get('type')}; only SimpleItem")
             p = [float("nan") if v is None else float(v) for v in item["params"]]
-            data = item.get(_PLAN_DATA_KEY) or {}
+            data = item.get(PLAN_DATA_KEY) or {}
             items.append(
                 Waypoint(
                     p[4],

@@ -32,13 +32,13 @@ from holescan.errors import InputError
 from holescan.geotag import LocalFrame
 from holescan.missions._checks import check_survey_numbers
 from holescan.missions._sweep import (
-    _check_area,
-    _estimate,
-    _heading_candidates,
-    _order,
-    _polygon_enu,
-    _sweep,
-    _validate_polygon,
+    check_area,
+    estimate_flight,
+    heading_candidates,
+    order_lines,
+    polygon_enu,
+    sweep_lines,
+    validate_polygon,
 )
 from holescan.missions._waypoint import (
     MAV_CMD_DO_CHANGE_SPEED,
@@ -289,10 +289,10 @@ def plan_survey(area: Area, params: SurveyParams | None = None) -> SurveyPlan:
     """
     params = params if params is not None else SurveyParams()
     params.check()
-    _check_area(area)
+    check_area(area)
     frame = frame_around(area)
-    poly = _polygon_enu(area, frame)
-    _validate_polygon(poly, frame, params.max_extent_m)
+    poly = polygon_enu(area, frame)
+    validate_polygon(poly, frame, params.max_extent_m)
 
     cam = params.camera
     across, along = cam.footprint_m(params.altitude_m)
@@ -322,27 +322,37 @@ def plan_survey(area: Area, params: SurveyParams | None = None) -> SurveyPlan:
         home_enu = (float(he), float(hn))
 
     headings = (
-        [params.heading_deg % 180.0]
-        if params.heading_deg is not None
-        else _heading_candidates(poly)
+        [params.heading_deg % 180.0] if params.heading_deg is not None else heading_candidates(poly)
     )
     # Inner chords of the arcs: every point of ``reach`` is within ``margin`` of the area.
     reach = poly.buffer(margin * (1.0 - 1e-6), quad_segs=16)
     best: tuple[float, float, list[tuple[float, float, float]]] | None = None
     for h in headings:
-        lines = _sweep(poly, reach, h, across, spacing, margin)
-        pairs = _order(lines, h, None)
+        lines = sweep_lines(poly, reach, h, across, spacing, margin)
+        pairs = order_lines(lines, h, None)
         pts = [p for pair in pairs for p in pair]
-        _, t = _estimate(pts, speed, params)
+        _, t = estimate_flight(
+            pts,
+            speed,
+            altitude_m=params.altitude_m,
+            climb_m_s=params.climb_m_s,
+            accel_m_s2=params.accel_m_s2,
+        )
         if best is None or t < best[0] - 1e-6:
             best = (t, h, lines)
     assert best is not None
     _, heading, lines = best
-    pairs = _order(lines, heading, home_enu)
+    pairs = order_lines(lines, heading, home_enu)
     flat = [p for pair in pairs for p in pair]
     if home_enu is None:
         home_enu = flat[0]
-    dist, duration = _estimate([home_enu, *flat, home_enu], speed, params)
+    dist, duration = estimate_flight(
+        [home_enu, *flat, home_enu],
+        speed,
+        altitude_m=params.altitude_m,
+        climb_m_s=params.climb_m_s,
+        accel_m_s2=params.accel_m_s2,
+    )
 
     e = np.array([p[0] for p in flat] + [home_enu[0]])
     n = np.array([p[1] for p in flat] + [home_enu[1]])

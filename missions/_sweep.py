@@ -22,7 +22,6 @@ if TYPE_CHECKING:
     from shapely.geometry import Polygon
     from shapely.geometry.base import BaseGeometry
 
-    from holescan.missions._survey import SurveyParams
 
 _HEADING_STEP_DEG = 5.0
 
@@ -30,7 +29,7 @@ _HEADING_STEP_DEG = 5.0
 # ----------------------------------------------------------------------------- geometry
 
 
-def _polygon_enu(area: Area, frame: LocalFrame) -> Polygon:
+def polygon_enu(area: Area, frame: LocalFrame) -> Polygon:
     from shapely.geometry import Polygon
 
     def ring(points: Sequence[tuple[float, float]]) -> npt.NDArray[np.float64]:
@@ -41,7 +40,7 @@ def _polygon_enu(area: Area, frame: LocalFrame) -> Polygon:
     return Polygon(ring(area.outer), [ring(h) for h in area.holes if len(h) >= 3])
 
 
-def _check_area(area: Area) -> None:
+def check_area(area: Area) -> None:
     if len(area.outer) < 3:
         raise InputError(
             f"the area is empty: a polygon needs at least 3 vertices, got {len(area.outer)}"
@@ -53,7 +52,7 @@ def _check_area(area: Area) -> None:
             raise InputError(f"area longitude must be within -180..180 deg, got {lon}")
 
 
-def _validate_polygon(poly: Polygon, frame: LocalFrame, max_extent_m: float) -> None:
+def validate_polygon(poly: Polygon, frame: LocalFrame, max_extent_m: float) -> None:
     import shapely
     from shapely.validation import explain_validity
 
@@ -115,7 +114,7 @@ def _intervals(geom: BaseGeometry) -> list[tuple[float, float]]:
     return sorted(out)
 
 
-def _sweep(
+def sweep_lines(
     poly: Polygon,
     reach: BaseGeometry,
     heading_deg: float,
@@ -158,7 +157,7 @@ def _sweep(
     return lines
 
 
-def _heading_candidates(poly: Polygon) -> list[float]:
+def heading_candidates(poly: Polygon) -> list[float]:
     hull = np.asarray(poly.convex_hull.exterior.coords)
     d = np.diff(hull, axis=0)
     edges = np.degrees(np.arctan2(d[:, 0], d[:, 1])) % 180.0
@@ -166,7 +165,7 @@ def _heading_candidates(poly: Polygon) -> list[float]:
     return sorted({round(float(h), 6) for h in np.concatenate([edges, grid])})
 
 
-def _order(
+def order_lines(
     lines: list[tuple[float, float, float]],
     heading_deg: float,
     home_enu: tuple[float, float] | None,
@@ -199,11 +198,17 @@ def _path_length(points: Sequence[tuple[float, float]]) -> float:
     return sum(math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in itertools.pairwise(points))
 
 
-def _estimate(
-    points: Sequence[tuple[float, float]], speed: float, params: SurveyParams
+def estimate_flight(
+    points: Sequence[tuple[float, float]],
+    speed: float,
+    *,
+    altitude_m: float,
+    climb_m_s: float,
+    accel_m_s2: float,
 ) -> tuple[float, float]:
-    """(distance m, duration s) of home -> points -> home."""
+    """(distance m, duration s) of home -> points -> home: climb to ``altitude_m`` and back
+    down at ``climb_m_s``, fly at ``speed`` m/s, stop at each waypoint (``accel_m_s2``)."""
     dist = _path_length(points)
     stops = max(len(points) - 2, 0)
-    vertical = 2.0 * params.altitude_m / params.climb_m_s
-    return dist, vertical + dist / speed + stops * speed / params.accel_m_s2
+    vertical = 2.0 * altitude_m / climb_m_s
+    return dist, vertical + dist / speed + stops * speed / accel_m_s2

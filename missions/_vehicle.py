@@ -28,9 +28,9 @@ from holescan.missions._link import mavlink
 from holescan.missions._protocol import (
     MAV_MISSION_ACCEPTED,
     MissionError,
-    _item_message,
-    _waypoint_from_message,
     connect,
+    item_message,
+    waypoint_from_message,
 )
 from holescan.missions._waypoint import Waypoint
 
@@ -159,7 +159,7 @@ class MissionReceiver:
                 return [self._ack(peer, mavlink.MAV_MISSION_INVALID_SEQUENCE)]
             self.items_sent += 1
             return [
-                _item_message(
+                item_message(
                     snapshot[seq],
                     seq,
                     peer,
@@ -184,7 +184,7 @@ class MissionReceiver:
         if int(msg.seq) != len(rx.items):
             return [self._request(now_ns)]
         try:
-            rx.items.append(_waypoint_from_message(msg))
+            rx.items.append(waypoint_from_message(msg))
         except InputError:
             self._rx = None
             return [self._ack(peer, mavlink.MAV_MISSION_ERROR)]

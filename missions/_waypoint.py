@@ -35,8 +35,8 @@ MAV_CMD_NAV_LAND: int = mavlink.MAV_CMD_NAV_LAND
 MAV_CMD_NAV_TAKEOFF: int = mavlink.MAV_CMD_NAV_TAKEOFF
 MAV_CMD_DO_CHANGE_SPEED: int = mavlink.MAV_CMD_DO_CHANGE_SPEED
 
-_KML_NS = "http://www.opengis.net/kml/2.2"
-_PLAN_DATA_KEY = "holescan"
+KML_NS = "http://www.opengis.net/kml/2.2"
+PLAN_DATA_KEY = "holescan"
 _LATLON_DECIMALS = 8
 
 
@@ -98,32 +98,32 @@ class Area:
 # ----------------------------------------------------------------------------- helpers
 
 
-def _fmt_ll(value: float) -> str:
+def fmt_ll(value: float) -> str:
     return f"{value:.{_LATLON_DECIMALS}f}"
 
 
-def _fmt_num(value: float) -> str:
+def fmt_num(value: float) -> str:
     if math.isnan(value):
         return "nan"
     return f"{value:.6f}"
 
 
-def _round_ll(value: float) -> float:
+def round_ll(value: float) -> float:
     return round(value, _LATLON_DECIMALS)
 
 
-def _positioned(items: Sequence[Waypoint]) -> list[Waypoint]:
+def positioned(items: Sequence[Waypoint]) -> list[Waypoint]:
     return [w for w in items if w.has_position]
 
 
-def _default_home(items: Sequence[Waypoint]) -> Waypoint:
-    pts = _positioned(items)
+def default_home(items: Sequence[Waypoint]) -> Waypoint:
+    pts = positioned(items)
     if not pts:
         raise InputError("no positioned waypoint to take a home position from: pass home=")
     return Waypoint(pts[0].lat_deg, pts[0].lon_deg, 0.0, name="home", frame=MAV_FRAME_GLOBAL)
 
 
-def _open_text(path: Path) -> str:
+def open_text(path: Path) -> str:
     try:
         return path.read_text(encoding="utf-8")
     except OSError as err:
@@ -132,16 +132,16 @@ def _open_text(path: Path) -> str:
         raise InputError(f"{path} is not UTF-8 text") from err
 
 
-def _json_safe(value: Any) -> Any:
+def json_safe(value: Any) -> Any:
     """Plain JSON types for properties (tuples -> lists, numpy scalars -> float/int)."""
     if isinstance(value, Mapping):
-        return {str(k): _json_safe(v) for k, v in value.items()}
+        return {str(k): json_safe(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
-        return [_json_safe(v) for v in value]
+        return [json_safe(v) for v in value]
     if isinstance(value, bool | int | str) or value is None:
         return value
     if isinstance(value, float):
         return value if math.isfinite(value) else None
     if hasattr(value, "item"):
-        return _json_safe(value.item())
+        return json_safe(value.item())
     return str(value)

@@ -41,7 +41,7 @@ from scipy.spatial.transform import Rotation
 
 from holescan.geotag import LocalFrame, VehiclePose
 from holescan.missions import MissionReceiver, mavlink, open_link
-from holescan.sim._trajectory import SimPath, _Trajectory
+from holescan.sim._trajectory import SimPath, Trajectory
 
 __all__ = ["SimAutopilot"]
 
@@ -114,7 +114,7 @@ class SimAutopilot:
         mission: MissionReceiver | None = None,
     ) -> None:
         self.path = path if path is not None else SimPath()
-        self._traj = _Trajectory(self.path)
+        self._traj = Trajectory(self.path)
         self.connection = connection
         self.sysid = sysid
         self.compid = compid

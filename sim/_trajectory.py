@@ -81,7 +81,7 @@ class _GeoPoint(Protocol):
     def alt_m(self) -> float: ...
 
 
-class _Trajectory:
+class Trajectory:
     """The path as periodic splines of time; state and attitude at any time (s)."""
 
     def __init__(self, path: SimPath) -> None:

@@ -17,8 +17,8 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+import holescan.sim._shapes as shp
 from holescan.errors import InputError
-from holescan.sim import _shapes as shp
 from holescan.sim._lighting import radiance_map
 from holescan.sim._raycast import MaxPyramid, build_pyramid
 

@@ -128,13 +128,13 @@ def test_hole_interiors_lie_in_their_boxes_and_read_deep(alien: ModuleType) -> N
     checked = 0
     for index in range(8):
         rng = np.random.default_rng([3, index, 1])
-        scene = alien._sample_scene(rng, cam, lib)
+        scene = alien.sample_scene(rng, cam, lib)
         access = [h for h in scene.holes if h.access]
         if not access:
             continue
-        view = alien._PerspectiveView(cam, scene.C, scene.R)
-        surf = alien._shade(rng, scene, view, tex)
-        depth = alien._depth_sensor(rng, scene, cam, surf)
+        view = alien.PerspectiveView(cam, scene.C, scene.R)
+        surf = alien.shade(rng, scene, view, tex)
+        depth = alien.depth_sensor(rng, scene, cam, surf)
         anns = alien._annotate(scene, cam, surf)
         for hole in access:
             vv, uu = np.nonzero(surf.tag == hole.tag)

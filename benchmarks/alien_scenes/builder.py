@@ -12,24 +12,24 @@ from alien_scenes.common import (
     F64,
     I64,
     CameraModel,
-    _mm,
-    _perp_basis,
-    _pick,
-    _resting_rotation,
-    _rot,
-    _rz,
+    mm,
+    perp_basis,
+    pick,
+    resting_rotation,
+    rot,
+    rz,
 )
-from alien_scenes.raycast import _Grid
+from alien_scenes.raycast import Grid
 from alien_scenes.sampling import (
-    _LIB_BOX,
-    _LIB_HULL0,
-    _ground_point,
-    _poly_dims,
-    _polygon_area,
+    LIB_BOX,
+    LIB_HULL0,
+    ground_point,
     opening_polygon,
+    poly_dims,
+    polygon_area,
 )
 from alien_scenes.shapes import (
-    _HOLE_RES,
+    HOLE_RES,
     KIND_BOWL,
     KIND_FLOOR,
     KIND_GROUND,
@@ -37,35 +37,35 @@ from alien_scenes.shapes import (
     KIND_PIPE_OUT,
     KIND_RUBBLE,
     KIND_WALL,
-    _Bowl,
-    _Hole,
-    _instance,
-    _Materials,
-    _Shape,
-    _Stain,
-    _Tube,
+    Bowl,
+    Hole,
+    Materials,
+    Shape,
+    Stain,
+    Tube,
+    instance,
 )
 
 
-class _Builder:
+class Builder:
     """Accumulates the solids, holes and surfaces of one scene."""
 
-    def __init__(self, rng: np.random.Generator, cam: CameraModel, lib: list[_Shape]) -> None:
+    def __init__(self, rng: np.random.Generator, cam: CameraModel, lib: list[Shape]) -> None:
         self.rng, self.cam, self.lib = rng, cam, lib
-        self.mats = _Materials(rng)
-        self.mats.add(_pick(rng, ["dirt", "stone", "concrete"]), KIND_GROUND)
+        self.mats = Materials(rng)
+        self.mats.add(pick(rng, ["dirt", "stone", "concrete"]), KIND_GROUND)
         self.planes: list[F64] = []
         self.verts: list[F64] = []
         self.pids: list[int] = []
         self.ell: list[tuple[F64, F64, F64, int]] = []
-        self.tubes: list[_Tube] = []
-        self.holes: list[_Hole] = []
-        self.bowls: list[_Bowl] = []
-        self.stains: list[_Stain] = []
+        self.tubes: list[Tube] = []
+        self.holes: list[Hole] = []
+        self.bowls: list[Bowl] = []
+        self.stains: list[Stain] = []
         self.kinds: dict[str, int] = {}
         self.cells: I64 | None = None
         self.pile_cap = float(rng.uniform(0.3, 0.8))  # rubble stops piling above this, m
-        self.grid: _Grid
+        self.grid: Grid
         self.C: F64
         self.R: F64
         self.foot: F64
@@ -80,11 +80,11 @@ class _Builder:
             u, v = r.uniform(0.12 * w, 0.88 * w), r.uniform(0.12 * h, 0.88 * h)
         else:
             u, v = r.uniform(-0.15 * w, 1.15 * w), r.uniform(-0.15 * h, 1.15 * h)
-        p = _ground_point(self.cam, self.C, self.R, u, v)
+        p = ground_point(self.cam, self.C, self.R, u, v)
         return None if p is None else p[:2]
 
     def add_poly(self, shape: int, dims: F64, R: F64, c: F64, mat: int) -> F64:
-        planes, verts = _instance(self.lib[shape], dims, R, c)
+        planes, verts = instance(self.lib[shape], dims, R, c)
         self.planes.append(planes)
         self.verts.append(verts)
         self.pids.append(mat)
@@ -124,9 +124,9 @@ class _Builder:
     # ---------------------------------------------------------------- openings
     def hole_mask(self, poly: F64) -> tuple[NDArray[np.uint8], float, float]:
         x0, y0 = poly.min(0) - 0.02
-        size = np.ceil((poly.max(0) + 0.02 - (x0, y0)) / _HOLE_RES).astype(int) + 1
+        size = np.ceil((poly.max(0) + 0.02 - (x0, y0)) / HOLE_RES).astype(int) + 1
         m = np.zeros((size[1], size[0]), np.uint8)
-        q = np.round((poly - (x0, y0)) / _HOLE_RES * 16).astype(np.int32)
+        q = np.round((poly - (x0, y0)) / HOLE_RES * 16).astype(np.int32)
         cv2.fillPoly(m, [q], 1, cv2.LINE_8, 4)
         return m, float(x0), float(y0)
 
@@ -141,13 +141,13 @@ class _Builder:
         y = np.array([x[1], -x[0], 0.0])  # outward for a counter-clockwise polygon
         z = np.array([0.0, 0.0, 1.0])
         T, Ws, sink = r.uniform(0.1, 0.3), r.uniform(0.6, 1.8), r.uniform(0.03, 0.1)
-        Rt = _rot(x, math.radians(r.uniform(-10, 8))) @ _rot(y, math.radians(r.uniform(-5, 5)))
+        Rt = rot(x, math.radians(r.uniform(-10, 8))) @ rot(y, math.radians(r.uniform(-5, 5)))
         Re = np.column_stack([x, y, z]) @ Rt
         dims = np.array([L + ext[0] + ext[1], Ws, T + sink])
         centre_l = np.array([(L + ext[1] - ext[0]) / 2, Ws / 2, (T - sink) / 2])
         A3 = np.append(A, 0.0)
         c = A3 + Re @ centre_l
-        corners = (self.lib[_LIB_BOX].verts * dims) @ Re.T + c
+        corners = (self.lib[LIB_BOX].verts * dims) @ Re.T + c
         # the slab must not cover the opening (beyond a few cm) nor other holes
         hull = cv2.convexHull(corners[:, :2].astype(np.float32))
         span = np.linspace(0.08, 0.92, 6)
@@ -159,7 +159,7 @@ class _Builder:
             return None
         if self.grid.overlaps_keepout(hull.reshape(-1, 2).astype(float)):
             return None
-        self.add_poly(_LIB_BOX, dims, Re, c, self.mats.add("concrete", KIND_RUBBLE))
+        self.add_poly(LIB_BOX, dims, Re, c, self.mats.add("concrete", KIND_RUBBLE))
         self.grid.add_keepout(hull.reshape(-1, 2).astype(float), 0.0)  # no later hole under it
         r0, r1, c0, c1, m = self.grid.roi_mask(corners[:, :2])
         if m.size:
@@ -175,7 +175,7 @@ class _Builder:
 
     def in_view(self, pts: F64, margin_px: float = 8.0) -> bool:
         """Whether 3-D points (N, 3) all project inside the image, ``margin_px`` from its edges."""
-        X = _mm(pts - self.C, self.R)
+        X = mm(pts - self.C, self.R)
         if (X[:, 2] < 0.1).any():
             return False
         u = self.cam.fx * X[:, 0] / X[:, 2] + self.cam.cx
@@ -195,7 +195,7 @@ class _Builder:
             [math.sin(tilt) * math.cos(az), math.sin(tilt) * math.sin(az), math.cos(tilt)]
         )
         poly = opening_polygon(r, kind)
-        L, S, ins = _poly_dims(poly, a)
+        L, S, ins = poly_dims(poly, a)
         if access and not (0.7 <= L <= 1.6 and S >= 0.45 and ins >= 0.42):
             return False
         if kind == "small" and L >= 0.3:
@@ -226,7 +226,7 @@ class _Builder:
                 top = self.edge_slab(A, B, poly, ext)
             rim.extend(top if top is not None else [np.append(A, 0.0), np.append(B, 0.0)])
         self.grid.add_keepout(poly, margin)
-        wall_mat = "concrete" if kind in ("rect", "gap") else _pick(r, ["dirt", "stone"])
+        wall_mat = "concrete" if kind in ("rect", "gap") else pick(r, ["dirt", "stone"])
         wall_id = self.mats.add(wall_mat, KIND_WALL, tag, disp=r.uniform(0.01, 0.03))
         floor_id = self.mats.add("dirt", KIND_FLOOR, tag, disp=r.uniform(0.02, 0.05))
         self.finish_hole(kind, access, poly, a, depth, np.array(rim), tag, wall_id, floor_id)
@@ -245,10 +245,10 @@ class _Builder:
         floor_id: int,
     ) -> None:
         m, x0, y0 = self.hole_mask(poly)
-        u, v = _perp_basis(a)
+        u, v = perp_basis(a)
         p3 = np.column_stack([poly, np.zeros(len(poly))])
-        r_eff = math.sqrt(_polygon_area(np.column_stack([p3 @ u, p3 @ v])) / math.pi)
-        hole = _Hole(kind, access, poly, a, depth, rim, tag, wall_id, floor_id, r_eff, m, x0, y0)
+        r_eff = math.sqrt(polygon_area(np.column_stack([p3 @ u, p3 @ v])) / math.pi)
+        hole = Hole(kind, access, poly, a, depth, rim, tag, wall_id, floor_id, r_eff, m, x0, y0)
         self.holes.append(hole)
         self.count(kind if not access else f"access_{kind}")
         if depth < 3.0 and r_eff > 0.2:  # debris on a visible floor
@@ -262,24 +262,24 @@ class _Builder:
                 dims = s * np.array([1, self.rng.uniform(0.5, 1), self.rng.uniform(0.3, 0.7)])
                 z = -depth + dims[2] * 0.25
                 c = np.array([p[0] + kx * z, p[1] + ky * z, z])
-                shape = int(self.rng.integers(_LIB_HULL0, len(self.lib)))
-                mat = self.mats.add(_pick(self.rng, ["concrete", "stone", "brick"]), 1, tag)
-                self.add_poly(shape, dims, _resting_rotation(self.rng, 30), c, mat)
+                shape = int(self.rng.integers(LIB_HULL0, len(self.lib)))
+                mat = self.mats.add(pick(self.rng, ["concrete", "stone", "brick"]), 1, tag)
+                self.add_poly(shape, dims, resting_rotation(self.rng, 30), c, mat)
 
     def add_pipe(self, centre: F64, access: bool, whole: bool = False) -> bool:
         r = self.rng
         if access:
             r_in, wall = r.uniform(0.36, 0.62), r.uniform(0.05, 0.12)
             tilt = r.uniform(0, 12) if r.uniform() < 0.5 else r.uniform(15, 35)
-            mat = _pick(r, ["concrete", "concrete", "rust"])
+            mat = pick(r, ["concrete", "concrete", "rust"])
         else:
             r_in, wall = r.uniform(0.04, 0.14), r.uniform(0.006, 0.03)
             tilt = r.uniform(20, 75)
-            mat = _pick(r, ["pvc", "rust", "concrete", "metal"])
+            mat = pick(r, ["pvc", "rust", "concrete", "metal"])
         r_out = r_in + wall
         t, az = math.radians(tilt), r.uniform(0, 2 * math.pi)
         a = np.array([math.sin(t) * math.cos(az), math.sin(t) * math.sin(az), math.cos(t)])
-        u, v = _perp_basis(a)
+        u, v = perp_basis(a)
         h_c = r_out * math.sin(t) + r.uniform(0.04, 0.25 if access else 0.2)
         top = np.array([centre[0], centre[1], h_c])
         phi = np.linspace(0, 2 * math.pi, 48, endpoint=False)
@@ -300,7 +300,7 @@ class _Builder:
         s_b = (-h_c - r_out * math.hypot(u[2], v[2])) / a[2] - 0.3
         out_id = self.mats.add(mat, KIND_PIPE_OUT)
         in_id = self.mats.add(mat, KIND_PIPE_IN, tag)
-        self.tubes.append(_Tube(top, a, r_in, r_out, s_b, out_id, in_id))
+        self.tubes.append(Tube(top, a, r_in, r_out, s_b, out_id, in_id))
         hull = cv2.convexHull(foot.astype(np.float32)).reshape(-1, 2).astype(float)
         self.grid.add_keepout(hull, r.uniform(0.02, 0.1))
         for gp in (hull,):
@@ -321,22 +321,22 @@ class _Builder:
         b, d = a * r.uniform(0.5, 1.0), r.uniform(0.06, 0.25)
         th = r.uniform(0, math.pi)
         phi = np.linspace(0, 2 * math.pi, 32, endpoint=False)
-        ell = np.column_stack([a * np.cos(phi), b * np.sin(phi)]) @ _rz(th)[:2, :2].T + centre
+        ell = np.column_stack([a * np.cos(phi), b * np.sin(phi)]) @ rz(th)[:2, :2].T + centre
         if self.grid.overlaps_keepout(ell) or not self.grid.inside(centre):
             return False
         # no keep-out: rubble may settle into the bowl (holes are all placed already)
-        M = np.diag([1 / a, 1 / b, 1 / d]) @ _rz(th).T
+        M = np.diag([1 / a, 1 / b, 1 / d]) @ rz(th).T
         r0, r1, c0, c1, m = self.grid.roi_mask(ell)
         if m.size:
             g = self.grid
             yy, xx = np.mgrid[r0:r1, c0:c1]
             pts = np.column_stack([xx.ravel(), yy.ravel()]) * g.res + (g.x0, g.y0) - centre
-            q = _mm(pts, _rz(th)[:2, :2]) / (a, b)
+            q = mm(pts, rz(th)[:2, :2]) / (a, b)
             bowl = -d * np.sqrt(np.clip(1 - (q**2).sum(1), 0, 1)).reshape(m.shape)
             hroi = g.hmap[r0:r1, c0:c1]
             np.minimum(hroi, bowl, out=hroi)
         ident = self.mats.add("dirt", KIND_BOWL, disp=0.01)
-        self.bowls.append(_Bowl(np.append(centre, 0.0), M, ident))
+        self.bowls.append(Bowl(np.append(centre, 0.0), M, ident))
         self.count("depression")
         return True
 
@@ -346,7 +346,7 @@ class _Builder:
         z0 = -ax[2] * r.uniform(0.2, 0.7)
         k = math.sqrt(1 - (z0 / ax[2]) ** 2)
         th = r.uniform(0, math.pi)
-        Rm = _rz(th)
+        Rm = rz(th)
         phi = np.linspace(0, 2 * math.pi, 32, endpoint=False)
         ell = np.column_stack([ax[0] * k * np.cos(phi), ax[1] * k * np.sin(phi)])
         ell = ell @ Rm[:2, :2].T + xy
@@ -364,7 +364,7 @@ class _Builder:
                 self.grid.x0,
                 self.grid.y0,
             )
-            q = _mm(pts - xy, Rm[:2, :2]) / ax[:2]
+            q = mm(pts - xy, Rm[:2, :2]) / ax[:2]
             dome = z0 + ax[2] * np.sqrt(np.clip(1 - (q**2).sum(1), 0, 1))
             hroi = self.grid.hmap[r0:r1, c0:c1]
             np.maximum(hroi, dome.reshape(hroi.shape) * (m > 0), out=hroi)

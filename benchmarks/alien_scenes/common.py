@@ -69,7 +69,7 @@ class CameraModel:
 # --------------------------------------------------------------------------- geometry
 
 
-def _mm(a: NDArray[Any], b: NDArray[Any] | list[float]) -> NDArray[Any]:
+def mm(a: NDArray[Any], b: NDArray[Any] | list[float]) -> NDArray[Any]:
     """``a @ b`` for many small vectors without BLAS (its threads stall on a busy machine)."""
     b = np.asarray(b, dtype=a.dtype if a.dtype == np.float32 else np.float64)
     if b.ndim == 1:
@@ -77,7 +77,7 @@ def _mm(a: NDArray[Any], b: NDArray[Any] | list[float]) -> NDArray[Any]:
     return cast(NDArray[Any], np.einsum("...j,jk->...k", a, b))
 
 
-def _rot(axis: F64 | tuple[float, float, float], angle: float) -> F64:
+def rot(axis: F64 | tuple[float, float, float], angle: float) -> F64:
     """Rotation matrix about ``axis`` by ``angle`` radians (Rodrigues)."""
     x, y, z = (float(v) for v in axis)
     n = math.sqrt(x * x + y * y + z * z)
@@ -93,7 +93,7 @@ def _rot(axis: F64 | tuple[float, float, float], angle: float) -> F64:
     )
 
 
-def _pick(rng: np.random.Generator, items: list[str], p: list[float] | None = None) -> str:
+def pick(rng: np.random.Generator, items: list[str], p: list[float] | None = None) -> str:
     """One of ``items`` (probabilities ``p``, default uniform); faster than Generator.choice."""
     if p is None:
         return items[int(rng.integers(len(items)))]
@@ -105,26 +105,26 @@ def _pick(rng: np.random.Generator, items: list[str], p: list[float] | None = No
     return items[-1]
 
 
-def _rz(angle: float) -> F64:
-    return _rot(np.array([0.0, 0.0, 1.0]), angle)
+def rz(angle: float) -> F64:
+    return rot(np.array([0.0, 0.0, 1.0]), angle)
 
 
-def _resting_rotation(rng: np.random.Generator, max_tilt_deg: float) -> F64:
+def resting_rotation(rng: np.random.Generator, max_tilt_deg: float) -> F64:
     """Random yaw, then a tilt about a random horizontal axis."""
     az = rng.uniform(0, 2 * math.pi)
     tilt = math.radians(rng.uniform(0, max_tilt_deg))
     axis = np.array([math.cos(az), math.sin(az), 0.0])
-    return _rot(axis, tilt) @ _rz(rng.uniform(0, 2 * math.pi))
+    return rot(axis, tilt) @ rz(rng.uniform(0, 2 * math.pi))
 
 
-def _perp_basis(a: F64) -> tuple[F64, F64]:
+def perp_basis(a: F64) -> tuple[F64, F64]:
     ref = np.array([1.0, 0, 0]) if abs(a[0]) < 0.9 else np.array([0, 1.0, 0])
     u = np.cross(a, ref)
     u /= np.linalg.norm(u)
     return u, np.cross(a, u)
 
 
-def _powerlaw(rng: np.random.Generator, lo: float, hi: float, alpha: float) -> float:
+def powerlaw(rng: np.random.Generator, lo: float, hi: float, alpha: float) -> float:
     """Sample p(s) ~ s^-alpha on [lo, hi]."""
     e = 1.0 - alpha
     u = rng.uniform()
@@ -135,7 +135,7 @@ def _powerlaw(rng: np.random.Generator, lo: float, hi: float, alpha: float) -> f
 
 
 @dataclass(frozen=True)
-class _Textures:
+class Textures:
     """Periodic zero-mean unit-variance noise images (float32, S x S)."""
 
     smooth: F32
@@ -156,11 +156,11 @@ def _fft_noise(rng: np.random.Generator, size: int, beta: float) -> F32:
     return out
 
 
-def _make_textures(rng: np.random.Generator) -> _Textures:
-    return _Textures(_fft_noise(rng, 512, 2.6), _fft_noise(rng, 512, 1.1))
+def make_textures(rng: np.random.Generator) -> Textures:
+    return Textures(_fft_noise(rng, 512, 2.6), _fft_noise(rng, 512, 1.1))
 
 
-def _triplanar(tex: F32, P: F32, w3: F32, inv_texel: F32, off: F32) -> F32:
+def triplanar(tex: F32, P: F32, w3: F32, inv_texel: F32, off: F32) -> F32:
     """Sample a periodic texture on surfaces by world position (triplanar blend).
 
     P, w3, off: (H, W, 3); inv_texel: (H, W) texels per metre. Returns (H, W).

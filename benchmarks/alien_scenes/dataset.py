@@ -12,12 +12,12 @@ from typing import Any
 import cv2
 import numpy as np
 
-from alien_scenes.common import F64, CameraModel, _make_textures, _Textures
-from alien_scenes.raycast import _PerspectiveView
-from alien_scenes.sampling import _polygon_area
-from alien_scenes.scene import _sample_scene
-from alien_scenes.shading import _depth_sensor, _rgb_sensor, _shade, _Surface
-from alien_scenes.shapes import _make_library, _Scene, _Shape
+from alien_scenes.common import F64, CameraModel, Textures, make_textures
+from alien_scenes.raycast import PerspectiveView
+from alien_scenes.sampling import polygon_area
+from alien_scenes.scene import sample_scene
+from alien_scenes.shading import Surface, depth_sensor, rgb_sensor, shade
+from alien_scenes.shapes import Scene, Shape, make_library
 
 # --------------------------------------------------------------------------- ground truth
 
@@ -41,7 +41,7 @@ def _clip_polygon(p: F64, x0: float, y0: float, x1: float, y1: float) -> F64:
     return p
 
 
-def _annotate(sc: _Scene, cam: CameraModel, s: _Surface) -> list[dict[str, Any]]:
+def _annotate(sc: Scene, cam: CameraModel, s: Surface) -> list[dict[str, Any]]:
     """COCO annotations (without ids) of the access holes in view."""
     anns = []
     for hole in sc.holes:
@@ -54,7 +54,7 @@ def _annotate(sc: _Scene, cam: CameraModel, s: _Surface) -> list[dict[str, Any]]
             [cam.fx * X[:, 0] / X[:, 2] + cam.cx + 0.5, cam.fy * X[:, 1] / X[:, 2] + cam.cy + 0.5]
         )
         clipped = _clip_polygon(uv, 0, 0, cam.width, cam.height)
-        if len(clipped) < 3 or _polygon_area(clipped) < 4:
+        if len(clipped) < 3 or polygon_area(clipped) < 4:
             continue
         m = np.zeros((cam.height, cam.width), np.uint8)
         cv2.fillPoly(m, [np.round((clipped - 0.5) * 16).astype(np.int32)], 1, cv2.LINE_8, 4)
@@ -71,7 +71,7 @@ def _annotate(sc: _Scene, cam: CameraModel, s: _Surface) -> list[dict[str, Any]]
             {
                 "category_id": 1,
                 "bbox": [round(float(v), 2) + 0.0 for v in (*lo, *(hi - lo))],  # no -0.0
-                "area": round(_polygon_area(clipped), 2),
+                "area": round(polygon_area(clipped), 2),
                 "segmentation": [[round(float(v), 2) for v in clipped.ravel()]],
                 "iscrowd": int(cut or vis < 0.5 or far),
                 "hole_kind": hole.kind,
@@ -93,20 +93,20 @@ class _Job:
     out: Path
 
 
-def _assets(seed: int) -> tuple[list[_Shape], _Textures]:
+def _assets(seed: int) -> tuple[list[Shape], Textures]:
     rng = np.random.default_rng([seed, 0xA11E])
-    return _make_library(rng), _make_textures(rng)
+    return make_library(rng), make_textures(rng)
 
 
 def _render_image(
-    job: _Job, lib: list[_Shape], tex: _Textures
+    job: _Job, lib: list[Shape], tex: Textures
 ) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     rng = np.random.default_rng([job.seed, job.index, 1])
-    sc = _sample_scene(rng, job.cam, lib)
-    view = _PerspectiveView(job.cam, sc.C, sc.R)
-    surf = _shade(rng, sc, view, tex)
-    rgb = _rgb_sensor(rng, sc, surf.radiance)
-    depth = _depth_sensor(rng, sc, job.cam, surf)
+    sc = sample_scene(rng, job.cam, lib)
+    view = PerspectiveView(job.cam, sc.C, sc.R)
+    surf = shade(rng, sc, view, tex)
+    rgb = rgb_sensor(rng, sc, surf.radiance)
+    depth = depth_sensor(rng, sc, job.cam, surf)
     anns = _annotate(sc, job.cam, surf)
     name = f"alien_{job.index:05d}.png"
     if not cv2.imwrite(str(job.out / "rgb" / name), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)):
@@ -128,7 +128,7 @@ def _render_image(
     return image, anns
 
 
-_WORKER_ASSETS: dict[int, tuple[list[_Shape], _Textures]] = {}
+_WORKER_ASSETS: dict[int, tuple[list[Shape], Textures]] = {}
 
 
 def _worker(job: _Job) -> tuple[dict[str, Any], list[dict[str, Any]]]:

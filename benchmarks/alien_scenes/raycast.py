@@ -10,13 +10,13 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from alien_scenes.common import F32, F64, GROUND_ID, I64, CameraModel, _mm, _perp_basis
-from alien_scenes.shapes import _Hole, _Scene, _Tube
+from alien_scenes.common import F32, F64, GROUND_ID, I64, CameraModel, mm, perp_basis
+from alien_scenes.shapes import Hole, Scene, Tube
 
 # --------------------------------------------------------------------------- world grid
 
 
-class _Grid:
+class Grid:
     """A 2 cm raster of the site: keep-out (holes), placement region, rubble height."""
 
     def __init__(self, x0: float, y0: float, x1: float, y1: float, res: float = 0.02) -> None:
@@ -120,7 +120,7 @@ class _View:
         return u0c, u1c, v0c, v1c
 
 
-class _PerspectiveView(_View):
+class PerspectiveView(_View):
     def __init__(self, cam: CameraModel, C: F64, R: F64) -> None:
         self.h, self.w = cam.height, cam.width
         self.cam, self.C, self.R = cam, C, R
@@ -128,12 +128,12 @@ class _PerspectiveView(_View):
         d = np.stack([(u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy, np.ones(u.shape)], -1).reshape(
             -1, 3
         )
-        self.D = _mm(d, R.T).astype(np.float32)
+        self.D = mm(d, R.T).astype(np.float32)
         self.origin = np.broadcast_to(C.astype(np.float32), self.D.shape)
         self.o_const, self.d_const = C, None
 
     def pix(self, pts: F64) -> tuple[F64, F64, F64]:
-        X = _mm(pts - self.C, self.R)
+        X = mm(pts - self.C, self.R)
         z = X[..., 2]
         with np.errstate(divide="ignore", invalid="ignore"):
             zz = np.where(z > 0.05, z, np.nan)
@@ -144,15 +144,15 @@ class _PerspectiveView(_View):
             )
 
 
-class _OrthoView(_View):
+class OrthoView(_View):
     """Parallel rays towards -s (from the sun), pixel (r, c) at base + c*tx*ea + r*tx*eb."""
 
     LIFT = 60.0
 
     def __init__(self, s: F64, pts: F64, max_px: int = 512, min_texel: float = 0.01) -> None:
         self.s = s
-        self.ea, self.eb = _perp_basis(s)
-        a, b = _mm(pts, self.ea), _mm(pts, self.eb)
+        self.ea, self.eb = perp_basis(s)
+        a, b = mm(pts, self.ea), mm(pts, self.eb)
         ext = max(np.ptp(a), np.ptp(b))
         self.texel = max(ext / max_px, min_texel)
         self.base = (a.min() - 2 * self.texel) * self.ea + (b.min() - 2 * self.texel) * self.eb
@@ -172,13 +172,13 @@ class _OrthoView(_View):
     def pix(self, pts: F64) -> tuple[F64, F64, F64]:
         rel = pts - self.base
         return (
-            _mm(rel, self.ea) / self.texel,
-            _mm(rel, self.eb) / self.texel,
+            mm(rel, self.ea) / self.texel,
+            mm(rel, self.eb) / self.texel,
             np.ones(pts.shape[:-1]),
         )
 
     def depth_of(self, P: F64) -> F64:
-        return self.LIFT - _mm(P - self.base, self.s)
+        return self.LIFT - mm(P - self.base, self.s)
 
 
 # --------------------------------------------------------------------------- ray casting
@@ -262,17 +262,14 @@ def _cover(view: _View, pts: F64) -> list[I64]:
     return out
 
 
-def _cast_polyhedra(view: _View, buf: _Buffers, sc: _Scene) -> None:
+def _cast_polyhedra(view: _View, buf: _Buffers, sc: Scene) -> None:
     """Ray-cast all polyhedra, nearest first, skipping pairs already hidden."""
     if len(sc.poly_ids) == 0:
         return
     verts = sc.verts.astype(np.float64)
     covers = _cover(view, verts)
     nlive = (sc.planes[..., :3] != 0).any(-1).sum(-1)
-    if isinstance(view, _OrthoView):
-        near = view.depth_of(verts).min(1)
-    else:
-        near = view.pix(verts)[2].min(1)
+    near = view.depth_of(verts).min(1) if isinstance(view, OrthoView) else view.pix(verts)[2].min(1)
     order = np.argsort(near)
     batch: list[int] = []
     count = 0
@@ -288,17 +285,17 @@ def _cast_polyhedra(view: _View, buf: _Buffers, sc: _Scene) -> None:
             batch, count = [], 0
 
 
-def _poly_batch(view: _View, buf: _Buffers, sc: _Scene, obj: I64, pix: I64, F: int) -> None:
+def _poly_batch(view: _View, buf: _Buffers, sc: Scene, obj: I64, pix: I64, F: int) -> None:
     """Slab test of rays against convex polyhedra, for (object, pixel) pairs."""
     if len(pix) == 0:
         return
     n = sc.planes[obj, :F, :3]
     if view.d_const is not None:
-        den = _mm(n, view.d_const.astype(np.float32))
+        den = mm(n, view.d_const.astype(np.float32))
     else:
         den = np.einsum("pfk,pk->pf", n, view.D[pix])
     if view.o_const is not None:
-        num = sc.planes[obj, :F, 3] - _mm(n, view.o_const.astype(np.float32))
+        num = sc.planes[obj, :F, 3] - mm(n, view.o_const.astype(np.float32))
     else:
         num = sc.planes[obj, :F, 3] - np.einsum("pfk,pk->pf", n, view.origin[pix])
     # padded planes have n = 0, d = 1: den = 0 and num > 0, so they never bind
@@ -315,7 +312,7 @@ def _poly_batch(view: _View, buf: _Buffers, sc: _Scene, obj: I64, pix: I64, F: i
         buf.merge(pix[hit], t_in[hit], sc.poly_ids[obj[hit]], nrm)
 
 
-def _cast_ellipsoids(view: _View, buf: _Buffers, sc: _Scene) -> None:
+def _cast_ellipsoids(view: _View, buf: _Buffers, sc: Scene) -> None:
     if len(sc.ell_ids) == 0:
         return
     u0, u1, v0, v1 = view.rects(sc.ell_corners.astype(np.float64))
@@ -339,7 +336,7 @@ def _cast_ellipsoids(view: _View, buf: _Buffers, sc: _Scene) -> None:
         buf.merge(pix[hit], t[hit], sc.ell_ids[obj[hit]], nw)
 
 
-def _cast_tube(view: _View, buf: _Buffers, tb: _Tube) -> None:
+def _cast_tube(view: _View, buf: _Buffers, tb: Tube) -> None:
     u0, u1, v0, v1 = view.rects(tb.corners()[None])
     _obj, pix = _pairs(u0, u1, v0, v1, np.array([0]), view.w)
     if len(pix) == 0:
@@ -347,7 +344,7 @@ def _cast_tube(view: _View, buf: _Buffers, tb: _Tube) -> None:
     a = tb.axis
     rel = view.origin[pix].astype(np.float64) - tb.top
     D = view.D[pix].astype(np.float64)
-    Oa, Da = _mm(rel, a), _mm(D, a)
+    Oa, Da = mm(rel, a), mm(D, a)
     Op, Dp = rel - Oa[:, None] * a, D - Da[:, None] * a
     A = np.maximum((Dp * Dp).sum(1), 1e-12)
     B = 2 * (Op * Dp).sum(1)
@@ -381,7 +378,7 @@ def _cast_tube(view: _View, buf: _Buffers, tb: _Tube) -> None:
         buf.merge(pix[hit], best[hit], ident[hit], normal[hit])
 
 
-def _shaft_hit(hole: _Hole, D: F64, t0: F64, Pxy: F64) -> tuple[F64, F64, NDArray[np.int32]]:
+def _shaft_hit(hole: Hole, D: F64, t0: F64, Pxy: F64) -> tuple[F64, F64, NDArray[np.int32]]:
     """Continue rays that crossed the ground inside ``hole``'s opening down its shaft."""
     a = hole.axis_down
     kx, ky = a[0] / a[2], a[1] / a[2]
@@ -412,7 +409,7 @@ def _shaft_hit(hole: _Hole, D: F64, t0: F64, Pxy: F64) -> tuple[F64, F64, NDArra
     return t0 + s_hit, normal, ident
 
 
-def _cast_ground(view: _View, buf: _Buffers, sc: _Scene) -> None:
+def _cast_ground(view: _View, buf: _Buffers, sc: Scene) -> None:
     D = view.D
     Oz = view.origin[:, 2]
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -432,24 +429,24 @@ def _cast_ground(view: _View, buf: _Buffers, sc: _Scene) -> None:
         th, nh, ih = _shaft_hit(hole, D[ii].astype(np.float64), tt[inside], Pxy[inside])
         buf.t[ii], buf.n[ii], buf.ident[ii] = th, nh, ih
     for bowl in sc.bowls:
-        q = _mm(P - bowl.centre, bowl.M.T)
+        q = mm(P - bowl.centre, bowl.M.T)
         inside = (q[:, 0] ** 2 + q[:, 1] ** 2) < 1.0
         if not inside.any():
             continue
         ii = idx[inside]
-        o = _mm(view.origin[ii].astype(np.float64) - bowl.centre, bowl.M.T)
-        d = _mm(D[ii].astype(np.float64), bowl.M.T)
+        o = mm(view.origin[ii].astype(np.float64) - bowl.centre, bowl.M.T)
+        d = mm(D[ii].astype(np.float64), bowl.M.T)
         A = (d * d).sum(1)
         B = 2 * (o * d).sum(1)
         Cq = (o * o).sum(1) - 1
         tb = (-B + np.sqrt(np.maximum(B * B - 4 * A * Cq, 0))) / (2 * A)
         p = o + tb[:, None] * d
-        nw = -_mm(p, bowl.M)
+        nw = -mm(p, bowl.M)
         nw /= np.linalg.norm(nw, axis=1)[:, None]
         buf.t[ii], buf.n[ii], buf.ident[ii] = tb, nw, bowl.ident
 
 
-def _render(view: _View, sc: _Scene) -> _Buffers:
+def render(view: _View, sc: Scene) -> _Buffers:
     buf = _Buffers.empty(view.h * view.w)
     _cast_ground(view, buf, sc)
     _cast_polyhedra(view, buf, sc)

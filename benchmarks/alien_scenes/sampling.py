@@ -10,32 +10,32 @@ import numpy as np
 from alien_scenes.common import (
     F64,
     CameraModel,
-    _perp_basis,
-    _pick,
-    _powerlaw,
-    _resting_rotation,
-    _rot,
-    _rz,
+    perp_basis,
+    pick,
+    powerlaw,
+    resting_rotation,
+    rot,
+    rz,
 )
 
 # --------------------------------------------------------------------------- scene sampling
 
-_LIB_BOX, _LIB_PRISM, _LIB_CUT0, _LIB_HULL0 = 0, 1, 2, 34
+LIB_BOX, _LIB_PRISM, _LIB_CUT0, LIB_HULL0 = 0, 1, 2, 34
 
 
-def _camera_rotation(up: F64, tilt: float, yaw: float, roll: float) -> F64:
+def camera_rotation(up: F64, tilt: float, yaw: float, roll: float) -> F64:
     """World-from-camera rotation: tilt from nadir, yaw about gravity, roll about the axis."""
-    x, _ = _perp_basis(up)
-    x = _rot(up, yaw) @ x
+    x, _ = perp_basis(up)
+    x = rot(up, yaw) @ x
     z = -up
     y = np.cross(z, x)
-    rt = _rot(x, tilt)
+    rt = rot(x, tilt)
     z2, y2 = rt @ z, rt @ y
-    rr = _rot(z2, roll)
+    rr = rot(z2, roll)
     return np.column_stack([rr @ x, rr @ y2, z2])
 
 
-def _ground_point(cam: CameraModel, C: F64, R: F64, u: float, v: float) -> F64 | None:
+def ground_point(cam: CameraModel, C: F64, R: F64, u: float, v: float) -> F64 | None:
     d = R @ np.array([(u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy, 1.0])
     if d[2] > -0.05:
         return None
@@ -43,7 +43,7 @@ def _ground_point(cam: CameraModel, C: F64, R: F64, u: float, v: float) -> F64 |
     return p
 
 
-def _footprint(cam: CameraModel, C: F64, R: F64) -> F64:
+def footprint(cam: CameraModel, C: F64, R: F64) -> F64:
     """Ground-plane polygon (M, 2) seen through the image border."""
     w, h = cam.width - 1, cam.height - 1
     border = (
@@ -54,7 +54,7 @@ def _footprint(cam: CameraModel, C: F64, R: F64) -> F64:
     )
     pts = []
     for u, v in border:
-        p = _ground_point(cam, C, R, u, v)
+        p = ground_point(cam, C, R, u, v)
         if p is None:  # ray towards the horizon: stop it 12 m away
             d = R @ np.array([(u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy, 1.0])
             d[2] = 0
@@ -63,10 +63,10 @@ def _footprint(cam: CameraModel, C: F64, R: F64) -> F64:
     return np.array(pts)
 
 
-def _poly_dims(poly: F64, axis: F64) -> tuple[float, float, float]:
+def poly_dims(poly: F64, axis: F64) -> tuple[float, float, float]:
     """Long and short side of the min-area rectangle and inscribed-circle diameter (m) of
     an opening ``poly`` in z = 0, measured across the shaft ``axis``."""
-    u, v = _perp_basis(axis)
+    u, v = perp_basis(axis)
     p3 = np.column_stack([poly, np.zeros(len(poly))])
     q = np.column_stack([p3 @ u, p3 @ v])
     (_, _), (w, h), _ = cv2.minAreaRect(q.astype(np.float32))
@@ -79,7 +79,7 @@ def _poly_dims(poly: F64, axis: F64) -> tuple[float, float, float]:
     return float(max(w, h)), float(min(w, h)), float(2 * dist.max() * res)
 
 
-def _polygon_area(p: F64) -> float:
+def polygon_area(p: F64) -> float:
     x, y = p[:, 0], p[:, 1]
     return float(0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
 
@@ -133,7 +133,7 @@ def opening_polygon(r: np.random.Generator, kind: str) -> F64:
         wid *= r.uniform(0.7, 1.3, n)
         p = np.vstack([c + nrm * wid[:, None] / 2, (c - nrm * wid[:, None] / 2)[::-1]])
         lo = hi = 0.0
-    p = p @ _rz(r.uniform(0, 2 * math.pi))[:2, :2].T
+    p = p @ rz(r.uniform(0, 2 * math.pi))[:2, :2].T
     if hi > 0:
         (_, _), (a, b), _ = cv2.minAreaRect(p.astype(np.float32))
         p *= r.uniform(lo, hi) / max(a, b)
@@ -145,29 +145,29 @@ def opening_polygon(r: np.random.Generator, kind: str) -> F64:
 
 def rubble_piece(r: np.random.Generator, n_shapes: int) -> tuple[int, F64, F64, str, float]:
     """A random piece of rubble: (library shape, dims, rotation, material, embedding)."""
-    k = _pick(
+    k = pick(
         r,
         ["chunk", "cut", "brick", "block", "plank", "beam", "rebar", "sheet", "pole"],
         [0.52, 0.2, 0.12, 0.04, 0.04, 0.015, 0.03, 0.02, 0.015],
     )
     if k == "chunk":
-        s = _powerlaw(r, 0.08, 0.9, 1.9)
+        s = powerlaw(r, 0.08, 0.9, 1.9)
         dims = s * np.array([1, r.uniform(0.55, 1), r.uniform(0.4, 0.85)])
-        mat = _pick(r, ["concrete", "brick", "stone", "dark"], [0.68, 0.12, 0.15, 0.05])
+        mat = pick(r, ["concrete", "brick", "stone", "dark"], [0.68, 0.12, 0.15, 0.05])
         return (
-            int(r.integers(_LIB_HULL0, n_shapes)),
+            int(r.integers(LIB_HULL0, n_shapes)),
             dims,
-            _resting_rotation(r, 35),
+            resting_rotation(r, 35),
             mat,
             r.uniform(0, 0.4),
         )
     if k == "cut":
-        s = _powerlaw(r, 0.1, 0.9, 2.0)
+        s = powerlaw(r, 0.1, 0.9, 2.0)
         dims = s * np.array([1, r.uniform(0.5, 0.95), r.uniform(0.3, 0.7)])
         return (
-            int(r.integers(_LIB_CUT0, _LIB_HULL0)),
+            int(r.integers(_LIB_CUT0, LIB_HULL0)),
             dims,
-            _resting_rotation(r, 20),
+            resting_rotation(r, 20),
             "concrete",
             r.uniform(0, 0.3),
         )
@@ -175,33 +175,33 @@ def rubble_piece(r: np.random.Generator, n_shapes: int) -> tuple[int, F64, F64, 
         dims = np.array([0.215, 0.1025, 0.065]) * r.uniform(0.95, 1.05)
         if r.uniform() < 0.3:
             dims[0] *= r.uniform(0.4, 0.8)
-        return _LIB_BOX, dims, _resting_rotation(r, 40), "brick", r.uniform(0, 0.3)
+        return LIB_BOX, dims, resting_rotation(r, 40), "brick", r.uniform(0, 0.3)
     if k == "block":
         dims = np.array([0.39, 0.19, 0.19]) * r.uniform(0.9, 1.1)
-        return _LIB_BOX, dims, _resting_rotation(r, 25), "concrete", r.uniform(0, 0.3)
+        return LIB_BOX, dims, resting_rotation(r, 25), "concrete", r.uniform(0, 0.3)
     if k == "plank":
         dims = np.array([r.uniform(0.4, 2.5), r.uniform(0.06, 0.25), r.uniform(0.02, 0.06)])
-        return _LIB_BOX, dims, _resting_rotation(r, 20), "wood", r.uniform(0, 0.2)
+        return LIB_BOX, dims, resting_rotation(r, 20), "wood", r.uniform(0, 0.2)
     if k == "beam":
         dims = np.array([r.uniform(1, 3), r.uniform(0.1, 0.25), r.uniform(0.1, 0.25)])
         return (
-            _LIB_BOX,
+            LIB_BOX,
             dims,
-            _resting_rotation(r, 12),
-            _pick(r, ["wood", "concrete"]),
+            resting_rotation(r, 12),
+            pick(r, ["wood", "concrete"]),
             r.uniform(0, 0.3),
         )
     if k == "rebar":
         d = r.uniform(0.01, 0.03)
         dims = np.array([r.uniform(0.4, 2.0), d, d])
-        return _LIB_PRISM, dims, _resting_rotation(r, 25), "rust", 0.0
+        return _LIB_PRISM, dims, resting_rotation(r, 25), "rust", 0.0
     if k == "sheet":
         dims = np.array([r.uniform(0.3, 1.2), r.uniform(0.3, 1.0), r.uniform(0.005, 0.02)])
         return (
-            _LIB_BOX,
+            LIB_BOX,
             dims,
-            _resting_rotation(r, 25),
-            _pick(r, ["metal", "drywall", "tarp"]),
+            resting_rotation(r, 25),
+            pick(r, ["metal", "drywall", "tarp"]),
             0.0,
         )
     d = r.uniform(0.06, 0.2)
@@ -209,7 +209,7 @@ def rubble_piece(r: np.random.Generator, n_shapes: int) -> tuple[int, F64, F64, 
     return (
         _LIB_PRISM,
         dims,
-        _resting_rotation(r, 12),
-        _pick(r, ["wood", "concrete"]),
+        resting_rotation(r, 12),
+        pick(r, ["wood", "concrete"]),
         r.uniform(0, 0.3),
     )

@@ -7,45 +7,45 @@ import math
 import cv2
 import numpy as np
 
-from alien_scenes.builder import _Builder
+from alien_scenes.builder import Builder
 from alien_scenes.common import (
     F64,
     F_PAD,
     CameraModel,
-    _perp_basis,
-    _pick,
-    _resting_rotation,
-    _rot,
-    _rz,
+    perp_basis,
+    pick,
+    resting_rotation,
+    rot,
+    rz,
 )
-from alien_scenes.raycast import _Grid
-from alien_scenes.sampling import _LIB_BOX, _camera_rotation, _footprint, rubble_piece
-from alien_scenes.shapes import _Scene, _Shape, _Stain
+from alien_scenes.raycast import Grid
+from alien_scenes.sampling import LIB_BOX, camera_rotation, footprint, rubble_piece
+from alien_scenes.shapes import Scene, Shape, Stain
 
 
-def _sample_scene(rng: np.random.Generator, cam: CameraModel, lib: list[_Shape]) -> _Scene:
+def sample_scene(rng: np.random.Generator, cam: CameraModel, lib: list[Shape]) -> Scene:
     """Draw one scene: site, camera pose, light, holes, distractors and rubble."""
-    b = _Builder(rng, cam, lib)
+    b = Builder(rng, cam, lib)
     slope, saz = math.radians(rng.uniform(0, 10)), rng.uniform(0, 2 * math.pi)
     up = np.array(
         [math.sin(slope) * math.cos(saz), math.sin(slope) * math.sin(saz), math.cos(slope)]
     )
     height = rng.uniform(2.0, 3.5)  # camera height above the rubble surface, m
     tilt = rng.uniform(0, 20)
-    R = _camera_rotation(
+    R = camera_rotation(
         up, math.radians(tilt), rng.uniform(0, 2 * math.pi), math.radians(rng.normal(0, 1.5))
     )
     z_axis = R[:, 2]
     C = (height + 0.3) * up[2] / z_axis[2] * z_axis
     b.C, b.R = C, R
-    foot = _footprint(cam, C, R)
+    foot = footprint(cam, C, R)
     b.foot = foot
     # light: a low dawn sun (or none yet) and a bluish sky
     sun: F64 | None = None
     sun_h = np.zeros(2)
     elev = -3.0
-    hx, _ = _perp_basis(up)
-    h = _rot(up, rng.uniform(0, 2 * math.pi)) @ hx
+    hx, _ = perp_basis(up)
+    h = rot(up, rng.uniform(0, 2 * math.pi)) @ hx
     glow = h
     if rng.uniform() > 0.25:
         elev = rng.uniform(3, 28)
@@ -58,7 +58,7 @@ def _sample_scene(rng: np.random.Generator, cam: CameraModel, lib: list[_Shape])
         pts.append(foot + sun_h * min(3.0, 1.2 / math.tan(math.radians(elev))))
     allp = np.vstack(pts)
     lo, hi = allp.min(0) - margin - 0.2, allp.max(0) + margin + 0.2
-    g = _Grid(lo[0], lo[1], hi[0], hi[1])
+    g = Grid(lo[0], lo[1], hi[0], hi[1])
     b.grid = g
     fm = np.zeros((g.ny, g.nx), np.uint8)
     cv2.fillPoly(fm, [np.round(g.px(foot) * 16).astype(np.int32)], 1, cv2.LINE_8, 4)
@@ -67,7 +67,7 @@ def _sample_scene(rng: np.random.Generator, cam: CameraModel, lib: list[_Shape])
     # access holes, then distractors
     n_access = int(rng.choice(4, p=[0.12, 0.45, 0.29, 0.14]))
     for _ in range(n_access):
-        kind = _pick(rng, ["irregular", "gap", "pipe", "rect"], [0.4, 0.25, 0.2, 0.15])
+        kind = pick(rng, ["irregular", "gap", "pipe", "rect"], [0.4, 0.25, 0.2, 0.15])
         whole = rng.uniform() < 0.8  # else anywhere, often cut by the image border
         for _try in range(60):
             c = b.sample_view_point(interior=whole)
@@ -98,7 +98,7 @@ def _sample_scene(rng: np.random.Generator, cam: CameraModel, lib: list[_Shape])
         if c is not None:
             ax = rng.uniform(0.15, 0.7) * np.array([1, rng.uniform(0.4, 1)])
             b.stains.append(
-                _Stain(c, ax, rng.uniform(0, math.pi), rng.uniform(0.35, 0.8), rng.uniform() < 0.3)
+                Stain(c, ax, rng.uniform(0, math.pi), rng.uniform(0.35, 0.8), rng.uniform() < 0.3)
             )
             b.count("stain")
     # big pieces: mounds, slabs, shadow-casting walls beyond the view
@@ -108,7 +108,7 @@ def _sample_scene(rng: np.random.Generator, cam: CameraModel, lib: list[_Shape])
         dims = np.array([rng.uniform(1, 2.8), rng.uniform(0.8, 2.2), rng.uniform(0.1, 0.3)])
         for _try in range(10):
             if b.add_resting(
-                _LIB_BOX, dims, _resting_rotation(rng, 18), b.random_region_point(), "concrete", 0.2
+                LIB_BOX, dims, resting_rotation(rng, 18), b.random_region_point(), "concrete", 0.2
             ):
                 b.count("slab")
                 break
@@ -124,7 +124,7 @@ def _sample_scene(rng: np.random.Generator, cam: CameraModel, lib: list[_Shape])
             )
             dims = np.array([rng.uniform(1.5, 3.5), rng.uniform(0.15, 0.3), rng.uniform(0.6, 1.6)])
             yaw = math.atan2(sun_h[1], sun_h[0]) + math.pi / 2 + rng.normal(0, 0.5)
-            if b.add_resting(_LIB_BOX, dims, _rz(yaw), p, _pick(rng, ["concrete", "brick"]), 0.1):
+            if b.add_resting(LIB_BOX, dims, rz(yaw), p, pick(rng, ["concrete", "brick"]), 0.1):
                 b.count("wall")
     # rubble until the region is covered about `coverage` times
     area = float(g.region.sum()) * g.res**2
@@ -162,7 +162,7 @@ def _sample_scene(rng: np.random.Generator, cam: CameraModel, lib: list[_Shape])
     for i, v in enumerate(b.verts):
         verts[i, : len(v)] = v
         verts[i, len(v) :] = v[0]
-    return _Scene(
+    return Scene(
         C=C,
         R=R,
         up=up,

@@ -17,38 +17,38 @@ from alien_scenes.common import (
     F64,
     GROUND_ID,
     CameraModel,
-    _mm,
-    _Textures,
-    _triplanar,
+    Textures,
+    mm,
+    triplanar,
 )
-from alien_scenes.raycast import _OrthoView, _PerspectiveView, _render
+from alien_scenes.raycast import OrthoView, PerspectiveView, render
 from alien_scenes.shapes import (
-    _M_CON,
-    _M_DISP,
-    _M_IR,
-    _M_KIND,
-    _M_OFF,
-    _M_SCALE,
-    _M_TAG,
     KIND_WALL,
-    _Scene,
+    M_CON,
+    M_DISP,
+    M_IR,
+    M_KIND,
+    M_OFF,
+    M_SCALE,
+    M_TAG,
+    Scene,
 )
 
 # --------------------------------------------------------------------------- shading
 
 
-def _shadow_factor(sc: _Scene, P: F64, n: F64, valid: NDArray[np.bool_]) -> F64:
+def _shadow_factor(sc: Scene, P: F64, n: F64, valid: NDArray[np.bool_]) -> F64:
     """Fraction (N,) of the sun's disc seen from surface points P (N, 3), from a shadow map."""
     out = np.zeros(len(P))
     if sc.sun is None:
         return out
     x0, y0, x1, y1 = sc.region
     box = np.array([[x, y, z] for x in (x0, x1) for y in (y0, y1) for z in (-0.5, 2.5)])
-    view = _OrthoView(sc.sun, box)
-    smap = _render(view, sc).t.reshape(view.h, view.w)
+    view = OrthoView(sc.sun, box)
+    smap = render(view, sc).t.reshape(view.h, view.w)
     a, b, _ = view.pix(P[valid])
     tp = view.depth_of(P[valid])
-    cosang = np.clip(_mm(n[valid], sc.sun), 0.05, 1.0)
+    cosang = np.clip(mm(n[valid], sc.sun), 0.05, 1.0)
     bias = 0.012 + np.clip(1.5 * view.texel * np.sqrt(1 - cosang**2) / cosang, 0, 0.12)
     j0, i0 = np.floor(a).astype(np.int64), np.floor(b).astype(np.int64)
     fa, fb = a - j0, b - i0
@@ -67,7 +67,7 @@ def _shadow_factor(sc: _Scene, P: F64, n: F64, valid: NDArray[np.bool_]) -> F64:
 
 
 @dataclass(frozen=True)
-class _Surface:
+class Surface:
     """Per-pixel surface data of the camera view, (H, W[, 3])."""
 
     Z: F64  # metres along the optical axis, inf = nothing
@@ -81,11 +81,9 @@ class _Surface:
     radiance: F32
 
 
-def _shade(
-    rng: np.random.Generator, sc: _Scene, view: _PerspectiveView, tex: _Textures
-) -> _Surface:
+def shade(rng: np.random.Generator, sc: Scene, view: PerspectiveView, tex: Textures) -> Surface:
     h, w = view.h, view.w
-    buf = _render(view, sc)
+    buf = render(view, sc)
     valid = np.isfinite(buf.t)
     t = np.where(valid, buf.t, 0.0).astype(np.float64)
     D = view.D.astype(np.float64)
@@ -100,30 +98,30 @@ def _shade(
     Pi, ni = P.reshape(h, w, 3).astype(np.float32), n.reshape(h, w, 3)
     w3 = np.abs(ni) ** 4 + 1e-6
     w3 = (w3 / w3.sum(2, keepdims=True)).astype(np.float32)
-    scale = mat[:, _M_SCALE].reshape(h, w)
-    off = mat[:, _M_OFF : _M_OFF + 3].reshape(h, w, 3)
-    grain = _triplanar(tex.grain, Pi, w3, (250.0 / scale).astype(np.float32), off).reshape(-1)
-    smooth = _triplanar(tex.smooth, Pi, w3, (30.0 / scale).astype(np.float32), off * 0.37).reshape(
+    scale = mat[:, M_SCALE].reshape(h, w)
+    off = mat[:, M_OFF : M_OFF + 3].reshape(h, w, 3)
+    grain = triplanar(tex.grain, Pi, w3, (250.0 / scale).astype(np.float32), off).reshape(-1)
+    smooth = triplanar(tex.smooth, Pi, w3, (30.0 / scale).astype(np.float32), off * 0.37).reshape(
         -1
     )
-    albedo = mat[:, 0:3] * np.exp(mat[:, _M_CON] * (0.75 * smooth + 0.45 * grain))[:, None]
-    ir = mat[:, _M_IR].astype(np.float64).copy()
+    albedo = mat[:, 0:3] * np.exp(mat[:, M_CON] * (0.75 * smooth + 0.45 * grain))[:, None]
+    ir = mat[:, M_IR].astype(np.float64).copy()
     # dust settles on upward faces
     dust_k = rng.uniform(0.05, 0.35)
     dust = np.array([0.42, 0.40, 0.37]) * rng.uniform(0.8, 1.1)
-    f = dust_k * np.clip(_mm(n, sc.up), 0, 1) ** 2 * np.clip(0.6 + 0.3 * smooth, 0, 1)
+    f = dust_k * np.clip(mm(n, sc.up), 0, 1) ** 2 * np.clip(0.6 + 0.3 * smooth, 0, 1)
     albedo = albedo * (1 - f[:, None]) + dust * f[:, None]
     for st in sc.stains:
         c, s_ = math.cos(st.angle), math.sin(st.angle)
         d = P[:, :2] - st.centre
-        q = (_mm(d, [c, s_]) / st.axes[0]) ** 2 + (_mm(d, [-s_, c]) / st.axes[1]) ** 2
+        q = (mm(d, [c, s_]) / st.axes[0]) ** 2 + (mm(d, [-s_, c]) / st.axes[1]) ** 2
         m = np.clip((1.15 - q * (1 + 0.3 * smooth)) / 0.3, 0, 1) * (P[:, 2] < 0.6) * valid
         albedo *= (1 - st.strength * m)[:, None]
         if st.wet:
             ir *= 1 - 0.85 * m
-    kind = mat[:, _M_KIND].astype(np.int64)
-    tag = np.where(valid, mat[:, _M_TAG], -1).astype(np.int32)
-    disp = mat[:, _M_DISP] * (0.7 * grain + 0.8 * smooth)
+    kind = mat[:, M_KIND].astype(np.int64)
+    tag = np.where(valid, mat[:, M_TAG], -1).astype(np.int32)
+    disp = mat[:, M_DISP] * (0.7 * grain + 0.8 * smooth)
     # bump normals from the screen-space gradient of the displacement
     dimg = disp.reshape(h, w)
     same_u = np.zeros((h, w), bool)
@@ -154,20 +152,20 @@ def _shade(
         vf = hole.r_eff**2 / (hole.r_eff**2 + below**2)
         vf *= np.where(kind[sel] == KIND_WALL, 0.65, 1.0)
         ao[sel] = np.minimum(ao[sel], 0.03 + vf)
-    nu = _mm(nb, sc.up)
+    nu = mm(nb, sc.up)
     light = (
-        sc.e_sun * sc.sun_rgb * (np.clip(_mm(nb, sc.sun), 0, 1) * shadow)[:, None]
+        sc.e_sun * sc.sun_rgb * (np.clip(mm(nb, sc.sun), 0, 1) * shadow)[:, None]
         if sc.sun is not None
         else np.zeros((len(nb), 3))
     )
     light = light + sc.sky_rgb * (ao * (0.55 + 0.45 * nu))[:, None]
-    glow = np.clip(_mm(nb, sc.glow), 0, 1) * ao  # the bright dawn sky low over the sunrise
+    glow = np.clip(mm(nb, sc.glow), 0, 1) * ao  # the bright dawn sky low over the sunrise
     light = light + np.array([1.0, 0.75, 0.6]) * (sc.glow_strength * glow)[:, None]
     bounce = (0.3 + 0.1 * sc.e_sun) * np.array([0.3, 0.27, 0.23]) * (0.5 - 0.5 * nu)[:, None]
     light = light + bounce * ao[:, None]
     rad = (albedo * light).reshape(h, w, 3).astype(np.float32)
     cos_inc = np.abs((n * D).sum(1)) / np.linalg.norm(D, axis=1)
-    return _Surface(
+    return Surface(
         Z=np.where(valid, t, np.inf).reshape(h, w),
         P=P.reshape(h, w, 3),
         n=n.reshape(h, w, 3),
@@ -183,7 +181,7 @@ def _shade(
 # --------------------------------------------------------------------------- sensors
 
 
-def _rgb_sensor(rng: np.random.Generator, sc: _Scene, rad: F32) -> NDArray[np.uint8]:
+def rgb_sensor(rng: np.random.Generator, sc: Scene, rad: F32) -> NDArray[np.uint8]:
     """Dawn colour camera: blur, vignetting, Bayer, shot/read noise, AE, AWB, gamma."""
     h, w = rad.shape[:2]
     img: NDArray[Any] = rad.copy()
@@ -222,8 +220,8 @@ def _rgb_sensor(rng: np.random.Generator, sc: _Scene, rad: F32) -> NDArray[np.ui
     return out
 
 
-def _depth_sensor(
-    rng: np.random.Generator, sc: _Scene, cam: CameraModel, s: _Surface
+def depth_sensor(
+    rng: np.random.Generator, sc: Scene, cam: CameraModel, s: Surface
 ) -> NDArray[np.uint16]:
     """Xtion-like structured-light depth (uint16 mm, 0 = no reading)."""
     h, w = s.Z.shape

@@ -10,26 +10,26 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import ConvexHull, HalfspaceIntersection
 
-from alien_scenes.common import F32, F64, F_PAD, _perp_basis
+from alien_scenes.common import F32, F64, F_PAD, perp_basis
 
 # --------------------------------------------------------------------------- shape library
 
 
 @dataclass(frozen=True)
-class _Shape:
+class Shape:
     """A convex polyhedron in its unit box: planes n.x <= d (F_PAD, 4), vertices (V, 3)."""
 
     planes: F64
     verts: F64
 
 
-def _shape_from_halfspaces(normals: F64, offsets: F64) -> _Shape:
+def _shape_from_halfspaces(normals: F64, offsets: F64) -> Shape:
     hs = np.hstack([normals, -offsets[:, None]])
     verts = HalfspaceIntersection(hs, np.zeros(3)).intersections
     return _finish_shape(normals, offsets, verts)
 
 
-def _finish_shape(normals: F64, offsets: F64, verts: F64) -> _Shape:
+def _finish_shape(normals: F64, offsets: F64, verts: F64) -> Shape:
     lo, hi = verts.min(0), verts.max(0)
     centre, ext = (lo + hi) / 2, hi - lo
     verts = (verts - centre) / ext
@@ -41,12 +41,12 @@ def _finish_shape(normals: F64, offsets: F64, verts: F64) -> _Shape:
     planes[:, 3] = 1.0
     planes[: len(n2), :3] = n2 / norm[:, None]
     planes[: len(n2), 3] = d2 / norm
-    return _Shape(planes, verts)
+    return Shape(planes, verts)
 
 
-def _make_library(rng: np.random.Generator) -> list[_Shape]:
+def make_library(rng: np.random.Generator) -> list[Shape]:
     """Index 0: box, 1: octagonal prism along x, then cut boxes, then random hulls."""
-    shapes: list[_Shape] = []
+    shapes: list[Shape] = []
     box_n = np.vstack([np.eye(3), -np.eye(3)])
     shapes.append(_shape_from_halfspaces(box_n, np.full(6, 0.5)))
     ang = np.arange(8) * math.pi / 4 + math.pi / 8
@@ -81,7 +81,7 @@ def _make_library(rng: np.random.Generator) -> list[_Shape]:
     return shapes
 
 
-def _instance(shape: _Shape, dims: F64, R: F64, c: F64) -> tuple[F64, F64]:
+def instance(shape: Shape, dims: F64, R: F64, c: F64) -> tuple[F64, F64]:
     """World planes (F_PAD, 4) and vertices (V, 3) of a scaled, rotated, moved shape."""
     n = shape.planes[:, :3]
     d = shape.planes[:, 3]
@@ -117,7 +117,7 @@ _PRESETS: dict[str, tuple[tuple[float, float, float], float, float, float, float
 KIND_GROUND, KIND_RUBBLE, KIND_WALL, KIND_FLOOR, KIND_PIPE_OUT, KIND_PIPE_IN, KIND_BOWL = range(7)
 
 
-class _Materials:
+class Materials:
     """Per-object surface table; row index = object id in the z-buffer."""
 
     def __init__(self, rng: np.random.Generator) -> None:
@@ -147,14 +147,14 @@ class _Materials:
 
 
 # columns of the material table
-_M_RGB, _M_CON, _M_DISP, _M_IR, _M_TAG, _M_KIND, _M_OFF, _M_SCALE = 0, 3, 4, 5, 6, 7, 8, 11
+_M_RGB, M_CON, M_DISP, M_IR, M_TAG, M_KIND, M_OFF, M_SCALE = 0, 3, 4, 5, 6, 7, 8, 11
 
 
 # --------------------------------------------------------------------------- scene records
 
 
 @dataclass(frozen=True)
-class _Hole:
+class Hole:
     """An opening in the ground plane continued by an oblique prism shaft."""
 
     kind: str
@@ -167,14 +167,14 @@ class _Hole:
     wall_id: int
     floor_id: int
     r_eff: float  # radius of the disc with the cross-section's area, m
-    mask: NDArray[np.uint8]  # opening raster at _HOLE_RES
+    mask: NDArray[np.uint8]  # opening raster at HOLE_RES
     mask_x0: float
     mask_y0: float
 
     def contains(self, xy: F64) -> NDArray[np.bool_]:
         """Which ground points (N, 2) fall in the opening."""
-        i = np.floor((xy[:, 1] - self.mask_y0) / _HOLE_RES).astype(np.int64)
-        j = np.floor((xy[:, 0] - self.mask_x0) / _HOLE_RES).astype(np.int64)
+        i = np.floor((xy[:, 1] - self.mask_y0) / HOLE_RES).astype(np.int64)
+        j = np.floor((xy[:, 0] - self.mask_x0) / HOLE_RES).astype(np.int64)
         h, w = self.mask.shape
         ok = (i >= 0) & (i < h) & (j >= 0) & (j < w)
         out = np.zeros(len(xy), bool)
@@ -182,11 +182,11 @@ class _Hole:
         return out
 
 
-_HOLE_RES = 0.01
+HOLE_RES = 0.01
 
 
 @dataclass(frozen=True)
-class _Tube:
+class Tube:
     """A hollow pipe open at its top end: axis up, top centre, radii, bottom axial offset."""
 
     top: F64
@@ -198,7 +198,7 @@ class _Tube:
     in_id: int
 
     def corners(self) -> F64:
-        u, v = _perp_basis(self.axis)
+        u, v = perp_basis(self.axis)
         pts = []
         for s in (0.0, self.s_bottom):
             for a in (-1, 1):
@@ -208,7 +208,7 @@ class _Tube:
 
 
 @dataclass(frozen=True)
-class _Bowl:
+class Bowl:
     """A shallow ellipsoidal depression centred on the ground plane."""
 
     centre: F64  # (3,), z = 0
@@ -217,7 +217,7 @@ class _Bowl:
 
 
 @dataclass(frozen=True)
-class _Stain:
+class Stain:
     centre: F64  # (2,)
     axes: F64  # (2,) semi-axes, m
     angle: float
@@ -226,7 +226,7 @@ class _Stain:
 
 
 @dataclass
-class _Scene:
+class Scene:
     C: F64
     R: F64  # world-from-camera, columns = camera x, y, z axes
     up: F64
@@ -244,10 +244,10 @@ class _Scene:
     ell_mat: F32
     ell_corners: F32
     ell_ids: NDArray[np.int32]
-    tubes: list[_Tube]
-    holes: list[_Hole]
-    bowls: list[_Bowl]
-    stains: list[_Stain]
+    tubes: list[Tube]
+    holes: list[Hole]
+    bowls: list[Bowl]
+    stains: list[Stain]
     mats: F32
     region: tuple[float, float, float, float]
     meta: dict[str, Any] = field(default_factory=dict)

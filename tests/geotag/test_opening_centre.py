@@ -24,8 +24,7 @@ sys.path.insert(0, str(REPO / "benchmarks"))
 from bench_geotag import ErrorModel, hard_rows, sim_sweep  # noqa: E402
 
 from holescan.detect import DEFAULT, CameraIntrinsics, detect_holes  # noqa: E402
-from holescan.sim import CameraPose, render  # noqa: E402
-from holescan.sim._sortie import SortieParams, make_sortie_world  # noqa: E402
+from holescan.sim import CameraPose, SortieParams, make_sortie_world, render  # noqa: E402  # noqa: E402
 
 
 @pytest.fixture(scope="module")

@@ -31,7 +31,7 @@ import pytest
 
 from holescan.capture import Flight, FlightConfig, LoggedDetections, read_flight_log
 from holescan.geotag import HoleSighting, geotag_frame
-from holescan.sim._sortie import SimSortie, SortieParams, TrueHole
+from holescan.sim import SimSortie, SortieParams, TrueHole
 
 PARAMS = SortieParams(
     size_m=(4.0, 4.0),
