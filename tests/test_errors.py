@@ -87,11 +87,11 @@ def test_detect_outputs_that_cannot_be_written(
     for extra, message in cases:
         one_line_error(capfd, ["detect", rgb, depth, *extra], message)
     assert not list(tmp_path.glob(".*part*"))
-    # An existing output is kept unless --overwrite.
+    # An existing output is kept unless --force (--overwrite: its old hidden spelling).
     (tmp_path / "d.json").write_text("keep")
     one_line_error(capfd, ["detect", rgb, depth, "--json", str(tmp_path / "d.json")], "exists")
     assert (tmp_path / "d.json").read_text() == "keep"
-    assert cli.main(["detect", rgb, depth, "--json", str(tmp_path / "d.json"), "--overwrite"]) == 0
+    assert cli.main(["detect", rgb, depth, "--json", str(tmp_path / "d.json"), "--force"]) == 0
     assert isinstance(json.loads((tmp_path / "d.json").read_text()), list)
 
 

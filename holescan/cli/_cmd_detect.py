@@ -44,7 +44,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument(
         "--overlay", type=Path, help="write the image with boxes and segmentation (.png, .jpg)"
     )
-    p.add_argument("--overwrite", action="store_true", help="replace existing --json/--overlay")
+    p.add_argument("--force", action="store_true", help="replace existing --json/--overlay")
+    # --overwrite: the old spelling of --force, kept hidden for scripts written before
+    p.add_argument("--overwrite", dest="force", action="store_true", help=argparse.SUPPRESS)
     add_detector_options(p)
     p.set_defaults(func=run)
 
@@ -55,9 +57,9 @@ _OVERLAY_SUFFIXES = {".png", ".jpg", ".jpeg"}
 def run(args: argparse.Namespace) -> int:
     inputs = [p for p in (args.rgb, args.depth, args.camera) if p is not None]
     if args.json:  # checked before detecting: a bad output costs nothing
-        check_output(args.json, inputs=inputs, suffixes={".json"}, force=args.overwrite)
+        check_output(args.json, inputs=inputs, suffixes={".json"}, force=args.force)
     if args.overlay:
-        check_output(args.overlay, inputs=inputs, suffixes=_OVERLAY_SUFFIXES, force=args.overwrite)
+        check_output(args.overlay, inputs=inputs, suffixes=_OVERLAY_SUFFIXES, force=args.force)
     rgb, depth = read_rgb(args.rgb), read_depth(args.depth)
     if args.camera:
         camera = read_camera(args.camera)
@@ -69,11 +71,11 @@ def run(args: argparse.Namespace) -> int:
     for i, d in enumerate(dets, 1):
         print(f"  {i}: box {d.box} {d.explain()}")
     if args.json:
-        with atomic_output(args.json, inputs=inputs, force=args.overwrite) as f:
+        with atomic_output(args.json, inputs=inputs, force=args.force) as f:
             f.write(json.dumps([asdict(d) for d in dets], indent=1).encode())
     if args.overlay:
         with output_via_part(
-            args.overlay, inputs=inputs, suffixes=_OVERLAY_SUFFIXES, force=args.overwrite
+            args.overlay, inputs=inputs, suffixes=_OVERLAY_SUFFIXES, force=args.force
         ) as tmp:
             draw_detections(tmp, rgb, depth, camera, params, dets)
         print(f"overlay: {args.overlay}")

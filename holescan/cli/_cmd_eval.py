@@ -56,8 +56,10 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--detections", type=Path, help="write COCO results JSON (the first run)")
     p.add_argument("--plot", type=Path, help="write a precision-recall plot (.png, .pdf, .svg)")
     p.add_argument(
-        "--overwrite", action="store_true", help="replace existing --detections/--plot files"
+        "--force", action="store_true", help="replace existing --detections/--plot files"
     )
+    # --overwrite: the old spelling of --force, kept hidden for scripts written before
+    p.add_argument("--overwrite", dest="force", action="store_true", help=argparse.SUPPRESS)
     p.add_argument(
         "--reliability",
         type=Path,
@@ -99,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
     }
     for suffixes, path in outputs.values():  # before minutes of detection
         if path is not None:
-            check_output(path, suffixes=suffixes, force=args.overwrite)
+            check_output(path, suffixes=suffixes, force=args.force)
     if args.synthetic is not None:
         if args.dataset is not None:
             raise InputError("give either DATASET or --synthetic, not both")
@@ -152,11 +154,11 @@ def run(args: argparse.Namespace) -> int:
     print(format_table(reports))
     if args.detections:
         suffixes = outputs["detections"][0]
-        with output_via_part(args.detections, suffixes=suffixes, force=args.overwrite) as tmp:
+        with output_via_part(args.detections, suffixes=suffixes, force=args.force) as tmp:
             write_coco_results(tmp, reports[0].detections)
         print(f"detections ({reports[0].name}): {args.detections}")
     if args.plot:
-        with output_via_part(args.plot, suffixes=_PLOT_SUFFIXES, force=args.overwrite) as tmp:
+        with output_via_part(args.plot, suffixes=_PLOT_SUFFIXES, force=args.force) as tmp:
             plot_pr(tmp, reports, f"{args.dataset.name}: {n} images, {n_gt} holes")
         print(f"precision-recall plot: {args.plot}")
     reliability = args.reliability
@@ -166,7 +168,7 @@ def run(args: argparse.Namespace) -> int:
         brier = brier_score(p, is_true)
         print(f"default mode p_hole: Brier score {brier:.4f} over {len(p)} detections")
         title = f"{args.dataset.name}: {len(p)} detections, Brier {brier:.3f}"
-        with output_via_part(reliability, suffixes=_PLOT_SUFFIXES, force=args.overwrite) as tmp:
+        with output_via_part(reliability, suffixes=_PLOT_SUFFIXES, force=args.force) as tmp:
             plot_reliability(tmp, p, is_true, title)
         print(f"reliability diagram (p_hole): {reliability}")
     return 0

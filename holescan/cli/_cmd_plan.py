@@ -68,7 +68,12 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--target-system", type=int, default=1, help="autopilot system id (1)")
     p.add_argument("--target-component", type=int, default=1, help="autopilot component (1)")
     p.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the autopilot")
-    p.add_argument("--force", action="store_true", help="upload even outside a sun window")
+    p.add_argument("--force", action="store_true", help="replace existing --out files")
+    p.add_argument(
+        "--outside-sun-window",
+        action="store_true",
+        help="upload even when the flight does not fit a sun window (infrared depth fails in sun)",
+    )
     p.set_defaults(func=run)
 
 
@@ -104,8 +109,8 @@ def run(args: argparse.Namespace) -> int:
     tz = _zone(args.tz)
     outs = args.out or [Path("survey.plan")]
     area_file = [args.area] if Path(args.area).is_file() else []
-    for out in outs:  # before planning; a plan file is replaced, a log or the area never
-        check_output(out, inputs=area_file, force=True)
+    for out in outs:  # before planning: an existing file only with --force, the area never
+        check_output(out, inputs=area_file, force=args.force)
     area = read_area(args.area)
     params = SurveyParams(
         altitude_m=args.altitude,
@@ -138,7 +143,7 @@ def run(args: argparse.Namespace) -> int:
 
     items = plan.mission_items()
     for out in outs:
-        with output_via_part(out, inputs=area_file, force=True) as tmp:
+        with output_via_part(out, inputs=area_file, force=args.force) as tmp:
             write_waypoints(tmp, items, plan.home, name="holescan survey", area=area)
         print(f"wrote {out}")
 
@@ -148,9 +153,13 @@ def run(args: argparse.Namespace) -> int:
         up_windows = sd.windows if up_day == day else sun_day(lat0, lon0, up_day, **sun_kw).windows
         now_fit = check_flight(up_windows, plan.duration_s, when, tz)
         if not now_fit.ok:
-            if not args.force:
-                raise SunWindowError(f"not uploading: {now_fit.message}; --force uploads anyway")
-            log.warning("uploading outside a sun window (--force): %s", now_fit.message)
+            if not args.outside_sun_window:
+                raise SunWindowError(
+                    f"not uploading: {now_fit.message}; --outside-sun-window uploads anyway"
+                )
+            log.warning(
+                "uploading outside a sun window (--outside-sun-window): %s", now_fit.message
+            )
         report = upload_mission(
             args.upload,
             items,

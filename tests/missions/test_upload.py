@@ -265,9 +265,17 @@ def test_cli_refuses_outside_a_window_unless_forced(
         (line,) = [ln for ln in err.splitlines() if ln.startswith("holescan plan: error:")]
         assert "not uploading" in line
         assert "outside every sun window" in line
-        assert "--force" in line
+        assert "--outside-sun-window" in line
         assert vehicle.receiver.uploads_accepted == 0
-        rc, _, _ = _cli(capsys, *args, "--upload", f"udpout:127.0.0.1:{port}", "--force")
+        rc, _, err = _cli(
+            capsys, *args, "--upload", f"udpout:127.0.0.1:{port}", "--outside-sun-window"
+        )
+        assert rc == 2 and "exists" in err  # the first call wrote s.plan: kept
+        rc, _, _ = _cli(
+            capsys,
+            *args,
+            *("--upload", f"udpout:127.0.0.1:{port}", "--outside-sun-window", "--force"),
+        )
         assert rc == 0
         vehicle.wait_accepted(1, timeout_s=5)
 
