@@ -14,9 +14,7 @@ from collections import Counter
 from collections.abc import Iterable, Sequence
 from typing import Any
 
-import pymap3d
-
-from holescan.geotag import Hole, nearest_pairs
+from holescan.geotag import Hole, LocalFrame, nearest_pairs
 from holescan.sim._render import GtBox
 from holescan.sim._sortie import TrueHole
 from holescan.sim._world import RubbleWorld
@@ -68,14 +66,8 @@ def frames_in_view(sources: Iterable[Any]) -> Counter[int]:
 
 
 def _en(world_anchor: Any, lat: float, lon: float) -> tuple[float, float]:
-    x, y, _ = pymap3d.geodetic2enu(
-        lat,
-        lon,
-        world_anchor.alt_m,
-        world_anchor.lat_deg,
-        world_anchor.lon_deg,
-        world_anchor.alt_m,
-    )
+    frame = LocalFrame(world_anchor.lat_deg, world_anchor.lon_deg, world_anchor.alt_m)
+    x, y = frame.to_en(lat, lon)
     return float(x), float(y)
 
 
