@@ -94,6 +94,7 @@ from holescan.missions._waypoint import (
     Area,
     Waypoint,
 )
+from holescan.missions.errors import MissionsError
 
 __all__ = [
     "CARD_PAYLOAD",
@@ -124,6 +125,7 @@ __all__ = [
     "MissionServer",
     "MissionServerError",
     "MissionTimeoutError",
+    "MissionsError",
     "SunDay",
     "SunWindow",
     "SunWindowError",

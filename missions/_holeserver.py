@@ -44,13 +44,14 @@ import time
 from collections.abc import Iterable
 from typing import Any
 
-from holescan.errors import HolescanError, InputError
+from holescan.errors import InputError
 from holescan.geotag import Hole
 from holescan.missions._holecards import CardSender, card_facts, make_card
 from holescan.missions._link import mavlink
 from holescan.missions._protocol import MissionError
 from holescan.missions._vehicle import MissionReceiver, MissionServer
 from holescan.missions._waypoint import MAV_FRAME_GLOBAL, MAV_FRAME_GLOBAL_RELATIVE_ALT, Waypoint
+from holescan.missions.errors import MissionServerError
 
 __all__ = [
     "HoleMissionServer",
@@ -63,10 +64,6 @@ _log = logging.getLogger(__name__)
 
 MAV_COMP_ID_ONBOARD_COMPUTER: int = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
 _STATUSTEXT_MAX = 50
-
-
-class MissionServerError(HolescanError):
-    """The mission server's link failed or it was used wrongly."""
 
 
 def hole_waypoints(

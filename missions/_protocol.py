@@ -18,7 +18,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from holescan.errors import HolescanError
 from holescan.missions._link import mavlink, open_link
 from holescan.missions._waypoint import (
     MAV_CMD_NAV_WAYPOINT,
@@ -26,6 +25,7 @@ from holescan.missions._waypoint import (
     MAV_FRAME_MISSION,
     Waypoint,
 )
+from holescan.missions.errors import MissionError, MissionRejectedError, MissionTimeoutError
 
 __all__ = [
     "MAV_MISSION_ACCEPTED",
@@ -46,22 +46,6 @@ _NS = 1_000_000_000
 
 # Frames whose x/y are latitude/longitude.
 _MISSION_FRAMES_WITHOUT_POSITION = {MAV_FRAME_MISSION}
-
-
-class MissionError(HolescanError):
-    """The mission transfer failed (bad link, protocol error)."""
-
-
-class MissionTimeoutError(MissionError, TimeoutError):
-    """The autopilot did not answer in time (after the retries)."""
-
-
-class MissionRejectedError(MissionError):
-    """The autopilot answered MISSION_ACK with an error; ``result`` is the MAV_MISSION_RESULT."""
-
-    def __init__(self, message: str, result: int) -> None:
-        super().__init__(message)
-        self.result = result
 
 
 def _result_name(result: int) -> str:

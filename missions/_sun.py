@@ -17,7 +17,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
-from holescan.errors import HolescanError, InputError
+from holescan.errors import InputError
+from holescan.missions.errors import SunWindowError
 
 __all__ = [
     "SUNRISE_ELEVATION_DEG",
@@ -41,10 +42,6 @@ _SCAN_STEP_NS = 60 * _NS
 _TOL_NS = _NS // 2
 
 WindowKind = Literal["dawn", "dusk", "low sun"]
-
-
-class SunWindowError(HolescanError):
-    """No usable sun window (polar day/night), or a flight outside every window."""
 
 
 @dataclass(frozen=True)
