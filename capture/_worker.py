@@ -199,6 +199,7 @@ class DetectionWorker:
             daemon=True,
         )
         self._seq = 0
+        self._received = 0  # results taken off the queue (drain waits for all done)
         self._started = False
 
     def __enter__(self) -> DetectionWorker:
@@ -261,6 +262,7 @@ class DetectionWorker:
                 item = self._results.get_nowait()
         except queue.Empty:
             pass
+        self._received += len(out)
         return out
 
     def stats(self) -> WorkerStats:
@@ -286,7 +288,9 @@ class DetectionWorker:
             out += self.results(timeout=0.05)
             with self._ctrl.get_lock():
                 idle = self._ctrl[_LATEST] < 0 and self._ctrl[_BUSY] < 0
-            if idle:
+                done = int(self._ctrl[_DONE])
+            # A result is queued after its frame counts as done: idle is not enough.
+            if idle and self._received >= done:
                 break
         return out + self.results()
 

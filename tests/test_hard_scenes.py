@@ -48,14 +48,11 @@ def test_layout_loads_and_is_sane(datasets: tuple[Path, Path]) -> None:
     assert 227 < cam["fx"] < 231 and cam["fx"] == cam["fy"]
     assert coco["categories"] == [{"id": 1, "name": "access_hole"}]
     assert len(coco["images"]) == 3
-    try:
-        from holescan.datasets import load_dataset
-    except ImportError:  # the reader moved: the JSON checks below still apply
-        load_dataset = None
-    if load_dataset is not None:
-        loaded = load_dataset(ds)
-        assert len(loaded.images) == 3
-        assert loaded.n_holes + loaded.n_crowd == len(coco["annotations"])
+    from holescan.ground import load_dataset
+
+    loaded = load_dataset(ds)
+    assert len(loaded.images) == 3
+    assert loaded.n_holes + loaded.n_crowd == len(coco["annotations"])
     for im in coco["images"]:
         assert im["file_name"].startswith("rgb/") and im["depth_file_name"].startswith("depth/")
         rgb = cv2.imread(str(ds / im["file_name"]), cv2.IMREAD_UNCHANGED)
