@@ -42,7 +42,7 @@ from holescan.missions import (
     waypoint_from_mission_item,
 )
 
-__all__ = ["VehicleLink"]
+__all__ = ["SECOND_GCS_SYSID", "VehicleLink"]
 
 _log = logging.getLogger(__name__)
 
