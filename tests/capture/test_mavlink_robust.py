@@ -119,7 +119,9 @@ def test_random_datagrams_on_udp_cost_no_telemetry() -> None:
     assert dirty["garbage_datagrams"] > 100
     assert dirty["bad_bytes"] > 10_000
     assert dirty["messages"] >= 0.95 * clean["messages"]  # before the fix: ~58 %
-    assert dirty["unposed"] <= 2  # before: 19 of 171
+    # Garbage costs no poses beyond what the same machine loses without it (a starved CPU
+    # delays every message alike: the clean run is the yardstick); before the fix: 19 of 171.
+    assert dirty["unposed"] <= clean["unposed"] + 2
 
 
 @pytest.mark.skipif(shutil.which("socat") is None, reason="needs socat (Debian package)")
