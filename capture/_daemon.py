@@ -50,15 +50,17 @@ from holescan.capture.errors import (
 )
 from holescan.capture.flightlog.writer import FlightLogWriter
 from holescan.detect import CameraIntrinsics
-from holescan.geotag import Hole, VehiclePose, local_en_m
+from holescan.geotag import Hole, Tier, VehiclePose, local_en_m
 
 log = logging.getLogger(__name__)
 
 SourceFactory = Callable[[], FrameSource]
-HoleListener = Callable[[list[Hole], list[Hole], Mapping[int, HoleView]], None]
-"""``on_holes(served, news, views)``: every hole that passes the announce gate (the
-waypoints), those new or changed enough to announce now, and the best view of each hole
-in ``news`` whose best view is known (hole id -> :class:`HoleView`)."""
+HoleListener = Callable[[list[Hole], list[Hole], Mapping[int, HoleView], Mapping[int, Tier]], None]
+"""``on_holes(served, news, views, tiers)``: every announced hole (the waypoints), the
+holes new or changed enough to tell the ground now (announced and for review), the best
+view of each hole in ``news`` whose best view is known (hole id -> :class:`HoleView`), and
+the tier of each hole in ``news`` (``announced`` or ``review``,
+:meth:`geotag.AnnounceGate.tier`)."""
 
 
 class Flight:
@@ -90,6 +92,7 @@ class Flight:
         self._telemetry: Telemetry | None = None
         self._worker: DetectionWorker | None = None
         self._announced: dict[int, tuple[float, float, float]] = {}
+        self._reviewed: dict[int, tuple[float, float, float]] = {}
         self._gate = config.gate
         self._views = BestViews()
         self._lock = threading.Lock()
@@ -171,20 +174,36 @@ class Flight:
         self._views.update(r.frame_index, r.detections, changed)
         served = self._gate.select(holes, announced=self._announced)
         served_ids = {h.id for h in served}
-        news = [h for h in changed if h.id in served_ids and self._worth_announcing(h)]
+        review_ids = {h.id for h in self._gate.review(holes, announced=self._announced)}
+        tiers: dict[int, Tier] = {}
+        news = []
+        for h in changed:
+            tier: Tier = (
+                "announced"
+                if h.id in served_ids
+                else "review"
+                if h.id in review_ids
+                else "candidate"
+            )
+            if tier != "candidate" and self._worth_telling(h, tier):
+                tiers[h.id] = tier
+                news.append(h)
         for h in news:
-            self._announced[h.id] = (h.lat_deg, h.lon_deg, h.score)
-            c.announcements += 1
+            if tiers[h.id] == "announced":
+                self._announced[h.id] = (h.lat_deg, h.lon_deg, h.score)
+                c.announcements += 1
+            else:
+                self._reviewed[h.id] = (h.lat_deg, h.lon_deg, h.score)
+                c.reviews += 1
         if self._on_holes is not None and news:
             views = {h.id: v for h in news if (v := self._views.get(h.id)) is not None}
-            self._on_holes(served, news, views)
+            self._on_holes(served, news, views, tiers)
 
-    def _worth_announcing(self, h: Hole) -> bool:
-        """Passes the announce gate, and is new to the ground, moved more than 0.5 m or
-        its score rose by 0.05 since it was last announced."""
-        if not self._gate.passes(h):
-            return False
-        last = self._announced.get(h.id)
+    def _worth_telling(self, h: Hole, tier: Tier) -> bool:
+        """New to the ground in this tier, moved more than 0.5 m or its score rose by 0.05
+        since the ground was last told (a hole for review that becomes announced is told
+        again)."""
+        last = (self._announced if tier == "announced" else self._reviewed).get(h.id)
         if last is None:
             return True
         east, north = local_en_m(h.lat_deg, h.lon_deg, last[0], last[1])

@@ -24,7 +24,7 @@ from holescan.capture._flyconfig import FlyConfig
 from holescan.capture._holepipeline import HoleView
 from holescan.capture._mavlink import Telemetry
 from holescan.capture._sensorsetup import SensorSetup, open_sensor
-from holescan.geotag import AnnounceGate, Hole
+from holescan.geotag import AnnounceGate, Hole, Tier
 from holescan.missions import HoleMissionServer
 
 __all__ = ["FlyReport", "fly", "format_report"]
@@ -75,22 +75,30 @@ def fly(
                 )
             )
 
-        def on_holes(served: list[Hole], news: list[Hole], views: Mapping[int, HoleView]) -> None:
+        def on_holes(
+            served: list[Hole],
+            news: list[Hole],
+            views: Mapping[int, HoleView],
+            tiers: Mapping[int, Tier],
+        ) -> None:
             for h in news:
                 _log.info(
-                    "hole %d at %.7f, %.7f (score %.2f, %d sightings)",
+                    "hole %d (%s) at %.7f, %.7f (p_hole %.2f, score %.2f, %d sightings)",
                     h.id,
+                    tiers[h.id],
                     h.lat_deg,
                     h.lon_deg,
+                    h.p_hole,
                     h.score,
                     h.sightings,
                 )
             if server is not None:
                 server.update_holes(served)
-                announced.extend(server.announce(h) for h in news)
-                for h in news:
+                # announced first: their STATUSTEXTs and cards go before the review ones
+                for h in sorted(news, key=lambda h: tiers[h.id] != "announced"):
+                    announced.append(server.announce(h, tiers[h.id]))
                     if h.id in views:
-                        server.send_card(h, views[h.id].jpeg, views[h.id].why)
+                        server.send_card(h, views[h.id].jpeg, views[h.id].why, tiers[h.id])
 
         if setup is None:
             setup = open_sensor(cfg)

@@ -212,6 +212,7 @@ _TABLES: dict[str, dict[str, tuple[tuple[type, ...], Any]]] = {
         "announce_min_p_hole": (_NUM, AnnounceGate.min_p_hole),
         "announce_min_sightings": ((int,), AnnounceGate.min_sightings),
         "announce_min_span_s": (_NUM, AnnounceGate.min_span_s),
+        "review_min_p_hole": (_NUM, AnnounceGate.review_min_p_hole),
         "card_bytes_per_s": _from(FlyConfig, _NUM, "hole_card_bytes_per_s"),
         "rel_alt_m": _from(FlyConfig, _NUM, "hole_rel_alt_m"),
         "clearance_m": _from(FlyConfig, _NUM, "hole_clearance_m"),
@@ -351,6 +352,7 @@ def parse_fly_config(
             float(holes["announce_min_p_hole"]),
             holes["announce_min_sightings"],
             float(holes["announce_min_span_s"]),
+            float(holes["review_min_p_hole"]),
         )
     except InputError as err:
         raise InputError(f"{where}: [holes] {err}") from err
@@ -368,6 +370,7 @@ def parse_fly_config(
         announce_min_p_hole=float(holes["announce_min_p_hole"]),
         announce_min_sightings=holes["announce_min_sightings"],
         announce_min_span_s=float(holes["announce_min_span_s"]),
+        review_min_p_hole=float(holes["review_min_p_hole"]),
         health_period_s=float(cap["health_period_s"]),
         pose_wait_s=float(cap["pose_wait_s"]),
         startup_sync_s=float(cap["startup_sync_s"]),

@@ -19,7 +19,8 @@ model over what the sightings say together (:class:`HoleEvidence`):
 * position consistency: the RMS scatter of the sightings' positions about their mean
   over the opening's size (the GPS error is shared by sightings close in time, so it does
   not spread them; a detection that wanders over the rubble does);
-* whether its rim was seen (the best ``rim_seen`` of its sightings).
+* whether its rim was seen (the best ``rim_seen`` of its sightings) and how often it was
+  only partly in view (cut by the image border).
 
 The coefficients are data (:mod:`geotag._confidence_table`), fitted by
 ``benchmarks/calibrate_confidence.py`` on hole-level truth; pure, no files or clocks.
@@ -54,11 +55,13 @@ STRONG_P = 0.5
 FEATURE_NAMES = (
     "best_logit",
     "median_logit",
+    "median_gap",
     "log_views",
     "strong_log_views",
     "size_spread",
     "scatter",
     "rim_seen",
+    "cut_fraction",
 )
 
 
@@ -79,6 +82,7 @@ class HoleEvidence:
     scatter : RMS distance of the sightings from their mean position / the major axis
         (at least 0.3 m).
     rim_seen : the best fraction of the rim seen (0.5 when never measured).
+    cut_fraction : fraction of the sightings whose box the image border cut.
     span_s : seconds between first and last sighting.
     """
 
@@ -90,6 +94,7 @@ class HoleEvidence:
     size_spread: float
     scatter: float
     rim_seen: float
+    cut_fraction: float
     span_s: float
 
     def features(self, names: Sequence[str] = FEATURES) -> tuple[float, ...]:
@@ -97,11 +102,13 @@ class HoleEvidence:
         values = {
             "best_logit": _logit(self.best_p),
             "median_logit": _logit(self.median_p),
+            "median_gap": _logit(self.median_p) - _logit(self.best_p),
             "log_views": math.log(max(self.views, 1)),
             "strong_log_views": self.strong_fraction * math.log(max(self.views, 1)),
             "size_spread": min(self.size_spread, 2.0),
             "scatter": min(self.scatter, 2.0),
             "rim_seen": self.rim_seen,
+            "cut_fraction": self.cut_fraction,
         }
         try:
             return tuple(values[name] for name in names)
@@ -158,6 +165,7 @@ def evidence_of(sightings: Sequence[HoleSighting]) -> HoleEvidence:
         size_spread=spread,
         scatter=rms / major,
         rim_seen=max(rims) if rims else 0.5,
+        cut_fraction=sum(s.cut_by_border for s in sightings) / len(sightings),
         span_s=(max(times) - min(times)) * 1e-9,
     )
 

@@ -316,6 +316,14 @@ class HoleTracker:
         changed = {self._merged.get(i, i) for i in changed}
         return [self._hole(t) for t in self._tracks if t.id in changed]
 
+    def sightings_of(self, hole_id: int) -> tuple[HoleSighting, ...]:
+        """The sightings merged into hole ``hole_id`` (a retired id: its survivor's)."""
+        hole_id = self._merged.get(hole_id, hole_id)
+        for t in self._tracks:
+            if t.id == hole_id:
+                return tuple(t.seen)
+        raise InputError(f"no hole {hole_id}")
+
     def merged(self) -> dict[int, int]:
         """Retired id -> the id of the hole it was fused into (the same opening)."""
         return dict(self._merged)

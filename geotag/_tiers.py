@@ -1,6 +1,6 @@
 """Which holes go to the ground crew, and how: announced, for review, or kept as candidates.
 
-See :class:`AnnounceGate`.
+See :class:`AnnounceGate`: its :meth:`~AnnounceGate.tier` is the vehicle's decision.
 """
 
 from __future__ import annotations
@@ -26,48 +26,31 @@ TIERS: tuple[Tier, ...] = ("announced", "review", "candidate")
 
 @dataclass(frozen=True)
 class AnnounceGate:
-    """When a hole is worth a rescuer's look: announced, served as a waypoint, sent on.
+    """Which tier a hole is in: *announced*, *for review*, or a *candidate*.
 
-    A hole passes when all three hold:
+    * **announced** (high confidence) goes to the crew as before: STATUSTEXT ``HOLE ...``,
+      a waypoint of the hole mission (component 191), its picture, TAK. A hole is
+      announced when ``p_hole >= min_p_hole``, it was seen ``min_sightings`` times over
+      ``min_span_s`` seconds (a one-view artefact does not repeat as the vehicle moves);
+    * **review** (plausible, not sure) reaches the ground station too, with its picture
+      (a card marked ``"tier": "review"``, STATUSTEXT ``REVIEW ...``), for an operator to
+      confirm or reject; it is not in the mission and not sent to TAK until confirmed. A
+      hole not announced is for review when ``p_hole >= review_min_p_hole``;
+    * **candidate**: everything else; logged and in the flight's report, not in the crew's
+      files.
 
-    min_p_hole : the probability that it is a true access hole, ``p_hole`` of its best
-        detector score (:func:`detect.p_hole_of_score`, see :meth:`p_hole`). ``p_hole``
-        never leaves [0.01, 0.99], so the threshold must lie in [0, 0.99].
-    min_sightings : frames it was seen in (2: the count depends on the detector's frame
-        rate, which drops to ~2.5 frames/s on a loaded computer; the time span does not).
-    min_span_s : seconds between its first and last sighting. The vehicle moves over the
-        hole meanwhile (0.6-1 m/s on a survey), so the views come from different
-        positions: a one-view artefact (a glint, a shadow edge) does not repeat.
+    ``p_hole`` is the hole-level confidence of all its sightings (:attr:`Hole.p_hole`,
+    :class:`geotag.ConfidenceModel`); holes read from logs that predate it use the best
+    frame's (:func:`detect.p_hole_of_score` of the best score). It never leaves
+    [0.01, 0.99], so thresholds lie in [0, 0.99].
 
-    min_separation_m, separation_fraction : a passing hole this close to one already
-        kept is the same opening seen twice (see :meth:`select`).
+    min_separation_m, separation_fraction : a passing hole this close to one already kept
+        is the same opening seen twice (see :meth:`select`; the tracker fuses overlapping
+        openings, this is a last guard).
 
-    Holes that do not pass stay *candidates*: logged and written to the hole files marked
-    as such, never a waypoint.
-
-    The calibration is the **default** detector mode's (Platt scaling fitted on its
-    scores). Paper mode's scores are not calibrated (its detections carry ``p_hole =
-    None``); the gate still maps them through the same curve, a monotone map, so in paper
-    mode ``min_p_hole`` is a raw-score threshold in disguise (0.5 is a paper score of
-    0.37), not a probability. One rule for both modes keeps one config key and one meaning
-    of "announced" on the ground; paper mode (2.5-3.5 s a frame) is a reference, not a
-    flight mode, and falling back to the raw score would silently change what a given
-    ``announce_min_p_hole`` lets through.
-
-    The default ``min_p_hole = 0.5`` was measured with the current detector
-    (``benchmarks/bench_announce.py``: 8 simulated worlds, 6,000 frames; figures in the
-    README, "What is announced"): every true hole seen twice over 0.3 s had p_hole >=
-    0.973, every false one (cracks, stains, small holes, a depression) <= 0.112, so any
-    threshold from 0.2 to 0.95 delivers the same 23 holes, all true (precision 1.000),
-    21 of the 22 true holes in view (the 22nd: one detection at score 0.09 in the whole
-    lap), first sighting to delivery median 0.3 s. Through the whole demo path
-    (``benchmarks/bench_delivery.py``, the same 8 worlds, 14-21 detected frames/s) 0.5
-    announced 20 holes, all true, all 20 true holes in view, median 0.4 s, max 17.6 s. But
-    on an idle machine (29 detected frames/s) ``holescan demo`` saw a stain 11 times at
-    score 0.43 (p_hole 0.73) and announced it at 0.5: more frames give a weak false box
-    more sightings. Hence 0.9: still far below every true hole seen twice (0.973), above
-    that stain; on independent single detections it keeps 91 of 101 true ones (0.5: 98),
-    and in flight a hole is judged on its best of many views.
+    The defaults were chosen from measured curves (``benchmarks/bench_tiers.py``, flights
+    over worlds and seeds not used to fit the confidence; README, "Tiers"): announced
+    precision >= 0.9 and announced + review recall >= 0.99 of the holes in view.
 
     Examples
     --------
@@ -82,6 +65,7 @@ class AnnounceGate:
     min_p_hole: float = 0.9
     min_sightings: int = 2
     min_span_s: float = 0.3
+    review_min_p_hole: float = 0.1
     min_separation_m: float = 0.5
     separation_fraction: float = 0.5
 
@@ -93,10 +77,32 @@ class AnnounceGate:
             )
         if self.min_sightings < 1 or not self.min_span_s >= 0.0:
             raise InputError("announce min_sightings must be >= 1 and min_span_s >= 0")
+        if not 0.0 <= self.review_min_p_hole <= self.min_p_hole:
+            raise InputError(
+                f"review min_p_hole must be in [0, announce min_p_hole {self.min_p_hole}], "
+                f"got {self.review_min_p_hole}"
+            )
 
     def p_hole(self, hole: Hole) -> float:
-        """``p_hole`` of ``hole``: of its best detector score."""
-        return p_hole_of_score(hole.score)
+        """``p_hole`` of ``hole``: its hole-level confidence (logs from before: its best
+        frame's)."""
+        return hole.p_hole if math.isfinite(hole.p_hole) else p_hole_of_score(hole.score)
+
+    def tier(self, hole: Hole) -> Tier:
+        """``announced``, ``review`` or ``candidate`` (see the class docstring)."""
+        if self.passes(hole):
+            return "announced"
+        return "review" if self.p_hole(hole) >= self.review_min_p_hole else "candidate"
+
+    def review(self, holes: Sequence[Hole], announced: Iterable[int] = ()) -> list[Hole]:
+        """The holes for review: in the review tier, not at the place of an announced one
+        (:meth:`select`'s duplicate rule). Sorted by id."""
+        kept = self.select(holes, announced)
+        out = []
+        for h in sorted(holes, key=lambda h: h.id):
+            if self.tier(h) == "review" and not any(_duplicate(h, k, self) for k in kept):
+                out.append(h)
+        return out
 
     def select(self, holes: Sequence[Hole], announced: Iterable[int] = ()) -> list[Hole]:
         """The holes to announce and serve: those that pass, less duplicates.

@@ -4,7 +4,10 @@
 component 191 (MAV_COMP_ID_ONBOARD_COMPUTER) of the vehicle's system, so a ground station
 targeting that component (MAVProxy: ``--target-component 191``, then ``wp list`` /
 ``wp save FILE``) downloads one waypoint per hole, and announces each new or updated hole
-with a STATUSTEXT ``HOLE <id> <score> <lat> <lon>`` that every GCS shows.
+with a STATUSTEXT ``HOLE <id> <score> <lat> <lon>`` that every GCS shows. Holes for
+review (:meth:`geotag.AnnounceGate.tier`) are not in the mission: they get a STATUSTEXT
+``REVIEW <id> ...`` and a card whose facts say ``"tier": "review"``, sent after the
+announced holes' cards under the same byte budget.
 
 The mission (decided after reading MAVProxy's ``wp save`` and the QGC WPL 110 format):
 
@@ -107,14 +110,23 @@ def hole_waypoints(
     return tuple(items)
 
 
-def hole_statustext(hole: Hole) -> str:
-    """``HOLE <id> <score> <lat> <lon>``, at most 50 characters (STATUSTEXT's text field).
+def hole_statustext(hole: Hole, tier: str = "announced") -> str:
+    """``HOLE <id> <score> <lat> <lon>``, at most 50 characters (STATUSTEXT's text field);
+    ``REVIEW <id> ...`` for a hole sent for review (not announced: an operator confirms it).
 
     Seven decimals (1 cm) fit for any id below 10**9; fewer are used only if needed.
+
+    >>> from holescan.geotag import Hole
+    >>> h = Hole(3, 43.65331, -79.38312, 120.0, 0.5, 0.88, 4, 0, 10, 1, (0, 0, 9, 9), 1.0, 0.7)
+    >>> hole_statustext(h), hole_statustext(h, "review")
+    ('HOLE 3 0.88 43.6533100 -79.3831200', 'REVIEW 3 0.88 43.6533100 -79.3831200')
     """
+    if tier not in ("announced", "review"):
+        raise InputError(f"a hole sent to the ground is announced or review, not {tier!r}")
+    word = "HOLE" if tier == "announced" else "REVIEW"
     for decimals in (7, 6, 5, 4):
         lat, lon = f"{hole.lat_deg:.{decimals}f}", f"{hole.lon_deg:.{decimals}f}"
-        text = f"HOLE {hole.id} {hole.score:.2f} {lat} {lon}"
+        text = f"{word} {hole.id} {hole.score:.2f} {lat} {lon}"
         if len(text) <= _STATUSTEXT_MAX:
             return text
     raise InputError(f"hole id {hole.id} too long for a STATUSTEXT")
@@ -230,26 +242,28 @@ class HoleMissionServer(MissionServer):
         with self._lock:
             return self.receiver.mission
 
-    def announce(self, hole: Hole) -> str:
-        """Send STATUSTEXT ``HOLE <id> <score> <lat> <lon>`` (severity NOTICE); return it."""
-        text = hole_statustext(hole)
-        self._send_or_fail(
-            lambda mav: mav.statustext_send(mavlink.MAV_SEVERITY_NOTICE, text.encode("ascii"))
-        )
+    def announce(self, hole: Hole, tier: str = "announced") -> str:
+        """Send STATUSTEXT ``HOLE <id> <score> <lat> <lon>`` (severity NOTICE), or for a
+        hole for review ``REVIEW ...`` (severity INFO); return it."""
+        text = hole_statustext(hole, tier)
+        severity = mavlink.MAV_SEVERITY_NOTICE if tier == "announced" else mavlink.MAV_SEVERITY_INFO
+        self._send_or_fail(lambda mav: mav.statustext_send(severity, text.encode("ascii")))
         _log.info("announced %s", text)
         return text
 
-    def send_card(self, hole: Hole, jpeg: bytes, why: str = "") -> int:
-        """Queue hole ``hole``'s card (its best view ``jpeg`` and facts); return its size.
+    def send_card(self, hole: Hole, jpeg: bytes, why: str = "", tier: str = "announced") -> int:
+        """Queue hole ``hole``'s card (its best view ``jpeg`` and facts, ``tier`` among
+        them); return its size.
 
-        Sent under the byte budget by the server's thread; a newer card of the same hole
-        replaces one not yet started.
+        Sent under the byte budget by the server's thread, announced holes' cards before
+        those of holes for review; a newer card of the same hole replaces one not yet
+        started.
         """
         with self._lock:
             rev = self._card_revs.get(hole.id, 0) + 1
             self._card_revs[hole.id] = rev
-            card = make_card(jpeg, card_facts(hole, why, rev))
-            self.cards.put(hole.id, card)
+            card = make_card(jpeg, card_facts(hole, why, rev, tier))
+            self.cards.put(hole.id, card, priority=0 if tier == "announced" else 1)
         return len(card)
 
     def flush_cards(self, timeout_s: float = 10.0) -> bool:

@@ -50,7 +50,7 @@ from holescan.capture import (
     read_flight_log,
 )
 from holescan.errors import InputError
-from holescan.geotag import AnnounceGate, Hole, VehiclePose
+from holescan.geotag import AnnounceGate, Hole, Tier, VehiclePose
 from holescan.ground import GroundOptions, GroundStation, ReprocessOptions, write_hole_outputs
 from holescan.missions import HoleMissionServer
 from holescan.sim._scoring import FalseHole, TruthRow, frames_in_view, score_holes
@@ -322,6 +322,7 @@ def run_demo(
     gcs_port = _free_udp_port()
     announced: list[str] = []
     first_announced: dict[int, float] = {}
+    first_review: dict[int, float] = {}
     card_bytes = cards_sent = 0
     mission_items: int | None = None
     mission_error: str | None = None
@@ -335,14 +336,21 @@ def run_demo(
             HoleMissionServer(f"udpout:127.0.0.1:{gcs_port}", 1, home=home)
         )
 
-        def on_holes(served: list[Hole], news: list[Hole], views: Mapping[int, HoleView]) -> None:
+        def on_holes(
+            served: list[Hole],
+            news: list[Hole],
+            views: Mapping[int, HoleView],
+            tiers: Mapping[int, Tier],
+        ) -> None:
             server.update_holes(served)
-            announced.extend(server.announce(h) for h in news)
-            for h in news:
-                if h.id not in first_announced:  # boot-clock span first sighting -> now
-                    first_announced[h.id] = (h.t_last_boot_ns - h.t_first_boot_ns) * 1e-9
+            for h in sorted(news, key=lambda h: tiers[h.id] != "announced"):
+                tier = tiers[h.id]
+                announced.append(server.announce(h, tier))
+                told = first_announced if tier == "announced" else first_review
+                if h.id not in told:  # boot-clock span first sighting -> now
+                    told[h.id] = (h.t_last_boot_ns - h.t_first_boot_ns) * 1e-9
                 if h.id in views:
-                    server.send_card(h, views[h.id].jpeg, views[h.id].why)
+                    server.send_card(h, views[h.id].jpeg, views[h.id].why, tier)
 
         stack.enter_context(sortie)
         cfg = FlightConfig(
@@ -350,6 +358,7 @@ def run_demo(
             announce_min_p_hole=opts.gate.min_p_hole,
             announce_min_sightings=opts.gate.min_sightings,
             announce_min_span_s=opts.gate.min_span_s,
+            review_min_p_hole=opts.gate.review_min_p_hole,
             config_record={
                 "demo": {"sortie": dataclasses.asdict(opts.sortie), "duration_s": duration}
             },

@@ -18,7 +18,7 @@ import numpy as np
 import numpy.typing as npt
 
 from holescan.capture import jsonable, output_via_part
-from holescan.geotag import Hole, VehiclePose
+from holescan.geotag import AnnounceGate, Hole, VehiclePose
 from holescan.ground.flightholes.views import render_thumbnail
 from holescan.ground.report.page import write_report
 from holescan.ground.reprocessing.options import HoleMatch, ReprocessOptions
@@ -128,8 +128,10 @@ def _hole_files(
     thumbnails: Mapping[int, bytes],
     home: tuple[float, float, float] | None,
     boot_to_unix_ns: int | None,
+    tiers: Mapping[int, str],
 ) -> list[tuple[str, Path]]:
     written: list[tuple[str, Path]] = []
+    holes = [h for h in holes if tiers.get(h.id, "candidate") != "candidate"]
     if not holes:
         return written
     for fmt in opts.formats:
@@ -145,6 +147,7 @@ def _hole_files(
                 rel_alt_m=opts.rel_alt_m,
                 clearance_m=opts.clearance_m,
                 name=f"holescan holes: {name}",
+                tiers=tiers,
             )
         written.append((fmt, path))
     return written
@@ -164,22 +167,29 @@ def write_hole_outputs(
     facts: Mapping[str, str] | None = None,
     title: str | None = None,
     track_breaks: Sequence[int] = (),
+    tiers: Mapping[int, str] | None = None,
 ) -> list[tuple[str, Path]]:
     """Write a flight's hole files (``NAME_holes.*``) and report (``NAME_report.html``).
 
     holes : the holes to write (confirmed ones). views : hole id -> (rgb, depth, box) of
     its best view, the box (x, y, w, h) in that picture's pixels. track : vehicle poses.
     truth : (name, lat_deg, lon_deg) drawn on the report's map. track_breaks : where in
-    ``track`` another flight starts (a campaign). Returns (kind, path) pairs.
+    ``track`` another flight starts (a campaign). tiers : hole id -> ``announced``,
+    ``review``, ``confirmed``, ``rejected`` or ``candidate`` (default: the vehicle's
+    :meth:`geotag.AnnounceGate.tier` with its default thresholds); candidates are left
+    out of the hole files (they stay in the report). Returns (kind, path) pairs.
     """
     opts = opts or ReprocessOptions()
+    if tiers is None:
+        gate = AnnounceGate()
+        tiers = {h.id: gate.tier(h) for h in holes}
     wanted = {h.id for h in holes}
     jpegs = {
         hid: render_thumbnail(rgb, depth, box)[0]
         for hid, (rgb, depth, box) in views.items()
         if hid in wanted
     }
-    written = _hole_files(out, name, holes, opts, jpegs, home, boot_to_unix_ns)
+    written = _hole_files(out, name, holes, opts, jpegs, home, boot_to_unix_ns, tiers)
     report_holes = [
         dataclasses.replace(h, best_box=views[h.id][2]) if h.id in views else h for h in holes
     ]

@@ -33,12 +33,24 @@ from holescan.missions import (
     write_kml,
 )
 
-__all__ = ["hole_summary", "hole_waypoint", "write_station_files"]
+__all__ = ["hole_summary", "hole_tier", "hole_waypoint", "write_station_files"]
+
+
+def hole_tier(h: GroundHole) -> str:
+    """``confirmed`` or ``rejected`` once the operator marked it so, else what the vehicle
+    said (``announced`` or ``review``)."""
+    if h.mark in ("confirmed", "rejected"):
+        return h.mark
+    return h.vehicle_tier
 
 
 def hole_summary(h: GroundHole) -> str:
-    """One line: size, depth reason, score, sightings, uncertainty, operator's mark."""
-    parts = [f"hole {h.id}", f"score {h.score:.2f}"]
+    """One line: tier, confidence, size, depth reason, score, sightings, uncertainty,
+    operator's mark."""
+    parts = [f"hole {h.id}", hole_tier(h)]
+    if h.p_hole is not None:
+        parts.append(f"p_hole {h.p_hole:.2f}")
+    parts.append(f"score {h.score:.2f}")
     if h.major_m is not None and h.minor_m is not None:
         parts.append(f"opening {h.major_m:.2f} x {h.minor_m:.2f} m")
     if h.sightings:
@@ -54,6 +66,8 @@ def hole_waypoint(h: GroundHole, image_src: str | None = None) -> Waypoint:
     """The hole as the project's waypoint record (MSL altitude when known)."""
     props: dict[str, Any] = {
         "hole_id": h.id,
+        "tier": hole_tier(h),
+        "p_hole": h.p_hole,
         "score": round(h.score, 3),
         "mark": h.mark,
         "sightings": h.sightings,

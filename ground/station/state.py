@@ -54,7 +54,7 @@ MARKS: tuple[Mark, ...] = ("new", "confirmed", "rejected", "visited")
 FORMAT = "holescan-ground-2"
 """The state file's ``format``; ``holescan-ground-1`` files (older stations) are read too."""
 _FORMAT_1 = "holescan-ground-1"
-_STATUSTEXT = re.compile(r"HOLE (\d+) ([\d.]+) (-?[\d.]+) (-?[\d.]+)")
+_STATUSTEXT = re.compile(r"(?:HOLE|REVIEW) (\d+) ([\d.]+) (-?[\d.]+) (-?[\d.]+)")
 _TRACK_MAX = 20_000
 _TRACK_SAVE_NS = 10 * 10**9
 _NS_PER_S = 1_000_000_000
@@ -64,11 +64,13 @@ _OLD_SECONDS = {"first_unix": "t_first_unix_ns", "updated_unix": "t_updated_unix
 
 
 def parse_hole_statustext(text: str) -> tuple[int, float, float, float] | None:
-    """``HOLE <id> <score> <lat> <lon>`` -> (id, score, lat_deg, lon_deg); None for other
-    texts.
+    """``HOLE <id> <score> <lat> <lon>`` (an announced hole) or ``REVIEW <id> ...`` (a hole
+    for review) -> (id, score, lat_deg, lon_deg); None for other texts.
 
     >>> parse_hole_statustext("HOLE 3 0.88 43.6533100 -79.3831200")
     (3, 0.88, 43.65331, -79.38312)
+    >>> parse_hole_statustext("REVIEW 4 0.30 43.6533100 -79.3831200")
+    (4, 0.3, 43.65331, -79.38312)
     >>> parse_hole_statustext("PreArm: GPS") is None
     True
     """
@@ -92,6 +94,9 @@ class GroundHole:
     mark : the operator's (``new`` until set). seq : waypoint number in the downloaded
     hole mission (None: not in it). t_first_unix_ns, t_updated_unix_ns : when the ground
     first heard of it / last changed it (Unix clock, ns).
+    vehicle_tier : what the vehicle said it is: ``announced`` (STATUSTEXT ``HOLE``, a card
+    with ``"tier": "announced"`` or none) or ``review`` (``REVIEW``, ``"tier": "review"``).
+    p_hole : the vehicle's hole-level confidence (its card's ``p``; None: not told).
     """
 
     id: int
@@ -110,6 +115,8 @@ class GroundHole:
     seq: int | None = None
     t_first_unix_ns: int = 0
     t_updated_unix_ns: int = 0
+    vehicle_tier: Literal["announced", "review"] = "announced"
+    p_hole: float | None = None
 
     def to_json(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -128,6 +135,8 @@ class GroundHole:
         names = {f.name for f in dataclasses.fields(cls)}
         h = cls(**{k: v for k, v in d.items() if k in names})
         h.t_first_unix_ns, h.t_updated_unix_ns = int(h.t_first_unix_ns), int(h.t_updated_unix_ns)
+        if h.vehicle_tier not in ("announced", "review"):
+            h.vehicle_tier = "announced"
         if h.mark not in MARKS:
             h.mark = "new"
         return h
@@ -255,12 +264,20 @@ class StationState:
         if parsed is None:
             return None
         hid, score, lat, lon = parsed
+        tier: Literal["announced", "review"] = (
+            "review" if text.strip().startswith("REVIEW") else "announced"
+        )
         with self._lock:
             h = self.holes.get(hid)
-            if h is not None and (h.lat_deg, h.lon_deg, h.score) == (lat, lon, score):
+            if h is not None and (h.lat_deg, h.lon_deg, h.score, h.vehicle_tier) == (
+                lat,
+                lon,
+                score,
+                tier,
+            ):
                 return h
             h = self._hole(hid, lat, lon, score)
-            h.lat_deg, h.lon_deg, h.score = lat, lon, score
+            h.lat_deg, h.lon_deg, h.score, h.vehicle_tier = lat, lon, score, tier
         self._changed()
         return h
 
@@ -287,6 +304,8 @@ class StationState:
             h.minor_m = _opt(facts.get("minor"))
             h.sightings = int(facts.get("n", h.sightings))
             h.why = str(facts.get("why", h.why))[:500]
+            h.vehicle_tier = "review" if facts.get("tier") == "review" else "announced"
+            h.p_hole = _opt(facts.get("p"))
         self._changed()
         return h
 
