@@ -77,10 +77,9 @@ class AnnounceGate:
             )
         if self.min_sightings < 1 or not self.min_span_s >= 0.0:
             raise InputError("announce min_sightings must be >= 1 and min_span_s >= 0")
-        if not 0.0 <= self.review_min_p_hole <= self.min_p_hole:
+        if not 0.0 <= self.review_min_p_hole <= _P_HOLE_MAX:
             raise InputError(
-                f"review min_p_hole must be in [0, announce min_p_hole {self.min_p_hole}], "
-                f"got {self.review_min_p_hole}"
+                f"review min_p_hole must be in [0, {_P_HOLE_MAX}], got {self.review_min_p_hole}"
             )
 
     def p_hole(self, hole: Hole) -> float:

@@ -26,6 +26,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import datetime as dt
+import functools
 import json
 import logging
 import math
@@ -143,6 +144,10 @@ class DemoResult:
     match_m: float = 0.5
     cards_sent: int = 0
     pictures_at_ground: int = 0
+    review: tuple[Hole, ...] = ()
+    review_true: int = 0
+    review_latency_s: tuple[float, ...] = ()
+    area_m2: float = 0.0
 
     @property
     def found(self) -> int:
@@ -161,6 +166,9 @@ class DemoResult:
             "not_in_view": sum(r.status == "not in view" for r in self.truth),
             "false": len(self.false),
             "candidates": self.candidates,
+            "review": [h.id for h in self.review],
+            "review_true": self.review_true,
+            "review_latency_s": list(self.review_latency_s),
             "gate": dataclasses.asdict(self.gate),
             "latency_s": list(self.latency_s),
             "card_bytes": self.card_bytes,
@@ -415,18 +423,16 @@ def run_demo(
         card_bytes, cards_sent = server.cards.bytes_sent, server.cards.cards_sent
     interrupted = capture_s < duration - 1.0
     confirmed = tuple(opts.gate.select(summary.holes, first_announced))
+    announced_ids = {h.id for h in confirmed}
+    review = tuple(h for h in summary.holes if h.id in first_review and h.id not in announced_ids)
     truth = sortie.truth
-    rows, false = score_holes(
-        confirmed,
-        truth,
-        sortie.world,
-        anchor,
-        frames_in_view(sortie.sources),
-        match_m=opts.match_m,
-        min_frames_in_view=opts.min_frames_in_view,
+    in_view = frames_in_view(sortie.sources)
+    scored = functools.partial(
+        score_holes, match_m=opts.match_m, min_frames_in_view=opts.min_frames_in_view
     )
+    rows, false = scored(confirmed, truth, sortie.world, anchor, in_view)
     log_files = tuple(summary.log.files)
-    views, track, boot_to_unix = _views_and_track(log_files, confirmed)
+    views, track, boot_to_unix = _views_and_track(log_files, (*confirmed, *review))
     kinds = Counter(str(h.kind) for h in sortie.world.holes)
     facts = {
         "flight log": ", ".join(p.name for p in log_files),
@@ -437,10 +443,12 @@ def run_demo(
         f"{sum(r.status == 'missed' for r in rows)}, false {len(false)} (a find: inside a "
         f"true opening or within {opts.match_m:g} m of its centre)",
     }
+    review_rows, _ = scored(review, truth, sortie.world, anchor, in_view)
+    tiers = {h.id: "announced" for h in confirmed} | {h.id: "review" for h in review}
     files = write_hole_outputs(
         out,
         "flight",
-        confirmed,
+        (*confirmed, *review),
         views,  # type: ignore[arg-type]
         track,
         opts=ReprocessOptions(workers=0, min_sightings=opts.gate.min_sightings),
@@ -449,6 +457,7 @@ def run_demo(
         truth=[(f"true hole {t.id}", t.lat_deg, t.lon_deg) for t in truth],
         facts=facts,
         title="holescan demo: simulated dawn survey",
+        tiers=tiers,
     )
     result = DemoResult(
         out=out,
@@ -466,7 +475,11 @@ def run_demo(
         interrupted=interrupted,
         world_features=dict(kinds),
         gate=opts.gate,
-        candidates=len(summary.holes) - len(confirmed),
+        candidates=len(summary.holes) - len(confirmed) - len(review),
+        review=review,
+        review_true=sum(r.status == "found" for r in review_rows),
+        review_latency_s=tuple(first_review[h.id] for h in review),
+        area_m2=opts.sortie.size_m[0] * opts.sortie.size_m[1],
         latency_s=tuple(first_announced[h.id] for h in confirmed if h.id in first_announced),
         card_bytes=card_bytes,
         cards_sent=cards_sent,

@@ -204,3 +204,32 @@ def test_every_file_says_what_each_hole_is_and_only_announced_ones_are_waypoints
     assert data["tier"] is not None and f"{tier} 8" in kml and "p_hole" in data
     with pytest.raises(InputError, match="tier"):
         write_hole_file(tmp_path / "x.gpx", holes, "gpx", tiers={8: "candidate"})
+
+
+def test_announced_holes_cards_go_before_those_for_review() -> None:
+    now = [0.0]
+    sender = CardSender(bytes_per_s=1000.0, clock=lambda: now[0], repeat_s=None)
+    wire = Wire()
+    cards = {k: make_card(jpeg(k), {"id": k, "rev": 1}) for k in (1, 2, 3, 4)}
+    sender.put(1, cards[1], priority=1)  # review, started first
+    for _ in range(2):  # its handshake goes out: a card begun is never cut off
+        sender.pump(wire.send)
+        now[0] += 0.1
+    assert wire.bytes
+    sender.put(2, cards[2], priority=1)  # review
+    sender.put(3, cards[3], priority=0)  # announced: before the waiting review card
+    sender.put(4, cards[4], priority=0)
+    p, asm, got = parser(), CardAssembler(), []
+    for _ in range(400):
+        sender.pump(wire.send)
+        now[0] += 0.1
+    for b in wire.bytes:
+        for msg in p.parse_buffer(b) or []:
+            if (card := asm.add(msg)) is not None:
+                got.append(read_card(card)["id"])  # type: ignore[index]
+    assert got == [1, 3, 4, 2]
+    # a review hole that becomes announced jumps the queue too
+    sender.put(5, make_card(jpeg(5), {"id": 5, "rev": 1}), priority=1)
+    sender.put(6, make_card(jpeg(6), {"id": 6, "rev": 1}), priority=1)
+    sender.put(6, make_card(jpeg(6), {"id": 6, "rev": 2}), priority=0)
+    assert [item.key for item in sender._queue] == [6, 5]

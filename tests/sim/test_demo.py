@@ -59,7 +59,8 @@ def test_printed_score_is_the_truth(demo: tuple[Path, str]) -> None:
     a = sortie.anchor
     truth = {t.id: t for t in true_holes(world, a)}
     flight = read_flight_holes(sorted(out.glob("flight_*.mcap")), thumbnails=False)
-    said = {int(t.split()[1]) for t in json.loads((out / "demo.json").read_text())["announcements"]}
+    told = json.loads((out / "demo.json").read_text())["announcements"]
+    said = {int(t.split()[1]) for t in told if t.startswith("HOLE ")}
     confirmed = {h.id: h for h in AnnounceGate().select(flight.holes, said)}
 
     def centre_m(h: Hole, t: TrueHole) -> float:
@@ -78,7 +79,7 @@ def test_printed_score_is_the_truth(demo: tuple[Path, str]) -> None:
         t = truth[int(tid)]
         assert (float(x), float(y)) == (round(t.x_m, 1), round(t.y_m, 1))
         if status == "FOUND":
-            m = re.search(r"as hole (\d+) \(score [\d.]+\), (\d+) cm off", rest)
+            m = re.search(r"as hole (\d+) \(p_hole [\d.]+, score [\d.]+\), (\d+) cm off", rest)
             assert m is not None
             h = confirmed[int(m[1])]  # a confirmed hole of the logged flight
             assert finds(h, t) and abs(100 * centre_m(h, t) - int(m[2])) <= 1
