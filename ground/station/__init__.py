@@ -5,10 +5,13 @@
   mission, the track);
 * :mod:`.state` - :class:`StationState`, everything learnt, kept in ``DIR/station.json``;
 * :mod:`.files` - KML/GeoJSON/GPX always current; :mod:`.cot` - holes as TAK CoT;
-* :mod:`.web` - the live page (``station.html``) and its state document.
+* :mod:`.web` - the live page (``station.html``) and its state document; :mod:`.webserver`
+  its HTTP server, :mod:`.guard` the checks every request passes (Host, Origin, the
+  station token, bounds), :mod:`.audit` the operators' marks in ``DIR/audit.jsonl``.
 """
 
 from holescan.ground.station.app import GroundOptions, GroundStation, run_ground
+from holescan.ground.station.audit import AuditTrail
 from holescan.ground.station.cot import (
     COT_TYPE,
     DEFAULT_COT_URL,
@@ -18,6 +21,7 @@ from holescan.ground.station.cot import (
     withdraw_cot,
 )
 from holescan.ground.station.files import hole_summary, hole_waypoint, write_station_files
+from holescan.ground.station.guard import Limits, StationToken
 from holescan.ground.station.link import VehicleLink
 from holescan.ground.station.state import (
     MARKS,
@@ -32,12 +36,15 @@ __all__ = [
     "COT_TYPE",
     "DEFAULT_COT_URL",
     "MARKS",
+    "AuditTrail",
     "CotError",
     "CotPublisher",
     "GroundHole",
     "GroundOptions",
     "GroundStation",
+    "Limits",
     "StationState",
+    "StationToken",
     "StationWeb",
     "TrackPoint",
     "VehicleLink",

@@ -30,7 +30,20 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--baud", type=int, default=57600, help="serial links only (default 57600)")
     p.add_argument("-o", "--out", type=Path, required=True, help="station folder")
     p.add_argument("--sysid", type=int, help="the vehicle's system id (default: first heard)")
-    p.add_argument("--http", default="127.0.0.1:8080", help="live page HOST:PORT, or 'off'")
+    p.add_argument(
+        "--http",
+        default="127.0.0.1:8080",
+        help="live page HOST:PORT, or 'off' (0.0.0.0:PORT: every network of the laptop; "
+        "marking always needs the station token, printed at start)",
+    )
+    p.add_argument(
+        "--http-name",
+        action="append",
+        default=None,
+        metavar="NAME",
+        help="a host name the page is opened by besides its IP addresses (repeatable; "
+        "default: this machine's hostname and HOSTNAME.local); other names are refused",
+    )
     p.add_argument(
         "--cot",
         default="udp+wo://239.2.3.1:6969",
@@ -66,6 +79,7 @@ def run(args: argparse.Namespace) -> int:
         baud=args.baud,
         http_host=host or "127.0.0.1",
         http_port=port,
+        http_names=None if args.http_name is None else tuple(args.http_name),
         cot_url=None if args.cot == "off" else args.cot,
         cot_proto=args.cot_proto,
         station=args.station,
