@@ -29,6 +29,7 @@ from holescan.ground.station.files import write_station_files
 from holescan.ground.station.link import VehicleLink
 from holescan.ground.station.state import GroundHole, StationState
 from holescan.ground.station.web import StationWeb
+from holescan.missions import SigningKey
 
 __all__ = ["GroundOptions", "GroundStation", "run_ground"]
 
@@ -45,6 +46,7 @@ class GroundOptions:
     is served as besides its addresses (None: this machine's hostname and HOSTNAME.local;
     see :func:`ground.station.guard.host_allowed`). cot_url : pytak COT_URL (None:
     no TAK). cot_proto : 0 = CoT XML, 1 = TAK protocol v1 (protobuf, via takproto).
+    signing : MAVLink 2 signing key shared with the vehicle (None: unsigned link).
     station : name in the CoT uids. cot_stale_s, cot_refresh_s : CoT stale time
     and re-send period. kml_refresh_s : Google Earth's NetworkLink reload period.
     """
@@ -63,6 +65,7 @@ class GroundOptions:
     cot_refresh_s: float = 600.0
     kml_refresh_s: float = 5.0
     silence_s: float = 3.0
+    signing: SigningKey | None = None
 
 
 class GroundStation:
@@ -103,7 +106,12 @@ class GroundStation:
             self._stack.callback(self._halt)
             self.link = self._stack.enter_context(
                 VehicleLink(
-                    o.mavlink, self.state, sysid=o.sysid, baud=o.baud, silence_s=o.silence_s
+                    o.mavlink,
+                    self.state,
+                    sysid=o.sysid,
+                    baud=o.baud,
+                    silence_s=o.silence_s,
+                    signing=o.signing,
                 )
             )
         except BaseException:

@@ -58,12 +58,28 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="0: CoT XML (default), 1: TAK protocol v1 protobuf (needs takproto)",
     )
     p.add_argument("--station", default="ground", help="name used in the CoT uids")
+    key = p.add_mutually_exclusive_group()
+    key.add_argument(
+        "--mavlink-key-file",
+        type=Path,
+        metavar="FILE",
+        help="MAVLink 2 signing: a file of one line, the key as 64 hex digits or a "
+        "passphrase (as MAVProxy's 'signing key PASSPHRASE'); the vehicle's fly.toml "
+        "mavlink_key/mavlink_key_file holds the same. Unsigned packets are then dropped",
+    )
+    key.add_argument(
+        "--mavlink-key",
+        metavar="HEX",
+        help="the signing key as 64 hex digits (visible to other users in 'ps': prefer "
+        "--mavlink-key-file)",
+    )
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from holescan.errors import InputError
     from holescan.ground import GroundOptions, run_ground
+    from holescan.missions import SigningKey
 
     host, port = "127.0.0.1", None
     if args.http != "off":
@@ -83,6 +99,13 @@ def run(args: argparse.Namespace) -> int:
         cot_url=None if args.cot == "off" else args.cot,
         cot_proto=args.cot_proto,
         station=args.station,
+        signing=(
+            SigningKey.from_file(args.mavlink_key_file)
+            if args.mavlink_key_file is not None
+            else SigningKey.from_hex(args.mavlink_key)
+            if args.mavlink_key is not None
+            else None
+        ),
     )
     stop = threading.Event()
 
