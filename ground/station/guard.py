@@ -199,11 +199,17 @@ def host_allowed(host: str | None, local_addr: str, port: int, names: Iterable[s
     return name in {n.lower() for n in names}
 
 
-def origin_allowed(origin: str | None, fetch_site: str | None, host: str) -> bool:
+def origin_allowed(
+    origin: str | None, fetch_site: str | None, host: str, *, navigation: bool = False
+) -> bool:
     """Is a request the page's own (or not a browser's cross-site one)?
 
     origin : the ``Origin`` header (None: absent, as from curl). fetch_site : the
     ``Sec-Fetch-Site`` header. host : the request's ``Host``, already checked.
+    navigation : a GET that opens a page in the browser's window (``Sec-Fetch-Mode:
+    navigate``), e.g. the pairing link clicked in a chat: allowed from another site (the
+    other site cannot read what it opens, nor frame it: the page says ``frame-ancestors
+    'none'``); a change never is.
 
     >>> origin_allowed("http://127.0.0.1:8080", "same-origin", "127.0.0.1:8080")
     True
@@ -211,8 +217,11 @@ def origin_allowed(origin: str | None, fetch_site: str | None, host: str) -> boo
     False
     >>> origin_allowed(None, "cross-site", "127.0.0.1:8080")
     False
+    >>> origin_allowed(None, "cross-site", "127.0.0.1:8080", navigation=True)
+    True
     """
-    if fetch_site is not None and fetch_site.strip().lower() not in ("same-origin", "none"):
+    site = None if fetch_site is None else fetch_site.strip().lower()
+    if site is not None and site not in ("same-origin", "none") and not navigation:
         return False
     if origin is None:
         return True

@@ -228,8 +228,15 @@ def _handler(web: Site) -> type[BaseHTTPRequestHandler]:
                 _log.warning("web: %s refused: Host %r", self.client_address[0], hosts[0][:80])
                 self._refuse(403, "unknown Host: open the page by the station's address")
                 return
+            navigation = (
+                self.command == "GET"
+                and (self.headers.get("Sec-Fetch-Mode") or "").strip().lower() == "navigate"
+            )
             if not origin_allowed(
-                origins[0] if origins else None, self.headers.get("Sec-Fetch-Site"), hosts[0]
+                origins[0] if origins else None,
+                self.headers.get("Sec-Fetch-Site"),
+                hosts[0],
+                navigation=navigation,
             ):
                 _log.warning(
                     "web: %s refused: cross-site request (Origin %r)",

@@ -123,6 +123,14 @@ def test_cross_site_text_plain_post_is_refused_and_changes_nothing(station: Stat
         station.port, "POST", "/holes/1/mark", {"Sec-Fetch-Site": "cross-site"}, mark_body()
     )
     assert r.status == 403
+    # a cross-site form that navigates (Sec-Fetch-Mode: navigate) is still a POST: refused
+    nav = {"Sec-Fetch-Site": "cross-site", "Sec-Fetch-Mode": "navigate"}
+    r = request(station.port, "POST", "/holes/1/mark", {**nav, **station.auth}, mark_body())
+    assert r.status == 403
+    # while the pairing link clicked on another site (a chat) opens the page
+    r = request(station.port, "GET", "/?token=x", {**nav, "Sec-Fetch-Dest": "document"})
+    assert r.status == 200 and b"holescan ground station" in r.body
+    assert "frame-ancestors 'none'" in r.headers["content-security-policy"]
     # a sandboxed frame's Origin is "null"
     r = request(station.port, "POST", "/holes/1/mark", {"Origin": "null"}, mark_body())
     assert r.status == 403
