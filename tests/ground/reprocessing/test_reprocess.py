@@ -369,7 +369,8 @@ def test_cli(flight: Flown, tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
     assert rc == 0, text.err
     assert "frames/s" in text.out and "summary:" in text.out
     doc = json.loads((out / "summary.json").read_text())["flights"][0]
-    assert set(doc["files"]) == {"report", "summary"} | ({"gpx"} if doc["confirmed"] else set())
+    holes = {"gpx", "datapackage"} if doc["confirmed"] else set()  # the package: always
+    assert set(doc["files"]) == {"report", "summary"} | holes
     meta = log_info(out / "sortie_reprocess.mcap").metadata["ground.reprocess"]
     assert json.loads(meta["params"])["searcher"]["name"] == "dog"
     assert cli.main(["reprocess", str(tmp_path / "nope.mcap"), "--out", str(out)]) == 2
