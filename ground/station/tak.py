@@ -28,6 +28,7 @@ import asyncio
 import configparser
 import contextlib
 import logging
+import re
 import ssl
 import threading
 from dataclasses import dataclass, field
@@ -42,6 +43,7 @@ __all__ = ["DEFAULT_COT_URL", "CotError", "CotPublisher", "TakTls", "tak_setting
 _log = logging.getLogger(__name__)
 
 DEFAULT_COT_URL = "udp+wo://239.2.3.1:6969"
+_UID = re.compile(rb'<event\b[^>]*?\buid="([^"]*)"')
 _SCHEMES = {"udp", "udp+wo", "udp+broadcast", "udp+broadcast+wo", "tcp", "tcp+wo", "tls"}
 _TLS_SCHEMES = {"tls"}
 
@@ -156,7 +158,9 @@ class CotPublisher:
     be opened or breaks is logged in one line and retried; events wait in the queue
     meanwhile. On a TCP/TLS link whatever the server sends (other clients' events, pings)
     is read and dropped, so the server never blocks on us; its end of the stream means a
-    reconnect.
+    reconnect. After a reconnect the newest event of every uid sent so far is sent again
+    (a restarted server has forgotten them, and the write that met the closed stream may
+    have been lost).
     """
 
     def __init__(self, url: str = DEFAULT_COT_URL, extra: dict[str, str] | None = None) -> None:
@@ -170,6 +174,7 @@ class CotPublisher:
         self.sent = 0
         self.errors = 0
         self.connects = 0
+        self._last: dict[bytes, bytes] = {}  # uid -> the newest event sent under it
 
     def __enter__(self) -> CotPublisher:
         self._thread.start()
@@ -220,6 +225,9 @@ class CotPublisher:
         import pytak  # imported here: pytak is needed only when TAK is on
 
         reader, writer = await pytak.protocol_factory(config)
+        if self.connects and self._queue is not None:  # a reconnect: send them all again
+            for event in self._last.values():
+                self._queue.put_nowait(event)
         drain = None
         if isinstance(reader, asyncio.StreamReader):
             drain = asyncio.get_running_loop().create_task(_drain(reader))
@@ -257,6 +265,10 @@ class CotPublisher:
                         raise ConnectionError("the server closed the connection")
                     await tx.send_data(data)
                     self.sent += 1
+                    uid = _UID.search(data)
+                    if uid is not None:
+                        self._last.pop(uid[1], None)
+                        self._last[uid[1]] = data
                     pending = None
                 except Exception as err:
                     self.errors += 1

@@ -161,11 +161,11 @@ def make_pki(folder: Path, clients: tuple[str, ...] = ("station", "reader")) -> 
 class Taky:
     """taky on 127.0.0.1 (TCP, or TLS requiring client certificates of ``pki``'s CA)."""
 
-    def __init__(self, folder: Path, pki: Pki | None = None) -> None:
+    def __init__(self, folder: Path, pki: Pki | None = None, port: int | None = None) -> None:
         self.program = taky_program()
         self.folder = folder
         folder.mkdir(parents=True, exist_ok=True)
-        self.port = free_tcp_port()
+        self.port = port or free_tcp_port()
         self.tls = pki is not None
         ssl = (
             f"enabled = true\nclient_cert_required = true\nca = {pki.ca}\n"

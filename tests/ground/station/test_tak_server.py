@@ -16,7 +16,15 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
-from takserver import P12_PASSWORD, Pki, TakClient, Taky, make_pki, p12_settings
+from takserver import (
+    P12_PASSWORD,
+    Pki,
+    TakClient,
+    Taky,
+    free_tcp_port,
+    make_pki,
+    p12_settings,
+)
 from test_station import hole, picture, wait_for
 
 from holescan import cli
@@ -107,6 +115,32 @@ def test_holes_through_taky_over_tcp(tmp_path: Path) -> None:
     for e in (first, update):  # stale from the moment it was sent
         assert cot_time(e.get("stale")) - cot_time(e.get("time")) == dt.timedelta(seconds=900)
     check_withdrawal(reader)
+
+
+def test_station_reconnects_when_the_server_restarts(tmp_path: Path) -> None:
+    """The server goes away and comes back on the same port: the station reconnects, sends
+    again what the new server has not seen (hole 1) and the hole that came meanwhile."""
+    port = free_tcp_port()
+    opts = GroundOptions(
+        mavlink=f"udpin:127.0.0.1:{free_udp_port()}",
+        out=tmp_path / "station",
+        http_port=None,
+        cot_url=f"tcp://127.0.0.1:{port}",
+    )
+    with GroundStation(opts) as station:
+        with Taky(tmp_path / "taky1", port=port) as first, TakClient(first.url) as reader:
+            station.state.on_statustext(f"HOLE 1 0.88 {hole(1).lat_deg:.7f} -79.3831900")
+            wait_for(lambda: reader.of(UID), 30.0, "hole 1 through the first server")
+        # the first server is gone; hole 2 comes while it is down
+        station.state.on_statustext(f"HOLE 2 0.77 {hole(2).lat_deg:.7f} -79.3831800")
+        with Taky(tmp_path / "taky2", port=port) as second, TakClient(second.url) as again:
+            uids = {UID, "holescan-ground-hole-2"}
+            wait_for(
+                lambda: uids <= {e.get("uid") for e in again.events},
+                30.0,
+                "holes 1 and 2 through the second server",
+            )
+        assert station.cot is not None and station.cot.connects >= 2
 
 
 @pytest.fixture
