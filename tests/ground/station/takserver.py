@@ -117,19 +117,26 @@ class Pki:
     stranger_p12: Path
 
 
-def make_pki(folder: Path, clients: tuple[str, ...] = ("station", "reader")) -> Pki:
-    """A CA, the server's certificate and key, each client's ``.p12`` and PEM pair, and a
-    stranger's ``.p12`` signed by another CA (EC P-256: milliseconds each)."""
+def make_pki(
+    folder: Path,
+    clients: tuple[str, ...] = ("station", "reader"),
+    server_names: tuple[str, ...] = ("localhost", "127.0.0.1"),
+) -> Pki:
+    """A CA, the server's certificate and key (its subject alternative names
+    ``server_names``: host names or IP addresses), each client's ``.p12`` and PEM pair, and
+    a stranger's ``.p12`` signed by another CA (EC P-256: milliseconds each)."""
     folder.mkdir(parents=True, exist_ok=True)
     ca_key = ec.generate_private_key(ec.SECP256R1())
     ca = _cert("holescan test CA", ca_key, _name("holescan test CA"), ca_key, ca=True)
     (folder / "ca.pem").write_bytes(_pem(ca))
     server_key = ec.generate_private_key(ec.SECP256R1())
-    san: list[x509.GeneralName] = [
-        x509.DNSName("localhost"),
-        x509.IPAddress(ipaddress.ip_address("127.0.0.1")),
-    ]
-    server = _cert("localhost", server_key, ca.subject, ca_key, san=san)
+    san: list[x509.GeneralName] = []
+    for n in server_names:
+        try:
+            san.append(x509.IPAddress(ipaddress.ip_address(n)))
+        except ValueError:
+            san.append(x509.DNSName(n))
+    server = _cert(server_names[0], server_key, ca.subject, ca_key, san=san)
     (folder / "server.pem").write_bytes(_pem(server))
     (folder / "server.key").write_bytes(_key_pem(server_key))
 

@@ -210,6 +210,29 @@ def test_holes_through_taky_over_tls_with_client_certificates(tmp_path: Path, pk
     check_withdrawal(reader)
 
 
+def test_tls_by_address_to_a_server_named_in_its_certificate(tmp_path: Path) -> None:
+    """The server's certificate names only ``takserver.test`` (no IP address): the station
+    connecting to 127.0.0.1 verifies it against --tak-server-name."""
+    pki = make_pki(tmp_path / "pki", server_names=("takserver.test",))
+    with (
+        Taky(tmp_path / "taky", pki) as server,
+        TakClient(
+            server.url, p12_settings(pki, "reader") | {"PYTAK_TLS_DONT_CHECK_HOSTNAME": "1"}
+        ) as reader,
+    ):
+        tls = TakTls(pki.p12["station"], ca=pki.ca, password=P12_PASSWORD)
+        opts = GroundOptions(
+            mavlink=f"udpin:127.0.0.1:{free_udp_port()}",
+            out=tmp_path / "station",
+            http_port=None,
+            cot_url=server.url,
+            cot_tls=dataclasses.replace(tls, server_name="takserver.test"),
+        )
+        with GroundStation(opts) as station:
+            station.state.on_statustext(f"HOLE 1 0.88 {hole(1).lat_deg:.7f} -79.3831900")
+            wait_for(lambda: reader.of(UID), 30.0, "hole 1, the server verified by name")
+
+
 # -- TLS settings that cannot work: one line at start -------------------------------------
 def test_tls_settings_checked_at_start(tmp_path: Path, pki: Pki) -> None:
     url = "tls://127.0.0.1:8089"
