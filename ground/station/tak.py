@@ -220,7 +220,7 @@ class CotPublisher:
         finally:
             self._loop.close()
 
-    async def _open(self, config: Any) -> tuple[Any, asyncio.Task[None] | None]:
+    async def _open(self, config: Any) -> tuple[Any, asyncio.Task[str] | None]:
         """A TXWorker on a fresh connection, and the task draining a stream's reader."""
         import pytak  # imported here: pytak is needed only when TAK is on
 
@@ -231,8 +231,14 @@ class CotPublisher:
         drain = None
         if isinstance(reader, asyncio.StreamReader):
             drain = asyncio.get_running_loop().create_task(_drain(reader))
+            drain.add_done_callback(self._ended)
         self.connects += 1
         return pytak.TXWorker(self._queue, config, writer), drain
+
+    def _ended(self, drain: asyncio.Task[str]) -> None:
+        """Say at once why the server ended the stream (a refused certificate ...)."""
+        if not drain.cancelled():
+            _log.warning("TAK link %s: %s", self.url, drain.result())
 
     async def _send_loop(self) -> None:
         assert self._queue is not None
@@ -240,7 +246,7 @@ class CotPublisher:
         parser["holescan"] = self._config
         config = parser["holescan"]
         tx: Any = None
-        drain: asyncio.Task[None] | None = None
+        drain: asyncio.Task[str] | None = None
         pending: bytes | None = None
         warned = False
         try:
@@ -262,7 +268,7 @@ class CotPublisher:
                 data = pending if pending is not None else await self._queue.get()
                 try:
                     if drain is not None and drain.done():
-                        raise ConnectionError("the server closed the connection")
+                        raise ConnectionError(drain.result())
                     await tx.send_data(data)
                     self.sent += 1
                     uid = _UID.search(data)
@@ -281,11 +287,15 @@ class CotPublisher:
             _close(drain)
 
 
-async def _drain(reader: asyncio.StreamReader) -> None:
-    """Read and drop what a TAK server sends until it closes the stream."""
-    with contextlib.suppress(ConnectionError, ssl.SSLError, OSError):
+async def _drain(reader: asyncio.StreamReader) -> str:
+    """Read and drop what a TAK server sends until it closes the stream; return why it
+    ended (a refused certificate shows here: ``TLSV1_ALERT_UNKNOWN_CA`` ...)."""
+    try:
         while await reader.read(65536):
             pass
+    except (ConnectionError, ssl.SSLError, OSError) as err:
+        return f"the server closed the connection: {err}"
+    return "the server closed the connection"
 
 
 def _close_writer(tx: Any) -> None:
@@ -295,6 +305,6 @@ def _close_writer(tx: Any) -> None:
             writer.close()
 
 
-def _close(task: asyncio.Task[None] | None) -> None:
+def _close(task: asyncio.Task[str] | None) -> None:
     if task is not None and not task.done():
         task.cancel()

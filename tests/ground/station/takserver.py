@@ -266,7 +266,8 @@ class TakClient:
 
     def __exit__(self, *exc: object) -> None:
         if self._task is not None:
-            self._loop.call_soon_threadsafe(self._task.cancel)
+            with contextlib.suppress(RuntimeError):  # the loop already ended (refused)
+                self._loop.call_soon_threadsafe(self._task.cancel)
         self._thread.join(timeout=5.0)
 
     def send(self, data: bytes) -> None:

@@ -84,6 +84,9 @@ def test_holes_through_taky_over_tcp(tmp_path: Path) -> None:
         ):
             h = hole(1)
             vehicle.update_holes([h])
+            link = station.link
+            assert link is not None  # a STATUSTEXT is sent once: to a link that hears us
+            wait_for(lambda: link.sysid is not None, 30.0, "the station hearing the vehicle")
             vehicle.announce(h)
             wait_for(lambda: reader.of(UID), 30.0, "hole 1 through taky")
             first = reader.of(UID)[0]
@@ -231,6 +234,29 @@ def test_tls_by_address_to_a_server_named_in_its_certificate(tmp_path: Path) -> 
         with GroundStation(opts) as station:
             station.state.on_statustext(f"HOLE 1 0.88 {hole(1).lat_deg:.7f} -79.3831900")
             wait_for(lambda: reader.of(UID), 30.0, "hole 1, the server verified by name")
+
+
+def test_a_refused_certificate_is_said(
+    tmp_path: Path, pki: Pki, caplog: pytest.LogCaptureFixture
+) -> None:
+    """The server refuses the station's certificate (another CA signed it): the station
+    says why in one log line at once, and keeps retrying."""
+    with Taky(tmp_path / "taky", pki) as server:
+        tls = TakTls(pki.stranger_p12, ca=pki.ca, password=P12_PASSWORD)
+        opts = GroundOptions(
+            mavlink=f"udpin:127.0.0.1:{free_udp_port()}",
+            out=tmp_path / "station",
+            http_port=None,
+            cot_url=server.url,
+            cot_tls=tls,
+        )
+        with (
+            caplog.at_level("WARNING", logger="holescan.ground.station.tak"),
+            GroundStation(opts) as station,
+        ):
+            station.state.on_statustext(f"HOLE 1 0.88 {hole(1).lat_deg:.7f} -79.3831900")
+            # the alert comes with the stream's end or with the next write: either says it
+            wait_for(lambda: "UNKNOWN_CA" in caplog.text, 30.0, "the server's refusal, in the log")
 
 
 # -- TLS settings that cannot work: one line at start -------------------------------------
