@@ -78,6 +78,11 @@ class GroundOptions:
                 f"the CoT re-send period ({self.cot_refresh_s:g} s) must be above 0 and "
                 f"below the stale time ({self.cot_stale_s:g} s), or markers blink out"
             )
+        if self.cot_proto == 1 and (self.cot_url or "").lower().startswith(("tcp", "tls")):
+            raise InputError(
+                "--cot-proto 1 (TAK protocol v1) is for mesh udp:// only: a TAK server's "
+                "stream starts in CoT XML (--cot-proto 0)"
+            )
         if self.overlay is not None and not self.overlay.is_file():
             raise InputError(f"map overlay {self.overlay}: no such file")
 

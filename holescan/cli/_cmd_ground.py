@@ -80,7 +80,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         type=int,
         choices=(0, 1),
         default=0,
-        help="0: CoT XML (default), 1: TAK protocol v1 protobuf (needs takproto)",
+        help="0: CoT XML (default), 1: TAK protocol v1 protobuf (mesh only; needs takproto)",
     )
     p.add_argument("--station", default="ground", help="name used in the CoT uids")
     p.set_defaults(func=run)

@@ -318,3 +318,5 @@ def test_cli_bad_certificate_is_one_line(
         assert not out.exists(), why  # nothing created for options that cannot work
     rc = cli.main([*base, "-o", str(tmp_path / "s"), "--cot-refresh", "7200"])
     assert rc == 2 and "stale" in capsys.readouterr().err
+    rc = cli.main([*base, "-o", str(tmp_path / "p"), "--cot", "tcp://h:8087", "--cot-proto", "1"])
+    assert rc == 2 and "mesh udp:// only" in capsys.readouterr().err
