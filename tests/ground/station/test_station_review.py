@@ -196,6 +196,13 @@ def test_two_operators_review_the_queue_live(
         for p in (ana, bea, viewer):
             wait_for(lambda p=p: len(p.ids()) == 4, 20.0, "the queue")
         assert "token" not in ana.js("location.href")  # taken out of the address bar
+        # no name yet: a mark asks for it (the name field) and nothing is sent
+        version = state.version
+        ana.key("c")
+        wait_for(lambda: ana.js("document.activeElement.id") == "operator", 5.0, "the name field")
+        assert ana.js("document.getElementById('operator').classList.contains('wanted')")
+        assert state.version == version and state.holes[3].mark == "new"
+        ana.js("document.activeElement.blur()")
         for p, name in ((ana, "Ana"), (bea, "Bea")):
             p.js(
                 f"(() => {{ const f = document.getElementById('operator'); f.value = '{name}';"
