@@ -22,13 +22,18 @@ from pathlib import Path
 from typing import Any
 
 from holescan.errors import InputError
+from holescan.ground.errors import GroundError
 
-__all__ = ["AUDIT_FILE", "AuditEntry", "AuditTrail", "check_operator"]
+__all__ = ["AUDIT_FILE", "AuditEntry", "AuditError", "AuditTrail", "check_operator"]
 
 _log = logging.getLogger(__name__)
 
 AUDIT_FILE = "audit.jsonl"
 _OPERATOR_MAX = 40
+
+
+class AuditError(GroundError):
+    """The audit trail cannot be written (the change it was for is not made)."""
 
 
 def check_operator(name: object) -> str:
@@ -69,8 +74,8 @@ class AuditTrail:
         self._lock = threading.Lock()
 
     def append(self, entry: AuditEntry) -> None:
-        """Write ``entry`` as one line, flushed and fsynced (raises InputError if it cannot:
-        a change that cannot be audited is not made)."""
+        """Write ``entry`` as one line, flushed and fsynced (raises :class:`AuditError` if
+        it cannot: a change that cannot be audited is not made)."""
         line = json.dumps(asdict(entry), separators=(",", ":"), ensure_ascii=False) + "\n"
         with self._lock:
             try:
@@ -81,7 +86,7 @@ class AuditTrail:
                 finally:
                     os.close(fd)
             except OSError as err:
-                raise InputError(f"cannot append to {self.path}: {err.strerror}") from err
+                raise AuditError(f"cannot append to {self.path}: {err.strerror}") from err
 
     def read(self) -> list[dict[str, Any]]:
         """Every complete entry, oldest first (none when there is no trail yet)."""

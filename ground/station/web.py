@@ -240,8 +240,8 @@ class StationWeb:
 
         Raises
         ------
-        LookupError : no such hole. InputError : a bad mark or name, or the trail cannot
-            be written.
+        LookupError : no such hole. InputError : a bad mark or name. AuditError : the
+            trail cannot be written (nothing is changed).
         """
         if mark not in MARKS:
             raise InputError(f"mark must be one of {', '.join(MARKS)}, got {mark!r}")

@@ -25,6 +25,7 @@ from importlib import resources
 from typing import Any, Protocol
 
 from holescan.errors import InputError
+from holescan.ground.station.audit import AuditError
 from holescan.ground.station.guard import (
     BoundedReader,
     Deadlines,
@@ -346,6 +347,10 @@ def _handler(web: Site) -> type[BaseHTTPRequestHandler]:
                 )
             except LookupError as err:
                 self._refuse(404, str(err))
+                return
+            except AuditError as err:  # the station's fault, not the request's
+                _log.error("mark not made: %s", err)
+                self._reply(503, f"mark not made: {err}\n".encode(), "text/plain; charset=utf-8")
                 return
             except (ValueError, InputError, UnicodeDecodeError) as err:
                 self._refuse(400, str(err))

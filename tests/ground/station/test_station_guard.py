@@ -91,7 +91,7 @@ class Station:
         return (
             self.state.version,
             self.state.path.read_bytes(),
-            audit.read_bytes() if audit.exists() else None,
+            audit.read_bytes() if audit.is_file() else None,
             [h.mark for h in self.state.snapshot()[1]],
         )
 
@@ -250,6 +250,12 @@ def test_a_mark_needs_a_name_a_known_hole_and_json(station: Station) -> None:
     for path, h, body, code in cases:
         assert request(station.port, "POST", path, h, body).status == code, (path, body)
     assert station.fingerprint() == before
+    # a trail that cannot be written: the mark is not made (503, the station's fault)
+    trail = station.state.folder / "audit.jsonl"
+    trail.mkdir()
+    assert request(station.port, "POST", "/holes/2/mark", hdrs, mark_body()).status == 503
+    assert station.fingerprint() == before
+    trail.rmdir()
     # a rejected hole is kept: rejected, not deleted
     r = request(station.port, "POST", "/holes/2/mark", hdrs, mark_body("rejected"))
     assert r.status == 200
