@@ -33,21 +33,13 @@ from holescan.missions import (
     write_kml,
 )
 
-__all__ = ["hole_summary", "hole_tier", "hole_waypoint", "write_station_files"]
-
-
-def hole_tier(h: GroundHole) -> str:
-    """``confirmed`` or ``rejected`` once the operator marked it so, else what the vehicle
-    said (``announced`` or ``review``)."""
-    if h.mark in ("confirmed", "rejected"):
-        return h.mark
-    return h.vehicle_tier
+__all__ = ["hole_summary", "hole_waypoint", "write_station_files"]
 
 
 def hole_summary(h: GroundHole) -> str:
     """One line: tier, confidence, size, depth reason, score, sightings, uncertainty,
     operator's mark."""
-    parts = [f"hole {h.id}", hole_tier(h)]
+    parts = [f"hole {h.id}", h.tier]
     if h.p_hole is not None:
         parts.append(f"p_hole {h.p_hole:.2f}")
     parts.append(f"score {h.score:.2f}")
@@ -66,7 +58,7 @@ def hole_waypoint(h: GroundHole, image_src: str | None = None) -> Waypoint:
     """The hole as the project's waypoint record (MSL altitude when known)."""
     props: dict[str, Any] = {
         "hole_id": h.id,
-        "tier": hole_tier(h),
+        "tier": h.tier,
         "p_hole": h.p_hole,
         "score": round(h.score, 3),
         "mark": h.mark,

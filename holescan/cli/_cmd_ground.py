@@ -30,27 +30,94 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--baud", type=int, default=57600, help="serial links only (default 57600)")
     p.add_argument("-o", "--out", type=Path, required=True, help="station folder")
     p.add_argument("--sysid", type=int, help="the vehicle's system id (default: first heard)")
-    p.add_argument("--http", default="127.0.0.1:8080", help="live page HOST:PORT, or 'off'")
+    p.add_argument(
+        "--http",
+        default="127.0.0.1:8080",
+        help="live page HOST:PORT, or 'off' (0.0.0.0:PORT: every network of the laptop; "
+        "marking always needs the station token, printed at start)",
+    )
+    p.add_argument(
+        "--http-name",
+        action="append",
+        default=None,
+        metavar="NAME",
+        help="a host name the page is opened by besides its IP addresses (repeatable; "
+        "default: this machine's hostname and HOSTNAME.local); other names are refused",
+    )
     p.add_argument(
         "--cot",
         default="udp+wo://239.2.3.1:6969",
-        help="TAK: pytak COT_URL (default mesh multicast udp+wo://239.2.3.1:6969; "
-        "tcp://HOST:8087, tls://HOST:8089), or 'off'",
+        help="TAK: mesh multicast udp+wo://239.2.3.1:6969 (default), a TAK server "
+        "tcp://HOST:8087 or tls://HOST:8089 (with --tak-cert), or 'off'",
+    )
+    p.add_argument(
+        "--tak-cert",
+        type=Path,
+        help="tls:// only: the client certificate, a .p12 (with --tak-password-file) or a "
+        "PEM certificate (with --tak-key)",
+    )
+    p.add_argument("--tak-key", type=Path, help="the PEM client certificate's key")
+    p.add_argument(
+        "--tak-password-file",
+        type=Path,
+        help="a file holding the .p12's password (TAK servers' default is atakatak)",
+    )
+    p.add_argument(
+        "--tak-ca", type=Path, help="the CA (PEM) that signed the TAK server's certificate"
+    )
+    p.add_argument(
+        "--tak-server-name",
+        help="the name in the server's certificate, when --cot has its IP address",
+    )
+    p.add_argument(
+        "--cot-stale",
+        type=float,
+        default=3600.0,
+        metavar="S",
+        help="each CoT event goes stale S seconds after it is sent (default 3600)",
+    )
+    p.add_argument(
+        "--cot-refresh",
+        type=float,
+        default=600.0,
+        metavar="S",
+        help="every hole is sent again every S seconds, below --cot-stale (default 600)",
+    )
+    p.add_argument(
+        "--overlay",
+        type=Path,
+        help="a map overlay (.kmz) to put in holes_datapackage.zip with the holes",
     )
     p.add_argument(
         "--cot-proto",
         type=int,
         choices=(0, 1),
         default=0,
-        help="0: CoT XML (default), 1: TAK protocol v1 protobuf (needs takproto)",
+        help="0: CoT XML (default), 1: TAK protocol v1 protobuf (mesh only; needs takproto)",
     )
     p.add_argument("--station", default="ground", help="name used in the CoT uids")
+    key = p.add_mutually_exclusive_group()
+    key.add_argument(
+        "--mavlink-key-file",
+        type=Path,
+        metavar="FILE",
+        help="MAVLink 2 signing: a file of one line, the key as 64 hex digits or a "
+        "passphrase (as MAVProxy's 'signing key PASSPHRASE'); the vehicle's fly.toml "
+        "mavlink_key/mavlink_key_file holds the same. Unsigned packets are then dropped",
+    )
+    key.add_argument(
+        "--mavlink-key",
+        metavar="HEX",
+        help="the signing key as 64 hex digits (visible to other users in 'ps': prefer "
+        "--mavlink-key-file)",
+    )
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from holescan.errors import InputError
-    from holescan.ground import GroundOptions, run_ground
+    from holescan.ground import GroundOptions, TakTls, run_ground
+    from holescan.missions import SigningKey
 
     host, port = "127.0.0.1", None
     if args.http != "off":
@@ -59,6 +126,22 @@ def run(args: argparse.Namespace) -> int:
             port = int(port_text)
         except ValueError as err:
             raise InputError(f"--http wants HOST:PORT or 'off', got {args.http!r}") from err
+    tls = None
+    if args.tak_cert is not None:
+        password = None
+        if args.tak_password_file is not None:
+            try:
+                password = args.tak_password_file.read_text().rstrip("\r\n")
+            except OSError as err:
+                raise InputError(
+                    f"--tak-password-file {args.tak_password_file}: {err.strerror or err}"
+                ) from err
+        tls = TakTls(args.tak_cert, args.tak_key, args.tak_ca, password, args.tak_server_name)
+    elif any(
+        v is not None
+        for v in (args.tak_key, args.tak_ca, args.tak_password_file, args.tak_server_name)
+    ):
+        raise InputError("--tak-key, --tak-ca, --tak-password-file go with --tak-cert")
     opts = GroundOptions(
         mavlink=args.mavlink,
         out=args.out,
@@ -66,9 +149,21 @@ def run(args: argparse.Namespace) -> int:
         baud=args.baud,
         http_host=host or "127.0.0.1",
         http_port=port,
+        http_names=None if args.http_name is None else tuple(args.http_name),
         cot_url=None if args.cot == "off" else args.cot,
         cot_proto=args.cot_proto,
+        cot_tls=tls,
         station=args.station,
+        cot_stale_s=args.cot_stale,
+        cot_refresh_s=args.cot_refresh,
+        overlay=args.overlay,
+        signing=(
+            SigningKey.from_file(args.mavlink_key_file)
+            if args.mavlink_key_file is not None
+            else SigningKey.from_hex(args.mavlink_key)
+            if args.mavlink_key is not None
+            else None
+        ),
     )
     stop = threading.Event()
 

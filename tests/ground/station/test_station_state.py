@@ -102,7 +102,7 @@ def test_mission_items_pair_with_holes_nearest_first(tmp_path: Path) -> None:
 
 
 def test_the_vehicles_tier_from_statustext_and_card_and_in_the_files(tmp_path: Path) -> None:
-    from holescan.ground.station.files import hole_tier, hole_waypoint
+    from holescan.ground.station.files import hole_waypoint
     from holescan.missions import card_facts, make_card
 
     state = StationState.open(tmp_path / "st")
@@ -121,6 +121,6 @@ def test_the_vehicles_tier_from_statustext_and_card_and_in_the_files(tmp_path: P
     facts = card_facts(hole, "why", 2, "announced")
     assert state.on_card(facts, make_card(jpeg, facts)).vehicle_tier == "announced"  # type: ignore[union-attr]
     state.mark(4, "confirmed")
-    assert hole_tier(state.holes[4]) == "confirmed"
+    assert state.holes[4].tier == "confirmed"
     again = StationState.open(tmp_path / "st")
     assert again.holes[4].vehicle_tier == "announced" and again.holes[4].p_hole == 0.42
