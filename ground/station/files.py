@@ -37,12 +37,8 @@ __all__ = ["hole_summary", "hole_waypoint", "write_station_files"]
 
 
 def hole_summary(h: GroundHole) -> str:
-    """One line: tier, confidence, size, depth reason, score, sightings, uncertainty,
-    operator's mark."""
-    parts = [f"hole {h.id}", h.tier]
-    if h.p_hole is not None:
-        parts.append(f"p_hole {h.p_hole:.2f}")
-    parts.append(f"score {h.score:.2f}")
+    """One line: size, depth reason, score, sightings, uncertainty, operator's mark."""
+    parts = [f"hole {h.id}", f"score {h.score:.2f}"]
     if h.major_m is not None and h.minor_m is not None:
         parts.append(f"opening {h.major_m:.2f} x {h.minor_m:.2f} m")
     if h.sightings:
@@ -68,7 +64,8 @@ def hole_waypoint(h: GroundHole, image_src: str | None = None) -> Waypoint:
         "minor_m": h.minor_m,
         "why": h.why,
     }
-    desc = hole_summary(h)
+    p = "unknown" if h.p_hole is None else f"{h.p_hole:.2f}"
+    desc = f"{h.tier}, p_hole {p}: {hole_summary(h)}"
     if image_src is not None:
         props["picture"] = image_src
     return Waypoint(
