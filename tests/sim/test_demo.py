@@ -109,20 +109,32 @@ def test_flight_log_ground_station_and_files(demo: tuple[Path, str]) -> None:
     assert info.frames == doc["frames_captured"] > 50
     assert "/mavlink/raw" in info.topics and "/holes" in info.topics
     confirmed = doc["found"] + doc["false"]
-    # Each confirmed hole was announced to the ground station and served as a waypoint.
-    texts = doc["announcements"]
+    # Each confirmed hole was announced to the ground station and served as a waypoint;
+    # each hole for review was sent too (REVIEW), never a waypoint.
+    texts = [t for t in doc["announcements"] if t.startswith("HOLE ")]
+    told = [t for t in doc["announcements"] if not t.startswith("HOLE ")]
     assert len({t.split()[1] for t in texts}) == confirmed
     assert all(re.fullmatch(r"HOLE \d+ [\d.]+ -?[\d.]+ -?[\d.]+", t) for t in texts)
+    assert all(re.fullmatch(r"REVIEW \d+ [\d.]+ -?[\d.]+ -?[\d.]+", t) for t in told)
+    review = doc["review"]
+    assert {int(t.split()[1]) for t in told} >= set(review)
     assert doc["mission_items"] == confirmed
     assert f"downloaded a mission of {confirmed} hole waypoints" in text
     files = doc["files"]
     gpx = gpxpy.parse(Path(files["gpx"]).read_text())
-    assert len(gpx.waypoints) == confirmed
+    assert len(gpx.waypoints) == confirmed + len(review)
+    assert sum(w.name.startswith("review ") for w in gpx.waypoints) == len(review)
     plan = json.loads(Path(files["plan"]).read_text())
     assert len(plan["mission"]["items"]) == confirmed
-    assert len(json.loads(Path(files["geojson"]).read_text())["features"]) == confirmed
+    feats = json.loads(Path(files["geojson"]).read_text())["features"]
+    assert sorted(f["properties"]["tier"] for f in feats) == sorted(
+        ["announced"] * confirmed + ["review"] * len(review)
+    )
+    if review:
+        assert "for review (sent to the ground with their pictures" in text
     page = Path(files["report"]).read_text()
-    assert page.count("true hole") >= 4 and page.count("data:image/png;base64,") == 2 * confirmed
+    shown = confirmed + len(review)
+    assert page.count("true hole") >= 4 and page.count("data:image/png;base64,") == 2 * shown
     for path in files.values():
         assert str(out) in path
     assert f"holescan reprocess {logs[0]}" in text
