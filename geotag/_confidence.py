@@ -28,8 +28,8 @@ The coefficients are data (:mod:`geotag._confidence_table`), fitted by
 
 from __future__ import annotations
 
+import bisect
 import math
-import statistics
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -43,6 +43,7 @@ __all__ = [
     "DEFAULT_CONFIDENCE",
     "FEATURE_NAMES",
     "ConfidenceModel",
+    "EvidenceAccumulator",
     "HoleEvidence",
     "evidence_of",
     "viewpoint_of",
@@ -132,42 +133,123 @@ def viewpoint_of(s: HoleSighting) -> tuple[int, int, int]:
     return (int((x + w / 2) // VIEW_CELL_PX), int((y + h / 2) // VIEW_CELL_PX), int(r // 0.3))
 
 
+def _median(xs: list[float]) -> float:
+    n = len(xs)
+    return xs[n // 2] if n % 2 else 0.5 * (xs[n // 2 - 1] + xs[n // 2])
+
+
+def _quartiles(xs: list[float]) -> tuple[float, float]:
+    """First and third quartiles of sorted ``xs`` (len >= 2), as ``statistics.quantiles(xs,
+    n=4)`` (its default, exclusive method)."""
+    m = len(xs) + 1
+    out = []
+    for i in (1, 3):
+        j, delta = divmod(i * m, 4)
+        j = min(max(j, 1), len(xs) - 1)
+        out.append((xs[j - 1] * (4 - delta) + xs[j] * delta) / 4)
+    return out[0], out[1]
+
+
+class EvidenceAccumulator:
+    """:class:`HoleEvidence` kept up to date one sighting at a time (the tracker's; each
+    :meth:`add` is O(log n) but for a list insertion, :meth:`evidence` O(1)).
+
+    ``north_m, east_m`` of each sighting may be in any local frame (the same for all).
+    """
+
+    def __init__(self) -> None:
+        self.n = 0
+        self._ps: list[float] = []
+        self._views: dict[tuple[int, int, int], float] = {}
+        self._majors: list[float] = []
+        self._sum = [0.0, 0.0, 0.0, 0.0]  # north, east, north^2, east^2
+        self._major_max = 0.3
+        self._rim: float | None = None
+        self._cut = 0
+        self._t = (0, 0)
+
+    def add(self, s: HoleSighting, north_m: float, east_m: float) -> None:
+        p = p_hole_of_score(s.score)
+        bisect.insort(self._ps, p)
+        v = viewpoint_of(s)
+        self._views[v] = max(self._views.get(v, 0.0), p)
+        if not s.cut_by_border and s.major_m > 0:
+            bisect.insort(self._majors, s.major_m)
+        if math.isfinite(s.major_m):
+            self._major_max = max(self._major_max, s.major_m)
+        if math.isfinite(s.rim_seen):
+            self._rim = s.rim_seen if self._rim is None else max(self._rim, s.rim_seen)
+        self._cut += bool(s.cut_by_border)
+        t = s.t_boot_ns
+        self._t = (t, t) if self.n == 0 else (min(self._t[0], t), max(self._t[1], t))
+        acc = self._sum
+        acc[0] += north_m
+        acc[1] += east_m
+        acc[2] += north_m * north_m
+        acc[3] += east_m * east_m
+        self.n += 1
+
+    def merge(self, other: EvidenceAccumulator) -> None:
+        """Take in another's sightings (two holes found to be one opening)."""
+        for p in other._ps:
+            bisect.insort(self._ps, p)
+        for v, p in other._views.items():
+            self._views[v] = max(self._views.get(v, 0.0), p)
+        for m in other._majors:
+            bisect.insort(self._majors, m)
+        self._major_max = max(self._major_max, other._major_max)
+        if other._rim is not None:
+            self._rim = other._rim if self._rim is None else max(self._rim, other._rim)
+        self._cut += other._cut
+        if other.n:
+            self._t = (
+                other._t
+                if not self.n
+                else (
+                    min(self._t[0], other._t[0]),
+                    max(self._t[1], other._t[1]),
+                )
+            )
+        self._sum = [a + b for a, b in zip(self._sum, other._sum, strict=True)]
+        self.n += other.n
+
+    def evidence(self) -> HoleEvidence:
+        if not self.n:
+            raise InputError("a hole's evidence needs at least one sighting")
+        n = self.n
+        strong = sum(p >= STRONG_P for p in self._views.values()) / len(self._views)
+        if len(self._majors) >= 4:
+            q1, q3 = _quartiles(self._majors)
+            spread = (q3 - q1) / max(_median(self._majors), 1e-3)
+        else:
+            spread = 0.0
+        sn, se, snn, see = self._sum
+        var = max(snn / n - (sn / n) ** 2, 0.0) + max(see / n - (se / n) ** 2, 0.0)
+        return HoleEvidence(
+            sightings=n,
+            views=len(self._views),
+            best_p=self._ps[-1],
+            median_p=_median(self._ps),
+            strong_fraction=strong,
+            size_spread=spread,
+            scatter=math.sqrt(var) / self._major_max,
+            rim_seen=self._rim if self._rim is not None else 0.5,
+            cut_fraction=self._cut / n,
+            span_s=(self._t[1] - self._t[0]) * 1e-9,
+        )
+
+
 def evidence_of(sightings: Sequence[HoleSighting]) -> HoleEvidence:
     """:class:`HoleEvidence` of one hole's sightings (any order; at least one)."""
     if not sightings:
         raise InputError("a hole's evidence needs at least one sighting")
-    ps = [p_hole_of_score(s.score) for s in sightings]
-    views: dict[tuple[int, int, int], float] = {}
-    for s, p in zip(sightings, ps, strict=True):
-        v = viewpoint_of(s)
-        views[v] = max(views.get(v, 0.0), p)
-    strong = sum(p >= STRONG_P for p in views.values()) / len(views)
-    majors = [s.major_m for s in sightings if not s.cut_by_border and s.major_m > 0]
-    if len(majors) >= 4:
-        q = statistics.quantiles(majors, n=4)
-        spread = (q[2] - q[0]) / max(statistics.median(majors), 1e-3)
-    else:
-        spread = 0.0
     s0 = sightings[0]
     frame = LocalFrame(s0.lat_deg, s0.lon_deg)
     e, n = frame.to_en([s.lat_deg for s in sightings], [s.lon_deg for s in sightings])
-    e_mean, n_mean = float(e.mean()), float(n.mean())
-    rms = math.sqrt(float(((e - e_mean) ** 2 + (n - n_mean) ** 2).mean()))
-    major = max([s.major_m for s in sightings if math.isfinite(s.major_m)] + [0.3])
-    rims = [s.rim_seen for s in sightings if math.isfinite(s.rim_seen)]
-    times = [s.t_boot_ns for s in sightings]
-    return HoleEvidence(
-        sightings=len(sightings),
-        views=len(views),
-        best_p=max(ps),
-        median_p=statistics.median(ps),
-        strong_fraction=strong,
-        size_spread=spread,
-        scatter=rms / major,
-        rim_seen=max(rims) if rims else 0.5,
-        cut_fraction=sum(s.cut_by_border for s in sightings) / len(sightings),
-        span_s=(max(times) - min(times)) * 1e-9,
-    )
+    acc = EvidenceAccumulator()
+    for s, ee, nn in zip(sightings, e.tolist(), n.tolist(), strict=True):
+        acc.add(s, nn, ee)
+    return acc.evidence()
 
 
 @dataclass(frozen=True)

@@ -59,7 +59,12 @@ from dataclasses import dataclass
 import pymap3d
 
 from holescan.errors import InputError
-from holescan.geotag._confidence import DEFAULT_CONFIDENCE, ConfidenceModel, evidence_of
+from holescan.geotag._confidence import (
+    DEFAULT_CONFIDENCE,
+    ConfidenceModel,
+    EvidenceAccumulator,
+    HoleEvidence,
+)
 from holescan.geotag._project import HoleSighting
 
 __all__ = ["Hole", "HoleTracker", "MergeParams"]
@@ -149,10 +154,16 @@ class _Track:
         self.best_score = -math.inf
         self.source: str | None = None
         self.seen: list[HoleSighting] = []
+        self.acc = EvidenceAccumulator()
         self.apart: set[int] = set()  # holes seen apart from this one in one frame
         self._add(s, ned)
 
+    def evidence(self) -> HoleEvidence:
+        """What its sightings say together (kept up to date as they come)."""
+        return self.acc.evidence()
+
     def _add(self, s: HoleSighting, ned: tuple[float, float, float]) -> None:
+        self.acc.add(s, ned[0], ned[1])
         self.seen.append(s)
         w = 1.0 / _rel_var(s)  # GPS error is shared: it cannot tell sightings apart
         self.count += 1
@@ -214,6 +225,7 @@ class _Track:
         if o.best_quality > self.best_quality:
             self.best_quality, self.best = o.best_quality, o.best
         self.seen = sorted(self.seen + o.seen, key=lambda s: s.t_boot_ns)
+        self.acc.merge(o.acc)
         self.apart |= o.apart
 
 
@@ -419,7 +431,7 @@ class HoleTracker:
         # down): the weighted mean of the sightings' opening sigmas. The rest (depth noise,
         # attitude, timing) averages down as 1/sqrt(n).
         opening = t.w_opening / t.w_sum
-        ev = evidence_of(t.seen)
+        ev = t.evidence()
         rel = math.hypot(opening, 1.0 / math.sqrt(t.inv_noise_var))
         return Hole(
             id=t.id,
