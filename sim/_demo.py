@@ -228,7 +228,9 @@ class _Ground:
         new = [h for h in holes if h.id not in self._told]
         self._told.update(h.id for h in new)
         return tuple(
-            f"hole {h.id} score {h.score:.2f} at {h.lat_deg:.7f}, {h.lon_deg:.7f}" for h in new
+            f"hole {h.id} ({h.vehicle_tier}) score {h.score:.2f} at {h.lat_deg:.7f}, "
+            f"{h.lon_deg:.7f}"
+            for h in new
         )
 
     def wait_complete(self, ids: set[int], timeout_s: float) -> bool:
