@@ -147,6 +147,15 @@ class Flight:
         with self._lock:
             self._handle_result_locked(r)
 
+    def _tiers(self, holes: list[Hole]) -> tuple[list[Hole], dict[int, Tier]]:
+        """The holes to serve, and every hole's tier (the gate's select and review)."""
+        served = self._gate.select(holes, announced=self._announced)
+        review = {h.id for h in self._gate.review(holes, announced=self._announced)}
+        tiers: dict[int, Tier] = {h.id: "candidate" for h in holes}
+        tiers.update({h.id: "review" for h in holes if h.id in review})
+        tiers.update({h.id: "announced" for h in served})
+        return served, tiers
+
     def _handle_result_locked(self, r: WorkerResult) -> None:
         assert self._writer is not None
         c = self.counters
@@ -170,21 +179,13 @@ class Flight:
         if not changed:
             return
         holes = self.tracker.holes()
-        self._writer.write_holes(holes, self.unix_ns(r.t_mono_ns))
+        served, now = self._tiers(holes)
+        self._writer.write_holes(holes, self.unix_ns(r.t_mono_ns), now, self._gate)
         self._views.update(r.frame_index, r.detections, changed)
-        served = self._gate.select(holes, announced=self._announced)
-        served_ids = {h.id for h in served}
-        review_ids = {h.id for h in self._gate.review(holes, announced=self._announced)}
         tiers: dict[int, Tier] = {}
         news = []
         for h in changed:
-            tier: Tier = (
-                "announced"
-                if h.id in served_ids
-                else "review"
-                if h.id in review_ids
-                else "candidate"
-            )
+            tier = now[h.id]
             if tier != "candidate" and self._worth_telling(h, tier):
                 tiers[h.id] = tier
                 news.append(h)
@@ -436,7 +437,8 @@ class Flight:
                     "rate_method": ts.rate_method,
                     "clock_source": self._telemetry.clock.source,
                 }
-            writer.write_holes(self.tracker.holes(), time.time_ns())
+            final = self.tracker.holes()
+            writer.write_holes(final, time.time_ns(), self._tiers(final)[1], self._gate)
         finally:
             if deadline is not None:
                 deadline.cancel()

@@ -82,6 +82,14 @@ class AnnounceGate:
                 f"review min_p_hole must be in [0, {_P_HOLE_MAX}], got {self.review_min_p_hole}"
             )
 
+    def summary(self) -> str:
+        """The thresholds in one line: ``announced p_hole >= 0.9, >= 2 sightings over
+        >= 0.3 s; review p_hole >= 0.1``."""
+        return (
+            f"announced p_hole >= {self.min_p_hole:g}, >= {self.min_sightings} sightings "
+            f"over >= {self.min_span_s:g} s; review p_hole >= {self.review_min_p_hole:g}"
+        )
+
     def p_hole(self, hole: Hole) -> float:
         """``p_hole`` of ``hole``: its hole-level confidence (logs from before: its best
         frame's)."""

@@ -26,7 +26,8 @@ from holescan.capture.errors import FlightLogError, TruncatedLogError
 from holescan.capture.flightlog.detections import decode_detection
 from holescan.capture.flightlog.scan import ScanState, scan_records
 from holescan.detect import CameraIntrinsics, Detection
-from holescan.geotag import Hole, VehiclePose
+from holescan.errors import InputError
+from holescan.geotag import AnnounceGate, Hole, VehiclePose
 
 __all__ = [
     "LogRecord",
@@ -92,11 +93,30 @@ class LoggedDetections:
 
 @dataclasses.dataclass(frozen=True)
 class LoggedHoles:
-    """The hole list as logged: one dict per hole (``lat_deg``, ``lon_deg``, ...)."""
+    """The hole list as logged: one dict per hole (``lat_deg``, ``lon_deg``, ..., ``tier``)
+    and the thresholds of the gate that decided the tiers (None: a log from before tiers
+    were recorded)."""
 
     t_unix_ns: int
     sequence: int
     holes: tuple[dict[str, Any], ...]
+    gate: dict[str, Any] | None = None
+
+    def tiers(self) -> dict[int, str] | None:
+        """Hole id -> the tier the vehicle gave it; None when the log did not record it."""
+        if self.gate is None or not all("tier" in h for h in self.holes):
+            return None
+        return {int(h["id"]): str(h["tier"]) for h in self.holes}
+
+    def announce_gate(self) -> AnnounceGate | None:
+        """The flight's :class:`geotag.AnnounceGate` (None: not recorded)."""
+        if self.gate is None:
+            return None
+        known = {f.name for f in dataclasses.fields(AnnounceGate)}
+        try:
+            return AnnounceGate(**{k: v for k, v in self.gate.items() if k in known})
+        except (InputError, TypeError) as err:
+            raise FlightLogError(f"unreadable logged gate {self.gate}: {err}") from err
 
     def as_holes(self) -> tuple[Hole, ...]:
         """The holes as :class:`geotag.Hole` records (when they were logged as such)."""
@@ -105,10 +125,10 @@ class LoggedHoles:
         required = {f.name for f in fields if f.default is dataclasses.MISSING}
         out = []
         for h in self.holes:
-            if not required <= set(h) <= names:  # logs from before p_hole and views
+            if not required <= set(h) - {"tier"} <= names:  # logs from before p_hole and views
                 raise FlightLogError(f"logged hole fields {sorted(h)} are not a geotag.Hole")
             box = h["best_box"]
-            values: dict[str, Any] = {k: v for k, v in h.items() if k != "p_hole"}
+            values: dict[str, Any] = {k: v for k, v in h.items() if k not in ("p_hole", "tier")}
             p = h.get("p_hole")
             values["p_hole"] = math.nan if p is None else float(p)
             out.append(Hole(**{**values, "best_box": tuple(box) if box is not None else box}))
@@ -293,7 +313,8 @@ def decode_message(
         dets = tuple(decode_detection(d) for d in obj["detections"])
         return LoggedDetections(int(obj["t_unix_ns"]), seq, int(obj["frame_index"]), dets)
     if topic == sch.TOPIC_HOLES:
-        return LoggedHoles(t, seq, tuple(sch.from_json(msg.data)["holes"]))
+        obj = sch.from_json(msg.data)
+        return LoggedHoles(t, seq, tuple(obj["holes"]), obj.get("gate"))
     if topic == sch.TOPIC_HEALTH:
         return LoggedHealth(t, seq, sch.from_json(msg.data))
     if topic == sch.TOPIC_CAMERA_INFO:

@@ -63,6 +63,7 @@ __all__ = [
     "float_or_none",
     "from_json",
     "holes_geojson_message",
+    "holes_record",
     "image_from_raw",
     "jsonable",
     "location_message",
@@ -377,6 +378,29 @@ def decode_pose(obj: Mapping[str, Any]) -> VehiclePose:
 
 
 # --------------------------------------------------------------------------------- holes
+
+
+def holes_record(
+    holes: Sequence[Any], tiers: Mapping[int, str] | None = None, gate: Any = None
+) -> dict[str, Any]:
+    """The ``/holes`` record: ``{"holes": [...], "gate": {...}}``.
+
+    holes : records or mappings with at least ``lat_deg`` and ``lon_deg`` (and ``id`` when
+        ``tiers`` is given). tiers : hole id -> the tier the vehicle gave it (``announced``,
+        ``review``, ``candidate``), written as each hole's ``tier`` (missing ids:
+        ``candidate``). gate : the :class:`geotag.AnnounceGate` that decided the tiers; its
+        thresholds are written as ``gate`` (logs without it predate recorded tiers).
+    """
+    records = [jsonable(h) for h in holes]
+    for rec in records:
+        if not isinstance(rec, dict) or "lat_deg" not in rec or "lon_deg" not in rec:
+            raise InputError("each hole needs lat_deg and lon_deg fields")
+        if tiers is not None:
+            rec["tier"] = tiers.get(rec.get("id", -1), "candidate")
+    doc: dict[str, Any] = {"holes": records}
+    if gate is not None:
+        doc["gate"] = jsonable(gate)
+    return doc
 
 
 def holes_geojson_message(holes: Sequence[Mapping[str, Any]]) -> GeoJSON:

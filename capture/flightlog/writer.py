@@ -169,14 +169,16 @@ class FlightLogWriter:
         dets = tuple(detections)
         return self._put(sch.TOPIC_DETECTIONS, "detections", int(frame_index), dets, int(t_unix_ns))
 
-    def write_holes(self, holes: Sequence[Any], t_unix_ns: int) -> bool:
-        """Queue the current hole list (records or mappings with at least ``lat_deg`` and
-        ``lon_deg``) on ``/holes`` (JSON) and ``/holes/geojson``."""
-        records = tuple(sch.jsonable(h) for h in holes)
-        for rec in records:
-            if not isinstance(rec, dict) or "lat_deg" not in rec or "lon_deg" not in rec:
-                raise InputError("each hole needs lat_deg and lon_deg fields")
-        return self._put(sch.TOPIC_HOLES, "holes", records, int(t_unix_ns))
+    def write_holes(
+        self,
+        holes: Sequence[Any],
+        t_unix_ns: int,
+        tiers: Mapping[int, str] | None = None,
+        gate: Any = None,
+    ) -> bool:
+        """Queue the hole list on ``/holes``, ``/holes/geojson`` (:func:`~schemas.holes_record`)."""
+        doc = sch.holes_record(holes, tiers, gate)
+        return self._put(sch.TOPIC_HOLES, "holes", doc, int(t_unix_ns))
 
     def write_health(
         self, values: Mapping[str, Any], t_unix_ns: int | None = None, source: str = "daemon"
@@ -394,10 +396,11 @@ class FlightLogWriter:
         self._count(sch.TOPIC_DETECTIONS)
         self._count(sch.TOPIC_DETECTION_ANNOTATIONS)
 
-    def _on_holes(self, seq: int, log_time: int, holes: tuple[dict[str, Any], ...], t: int) -> None:
-        self._json(sch.TOPIC_HOLES, {"holes": list(holes)}, seq, log_time, t)
+    def _on_holes(self, seq: int, log_time: int, doc: dict[str, Any], t: int) -> None:
+        self._json(sch.TOPIC_HOLES, doc, seq, log_time, t)
         geo_seq = self._own_seq(sch.TOPIC_HOLES_GEOJSON)
-        self._proto(sch.TOPIC_HOLES_GEOJSON, sch.holes_geojson_message(holes), geo_seq, log_time, t)
+        geo = sch.holes_geojson_message(doc["holes"])
+        self._proto(sch.TOPIC_HOLES_GEOJSON, geo, geo_seq, log_time, t)
         self._count(sch.TOPIC_HOLES)
         self._count(sch.TOPIC_HOLES_GEOJSON)
 

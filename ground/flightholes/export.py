@@ -14,7 +14,7 @@ from pathlib import Path
 
 from holescan.capture import check_output, output_via_part
 from holescan.errors import InputError
-from holescan.geotag import AnnounceGate, Hole
+from holescan.geotag import Hole
 from holescan.ground.flightholes.read import (
     FlightHoles,
     flight_log_files,
@@ -47,7 +47,11 @@ class ExportReport:
         )
         if f.truncated:
             head += f"; {len(f.truncated)} file(s) cut off, read up to their last chunk"
-        return [head, *(f"wrote {path} ({fmt})" for fmt, path in self.files)]
+        how = (
+            "the flight's" if f.gate_recorded else "default gate (the log predates recorded tiers)"
+        )
+        gate = f"tiers: {how}: {f.gate.summary()}"
+        return [head, gate, *(f"wrote {path} ({fmt})" for fmt, path in self.files)]
 
 
 def default_out_path(log: Path, fmt: HoleFormat) -> Path:
@@ -116,8 +120,7 @@ def export_flight_holes(
     flight = read_flight_holes(logs, thumbnails=need_pictures, thumb_height_px=thumb_height_px)
     if not flight.holes:
         raise InputError(f"{flight.paths[0]}: the flight found no holes (its hole list is empty)")
-    gate = AnnounceGate()
-    tiers = {h.id: gate.tier(h) for h in flight.holes}
+    gate, tiers = flight.gate, flight.tiers  # the flight's own (default gate for old logs)
     seen = tuple(h for h in flight.holes if h.sightings >= min_sightings)
     if not seen:
         most = max(h.sightings for h in flight.holes)

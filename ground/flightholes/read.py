@@ -38,7 +38,7 @@ from holescan.capture import (
     read_flight_log,
 )
 from holescan.errors import InputError
-from holescan.geotag import Hole
+from holescan.geotag import AnnounceGate, Hole
 from holescan.ground.flightholes.views import BestViews, HoleThumbnail
 from holescan.missions import mavlink, parser
 
@@ -62,6 +62,11 @@ class FlightHoles:
     boot_to_unix_ns : add to an autopilot boot time to get Unix time, ns (None: unknown).
     thumbnails : hole id -> best view (holes whose best frame is not in the log have none).
     frames_read : RGB-D frames decoded (0 when thumbnails were not asked for).
+    gate : the flight's :class:`geotag.AnnounceGate` (its thresholds as the last ``/holes``
+        record gives them; the default gate for logs from before they were recorded, and
+        then ``gate_recorded`` is False).
+    tiers : hole id -> the tier the vehicle gave it in that record (logs from before:
+        ``gate.tier`` of the hole).
     """
 
     paths: tuple[Path, ...]
@@ -74,6 +79,9 @@ class FlightHoles:
     boot_to_unix_ns: int | None
     thumbnails: Mapping[int, HoleThumbnail]
     frames_read: int
+    gate: AnnounceGate = dataclasses.field(default_factory=AnnounceGate)
+    gate_recorded: bool = False
+    tiers: Mapping[int, str] = dataclasses.field(default_factory=dict)
 
 
 # ------------------------------------------------------------------------ file names
@@ -217,6 +225,15 @@ def read_flight_holes(
         home, source = first_pos, "first logged position"
     else:
         source = "unknown"
+    gate = last.announce_gate()
+    tiers = last.tiers()
+    if gate is None:
+        _log.info(
+            "%s: the log predates recorded tiers; tiers from the default gate %s",
+            files[0],
+            AnnounceGate().summary(),
+        )
+    use = gate or AnnounceGate()
     return FlightHoles(
         paths=files,
         truncated=tuple(truncated),
@@ -228,4 +245,7 @@ def read_flight_holes(
         boot_to_unix_ns=offset_frames if offset_frames is not None else offset_poses,
         thumbnails=views.thumbnails(holes, thumb_height_px) if thumbnails else {},
         frames_read=frames,
+        gate=use,
+        gate_recorded=gate is not None,
+        tiers=tiers if tiers is not None else {h.id: use.tier(h) for h in holes},
     )

@@ -33,7 +33,7 @@ from holescan.capture import (
     holes_geojson_message,
     jsonable,
 )
-from holescan.geotag import Hole, VehiclePose
+from holescan.geotag import AnnounceGate, Hole, VehiclePose
 from holescan.ground.reprocessing.options import ReprocessOptions
 from holescan.ground.reprocessing.plan import FlightPlan, PartitionTask
 from holescan.ground.reprocessing.task import Box, FrameResult, PartitionResult, View, best_view
@@ -70,6 +70,7 @@ class FlightMerger:
         self.telemetry = TelemetryReplay()
         self.track: list[VehiclePose] = []
         self.flight_holes: tuple[Hole, ...] = ()
+        self.flight_gate: AnnounceGate | None = None  # as the last /holes record gives it
         self.first_pose: VehiclePose | None = None
         self.best: dict[int, tuple[PartitionTask, int, Box]] = {}
         self._task: PartitionTask | None = None
@@ -108,6 +109,7 @@ class FlightMerger:
                     self._decide(ev.frame_index)
             elif isinstance(ev, LoggedHoles):
                 try:
+                    self.flight_gate = ev.announce_gate()
                     self.flight_holes = ev.as_holes()
                 except FlightLogError as err:
                     _log.debug("in-flight hole list not comparable: %s", err)

@@ -18,7 +18,7 @@ import numpy as np
 
 from holescan.detect import DEFAULT, DetectParams
 from holescan.errors import InputError
-from holescan.geotag import LocalFrame, nearest_pairs
+from holescan.geotag import AnnounceGate, LocalFrame, nearest_pairs
 from holescan.missions import HoleFormat
 
 __all__ = ["TOPICS", "HoleMatch", "Progress", "ReprocessOptions", "match_points"]
@@ -54,6 +54,9 @@ class ReprocessOptions:
     topic_prefix : topics of the sidecar MCAP files.
     cache : keep finished partitions in ``OUT/.holescan-cache`` and reuse them.
     storage_options : passed to ``fsspec`` for URLs (credentials stay out of the logs).
+    announce_min_p_hole, review_min_p_hole : the thresholds of the tiers of the reprocessed
+        holes (:class:`geotag.AnnounceGate`); None: the flight's own, as its log records
+        them (:meth:`gate_for`).
     """
 
     params: DetectParams = DEFAULT
@@ -68,8 +71,11 @@ class ReprocessOptions:
     topic_prefix: str = "/reprocess"
     cache: bool = True
     storage_options: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    announce_min_p_hole: float | None = None
+    review_min_p_hole: float | None = None
 
     def __post_init__(self) -> None:
+        self.gate_for(None)  # refuses thresholds outside [0, 0.99]
         if self.workers < 0 or self.min_sightings < 1:
             raise InputError("workers must be >= 0 and min_sightings >= 1")
         if not self.partition_mib > 0 or not math.isfinite(self.partition_mib):
@@ -85,6 +91,25 @@ class ReprocessOptions:
     @property
     def partition_bytes(self) -> int:
         return max(1, round(self.partition_mib * (1 << 20)))
+
+    def gate_for(self, recorded: AnnounceGate | None) -> tuple[AnnounceGate, str]:
+        """The gate that gives the reprocessed holes their tiers, and where it comes from.
+
+        recorded : the flight's gate as its log records it (None: the log predates recorded
+            tiers, and the default gate stands in). The thresholds given here replace its.
+        """
+        gate = recorded or AnnounceGate()
+        source = "the flight's" if recorded is not None else "default (not in the log)"
+        given = []
+        if self.announce_min_p_hole is not None:
+            gate = dataclasses.replace(gate, min_p_hole=self.announce_min_p_hole)
+            given.append(f"announced p_hole >= {self.announce_min_p_hole:g}")
+        if self.review_min_p_hole is not None:
+            gate = dataclasses.replace(gate, review_min_p_hole=self.review_min_p_hole)
+            given.append(f"review p_hole >= {self.review_min_p_hole:g}")
+        if given:
+            source += ", " + " and ".join(given) + " given"
+        return gate, source
 
     def settings_key(self) -> dict[str, Any]:
         """What decides a partition's result besides the log bytes (the cache key)."""

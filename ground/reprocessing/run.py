@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import logging
 import os
 import threading
 import time
@@ -58,6 +59,8 @@ from holescan.ground.reprocessing.plan import (
 from holescan.ground.reprocessing.sidecar import Sidecar
 
 __all__ = ["ReprocessResult", "reprocess", "run_campaign"]
+
+_log = logging.getLogger(__name__)
 
 CACHE_FOLDER = ".holescan-cache"
 
@@ -255,6 +258,10 @@ def _flight_outputs(
             f"{sum(m.found is not None for m in matches)} of {len(matches)}"
         ),
     }
+    gate, source = opts.gate_for(fl.flight_gate if fl is not None else None)
+    if fl is not None and fl.flight_gate is None:
+        _log.info("%s: the log predates recorded tiers: default gate %s", plan.name, gate.summary())
+    facts["tiers"] = f"{gate.summary()} ({source})"
     if problems:
         facts["cut off or damaged"] = "; ".join(problems)
     views = {}
@@ -272,6 +279,7 @@ def _flight_outputs(
         boot_to_unix_ns=fl.boot_to_unix_ns if fl is not None else None,
         facts=facts,
         title=f"holescan reprocessed flight: {plan.name}",
+        tiers={h.id: gate.tier(h) for h in confirmed},
     )
     summary_path = out / f"{plan.name}_reprocess.json"
     files.append(("summary", summary_path))
@@ -306,10 +314,13 @@ def _campaign_outputs(run: _Run, holes: list[CampaignHole]) -> list[tuple[str, P
         breaks.append(len(track))
         track += [dataclasses.replace(p, t_boot_ns=p.t_boot_ns + shift) for p in m.track]
     homes = [m.home() for m in run.mergers.values() if m.home() is not None]
+    gates = {m.flight_gate for m in run.mergers.values()}  # one gate when all flights agree
+    gate, source = run.opts.gate_for(gates.pop() if len(gates) == 1 else None)
     facts = {
         "flights": ", ".join(p.name for p in run.plans),
         "frames": str(sum(r.frames_detected for r in run.results.values())),
         "holes seen by several flights": str(sum(len(h.flights) > 1 for h in holes)),
+        "tiers": f"{gate.summary()} ({source})",
     }
     per = campaign_summary(holes, _tracks(run))["per_flight"]
     for name, c in per.items():
@@ -331,6 +342,7 @@ def _campaign_outputs(run: _Run, holes: list[CampaignHole]) -> list[tuple[str, P
         facts=facts,
         track_breaks=breaks,
         title="holescan campaign: " + ", ".join(p.name for p in run.plans),
+        tiers={h.id: gate.tier(h) for h in confirmed},
     )
 
 

@@ -92,6 +92,19 @@ def add_engine_arguments(p: argparse.ArgumentParser, default_out: str) -> None:
         help="holes seen in at least N frames go to the hole files (default 2)",
     )
     p.add_argument(
+        "--announce-min-p-hole",
+        type=_score,
+        metavar="P",
+        help="holes at this hole-level p_hole (and seen often enough) are announced "
+        "(default: the flight's own threshold, as its log records it; 0.9 for old logs)",
+    )
+    p.add_argument(
+        "--review-min-p-hole",
+        type=_score,
+        metavar="P",
+        help="other holes at this p_hole are for review (default: the flight's; 0.1 for old logs)",
+    )
+    p.add_argument(
         "-f",
         "--format",
         dest="formats",
@@ -136,6 +149,8 @@ def options(args: argparse.Namespace) -> ReprocessOptions:
         frames=args.frames,
         min_sightings=args.min_sightings,
         cache=not args.no_cache,
+        announce_min_p_hole=args.announce_min_p_hole,
+        review_min_p_hole=args.review_min_p_hole,
     )
     if args.formats:
         opts = dataclasses.replace(opts, formats=tuple(dict.fromkeys(args.formats)))

@@ -15,10 +15,13 @@ import pytest
 
 from holescan.capture import Flight, FlightConfig, FlightSummary, LogOptions
 from holescan.detect import CameraIntrinsics
+from holescan.geotag import AnnounceGate
 from holescan.sim import RubbleWorld, SimAutopilot, SimPath, SimSource, WorldAnchor, make_world
 
 CAM = CameraIntrinsics.xtion()
 ANCHOR = WorldAnchor(43.6532, -79.3832, 120.0)
+GATE = AnnounceGate(min_p_hole=0.5, review_min_p_hole=0.05)
+"""The sorties' gate (not the default)."""
 
 Flown = tuple[list[Path], FlightSummary]
 
@@ -68,6 +71,9 @@ def fly(world: RubbleWorld, out: Path, name: str, reverse: bool, uptime_s: float
             max_frames=40,
             log_options=LogOptions(max_file_s=3.0),
             pose_wait_s=1.0,  # a loaded test machine can delay telemetry; the flight waits
+            # Not the default gate: the log records it, reprocessing gives its tiers with it.
+            announce_min_p_hole=GATE.min_p_hole,
+            review_min_p_hole=GATE.review_min_p_hole,
         )
         summary = Flight(cfg, source, CAM, mavlink=f"udpin:127.0.0.1:{port}").run()
     files = list(summary.log.files)

@@ -26,11 +26,19 @@ from holescan import cli
 from holescan.capture import FlightSummary, log_info
 from holescan.detect import DetectParams
 from holescan.errors import InputError
-from holescan.geotag import Hole
-from holescan.ground import Progress, ReprocessOptions, ReprocessResult, group_flights, match_points
+from holescan.geotag import AnnounceGate, Hole
+from holescan.ground import (
+    Progress,
+    ReprocessOptions,
+    ReprocessResult,
+    group_flights,
+    match_points,
+    read_flight_holes,
+)
 from holescan.ground import reprocess as _reprocess
 
 Flown = tuple[list[Path], FlightSummary]
+GATE = AnnounceGate(min_p_hole=0.5, review_min_p_hole=0.05)  # conftest's sorties fly with it
 
 SMALL = 0.15  # MiB per partition: a dozen partitions in the 40-frame flight
 
@@ -124,6 +132,44 @@ def test_flight_frames_reproduce_the_flights_holes(flight: Flown, tmp_path: Path
     if c.pose_refusals == 0 and c.frames_unposed < c.frames_captured:
         same_holes(f.holes, summary.holes, tol_m=0.01)
         assert f.flight_same_ids == len(f.flight_matches)
+
+
+def test_the_flights_recorded_gate_gives_the_tiers(
+    flight: Flown, reference: ReprocessResult, tmp_path: Path
+) -> None:
+    files, summary = flight
+    logged = read_flight_holes(files, thumbnails=False)  # the daemon's own record
+    assert logged.gate == GATE != AnnounceGate() and logged.gate_recorded
+    served = {h.id for h in GATE.select(list(summary.holes))}
+    review = {h.id for h in GATE.review(list(summary.holes))}
+    assert logged.tiers == {
+        h.id: "announced" if h.id in served else "review" if h.id in review else "candidate"
+        for h in summary.holes
+    }
+    (f,) = reference.flights
+    assert tiers_in(dict(f.files)["geojson"]) == tiers_of(f.confirmed, GATE)
+    report = dict(f.files)["report"].read_text()
+    assert "p_hole &gt;= 0.5" in report and "the flight&#x27;s" in report  # which gate
+    # Thresholds given by the user replace the flight's.
+    res = reprocess(files, tmp_path, opts(announce_min_p_hole=0.99, review_min_p_hole=0.0))
+    (g,) = res.flights
+    assert tiers_in(dict(g.files)["geojson"]) == tiers_of(
+        g.confirmed, AnnounceGate(min_p_hole=0.99, review_min_p_hole=0.0)
+    )
+    report = dict(g.files)["report"].read_text()
+    assert "announced p_hole &gt;= 0.99 and review p_hole &gt;= 0 given" in report
+
+
+def tiers_in(geojson: Path) -> dict[int, str]:
+    doc = json.loads(geojson.read_text())
+    return {x["properties"]["hole_id"]: x["properties"]["tier"] for x in doc["features"]}
+
+
+def tiers_of(holes: tuple[Hole, ...], gate: AnnounceGate) -> dict[int, str]:
+    """The tiers of the holes a hole file holds (not candidates)."""
+    out = {h.id: gate.tier(h) for h in holes}
+    assert out
+    return {k: v for k, v in out.items() if v != "candidate"}
 
 
 def test_two_worker_processes_give_what_one_process_gives(
