@@ -11,18 +11,23 @@ of every hole is recorded (time, best score, sightings, time span of its sightin
 final holes are scored against the world's truth (:func:`sim.score_holes`: a hole within
 0.5 m of a true access hole's centre, or inside its opening, is true).
 
-A hole's ``p_hole`` is :func:`detect.p_hole_of_score` of its best score, as in
-:class:`geotag.AnnounceGate` (the histories keep the raw score; the map is monotone). Then
-each gate ``p_hole >= p and sightings >= n and span >= t`` of a grid is replayed over the
-recorded histories: a hole is delivered at the first change that passes the gate.
+A hole's ``p_hole`` is its hole-level confidence (:attr:`geotag.Hole.p_hole`, the
+tracker's :class:`geotag.ConfidenceModel` over all its sightings), recorded at every
+change. Then each gate ``AnnounceGate(min_p_hole=p, min_sightings=n, min_span_s=t)`` of a
+grid is replayed over the recorded histories with :meth:`geotag.AnnounceGate.tier`: a hole
+is delivered (announced) at the first change whose tier is ``announced``, and it is a
+review item when it reached ``review`` (``--review-min-p-hole``) and was never announced.
 Printed: the best score, p_hole, sightings and span distributions of true and false holes
 (all, and those seen twice over 0.3 s), and per gate the delivered precision, the recall of
-holes in view (whole in >= 3 frames), and the time from first sighting to delivery
-(median, max).
+holes in view (whole in >= 3 frames), the time from first sighting to delivery (median,
+max), the review items and the recall of announced + review. Histories of a ``--json``
+from before hole-level p_hole (4 numbers per change) fall back to the best frame's
+p_hole, as the gate does for old logs, and say so.
 
 Also (``--alien DATASET``): per-detection scores and p_hole of true and false detections
 on the independent scenes of ``benchmarks/alien_scenes.py`` (IoU > 0.5 with an access
-hole). ``--load JSON`` replays the histories of an earlier ``--json`` run.
+hole): single frames, where the hole-level p_hole is the best frame's. ``--load JSON``
+replays the histories of an earlier ``--json`` run.
 
 Usage::
 
@@ -46,7 +51,7 @@ import numpy as np
 
 from holescan.capture import HolePipeline
 from holescan.detect import CameraIntrinsics, detect_holes, p_hole_of_score
-from holescan.geotag import CameraMount, VehiclePose
+from holescan.geotag import AnnounceGate, CameraMount, Hole, Tier, VehiclePose
 from holescan.sim import (
     Conditions,
     SimAutopilot,
@@ -73,7 +78,7 @@ def fly_world(seed: int, fps: float) -> dict[str, Any]:
     mount = CameraMount()
     pipeline = HolePipeline(camera, mount)
     n = int(loop_length_m(path) / path.speed_m_s * fps)
-    history: dict[int, list[tuple[float, float, int, float]]] = {}
+    history: dict[int, list[tuple[float, float, int, float, float]]] = {}
     boxes_seen = []
     t0 = time.perf_counter()
     for k in range(n):
@@ -90,7 +95,8 @@ def fly_world(seed: int, fps: float) -> dict[str, Any]:
         step = pipeline.add(k, dets, lambda pose=pose: pose)
         for h in step.changed:
             span = (h.t_last_boot_ns - h.t_first_boot_ns) * 1e-9
-            history.setdefault(h.id, []).append((k / fps, h.score, h.sightings, span))
+            entry = (k / fps, h.score, h.sightings, span, AnnounceGate().p_hole(h))
+            history.setdefault(h.id, []).append(entry)
     holes = pipeline.holes()
     truth = true_holes(world, p.anchor)
     rows, false = score_holes(holes, truth, world, p.anchor, count_in_view(boxes_seen))
@@ -123,19 +129,46 @@ def fly_world(seed: int, fps: float) -> dict[str, Any]:
     }
 
 
-def replay(worlds: list[dict[str, Any]], p: float, n: int, span: float) -> dict[str, Any]:
-    """Gate ``p_hole >= p``, ``n`` sightings over ``span`` seconds over the histories."""
-    delivered = true_delivered = 0
+def p_hole_of(entry: list[float]) -> float:
+    """The hole-level p_hole of a history entry (old histories: the best frame's)."""
+    return entry[4] if len(entry) > 4 else p_hole_of_score(entry[1])
+
+
+def tier_of(gate: AnnounceGate, entry: list[float]) -> Tier:
+    """:meth:`AnnounceGate.tier` of a hole as one history entry recorded it."""
+    _, score, k, span = entry[:4]
+    hole = Hole(
+        0, 0.0, 0.0, 0.0, 0.0, score, int(k), 0, round(span * 1e9), None, (0, 0, 1, 1), 0.0,
+        0.0, p_hole=p_hole_of(entry),
+    )  # fmt: skip
+    return gate.tier(hole)
+
+
+def replay(
+    worlds: list[dict[str, Any]], p: float, n: int, span: float, review_p: float
+) -> dict[str, Any]:
+    """The tier gate (``p_hole >= p``, ``n`` sightings over ``span`` s; review at
+    ``review_p``) over the histories."""
+    gate = AnnounceGate(min_p_hole=p, min_sightings=n, min_span_s=span, review_min_p_hole=review_p)
+    delivered = true_delivered = reviews = true_reviews = 0
     latency = []
-    in_view = found = 0
+    in_view = found = found_or_review = 0
     for w in worlds:
         first_pass: dict[int, float] = {}
+        reviewed: set[int] = set()
         for h in w["holes"]:
             t_first = h["history"][0][0]
-            for t, score, k, sp in h["history"]:
-                if p_hole_of_score(score) >= p and k >= n and sp >= span:
-                    first_pass[h["id"]] = t - t_first
+            for entry in h["history"]:
+                tier = tier_of(gate, entry)
+                if tier == "announced":
+                    first_pass[h["id"]] = entry[0] - t_first
                     break
+                if tier == "review":
+                    reviewed.add(h["id"])
+        reviewed -= set(first_pass)
+        for h in w["holes"]:
+            reviews += h["id"] in reviewed
+            true_reviews += h["id"] in reviewed and h["true"]
         for h in w["holes"]:
             if h["id"] in first_pass:
                 delivered += 1
@@ -146,6 +179,7 @@ def replay(worlds: list[dict[str, Any]], p: float, n: int, span: float) -> dict[
             if got:
                 found += 1
                 latency.append(min(got))
+            found_or_review += bool(got) or any(c in reviewed for c in cands)
     return {
         "p_hole": p,
         "sightings": n,
@@ -156,6 +190,9 @@ def replay(worlds: list[dict[str, Any]], p: float, n: int, span: float) -> dict[
         "in_view": in_view,
         "latency_median_s": statistics.median(latency) if latency else math.nan,
         "latency_max_s": max(latency) if latency else math.nan,
+        "review": reviews,
+        "review_true": true_reviews,
+        "recall_with_review": found_or_review / in_view if in_view else math.nan,
     }
 
 
@@ -209,6 +246,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", type=Path, help="write the histories here")
     ap.add_argument("--load", type=Path, help="replay histories from an earlier --json")
     ap.add_argument("--alien", type=Path, help="alien_scenes.py dataset for per-detection scores")
+    ap.add_argument("--review-min-p-hole", type=float, default=AnnounceGate.review_min_p_hole)
     args = ap.parse_args(argv)
     if args.load:
         worlds = json.loads(args.load.read_text())["worlds"]
@@ -221,12 +259,14 @@ def main(argv: list[str] | None = None) -> int:
     tru = [h for w in worlds for h in w["holes"] if h["true"]]
     fal = [h for w in worlds for h in w["holes"] if not h["true"]]
     print(f"{len(worlds)} worlds, {sum(w['frames'] for w in worlds)} frames")
+    if any(len(e) < 5 for w in worlds for h in w["holes"] for e in h["history"]):
+        print("  histories from before hole-level p_hole: the best frame's p_hole stands in")
 
     def dist(name: str, hs: list[dict[str, Any]]) -> None:
         best = [h["history"][-1][1] for h in hs]
         print(
             f"  {name:22} n={len(hs):3}  score {_pct(best)}  p_hole "
-            f"{_pct([p_hole_of_score(s) for s in best])}"
+            f"{_pct([p_hole_of(h['history'][-1]) for h in hs])}"
             f"  sightings {_pct([h['history'][-1][2] for h in hs])}"
             f"  span s {_pct([h['history'][-1][3] for h in hs])}"
         )
@@ -245,17 +285,22 @@ def main(argv: list[str] | None = None) -> int:
         kinds[h["nearest"]] = kinds.get(h["nearest"], 0) + 1
     print("  false holes by nearest feature:", kinds)
     for name, hs in (("true", twice(tru)), ("false", twice(fal))):
-        ps = sorted(round(p_hole_of_score(h["history"][-1][1]), 3) for h in hs)
+        ps = sorted(round(p_hole_of(h["history"][-1]), 3) for h in hs)
         print(f"  p_hole of every {name} hole seen twice over 0.3 s: {ps}")
-    print("gate                          delivered precision recall  latency median/max s")
+    rp = args.review_min_p_hole
+    print(
+        f"gate (review p_hole >= {rp:g})     delivered precision recall  latency median/max s"
+        "  review (true)  recall announced+review"
+    )
     for p in (0.05, 0.1, 0.2, 0.3, 0.5, 0.7, 0.8, 0.9, 0.95, 0.98, 0.99):
         for n in (2, 3, 5):
             for span in (0.0, 0.3, 0.6):
-                r = replay(worlds, p, n, span)
+                r = replay(worlds, p, n, span, min(rp, p))
                 print(
                     f"  p_hole>={p:.2f} n>={n} span>={span:.1f}  {r['delivered']:4d}  "
                     f"{r['precision']:.3f}  {r['recall']:.3f} ({r['in_view']})  "
-                    f"{r['latency_median_s']:.2f} / {r['latency_max_s']:.2f}"
+                    f"{r['latency_median_s']:.2f} / {r['latency_max_s']:.2f}  "
+                    f"{r['review']:4d} ({r['review_true']})  {r['recall_with_review']:.3f}"
                 )
     if args.alien:
         a = alien_scores(args.alien)
