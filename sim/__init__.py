@@ -26,7 +26,7 @@ from holescan.sim._demo import (
     TruthRow,
     run_demo,
 )
-from holescan.sim._demo_format import format_result
+from holescan.sim._demo_format import REVIEW_PER_HA_MEASURED, format_result
 from holescan.sim._fly import SIM_TABLE, SimFlyReport, fly_sim, format_sim_report, sortie_params
 from holescan.sim._lap import LapReplay, prerender_lap
 from holescan.sim._render import GtBox, hole_boxes, render, render_exact
@@ -51,6 +51,7 @@ from holescan.sim._world import AccessHole, HoleKind, RubbleWorld, make_world, r
 __all__ = [
     "DEFAULT_ANCHOR",
     "DEMO_SORTIE",
+    "REVIEW_PER_HA_MEASURED",
     "SIM_TABLE",
     "AccessHole",
     "CameraPose",

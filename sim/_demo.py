@@ -169,6 +169,7 @@ class DemoResult:
             "review": [h.id for h in self.review],
             "review_true": self.review_true,
             "review_latency_s": list(self.review_latency_s),
+            "area_m2": self.area_m2,
             "gate": dataclasses.asdict(self.gate),
             "latency_s": list(self.latency_s),
             "card_bytes": self.card_bytes,

@@ -130,8 +130,10 @@ def test_flight_log_ground_station_and_files(demo: tuple[Path, str]) -> None:
     assert sorted(f["properties"]["tier"] for f in feats) == sorted(
         ["announced"] * confirmed + ["review"] * len(review)
     )
-    if review:
-        assert "for review (sent to the ground with their pictures" in text
+    # The stated review load: this flight's, per hectare, next to the measured figure.
+    per_ha = round(len(review) / (doc["area_m2"] / 1e4))
+    assert f"{len(review)} holes, {doc['review_true']} at a true opening, {per_ha} per " in text
+    assert "expected at the default gate: about 70 per hectare (benchmarks/bench_tiers" in text
     page = Path(files["report"]).read_text()
     shown = confirmed + len(review)
     assert page.count("true hole") >= 4 and page.count("data:image/png;base64,") == 2 * shown
