@@ -25,9 +25,12 @@ Per frame (``pixel_stride`` s: every s-th pixel of every s-th row):
    the rim seen in the same cell is not the cell's look. A cell behind a slab receives no
    sample and is not looked at; a 2.5-D map cannot tell a surface under an overhang.
 4. The look's probability of detection is the measured recall at its range and angle
-   (:class:`RecallTable`). Looks from camera positions within ``independent_m`` of where a
-   cell's current pass began are one pass (their best POD: consecutive frames miss alike);
-   passes combine as POD = 1 - prod(1 - POD_pass).
+   (:class:`RecallTable`); for a sample 0.2 m or more below the mean height of the readings
+   around it (a hole's floor, a void) at the range where its ray crosses that level, and
+   the angle to the vertical: a look into a hole is a look at its opening. Looks from
+   camera positions within ``independent_m`` of where a cell's current pass began are one
+   pass (their best POD: consecutive frames miss alike); passes combine as
+   POD = 1 - prod(1 - POD_pass).
 5. The best look (least range / cos(off-nadir)) gives the cell's height and colour.
 """
 
@@ -54,6 +57,7 @@ F32 = npt.NDArray[np.float32]
 _MAX_POD = 0.999  # one pass never proves a cell empty (and ln(1 - POD) stays finite)
 _OCCLUDER_WINDOW_M = 0.3  # an unread pixel's neighbourhood searched for a nearer surface
 _OCCLUDER_GAP_M = 0.5  # that much nearer than the terrain behind: an occluding edge
+_BELOW_TERRAIN_M = 0.2  # a sample this far below the terrain's level around it is in a hole
 
 
 @dataclass(frozen=True)
@@ -254,10 +258,18 @@ class SearchMap:
         cos_view = self._cos_view(pts, read, dirs, ray_len, k)
         window = max(3, round(self.params.void_window_m * px_per_m / s) | 1)
         near = max(3, round(_OCCLUDER_WINDOW_M * px_per_m / s) | 1)
-        void, void_pts, void_t = self._voids(pts, z, read, dirs, c, window, near)
-        rng = np.where(read, z, void_t) * ray_len
-        cos_view = np.where(read, cos_view, up_cos)
+        void, void_pts, void_t, level = self._voids(pts, z, read, dirs, c, window, near)
+        t_pt = np.where(read, z, void_t)
+        rng = t_pt * ray_len
         pts = np.where(read[..., None], pts, void_pts)
+        # A sample well below the terrain around it (a hole's floor, a void placed on the
+        # lowest reading) is a look at the opening: its range is where its ray crosses the
+        # terrain's level, its angle the line of sight's to the vertical.
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t_level = (level - c[2]) / dirs[..., 2]
+        in_hole = (pts[..., 2] < level - _BELOW_TERRAIN_M) & np.isfinite(t_level) & (t_level > 0)
+        rng_pod = np.where(in_hole, np.minimum(t_level, t_pt), t_pt) * ray_len
+        cos_view = np.where(read & ~in_hole, cos_view, up_cos)
         looked = read | void
         ang = np.degrees(np.arccos(np.clip(cos_view, 0.0, 1.0)))
 
@@ -276,7 +288,7 @@ class SearchMap:
         top = order[last]
         cell = idx[top]
         src = sel[top]
-        pod = np.minimum(self.recall.pod(rng.ravel()[src], ang.ravel()[src]), _MAX_POD)
+        pod = np.minimum(self.recall.pod(rng_pod.ravel()[src], ang.ravel()[src]), _MAX_POD)
         self.version += 1
         self._update(cell, src, is_read[top], pod, pts, rgb[::s, ::s], rng, up_cos, c)
         return FrameFused(
@@ -318,8 +330,9 @@ class SearchMap:
         c: F32,
         ks: int,
         near: int,
-    ) -> tuple[npt.NDArray[np.bool_], F32, F32]:
-        """Unread samples that are looks: their mask, points and optical depth.
+    ) -> tuple[npt.NDArray[np.bool_], F32, F32, F32]:
+        """Unread samples that are looks: their mask, points and optical depth; and the
+        terrain's level around every sample (the mean height of the readings).
 
         Not a look: an unread pixel beside a surface much nearer than where its ray would
         meet the terrain (a dropout or projector shadow at an occluding edge: its ray ends
@@ -336,7 +349,13 @@ class SearchMap:
         void = ~read & (frac >= self.params.void_min_read) & np.isfinite(t) & (t > 0)
         void &= t <= zmin + _OCCLUDER_GAP_M
         t = np.where(void, t, 0.0).astype(np.float32)
-        return void, (dirs * t[..., None] + c).astype(np.float32), t
+        hsum = cv2.blur(
+            np.where(read, pts[..., 2], 0.0).astype(np.float32),
+            (ks, ks),
+            borderType=cv2.BORDER_REPLICATE,
+        )
+        level = (hsum / np.maximum(frac, 1e-6)).astype(np.float32)
+        return void, (dirs * t[..., None] + c).astype(np.float32), t, level
 
     def _update(
         self,

@@ -13,6 +13,8 @@ import subprocess
 import sys
 import threading
 import time
+import xml.etree.ElementTree as ET
+import zipfile
 from collections import defaultdict
 from pathlib import Path
 
@@ -100,10 +102,17 @@ def test_in_process_run_reads_every_frame_and_writes_a_sidecar(
     info = log_info(path)  # every CRC; summary counts against the content
     assert not info.truncated and info.metadata["ground.reprocess"]["frames"] == "all"
     kinds = dict(f.files)
-    hole_files = {"gpx", "kml", "geojson", "plan", "report", "summary"}
+    hole_files = {"gpx", "kml", "geojson", "plan", "datapackage", "report", "summary"}
     map_files = {"ortho", "dsm", "coverage", "map", "gaps"}
     assert hole_files | map_files <= set(kinds) <= hole_files | map_files | REFLY
     assert kinds["kml"].read_text().count("data:image/jpeg;base64,") == len(f.confirmed)
+    with zipfile.ZipFile(kinds["datapackage"]) as z:  # every confirmed hole + its picture
+        names = z.namelist()
+        assert "MANIFEST/manifest.xml" in names
+        cots = [n for n in names if n.endswith(".cot")]
+        assert len(cots) == len(f.confirmed) == sum(n.endswith(".jpg") for n in names)
+        ev = ET.fromstring(z.read(cots[0]))
+        assert ev.get("uid", "").startswith("holescan-sortie-hole-")
     doc = json.loads(reference.summary_path.read_text())
     assert doc["flights"][0] == json.loads(kinds["summary"].read_text())
 
@@ -390,7 +399,8 @@ def test_cli(flight: Flown, tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
     assert "frames/s" in text.out and "summary:" in text.out
     doc = json.loads((out / "summary.json").read_text())["flights"][0]
     # --map-cell 0: no search map, so no map files.
-    assert set(doc["files"]) == {"report", "summary"} | ({"gpx"} if doc["confirmed"] else set())
+    holes = {"gpx", "datapackage"} if doc["confirmed"] else set()  # the package: always
+    assert set(doc["files"]) == {"report", "summary"} | holes
     assert doc["map"] == {}
     meta = log_info(out / "sortie_reprocess.mcap").metadata["ground.reprocess"]
     assert json.loads(meta["params"])["searcher"]["name"] == "dog"
