@@ -88,7 +88,6 @@ def field(size: float, out: Path | None) -> None:
     for a, b in plan.lines:
         (ea, na), (eb, nb) = (frame.to_en(w.lat_deg, w.lon_deg) for w in (a, b))
         lanes.append((float(ea), float(na), float(eb), float(nb)))
-    rng = np.random.default_rng(0)
     views = []  # (lane, pose)
     for k, (ea, na, eb, nb) in enumerate(lanes):
         length = math.hypot(eb - ea, nb - na)
@@ -97,15 +96,20 @@ def field(size: float, out: Path | None) -> None:
             x, y = ea + (eb - ea) * t / length, na + (nb - na) * t / length
             views.append((k, CameraPose.looking_down(x, y, 2.5, yaw=yaw)))
     print(f"2. a {size:g} x {size:g} m field: {len(lanes)} lanes, {len(views)} frames at 2.5 m")
-    t0 = time.perf_counter()
-    rendered = []
-    for k, pose in views:
-        rgb, depth, _ = render(world, pose, CAM, rng)
-        rendered.append((k, pose, depth, rgb))
-    print(f"   rendered in {time.perf_counter() - t0:.0f} s")
-    per_frame_cost(
-        world, [(d, c, LocalCameraPose(p.rotation, p.position)) for _, p, d, c in rendered[:60]]
-    )
+
+    def rendered():  # type: ignore[no-untyped-def]
+        # Rendered again for each pass (the same seed: the same frames); 1 GB+ if kept.
+        r = np.random.default_rng(0)
+        for k, pose in views:
+            rgb, depth, _ = render(world, pose, CAM, r)
+            yield k, pose, depth, rgb
+
+    first = [
+        (d, c, LocalCameraPose(p.rotation, p.position))
+        for (_, p, d, c), _ in zip(rendered(), range(60), strict=False)
+    ]
+    per_frame_cost(world, first)
+    del first
     grid = MapGrid.covering(0.0, 0.0, *world.size_m, 0.02)
     e, n = grid.centres()
     ee, nn = np.meshgrid(e, n)
@@ -113,15 +117,18 @@ def field(size: float, out: Path | None) -> None:
     for sigma in (0.0, 1.0):
         prng = np.random.default_rng(1)
         m = SearchMap(grid, frame)
-        lane_maps: dict[int, SearchMap] = {}
+        lane_dh: list[float] = []
+        lane_prev: np.ndarray | None = None  # heights of the lane before
+        lane_map: SearchMap | None = None
+        lane_k = -1
         seams = []
         prev = None
         t0 = time.thread_time()
-        for i, (k, pose, depth, rgb) in enumerate(rendered):
+        for i, (k, pose, depth, rgb) in enumerate(rendered()):
             p = _tilt(pose, prng, sigma)
             lp = LocalCameraPose(p.rotation, p.position)
             m.add_frame(depth, rgb, CAM, lp)
-            if i % 10 == 0 and i + 1 < len(rendered) and rendered[i + 1][0] == k:
+            if i % 10 == 0 and i + 1 < len(views) and views[i + 1][0] == k:
                 one = SearchMap(
                     MapGrid.covering(
                         p.position[0] - 3,
@@ -142,7 +149,17 @@ def field(size: float, out: Path | None) -> None:
                 if both.sum() > 100:
                     seams.append(float(np.mean(np.abs(prev.height_m[both] - b.height_m[both]))))
                 prev = None
-            lane_maps.setdefault(k, SearchMap(grid, frame)).add_frame(depth, rgb, CAM, lp)
+            if k != lane_k:  # a new lane: compare the last one with the one before it
+                if lane_map is not None:
+                    h = lane_map.layers().height_m
+                    if lane_prev is not None:
+                        both = np.isfinite(lane_prev) & np.isfinite(h)
+                        if both.sum() > 100:
+                            lane_dh.append(float(np.mean(np.abs(lane_prev[both] - h[both]))))
+                    lane_prev = h
+                lane_map, lane_k = SearchMap(grid, frame), k
+            assert lane_map is not None
+            lane_map.add_frame(depth, rgb, CAM, lp)
         fuse_s = time.thread_time() - t0
         lay = m.layers()
         seen = np.isfinite(lay.height_m)
@@ -151,12 +168,6 @@ def field(size: float, out: Path | None) -> None:
         b = truth.astype(np.float32)
         win = cv2.createHanningWindow(a.shape[::-1], cv2.CV_32F)
         (dx, dy), _ = cv2.phaseCorrelate(b - b.mean(), a - a.mean(), win)
-        lane_dh = []
-        for k in range(len(lanes) - 1):
-            la, lb = lane_maps[k].layers(), lane_maps[k + 1].layers()
-            both = np.isfinite(la.height_m) & np.isfinite(lb.height_m)
-            if both.sum() > 100:
-                lane_dh.append(float(np.mean(np.abs(la.height_m[both] - lb.height_m[both]))))
         print(
             f"   attitude error {sigma:g} deg: map vs world offset ({dx * 0.02:+.3f}, "
             f"{-dy * 0.02:+.3f}) m east/north; height - world median {np.median(err):+.4f} m, "
