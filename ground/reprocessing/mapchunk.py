@@ -7,7 +7,7 @@ the client merges the windows (:func:`mapping.merge_layers`: looks and independe
 add, the best look wins), so the map is built in parallel with the detection. Frames are
 placed by the pose logged with them (the pose the flight geotagged its holes with, at most
 a frame's age from the re-interpolated one the merge uses; the difference is measured per
-flight, :attr:`FlightMap.pose_gap_m`).
+flight, :attr:`FlightMerger.pose_gap_m`, in the report and the summary).
 """
 
 from __future__ import annotations
@@ -25,7 +25,6 @@ from holescan.mapping import MapGrid, MapLayers, SearchMap, merge_layers
 
 __all__ = [
     "REACH_M",
-    "FlightMap",
     "MapFrame",
     "fuse_frames",
     "horizontal_gap_m",
@@ -69,16 +68,6 @@ def fuse_frames(
     for f, p in zip(frames, poses, strict=True):
         m.add_frame(f.depth, f.rgb, camera, p)
     return m.layers().seen_window()
-
-
-@dataclasses.dataclass(frozen=True)
-class FlightMap:
-    """A flight's (or a campaign's) merged map, on its frame; pose_gap_m: per fused frame,
-    the horizontal distance between the pose logged with it and the re-interpolated one."""
-
-    layers: MapLayers
-    frame: LocalFrame
-    pose_gap_m: tuple[float, ...] = ()
 
 
 def merge_flight_maps(parts: Sequence[MapLayers], cell_m: float) -> MapLayers | None:
