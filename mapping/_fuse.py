@@ -161,6 +161,20 @@ class SearchMap:
             log_miss.astype(np.float32),
         )
 
+    def seen_window(self) -> MapLayers | None:
+        """The layers of the smallest window holding every cell seen (None: nothing seen);
+        what :meth:`layers` then :meth:`MapLayers.seen_window` give, without copying the
+        whole grid first."""
+        looks = self._layers.looks
+        rows = np.flatnonzero(looks.any(axis=1))
+        if len(rows) == 0:
+            return None
+        cols = np.flatnonzero(looks[rows[0] : rows[-1] + 1].any(axis=0))
+        r, c = slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1)
+        win = self._layers.window(r, c)
+        win.log_miss[...] += np.log1p(-self._pass_pod[r, c])
+        return win
+
     def changed_tiles(self, since_version: int) -> list[tuple[int, int]]:
         """(tile row, tile column) of every tile changed after ``since_version``, row-major."""
         rows, cols = np.nonzero(self._tile_version > since_version)

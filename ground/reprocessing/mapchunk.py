@@ -67,7 +67,7 @@ def fuse_frames(
     m = SearchMap(grid, frame)
     for f, p in zip(frames, poses, strict=True):
         m.add_frame(f.depth, f.rgb, camera, p)
-    return m.layers().seen_window()
+    return m.seen_window()
 
 
 def merge_flight_maps(parts: Sequence[MapLayers], cell_m: float) -> MapLayers | None:

@@ -76,7 +76,12 @@ def test_chunks_merge_to_the_map_of_the_whole_flight(world) -> None:  # type: ig
     for k, (depth, rgb, pose) in enumerate(frames):
         whole.add_frame(depth, rgb, CAM, pose)
         parts[k // 2].add_frame(depth, rgb, CAM, pose)
-    windows = [p.layers().seen_window() for p in parts]
+    windows = [p.seen_window() for p in parts]
+    for p, w in zip(parts, windows, strict=True):  # the same window as from the whole layers
+        full = p.layers().seen_window()
+        assert w is not None and full is not None and w.grid == full.grid
+        np.testing.assert_array_equal(w.log_miss, full.log_miss)
+        np.testing.assert_array_equal(w.rgb, full.rgb)
     assert all(w is not None and w.grid.nx < grid.nx for w in windows)
     merged = merge_layers(grid, [w for w in windows if w is not None])
     one = whole.layers()
