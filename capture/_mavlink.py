@@ -40,7 +40,8 @@ from holescan.capture._mavadapt import is_autopilot_heartbeat
 from holescan.capture._mavingest import VehicleState
 from holescan.capture._mavrates import RateMethod, RateRequests
 from holescan.capture._mavstream import MavlinkStream
-from holescan.capture._posebuffer import GpsFix, PoseBuffer
+from holescan.capture._posebuffer import PoseBuffer
+from holescan.capture._posevalidity import GpsFix
 from holescan.capture.errors import (
     ClockUnavailable,
     PoseUnavailable,
@@ -69,6 +70,7 @@ DEFAULT_RATES_HZ: Mapping[str, float] = {
     "GLOBAL_POSITION_INT": 10.0,
     "ATTITUDE": 50.0,
     "GPS_RAW_INT": 5.0,
+    "EKF_STATUS_REPORT": 2.0,
     "SYSTEM_TIME": 1.0,
 }
 
