@@ -17,6 +17,7 @@ import logging
 import threading
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 from holescan.capture._daemon import Flight
 from holescan.capture._flightrecords import FlightSummary
@@ -102,12 +103,20 @@ def fly(
             mavlink or "none",
             cfg.gcs or "none",
         )
+        hook = setup.on_telemetry
+
+        def telemetry(conn: str, **kw: Any) -> Telemetry:
+            tel = Telemetry(conn, baud=cfg.baud, **kw)
+            if hook is not None:
+                hook(tel)
+            return tel
+
         flight = Flight(
             fc,
             setup.factory,
             setup.camera,
             mavlink=mavlink,
-            telemetry_factory=lambda conn, **kw: Telemetry(conn, baud=cfg.baud, **kw),
+            telemetry_factory=telemetry,
             usb_reset=setup.usb_reset,
             on_holes=on_holes,
         )
