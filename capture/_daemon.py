@@ -78,6 +78,7 @@ class Flight:
         telemetry_factory: Callable[..., Telemetry] = Telemetry,
         usb_reset: Callable[[], None] | None = None,
         on_holes: HoleListener | None = None,
+        before_close: Callable[[], None] | None = None,
     ) -> None:
         self.config = config
         self.camera = camera
@@ -86,6 +87,7 @@ class Flight:
         self._telemetry_factory = telemetry_factory
         self._usb_reset = usb_reset
         self._on_holes = on_holes
+        self._before_close = before_close  # e.g. the last pictures out on the shared link
         self.counters = FlightCounters()
         self.hole_pipeline = HolePipeline(camera, config.mount, errors=config.errors)
         self.tracker = self.hole_pipeline.tracker
@@ -445,6 +447,11 @@ class Flight:
                 deadline.cancel()
             done.set()
             self.stop.set()  # also ends a telemetry retry still waiting for the autopilot
+            if self._before_close is not None:
+                try:
+                    self._before_close()
+                except Exception:  # the flight's end must not fail on it
+                    log.exception("before-close hook failed")
             if self._telemetry is not None:
                 self._telemetry.close()
             try:

@@ -285,6 +285,14 @@ class Telemetry(RateRequests):
                     self._cond.wait(remaining)
         return self.poses.pose_at(t_boot_ns)
 
+    def send_with(self, fn: Callable[[Any], None]) -> None:
+        """Call ``fn(mav)`` with this link's MAVLink sender, under its send lock (others
+        sharing the link: the hole mission server on the companion's one link). Sent as
+        the companion (the vehicle's system id, component 191) once the autopilot is known;
+        :class:`TelemetryError` when the link is closed."""
+        with self._send_lock:
+            fn(self._link.mav)
+
     def latest_gps(self) -> GpsFix | None:
         return self.poses.latest_gps()
 

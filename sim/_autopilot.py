@@ -21,6 +21,10 @@ has no origin), GPS_RAW_INT with ``fix_type`` 1 and an EKF_STATUS_REPORT in
 constant-position mode; a fix lost in flight leaves the EKF dead-reckoning, its position
 drifting away from the truth (``lost_drift_m_s``) without POS_HORIZ_ABS.
 
+A SiK radio on the link can be played too (:attr:`SimAutopilot.radio_txbuf`): RADIO_STATUS
+once a second from system 51, component 68 (as SiK firmware sends it), reporting that much
+of its transmit buffer free, as ArduPilot forwards it to its other links.
+
 Its boot clock is the host's monotonic clock shifted by a realistic offset (it booted
 ``uptime_at_start_s`` before the simulator started), running ``drift_ppm`` fast, read with
 ``jitter_ns`` of Gaussian noise. Motion: a periodic cubic spline through the waypoints (times
@@ -153,6 +157,7 @@ class SimAutopilot:
         self.sent: dict[str, int] = {}
         self.received: dict[str, int] = {}
         self.silent = False
+        self.radio_txbuf: int | None = None
         self.mission = (
             mission
             if mission is not None
@@ -343,6 +348,14 @@ class SimAutopilot:
                 3,  # ArduCopter AUTO
                 mavlink.MAV_STATE_ACTIVE,
             )
+            txbuf = self.radio_txbuf
+            if txbuf is not None:  # the SiK radio's own report, routed to this link
+                ids = (mav.srcSystem, mav.srcComponent)
+                mav.srcSystem, mav.srcComponent = 51, 68
+                try:
+                    mav.radio_status_send(180, 170, txbuf, 30, 28, 0, 0)
+                finally:
+                    mav.srcSystem, mav.srcComponent = ids
         elif name == "SYSTEM_TIME":
             # both clocks read at the same instant, each truncated to its field's unit
             mav.system_time_send(self.unix_ns_at_boot(t_boot_now_ns) // 1000, t_boot_ms)

@@ -1,0 +1,70 @@
+"""Issue 20: the real topology, one link. With ``--mavlink`` only (no ``--gcs``) the
+announcements, the hole mission and the cards go out on the companion's link to the
+autopilot (which routes them to the GCS on its other port: ArduPilot SITL shows it, see
+``benchmarks/sitl_sortie.py``); a SiK radio's RADIO_STATUS on the way sets the cards'
+byte budget."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from holescan.capture import FlyReport, SensorSetup, fly, parse_fly_config
+from holescan.missions import radio_budget
+from holescan.sim import SimAutopilot
+from tests.capture.test_daemon import CAM, ScriptedSource, free_port, hover_path
+
+
+def test_radio_budget_follows_the_radio_buffer() -> None:
+    assert radio_budget(1000.0, 1000.0, 10) == 500.0  # overrun: halve
+    assert radio_budget(1000.0, 1000.0, 40) == 800.0
+    assert radio_budget(800.0, 1000.0, 70) == 800.0  # comfortable: keep
+    assert radio_budget(800.0, 1000.0, 95) == pytest.approx(880.0)
+    assert radio_budget(990.0, 1000.0, 100) == 1000.0  # never above the configured budget
+    b = 1000.0
+    for _ in range(20):
+        b = radio_budget(b, 1000.0, 5)
+    assert b == 50.0  # a card still gets through, slowly
+
+
+def _fly_one_link(tmp_path: Path, txbuf: int | None) -> tuple[FlyReport, dict[str, int]]:
+    port = free_port()
+    with SimAutopilot(f"udpout:127.0.0.1:{port}", hover_path()) as ap:
+        ap.radio_txbuf = txbuf
+        cfg = parse_fly_config(
+            {
+                "holes": {
+                    "announce_min_sightings": 3,
+                    "announce_min_span_s": 0.5,
+                    "announce_min_p_hole": 0.0,
+                }
+            },
+            {"log_dir": tmp_path, "mavlink": f"udpin:127.0.0.1:{port}", "max_frames": 150},
+        )
+        setup = SensorSetup(lambda: ScriptedSource(200), CAM, cfg.mavlink)
+        report = fly(cfg, setup)
+        received = dict(ap.received)
+    return report, received
+
+
+def test_holes_go_out_on_the_autopilot_link_without_gcs(tmp_path: Path) -> None:
+    report, received = _fly_one_link(tmp_path, None)
+    assert report.announced, report
+    assert received.get("STATUSTEXT", 0) >= len(report.announced)
+    assert received.get("DATA_TRANSMISSION_HANDSHAKE", 0) >= 1  # the card: on the same link
+    assert received.get("ENCAPSULATED_DATA", 0) >= 1
+    assert report.cards_sent >= 1
+    # One companion on the link: its heartbeats (ONBOARD_CONTROLLER, the vehicle's id)
+    # come from the telemetry alone, the mission server sends none of its own.
+    assert received.get("HEARTBEAT", 0) <= report.summary.duration_s + 3
+
+
+@pytest.mark.slow
+def test_a_full_radio_buffer_slows_the_cards(tmp_path: Path) -> None:
+    report, _ = _fly_one_link(tmp_path, 5)  # the SiK radio is overrun
+    assert report.announced
+    # At the 50 B/s floor a 2-3 kB card does not get through in the flight's seconds
+    # (plus the 10 s flush); at the configured 1000 B/s it does (test above).
+    assert report.cards_sent == 0, report
+    assert 0 < report.card_bytes < 2500
