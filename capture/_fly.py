@@ -5,9 +5,9 @@
 simulator's, from :func:`sim.fly_sim`) into a :class:`~capture._daemon.Flight` and a
 :class:`missions.HoleMissionServer` (on the ``gcs`` link when one is configured; else on
 the one link to the autopilot, which routes to the ground station on its other port, as
-on a real vehicle: companion on TELEM2, radio on TELEM1) that serves the holes passing the announce gate as a
-mission, announces each new or moved one by STATUSTEXT and sends its card (best view and
-facts, under the byte budget) through the daemon's ``on_holes``.
+on a real vehicle: companion on TELEM2, radio on TELEM1) that serves the holes passing the
+announce gate as a mission, announces each new or moved one by STATUSTEXT and sends its
+card (best view and facts, under the byte budget) through the daemon's ``on_holes``.
 :func:`format_report` is the operator's summary.
 """
 
