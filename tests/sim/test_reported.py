@@ -15,8 +15,7 @@ import pytest
 
 from holescan.capture import LoggedFrame, parse_fly_config, read_flight_log
 from holescan.geotag import local_en_m
-from holescan.sim import SimAutopilot, fly_sim, sortie_params
-from holescan.sim._reported import anchor_at_home
+from holescan.sim import SimAutopilot, anchor_at_home, fly_sim, sortie_params
 from holescan.sim._sortie import make_sortie_world, survey_path
 
 TABLE = {"size_m": [4.0, 4.0], "world_seed": 15, "n_access_holes": 4, "fps": 10.0}
