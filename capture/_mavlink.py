@@ -62,10 +62,8 @@ __all__ = [
 ]
 
 _log = logging.getLogger(__name__)
-
 COMPANION_COMPONENT = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER  # 191
 DEFAULT_BAUD: Final = 921_600  # the flight controller's TELEM port (also ``fly``'s default)
-
 DEFAULT_RATES_HZ: Mapping[str, float] = {
     "GLOBAL_POSITION_INT": 10.0,
     "ATTITUDE": 50.0,
@@ -286,10 +284,8 @@ class Telemetry(RateRequests):
         return self.poses.pose_at(t_boot_ns)
 
     def send_with(self, fn: Callable[[Any], None]) -> None:
-        """Call ``fn(mav)`` with this link's MAVLink sender, under its send lock (others
-        sharing the link: the hole mission server on the companion's one link). Sent as
-        the companion (the vehicle's system id, component 191) once the autopilot is known;
-        :class:`TelemetryError` when the link is closed."""
+        """``fn(mav)`` with this link's sender under its lock (for a server sharing the link;
+        sent as the companion, sysid/191); :class:`TelemetryError` once closed."""
         with self._send_lock:
             fn(self._link.mav)
 
