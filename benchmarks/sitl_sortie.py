@@ -97,8 +97,8 @@ class Controller:
         self.stop = threading.Event()
         self.thread = threading.Thread(target=self._rx, daemon=True)
         self.thread.start()
-        for msg_id, hz in ((164, 20), (33, 10), (193, 2), (42, 2), (46, 0)):
-            self.command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / hz if hz else 0)
+        for msg_id, hz in ((164, 20), (108, 20), (33, 10), (193, 2), (42, 2)):
+            self.command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / hz)
 
     def _rx(self) -> None:
         next_ts = 0
