@@ -68,3 +68,43 @@ def test_a_full_radio_buffer_slows_the_cards(tmp_path: Path) -> None:
     # (plus the 10 s flush); at the configured 1000 B/s it does (test above).
     assert report.cards_sent == 0, report
     assert 0 < report.card_bytes < 2500
+
+
+def test_companion_heartbeat_is_not_a_second_vehicle() -> None:
+    """A GCS behind the autopilot sees the companion's heartbeat (the vehicle's system id,
+    component 191) and must not take it for a vehicle: pymavlink's (and so MAVProxy's)
+    vehicle test says no; the shared-link mission server sends no heartbeat of its own."""
+    import threading
+    import time
+    from typing import Any
+
+    from holescan.capture import Telemetry
+    from holescan.missions import HoleMissionServer, mavutil
+
+    port = free_port()
+    ap = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=1)
+    stop = threading.Event()
+    beats: list[Any] = []
+
+    def autopilot() -> None:  # a quadrotor running ArduPilot, listening
+        while not stop.is_set():
+            ap.mav.heartbeat_send(2, 3, 0, 0, 4)
+            msg = ap.recv_match(type="HEARTBEAT", blocking=True, timeout=0.2)
+            if msg is not None:
+                beats.append(msg)
+
+    thread = threading.Thread(target=autopilot, daemon=True)
+    thread.start()
+    with (
+        Telemetry(f"udpin:127.0.0.1:{port}", rates_hz={}, timesync_hz=0) as tel,
+        HoleMissionServer(None, 1, sender=tel.send_with),
+    ):
+        deadline = time.monotonic() + 10.0
+        while time.monotonic() < deadline and len(beats) < 4:
+            time.sleep(0.1)
+    stop.set()
+    thread.join(2.0)
+    ap.close()
+    assert len(beats) >= 2, beats
+    assert {(m.get_srcSystem(), m.get_srcComponent()) for m in beats} == {(1, 191)}
+    assert not any(ap.probably_vehicle_heartbeat(m) for m in beats)
