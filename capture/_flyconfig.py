@@ -89,8 +89,8 @@ class FlyConfig:
     with, None = a simulated autopilot on a free loopback port). baud : serial rate.
     log_dir : folder of the flight logs. gcs : pymavlink connection towards the ground
     station for the hole mission server (None: the server shares the ``mavlink`` link and
-    the autopilot routes to the ground station; no server without either). sysid : the vehicle's MAVLink
-    system id (the hole server speaks as its component 191).
+    the autopilot routes to the ground station; no server without either). sysid : the
+    vehicle's MAVLink system id (the hole server speaks as its component 191).
     duration_s, max_frames : stop after this long / this many frames (None: until stopped).
     usb_reset : reset the Xtion on USB after a sensor failure (``openni2`` only).
     openni_uri : OpenNI2 device URI (None: the first Xtion).
