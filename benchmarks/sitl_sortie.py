@@ -162,31 +162,31 @@ def _wait(cond: Any, timeout: float, what: str) -> float:
     return time.monotonic() - t0
 
 
-def _truth_at(
-    ctl: Controller, t_boot_ns: int, offset: float
-) -> tuple[float, float, float, float, float] | None:
-    """SITL's SIMSTATE (lat, lon, roll, pitch, yaw) at a boot time (arrival - offset; linear)."""
-    times = [t + offset for t, _ in ctl.truth]
+Truth = list[tuple[int, float, float, float, float, float]]
+"""SITL's own state: (arrival mono ns, lat, lon, roll, pitch, yaw) per SIMSTATE/SIM_STATE."""
+
+
+def _truth_rows(ctl: Controller) -> Truth:
+    rows = []
+    for t, m in ctl.truth:
+        if m.get_type() == "SIMSTATE":
+            lat, lon = m.lat * 1e-7, m.lng * 1e-7
+        else:
+            lat, lon = float(m.lat), float(m.lon)
+        rows.append((t, lat, lon, float(m.roll), float(m.pitch), float(m.yaw)))
+    return rows
+
+
+def _truth_at(truth: Truth, t_boot_ns: int, offset: float) -> tuple[float, ...] | None:
+    """SITL's state at a boot time (arrival time + offset, linear between samples)."""
+    times = [row[0] + offset for row in truth]
     i = bisect.bisect_left(times, t_boot_ns)
     if i == 0 or i == len(times) or times[i] - times[i - 1] > 200e6:
         return None
-    a, b = ctl.truth[i - 1][1], ctl.truth[i][1]
+    a, b = truth[i - 1], truth[i]
     f = (t_boot_ns - times[i - 1]) / (times[i] - times[i - 1])
-
-    def ll(m: Any) -> tuple[float, float]:
-        if m.get_type() == "SIMSTATE":
-            return m.lat * 1e-7, m.lng * 1e-7
-        return float(m.lat), float(m.lon)
-
-    (la, oa), (lb, ob) = ll(a), ll(b)
-    yaw = a.yaw + f * math.remainder(b.yaw - a.yaw, math.tau)
-    return (
-        la + f * (lb - la),
-        oa + f * (ob - oa),
-        a.roll + f * (b.roll - a.roll),
-        a.pitch + f * (b.pitch - a.pitch),
-        yaw,
-    )
+    yaw = a[5] + f * math.remainder(b[5] - a[5], math.tau)
+    return (*(a[k] + f * (b[k] - a[k]) for k in range(1, 5)), yaw)
 
 
 def _read_wpl(path: Path) -> list[tuple[float, float]]:
@@ -207,7 +207,18 @@ def main() -> int:
     ap.add_argument("--size", type=float, default=10.0, help="surveyed square, m (10)")
     ap.add_argument("--altitude", type=float, default=3.0, help="survey height, m (3)")
     ap.add_argument("--fps", type=float, default=10.0, help="simulated Xtion rate (10)")
+    ap.add_argument("--report-only", action="store_true", help="report a finished run in --out")
     args = ap.parse_args()
+    params = SortieParams(
+        world_seed=args.world_seed,
+        size_m=(args.size, args.size),
+        altitude_m=args.altitude,
+        fps=args.fps,
+    )
+    truth = true_holes(make_sortie_world(params), DEFAULT_ANCHOR)
+    if args.report_only:
+        report(args.out, truth)
+        return 0
     exe = args.arducopter.resolve()
     defaults = args.defaults or exe.parents[3] / "Tools/autotest/default_params/copter.parm"
     if not exe.is_file() or not defaults.is_file():
@@ -216,12 +227,6 @@ def main() -> int:
     shutil.rmtree(out, ignore_errors=True)
     (out / "sitl").mkdir(parents=True)
 
-    params = SortieParams(
-        world_seed=args.world_seed,
-        size_m=(args.size, args.size),
-        altitude_m=args.altitude,
-        fps=args.fps,
-    )
     world = make_sortie_world(params)
     anchor = DEFAULT_ANCHOR
     home_lat, home_lon, _ = anchor.to_geodetic(params.margin_m, params.margin_m, 0.0)
@@ -229,7 +234,6 @@ def main() -> int:
     # The companion places the world at the home it is first given (sim._reported): here.
     placed = anchor_at_home(home, params.margin_m)
     assert abs(placed.lat_deg - anchor.lat_deg) + abs(placed.lon_deg - anchor.lon_deg) < 1e-8
-    truth = true_holes(world, anchor)
     area = world_area(world, anchor, params.margin_m)
     ring = [[lon, lat] for lat, lon in area.outer] + [[area.outer[0][1], area.outer[0][0]]]
     (out / "area.geojson").write_text(json.dumps({"type": "Polygon", "coordinates": [ring]}))
@@ -376,8 +380,15 @@ def main() -> int:
         ).wait(60)
         comp.send_signal(signal.SIGINT)
         comp.wait(60)
-        offset = ctl.boot_minus_mono_ns()
         ctl.stop.set()
+        saved = {
+            "offset": ctl.boot_minus_mono_ns(),
+            "truth": _truth_rows(ctl),
+            "rtt_ms": [rt / 1e6 for rt, _ in ctl.offsets],
+            "t_survey": t_survey,
+            "unix_minus_mono": time.time_ns() - time.monotonic_ns(),
+        }
+        (out / "controller.json").write_text(json.dumps(saved))
     finally:
         for p in reversed(procs):
             if p.poll() is None:
@@ -386,15 +397,17 @@ def main() -> int:
                     p.wait(10)
                 except subprocess.TimeoutExpired:
                     p.kill()
-    report(out, ctl, offset, truth, dl, t_survey)
+    report(out, truth)
     return 0
 
 
-def report(
-    out: Path, ctl: Controller, offset: float, truth: Any, dl: Path, t_survey: float
-) -> None:
+def report(out: Path, truth: Any) -> None:
+    """Print the figures of a finished run in ``out`` (its logs, tlog, controller.json)."""
     from holescan.capture import LoggedFrame, LoggedHealth, LoggedHoles, read_flight_log
 
+    saved = json.loads((out / "controller.json").read_text())
+    offset, rows, t_survey = saved["offset"], saved["truth"], saved["t_survey"]
+    dl = out / "holes_at_gcs.txt"
     files = sorted((out / "logs").glob("flight-*_*.mcap"))
     records = list(read_flight_log(files))
     # What the GCS downloaded, against the truth (0.5 m, as format_sim_report counts).
@@ -421,8 +434,8 @@ def report(
     for r in records:
         if isinstance(r, LoggedHoles):
             for h in r.holes:
-                first.setdefault(h.id, h.t_first_boot_ns)
-    unix_minus_mono = time.time_ns() - time.monotonic_ns()
+                first.setdefault(int(h["id"]), int(h["t_first_boot_ns"]))
+    unix_minus_mono = saved["unix_minus_mono"]
     at_gcs: dict[int, float] = {}
     card_bytes = ap_bytes = 0
     t_lo = t_hi = None
@@ -449,7 +462,7 @@ def report(
         f"{RADIO_BYTES_PER_S:.0f} B/s, leaving {RADIO_BYTES_PER_S - ap_bytes / span:.0f} B/s"
     )
     # The companion's clock against SITL's (the controller's quickest round trips).
-    rtts = [rt / 1e6 for rt, _ in ctl.offsets]
+    rtts = saved["rtt_ms"]
     est = [
         float(r.values["clock_offset_ns"]) - offset
         for r in records
@@ -467,7 +480,7 @@ def report(
     for f in frames:
         if f.pose is None or f.t_boot_ns is None:
             continue
-        tr = _truth_at(ctl, f.t_boot_ns, offset)
+        tr = _truth_at(rows, f.t_boot_ns, offset)
         if tr is None:
             continue
         h_err.append(math.hypot(*local_en_m(f.pose.lat_deg, f.pose.lon_deg, tr[0], tr[1])))

@@ -15,13 +15,10 @@ hands the autopilot's messages to a :class:`~capture._mavingest.VehicleState`, w
   ``timesync_hz``, arrival times of stamped messages, SYSTEM_TIME for UTC) and notices
   reboots;
 
-and itself
+and itself counts (and logs) garbage bytes and packets that fail to parse (otherwise
+ignored) and hands every parsed message with its arrival time to ``on_message``.
 
-* counts (and logs) garbage bytes and packets that fail to parse; they are otherwise ignored;
-* hands every parsed message with its arrival time to ``on_message`` (e.g. a flight logger).
-
-The link speaks MAVLink 2 through :func:`missions.open_link` (TIMESYNC and MAVProxy's
-mission module need it); message classes and enums come from :data:`missions.mavlink`.
+MAVLink 2 through :func:`missions.open_link` (TIMESYNC and MAVProxy's wp module need it).
 """
 
 from __future__ import annotations
@@ -387,6 +384,10 @@ class Telemetry(RateRequests):
         return msgs
 
     def _send_heartbeat(self) -> None:
+        # None before the autopilot (and so our system id) is known: a GCS behind it would
+        # see a system 255 (ArduPilot SITL); except on a link that must speak first.
+        if self._target is None and not self.connection.startswith("udpout:"):
+            return
         with self._send_lock:
             self._link.mav.heartbeat_send(
                 mavlink.MAV_TYPE_ONBOARD_CONTROLLER,

@@ -108,3 +108,44 @@ def test_companion_heartbeat_is_not_a_second_vehicle() -> None:
     assert len(beats) >= 2, beats
     assert {(m.get_srcSystem(), m.get_srcComponent()) for m in beats} == {(1, 191)}
     assert not any(ap.probably_vehicle_heartbeat(m) for m in beats)
+
+
+def test_no_heartbeat_of_an_unknown_system_before_the_autopilot_is_heard() -> None:
+    """ArduPilot SITL showed MAVProxy a vehicle 255:191: the companion's heartbeats on its
+    TCP link before the autopilot's first heartbeat, when our system id is not known. The
+    autopilot here (a TCP server) waits 2 s before its first heartbeat."""
+    import socket
+    import threading
+    import time
+    from typing import Any
+
+    from holescan.capture import Telemetry
+    from holescan.missions import mavutil
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    ap = mavutil.mavlink_connection(f"tcpin:127.0.0.1:{port}", source_system=1)
+    seen: list[Any] = []
+    stop = threading.Event()
+
+    def autopilot() -> None:
+        t0 = time.monotonic()
+        while not stop.is_set():
+            if time.monotonic() - t0 > 2.0:
+                ap.mav.heartbeat_send(2, 3, 0, 0, 4)
+            msg = ap.recv_match(type="HEARTBEAT", blocking=True, timeout=0.2)
+            if msg is not None:
+                seen.append(msg)
+
+    thread = threading.Thread(target=autopilot, daemon=True)
+    thread.start()
+    with Telemetry(f"tcp:127.0.0.1:{port}", rates_hz={}, timesync_hz=0):
+        deadline = time.monotonic() + 10.0
+        while time.monotonic() < deadline and len(seen) < 2:
+            time.sleep(0.1)
+    stop.set()
+    thread.join(2.0)
+    ap.close()
+    assert len(seen) >= 2, seen
+    assert {(m.get_srcSystem(), m.get_srcComponent()) for m in seen} == {(1, 191)}
