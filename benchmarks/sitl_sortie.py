@@ -88,7 +88,7 @@ class Controller:
         self.lock = threading.Lock()
         self.truth: list[tuple[int, Any]] = []  # (arrival mono ns, SIMSTATE)
         self.gpi: list[tuple[int, Any]] = []
-        self.offsets: list[tuple[int, int]] = []  # (round trip ns, boot - mono ns)
+        self.offsets: list[tuple[int, int, int]] = []  # (mono ns, round trip ns, boot - mono)
         self.acks: dict[int, int] = {}
         self.reached: set[int] = set()
         self.armed = False
@@ -97,7 +97,7 @@ class Controller:
         self.stop = threading.Event()
         self.thread = threading.Thread(target=self._rx, daemon=True)
         self.thread.start()
-        for msg_id, hz in ((164, 20), (108, 20), (33, 10), (193, 2), (42, 2)):
+        for msg_id, hz in ((164, 20), (33, 10), (193, 2), (42, 2)):
             self.command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / hz)
 
     def _rx(self) -> None:
@@ -115,13 +115,13 @@ class Controller:
             if msg.get_srcSystem() != 1 or msg.get_srcComponent() != 1:
                 continue
             kind = msg.get_type()
-            if kind in ("SIMSTATE", "SIM_STATE"):
+            if kind == "SIMSTATE":
                 self.truth.append((t, msg))
             elif kind == "GLOBAL_POSITION_INT":
                 self.gpi.append((t, msg))
                 self.rel_alt_m = msg.relative_alt / 1000
             elif kind == "TIMESYNC" and msg.tc1 != 0:
-                self.offsets.append((t - msg.ts1, msg.tc1 - (msg.ts1 + t) // 2))
+                self.offsets.append((t, t - msg.ts1, msg.tc1 - (msg.ts1 + t) // 2))
             elif kind == "COMMAND_ACK":
                 self.acks[msg.command] = msg.result
             elif kind == "MISSION_ITEM_REACHED":
@@ -146,12 +146,6 @@ class Controller:
     def mode(self, custom: int) -> int | None:
         return self.command(mavlink.MAV_CMD_DO_SET_MODE, 1, custom)
 
-    def boot_minus_mono_ns(self) -> float:
-        """SITL's boot clock minus the host's monotonic clock, from the quickest TIMESYNC
-        round trips of this link (the truth the companion's estimate is judged by)."""
-        best = sorted(self.offsets)[: max(3, len(self.offsets) // 10)]
-        return statistics.median(o for _, o in best)
-
 
 def _wait(cond: Any, timeout: float, what: str) -> float:
     t0 = time.monotonic()
@@ -167,19 +161,30 @@ Truth = list[tuple[int, float, float, float, float, float]]
 
 
 def _truth_rows(ctl: Controller) -> Truth:
-    rows = []
-    for t, m in ctl.truth:
-        if m.get_type() == "SIMSTATE":
-            lat, lon = m.lat * 1e-7, m.lng * 1e-7
-        else:
-            lat, lon = float(m.lat), float(m.lon)
-        rows.append((t, lat, lon, float(m.roll), float(m.pitch), float(m.yaw)))
-    return rows
+    return [(t, m.lat * 1e-7, m.lng * 1e-7, m.roll, m.pitch, m.yaw) for t, m in ctl.truth]
 
 
-def _truth_at(truth: Truth, t_boot_ns: int, offset: float) -> tuple[float, ...] | None:
-    """SITL's state at a boot time (arrival time + offset, linear between samples)."""
-    times = [row[0] + offset for row in truth]
+class SitlClock:
+    """SITL's boot clock minus the host's monotonic one near a time, from the controller's
+    quickest TIMESYNC round trips within 5 s (SITL's clock does not keep to the host's
+    exactly when the host is loaded: a local estimate, not one offset for the run)."""
+
+    def __init__(self, samples: list[list[int]]) -> None:
+        self.samples = sorted((int(t), int(rt), int(o)) for t, rt, o in samples)
+        self.times = [s[0] for s in self.samples]
+
+    def offset(self, t_mono_ns: float) -> float:
+        lo = bisect.bisect_left(self.times, t_mono_ns - 5e9)
+        hi = bisect.bisect_right(self.times, t_mono_ns + 5e9)
+        near = sorted(self.samples[lo:hi], key=lambda s: s[1])[:3] or [
+            min(self.samples, key=lambda s: abs(s[0] - t_mono_ns))
+        ]
+        return float(statistics.median(s[2] for s in near))
+
+
+def _truth_at(truth: Truth, times: list[float], t_boot_ns: int) -> tuple[float, ...] | None:
+    """SITL's state at a boot time (``times``: the samples' arrivals on SITL's clock; linear
+    between samples)."""
     i = bisect.bisect_left(times, t_boot_ns)
     if i == 0 or i == len(times) or times[i] - times[i - 1] > 200e6:
         return None
@@ -382,9 +387,8 @@ def main() -> int:
         comp.wait(60)
         ctl.stop.set()
         saved = {
-            "offset": ctl.boot_minus_mono_ns(),
+            "timesync": ctl.offsets,
             "truth": _truth_rows(ctl),
-            "rtt_ms": [rt / 1e6 for rt, _ in ctl.offsets],
             "t_survey": t_survey,
             "unix_minus_mono": time.time_ns() - time.monotonic_ns(),
         }
@@ -406,7 +410,8 @@ def report(out: Path, truth: Any) -> None:
     from holescan.capture import LoggedFrame, LoggedHealth, LoggedHoles, read_flight_log
 
     saved = json.loads((out / "controller.json").read_text())
-    offset, rows, t_survey = saved["offset"], saved["truth"], saved["t_survey"]
+    rows, t_survey = saved["truth"], saved["t_survey"]
+    clock = SitlClock(saved["timesync"])
     dl = out / "holes_at_gcs.txt"
     files = sorted((out / "logs").glob("flight-*_*.mcap"))
     records = list(read_flight_log(files))
@@ -450,7 +455,12 @@ def report(out: Path, truth: Any) -> None:
             card_bytes += len(m.get_msgbuf())
         elif m.get_srcComponent() == 1:
             ap_bytes += len(m.get_msgbuf())
-    lat = [at_gcs[i] - (first[i] - offset + unix_minus_mono) / 1e9 for i in at_gcs if i in first]
+    g = clock.samples[0][2]  # boot -> mono: a first guess, then the local offset there
+    lat = [
+        at_gcs[i] - (first[i] - clock.offset(first[i] - g) + unix_minus_mono) / 1e9
+        for i in at_gcs
+        if i in first
+    ]
     print(
         f"first sighting -> STATUSTEXT at the GCS: median {_median(lat):.2f} s, max "
         f"{max(lat, default=math.nan):.2f} s over {len(lat)} holes"
@@ -462,9 +472,9 @@ def report(out: Path, truth: Any) -> None:
         f"{RADIO_BYTES_PER_S:.0f} B/s, leaving {RADIO_BYTES_PER_S - ap_bytes / span:.0f} B/s"
     )
     # The companion's clock against SITL's (the controller's quickest round trips).
-    rtts = saved["rtt_ms"]
+    rtts = [rt / 1e6 for _, rt, _ in clock.samples]
     est = [
-        float(r.values["clock_offset_ns"]) - offset
+        float(r.values["clock_offset_ns"]) - clock.offset(r.t_unix_ns - unix_minus_mono)
         for r in records
         if isinstance(r, LoggedHealth) and "clock_offset_ns" in r.values
     ]
@@ -476,11 +486,12 @@ def report(out: Path, truth: Any) -> None:
     )
     # The pose at frame time against SITL's own truth.
     h_err, att_err = [], []
+    truth_boot = [row[0] + clock.offset(row[0]) for row in rows]
     frames = [r for r in records if isinstance(r, LoggedFrame)]
     for f in frames:
         if f.pose is None or f.t_boot_ns is None:
             continue
-        tr = _truth_at(rows, f.t_boot_ns, offset)
+        tr = _truth_at(rows, truth_boot, f.t_boot_ns)
         if tr is None:
             continue
         h_err.append(math.hypot(*local_en_m(f.pose.lat_deg, f.pose.lon_deg, tr[0], tr[1])))
