@@ -87,6 +87,7 @@ def fly(
                     clearance_m=cfg.hole_clearance_m,
                     card_bytes_per_s=cfg.hole_card_bytes_per_s,
                     sender=None if cfg.gcs else via_autopilot,
+                    signing=cfg.signing if cfg.gcs else None,  # its own link only
                 )
             )
         shared = server if server is not None and not cfg.gcs else None

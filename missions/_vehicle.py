@@ -33,6 +33,7 @@ from holescan.missions._protocol import (
     item_message,
     waypoint_from_message,
 )
+from holescan.missions._signing import SigningKey
 from holescan.missions._waypoint import Waypoint
 
 __all__ = ["MissionReceiver", "MissionServer"]
@@ -233,6 +234,8 @@ class MissionServer:
         the autopilot, which routes to the GCS): ``sender(fn)`` calls ``fn(mav)`` with the
         owner's MAVLink sender under its lock; the owner hands every message it receives
         to :meth:`feed` and sends the heartbeats (none are sent here).
+    signing : MAVLink 2 signing key (None: unsigned); with one, unsigned or badly signed
+        requests are dropped unanswered (:class:`missions.SigningKey`).
 
     Subclasses hook in with :meth:`on_message` (every other message) and :meth:`tick`
     (each turn of the loop, about every ``tick_s``).
@@ -250,6 +253,7 @@ class MissionServer:
         mav_type: int = mavlink.MAV_TYPE_QUADROTOR,
         autopilot: int = mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
         sender: Callable[[Callable[[Any], None]], None] | None = None,
+        signing: SigningKey | None = None,
     ) -> None:
         if (link is None) == (sender is None):
             raise InputError("a mission server needs a link or a sender, not both")
@@ -261,6 +265,7 @@ class MissionServer:
         self.heartbeat_period_s = heartbeat_period_s
         self.mav_type = mav_type
         self.autopilot = autopilot
+        self.signing = signing
         self.sent: list[str] = []
         self.dropped: list[str] = []
         self.received: list[str] = []
@@ -287,6 +292,7 @@ class MissionServer:
                 self.link,
                 source_system=self.receiver.system_id,
                 source_component=self.receiver.component_id,
+                signing=self.signing,
             )
         self._thread = threading.Thread(target=self._run, name="mission-server", daemon=True)
         self._thread.start()

@@ -36,6 +36,7 @@ from holescan.ground.station.state import StationState, TrackPoint
 from holescan.missions import (
     CardAssembler,
     MavConnection,
+    SigningKey,
     mavlink,
     open_link,
     read_card,
@@ -71,6 +72,9 @@ class VehicleLink:
         ``MAV_COMP_ID_MISSIONPLANNER`` by default).
     clock : monotonic seconds, for the link's timeouts (the track's times are the state's
         Unix clock).
+    signing : MAVLink 2 signing key shared with the vehicle (None: unsigned). With one,
+        what this link sends is signed and every unsigned or badly signed packet is
+        dropped: a forger's HOLE STATUSTEXT, cards and mission items are never seen.
     """
 
     def __init__(
@@ -85,8 +89,10 @@ class VehicleLink:
         silence_s: float = 3.0,
         mission_period_s: float = 30.0,
         clock: Callable[[], float] = time.monotonic,
+        signing: SigningKey | None = None,
     ) -> None:
         self.connection = connection
+        self.signing = signing
         self.state = state
         self.sysid = sysid
         self.source_system = source_system
@@ -133,6 +139,7 @@ class VehicleLink:
                 source_system=self.source_system,
                 source_component=self.source_component,
                 baud=self.baud,
+                signing=self.signing,
             )
         except Exception as err:  # pymavlink: OSError, ValueError, SerialException
             if not self._open_failed:  # one line, not one every retry
@@ -144,7 +151,11 @@ class VehicleLink:
             self._open_failed = True
             return False
         self._open_failed = False
-        _log.info("listening for the vehicle on %s", self.connection)
+        _log.info(
+            "listening for the vehicle on %s%s",
+            self.connection,
+            "" if self.signing is None else f", MAVLink signed ({self.signing})",
+        )
         return True
 
     def _run(self) -> None:
