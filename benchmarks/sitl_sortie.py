@@ -205,7 +205,7 @@ def _read_wpl(path: Path) -> list[tuple[float, float]]:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--arducopter", type=Path, required=True, help="a built SITL arducopter")
+    ap.add_argument("--arducopter", type=Path, help="a built SITL arducopter (required)")
     ap.add_argument("--defaults", type=Path, help="copter.parm (default: from its source tree)")
     ap.add_argument("--out", type=Path, default=Path("/tmp/sitl_sortie"))
     ap.add_argument("--world-seed", type=int, default=7)
@@ -224,6 +224,8 @@ def main() -> int:
     if args.report_only:
         report(args.out, truth)
         return 0
+    if args.arducopter is None:
+        ap.error("--arducopter PATH is required (a built SITL arducopter)")
     exe = args.arducopter.resolve()
     defaults = args.defaults or exe.parents[3] / "Tools/autotest/default_params/copter.parm"
     if not exe.is_file() or not defaults.is_file():
