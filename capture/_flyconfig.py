@@ -86,14 +86,15 @@ class FlyConfig:
     """Everything ``holescan fly`` needs.
 
     sensor : where frames come from. mavlink : the autopilot link (None: fly without
-    telemetry, every frame unposed; for ``sim``: a ``udpin:`` address the simulated
-    autopilot talks to, None = a free loopback port). baud : serial rate.
+    telemetry, every frame unposed; for ``sim``: the autopilot the simulated Xtion flies
+    with, None = a simulated autopilot on a free loopback port). baud : serial rate.
     log_dir : folder of the flight logs. gcs : pymavlink connection towards the ground
-    station for the hole mission server (None: no server). sysid : the vehicle's MAVLink
-    system id (the hole server speaks as its component 191). signing : MAVLink 2 signing
-    key of the hole server's link to the ground station (None: unsigned; fly.toml
-    ``mavlink_key`` = 64 hex digits or ``mavlink_key_file`` = a file of the key or a
-    passphrase, :class:`missions.SigningKey`; never in ``record`` or a log).
+    station for the hole mission server (None: the server shares the ``mavlink`` link and
+    the autopilot routes to the ground station; no server without either). sysid : the
+    vehicle's MAVLink system id (the hole server speaks as its component 191). signing :
+    MAVLink 2 signing key of the hole server's link to the ground station (None: unsigned;
+    fly.toml ``mavlink_key`` = 64 hex digits or ``mavlink_key_file`` = a file of the key or
+    a passphrase, :class:`missions.SigningKey`; never in ``record`` or a log).
     duration_s, max_frames : stop after this long / this many frames (None: until stopped).
     usb_reset : reset the Xtion on USB after a sensor failure (``openni2`` only).
     openni_uri : OpenNI2 device URI (None: the first Xtion).

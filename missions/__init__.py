@@ -48,6 +48,7 @@ from holescan.missions._holeserver import (
     MissionServerError,
     hole_statustext,
     hole_waypoints,
+    radio_budget,
 )
 from holescan.missions._link import MavConnection, mavlink, mavutil, open_link, parser
 from holescan.missions._protocol import (
@@ -157,6 +158,7 @@ __all__ = [
     "open_link",
     "parser",
     "plan_survey",
+    "radio_budget",
     "rank_holes",
     "read_area",
     "read_card",

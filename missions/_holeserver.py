@@ -44,7 +44,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from typing import Any
 
 from holescan.errors import InputError
@@ -62,6 +62,7 @@ __all__ = [
     "MissionServerError",
     "hole_statustext",
     "hole_waypoints",
+    "radio_budget",
 ]
 
 _log = logging.getLogger(__name__)
@@ -133,13 +134,39 @@ def hole_statustext(hole: Hole, tier: str = "announced") -> str:
     raise InputError(f"hole id {hole.id} too long for a STATUSTEXT")
 
 
+_MIN_CARD_BYTES_PER_S = 50.0
+
+
+def radio_budget(current: float, ceiling: float, txbuf_pct: int) -> float:
+    """The hole cards' byte budget after a RADIO_STATUS, B/s.
+
+    ``txbuf_pct`` is how much of the radio's transmit buffer is free (SiK radios report it;
+    ArduPilot slows its own streams on it the same way): under 20 % the link is
+    overrun, the budget halves; under 50 % it shrinks by a fifth; over 90 % it grows by a
+    tenth, up to ``ceiling`` (the configured budget); between, it stays. Never under
+    50 B/s (a card still gets through, slowly).
+    """
+    if txbuf_pct < 20:
+        new = current * 0.5
+    elif txbuf_pct < 50:
+        new = current * 0.8
+    elif txbuf_pct > 90:
+        new = current * 1.1
+    else:
+        new = current
+    return max(min(new, ceiling), min(_MIN_CARD_BYTES_PER_S, ceiling))
+
+
 class HoleMissionServer(MissionServer):
     """Live MAVLink mission server for found holes (a background thread).
 
     Parameters
     ----------
     connection_string : pymavlink connection, e.g. ``udpout:127.0.0.1:14550`` (towards a
-        GCS or router), ``udpin:0.0.0.0:14560``, ``tcp:HOST:PORT``, a serial device.
+        GCS or router), ``udpin:0.0.0.0:14560``, ``tcp:HOST:PORT``, a serial device; None
+        with ``sender``: the companion's one link to the autopilot, which routes the
+        announcements, the mission and the cards to the GCS on its other port (see
+        :class:`missions.MissionServer`; the link's owner feeds it with :meth:`feed`).
     sysid : the vehicle's system id (GCS modules only listen to their target system).
     compid : our component id (191 = onboard computer).
     home : (lat_deg, lon_deg, alt_m MSL) of the vehicle's home, if known (see
@@ -147,7 +174,9 @@ class HoleMissionServer(MissionServer):
     rel_alt_m, clearance_m : waypoint altitude, see :func:`hole_waypoints`.
     heartbeat_period_s : HEARTBEAT interval (MAV_TYPE_ONBOARD_CONTROLLER).
     card_bytes_per_s : byte budget of the hole cards (best view + facts, see
-        :mod:`missions._holecards`) sent by :meth:`send_card`.
+        :mod:`missions._holecards`) sent by :meth:`send_card`: the most they may take. A
+        radio on the way that reports RADIO_STATUS (a SiK radio, seen through the
+        autopilot's routing) adapts it to what the link carries (:func:`radio_budget`).
 
     Use as a context manager; the link opens on enter and closes on exit. Errors of the
     background thread are raised as :class:`MissionServerError` by :meth:`close`.
@@ -157,7 +186,7 @@ class HoleMissionServer(MissionServer):
 
     def __init__(
         self,
-        connection_string: str,
+        connection_string: str | None,
         sysid: int,
         compid: int = MAV_COMP_ID_ONBOARD_COMPUTER,
         *,
@@ -166,6 +195,7 @@ class HoleMissionServer(MissionServer):
         clearance_m: float = 5.0,
         heartbeat_period_s: float = 1.0,
         card_bytes_per_s: float = 1000.0,
+        sender: Callable[[Callable[[Any], None]], None] | None = None,
         signing: SigningKey | None = None,
     ) -> None:
         if not (1 <= sysid <= 255 and 1 <= compid <= 255):
@@ -179,6 +209,7 @@ class HoleMissionServer(MissionServer):
             heartbeat_period_s=heartbeat_period_s,
             mav_type=mavlink.MAV_TYPE_ONBOARD_CONTROLLER,
             autopilot=mavlink.MAV_AUTOPILOT_INVALID,
+            sender=sender,
             signing=signing,
         )
         self.connection_string = connection_string
@@ -190,6 +221,8 @@ class HoleMissionServer(MissionServer):
         self._holes: tuple[Hole, ...] = ()
         self.cards = CardSender(bytes_per_s=card_bytes_per_s)
         self._card_revs: dict[int, int] = {}
+        self.card_ceiling_bytes_per_s = card_bytes_per_s
+        self.radio_status_seen = 0
         self._rebuild()
 
     # -- lifecycle -----------------------------------------------------------------------
@@ -208,7 +241,7 @@ class HoleMissionServer(MissionServer):
             raise MissionServerError(str(err)) from err
         _log.info(
             "hole mission server on %s as %d/%d%s",
-            self.connection_string,
+            self.connection_string or "the autopilot link",
             self.sysid,
             self.compid,
             "" if self.signing is None else f", MAVLink signed ({self.signing})",
@@ -291,6 +324,20 @@ class HoleMissionServer(MissionServer):
 
     # -- hooks of the server's thread ----------------------------------------------------
     def on_message(self, msg: Any) -> None:
+        if msg.get_type() == "RADIO_STATUS":
+            with self._lock:
+                self.radio_status_seen += 1
+                old = self.cards.bytes_per_s
+                self.cards.bytes_per_s = radio_budget(
+                    old, self.card_ceiling_bytes_per_s, int(msg.txbuf)
+                )
+            if self.cards.bytes_per_s != old:
+                _log.debug(
+                    "radio tx buffer %d %% free: card budget %.0f B/s",
+                    msg.txbuf,
+                    self.cards.bytes_per_s,
+                )
+            return
         if msg.get_type() != "DATA_TRANSMISSION_HANDSHAKE":  # no target fields: any peer
             return
         if msg.size == 0 and msg.packets == 0:  # a ground station asks for every card
