@@ -43,11 +43,10 @@ from holescan.capture._outpath import (
 )
 from holescan.capture._posebuffer import (
     AttitudeSample,
-    GpsFix,
     PoseBuffer,
-    PositionSample,
     quat_from_euler,
 )
+from holescan.capture._posevalidity import GpsFix, NavStatus, PoseValidity, PositionSample
 from holescan.capture._sensorsetup import PacedReplay, SensorSetup, open_sensor
 from holescan.capture._telemetryreplay import TelemetryReplay
 from holescan.capture._usb import UsbDeviceInfo, find_xtion, reset_xtion
@@ -58,6 +57,7 @@ from holescan.capture.errors import (
     ClockUnavailable,
     FlightLogError,
     OutputPathError,
+    PoseInvalid,
     PoseUnavailable,
     SensorError,
     TelemetryError,
@@ -173,6 +173,7 @@ __all__ = [
     "MavlinkStream",
     "McapFile",
     "McapSource",
+    "NavStatus",
     "OniInfo",
     "OniSource",
     "OniStreamInfo",
@@ -181,7 +182,9 @@ __all__ = [
     "OutputPathError",
     "PacedReplay",
     "PoseBuffer",
+    "PoseInvalid",
     "PoseUnavailable",
+    "PoseValidity",
     "PositionSample",
     "RecoveryReport",
     "ScanState",

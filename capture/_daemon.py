@@ -15,8 +15,11 @@ Threads and processes of one flight:
 
 A sensor that fails (raises, or delivers nothing for ``frame_timeout_s``) is closed, reset
 on USB when a reset function is given, and reopened with back-off; telemetry and logging
-go on meanwhile. Frames that cannot be posed (MAVLink silent, clock not synchronised) are
-still logged, marked unposed, and counted.
+go on meanwhile. Frames that cannot be posed (MAVLink silent, clock not synchronised, or a
+position the autopilot does not have: no 3-D fix, EKF without a horizontal position,
+lat = lon = 0, a jump) are still logged, marked unposed, detected and counted; their
+detections are never placed on the Earth, so nothing is announced from them (a pose not
+there *yet* is waited for, ``pose_wait_s``; one the autopilot did not have stays unplaced).
 """
 
 from __future__ import annotations
@@ -44,21 +47,24 @@ from holescan.capture._worker import DetectionWorker, WorkerResult
 from holescan.capture.errors import (
     ClockUnavailable,
     FlightLogError,
+    PoseInvalid,
     PoseUnavailable,
     SensorError,
     TelemetryTimeoutError,
 )
 from holescan.capture.flightlog.writer import FlightLogWriter
 from holescan.detect import CameraIntrinsics
-from holescan.geotag import Hole, VehiclePose, local_en_m
+from holescan.geotag import Hole, Tier, VehiclePose, local_en_m
 
 log = logging.getLogger(__name__)
 
 SourceFactory = Callable[[], FrameSource]
-HoleListener = Callable[[list[Hole], list[Hole], Mapping[int, HoleView]], None]
-"""``on_holes(served, news, views)``: every hole that passes the announce gate (the
-waypoints), those new or changed enough to announce now, and the best view of each hole
-in ``news`` whose best view is known (hole id -> :class:`HoleView`)."""
+HoleListener = Callable[[list[Hole], list[Hole], Mapping[int, HoleView], Mapping[int, Tier]], None]
+"""``on_holes(served, news, views, tiers)``: every announced hole (the waypoints), the
+holes new or changed enough to tell the ground now (announced and for review), the best
+view of each hole in ``news`` whose best view is known (hole id -> :class:`HoleView`), and
+the tier of each hole in ``news`` (``announced`` or ``review``,
+:meth:`geotag.AnnounceGate.tier`)."""
 
 
 class Flight:
@@ -74,6 +80,7 @@ class Flight:
         telemetry_factory: Callable[..., Telemetry] = Telemetry,
         usb_reset: Callable[[], None] | None = None,
         on_holes: HoleListener | None = None,
+        before_close: Callable[[], None] | None = None,
     ) -> None:
         self.config = config
         self.camera = camera
@@ -82,6 +89,7 @@ class Flight:
         self._telemetry_factory = telemetry_factory
         self._usb_reset = usb_reset
         self._on_holes = on_holes
+        self._before_close = before_close  # e.g. the last pictures out on the shared link
         self.counters = FlightCounters()
         self.hole_pipeline = HolePipeline(camera, config.mount, errors=config.errors)
         self.tracker = self.hole_pipeline.tracker
@@ -90,11 +98,13 @@ class Flight:
         self._telemetry: Telemetry | None = None
         self._worker: DetectionWorker | None = None
         self._announced: dict[int, tuple[float, float, float]] = {}
+        self._reviewed: dict[int, tuple[float, float, float]] = {}
         self._gate = config.gate
         self._views = BestViews()
         self._lock = threading.Lock()
         self._unix_minus_mono = time.time_ns() - time.monotonic_ns()
         self._finished = False  # ended by a limit or the source's end, not by a stop
+        self.invalid = ""  # why the last frame refused as PoseInvalid was
 
     # -- clocks ---------------------------------------------------------------------------
 
@@ -108,12 +118,25 @@ class Flight:
                 pass
         return t_mono_ns + self._unix_minus_mono
 
-    def pose(self, t_mono_ns: int, wait_s: float = 0.0) -> VehiclePose | None:
+    def pose(
+        self, t_mono_ns: int, wait_s: float = 0.0, invalid: list[str] | None = None
+    ) -> VehiclePose | None:
+        """The vehicle pose at a frame time, or None: no telemetry, not synchronised, or a
+        position the autopilot does not have (:class:`PoseInvalid`: no fix, EKF without a
+        position, 0/0, a jump; its reason is appended to ``invalid`` and kept in
+        :attr:`invalid`)."""
         tel = self._telemetry
         if tel is None:
             return None
         try:
             return tel.pose_at_mono(t_mono_ns, wait_s=wait_s)
+        except PoseInvalid as err:
+            if str(err) != self.invalid:
+                log.info("frames not posed: %s", err)
+            self.invalid = str(err)
+            if invalid is not None:
+                invalid.append(str(err))
+            return None
         except PoseUnavailable as err:
             log.debug("frame at mono %d not posed: %s", t_mono_ns, err)
             return None
@@ -155,13 +178,15 @@ class Flight:
             return
         c.detections += len(r.detections)
         self._writer.write_detections(r.frame_index, r.detections, self.unix_ns(r.t_mono_ns))
+        invalid: list[str] = []
         step = self.hole_pipeline.add(
             r.frame_index,
             r.detections,
-            lambda: self.pose(r.t_mono_ns, wait_s=self.config.pose_wait_s),
+            lambda: self.pose(r.t_mono_ns, wait_s=self.config.pose_wait_s, invalid=invalid),
         )
-        if step.refused:
+        if step.refused:  # logged and detected, never placed: nothing announced from it
             c.pose_refusals += 1
+            c.pose_invalid += bool(invalid)
             return
         changed = step.changed
         if not changed:
@@ -171,20 +196,36 @@ class Flight:
         self._views.update(r.frame_index, r.detections, changed)
         served = self._gate.select(holes, announced=self._announced)
         served_ids = {h.id for h in served}
-        news = [h for h in changed if h.id in served_ids and self._worth_announcing(h)]
+        review_ids = {h.id for h in self._gate.review(holes, announced=self._announced)}
+        tiers: dict[int, Tier] = {}
+        news = []
+        for h in changed:
+            tier: Tier = (
+                "announced"
+                if h.id in served_ids
+                else "review"
+                if h.id in review_ids
+                else "candidate"
+            )
+            if tier != "candidate" and self._worth_telling(h, tier):
+                tiers[h.id] = tier
+                news.append(h)
         for h in news:
-            self._announced[h.id] = (h.lat_deg, h.lon_deg, h.score)
-            c.announcements += 1
+            if tiers[h.id] == "announced":
+                self._announced[h.id] = (h.lat_deg, h.lon_deg, h.score)
+                c.announcements += 1
+            else:
+                self._reviewed[h.id] = (h.lat_deg, h.lon_deg, h.score)
+                c.reviews += 1
         if self._on_holes is not None and news:
             views = {h.id: v for h in news if (v := self._views.get(h.id)) is not None}
-            self._on_holes(served, news, views)
+            self._on_holes(served, news, views, tiers)
 
-    def _worth_announcing(self, h: Hole) -> bool:
-        """Passes the announce gate, and is new to the ground, moved more than 0.5 m or
-        its score rose by 0.05 since it was last announced."""
-        if not self._gate.passes(h):
-            return False
-        last = self._announced.get(h.id)
+    def _worth_telling(self, h: Hole, tier: Tier) -> bool:
+        """New to the ground in this tier, moved more than 0.5 m or its score rose by 0.05
+        since the ground was last told (a hole for review that becomes announced is told
+        again)."""
+        last = (self._announced if tier == "announced" else self._reviewed).get(h.id)
         if last is None:
             return True
         east, north = local_en_m(h.lat_deg, h.lon_deg, last[0], last[1])
@@ -206,6 +247,8 @@ class Flight:
             "detect_ms_mean": c.detect_ms_total / max(c.frames_detected, 1),
             "frames_unposed": c.frames_unposed,
             "pose_refusals": c.pose_refusals,
+            "pose_invalid": c.pose_invalid,
+            "pose_invalid_why": self.invalid,
             "sensor_failures": c.sensor_failures,
             "holes": len(self.tracker.holes()),
         }
@@ -423,6 +466,11 @@ class Flight:
                 deadline.cancel()
             done.set()
             self.stop.set()  # also ends a telemetry retry still waiting for the autopilot
+            if self._before_close is not None:
+                try:
+                    self._before_close()
+                except Exception:  # the flight's end must not fail on it
+                    log.exception("before-close hook failed")
             if self._telemetry is not None:
                 self._telemetry.close()
             try:

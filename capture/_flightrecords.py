@@ -34,8 +34,10 @@ class FlightConfig:
     retry_backoff_s : waits between sensor reopen attempts (the last one repeats).
     announce_min_p_hole, announce_min_sightings, announce_min_span_s : the announce gate
         (:class:`geotag.AnnounceGate`): a hole is announced, served as a waypoint and its
-        view sent only when its ``p_hole``, sightings and time span reach these. Weaker holes
-        stay candidates (logged, never a waypoint).
+        view sent only when its ``p_hole``, sightings and time span reach these.
+    review_min_p_hole : a hole not announced whose ``p_hole`` reaches this is sent to the
+        ground for review (its card, not a waypoint). Weaker holes stay candidates
+        (logged, never sent).
     pose_wait_s : how long the results thread waits for telemetry after a frame's time.
     startup_sync_s : at start, wait up to this long for the clock sync and a first pose
         (the sensor opens only then; a silent autopilot just delays the start).
@@ -53,6 +55,7 @@ class FlightConfig:
     announce_min_p_hole: float = AnnounceGate.min_p_hole
     announce_min_sightings: int = AnnounceGate.min_sightings
     announce_min_span_s: float = AnnounceGate.min_span_s
+    review_min_p_hole: float = AnnounceGate.review_min_p_hole
     health_period_s: float = 1.0
     pose_wait_s: float = 0.15
     max_frames: int | None = None
@@ -69,7 +72,10 @@ class FlightConfig:
     def gate(self) -> AnnounceGate:
         """The announce gate these settings make."""
         return AnnounceGate(
-            self.announce_min_p_hole, self.announce_min_sightings, self.announce_min_span_s
+            self.announce_min_p_hole,
+            self.announce_min_sightings,
+            self.announce_min_span_s,
+            self.review_min_p_hole,
         )
 
 
@@ -83,9 +89,11 @@ class FlightCounters:
     detect_ms_total: float = 0.0
     detect_errors: int = 0
     pose_refusals: int = 0
+    pose_invalid: int = 0
     sensor_failures: int = 0
     sensor_reopens: int = 0
     announcements: int = 0
+    reviews: int = 0
 
 
 @dataclass(frozen=True)

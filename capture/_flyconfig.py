@@ -86,14 +86,15 @@ class FlyConfig:
     """Everything ``holescan fly`` needs.
 
     sensor : where frames come from. mavlink : the autopilot link (None: fly without
-    telemetry, every frame unposed; for ``sim``: a ``udpin:`` address the simulated
-    autopilot talks to, None = a free loopback port). baud : serial rate.
+    telemetry, every frame unposed; for ``sim``: the autopilot the simulated Xtion flies
+    with, None = a simulated autopilot on a free loopback port). baud : serial rate.
     log_dir : folder of the flight logs. gcs : pymavlink connection towards the ground
-    station for the hole mission server (None: no server). sysid : the vehicle's MAVLink
-    system id (the hole server speaks as its component 191). signing : MAVLink 2 signing
-    key of the hole server's link to the ground station (None: unsigned; fly.toml
-    ``mavlink_key`` = 64 hex digits or ``mavlink_key_file`` = a file of the key or a
-    passphrase, :class:`missions.SigningKey`; never in ``record`` or a log).
+    station for the hole mission server (None: the server shares the ``mavlink`` link and
+    the autopilot routes to the ground station; no server without either). sysid : the
+    vehicle's MAVLink system id (the hole server speaks as its component 191). signing :
+    MAVLink 2 signing key of the hole server's link to the ground station (None: unsigned;
+    fly.toml ``mavlink_key`` = 64 hex digits or ``mavlink_key_file`` = a file of the key or
+    a passphrase, :class:`missions.SigningKey`; never in ``record`` or a log).
     duration_s, max_frames : stop after this long / this many frames (None: until stopped).
     usb_reset : reset the Xtion on USB after a sensor failure (``openni2`` only).
     openni_uri : OpenNI2 device URI (None: the first Xtion).
@@ -219,6 +220,7 @@ _TABLES: dict[str, dict[str, tuple[tuple[type, ...], Any]]] = {
         "announce_min_p_hole": (_NUM, AnnounceGate.min_p_hole),
         "announce_min_sightings": ((int,), AnnounceGate.min_sightings),
         "announce_min_span_s": (_NUM, AnnounceGate.min_span_s),
+        "review_min_p_hole": (_NUM, AnnounceGate.review_min_p_hole),
         "card_bytes_per_s": _from(FlyConfig, _NUM, "hole_card_bytes_per_s"),
         "rel_alt_m": _from(FlyConfig, _NUM, "hole_rel_alt_m"),
         "clearance_m": _from(FlyConfig, _NUM, "hole_clearance_m"),
@@ -358,6 +360,7 @@ def parse_fly_config(
             float(holes["announce_min_p_hole"]),
             holes["announce_min_sightings"],
             float(holes["announce_min_span_s"]),
+            float(holes["review_min_p_hole"]),
         )
     except InputError as err:
         raise InputError(f"{where}: [holes] {err}") from err
@@ -375,6 +378,7 @@ def parse_fly_config(
         announce_min_p_hole=float(holes["announce_min_p_hole"]),
         announce_min_sightings=holes["announce_min_sightings"],
         announce_min_span_s=float(holes["announce_min_span_s"]),
+        review_min_p_hole=float(holes["review_min_p_hole"]),
         health_period_s=float(cap["health_period_s"]),
         pose_wait_s=float(cap["pose_wait_s"]),
         startup_sync_s=float(cap["startup_sync_s"]),

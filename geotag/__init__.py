@@ -8,40 +8,57 @@ from holescan.geotag._camera import (
     rotation_ned_from_optical,
 )
 from holescan.geotag._campose import R_ENU_NED, LocalCameraPose, camera_pose_local
+from holescan.geotag._confidence import (
+    DEFAULT_CONFIDENCE,
+    ConfidenceModel,
+    HoleEvidence,
+    evidence_of,
+    viewpoint_of,
+)
 from holescan.geotag._local import LocalFrame, local_en_m
 from holescan.geotag._matching import nearest_pairs
-from holescan.geotag._merge import AnnounceGate, Hole, HoleTracker, MergeParams
+from holescan.geotag._merge import Hole, HoleTracker, MergeParams
 from holescan.geotag._project import (
     CIRCLE_95_PER_SIGMA,
     ErrorModel,
     HoleSighting,
+    box_cut_by_border,
     geotag_detection,
     geotag_frame,
     project_to_pixel,
 )
+from holescan.geotag._tiers import TIERS, AnnounceGate, Tier
 from holescan.geotag._types import VehiclePose
 
 __all__ = [
     "CIRCLE_95_PER_SIGMA",
+    "DEFAULT_CONFIDENCE",
     "R_ENU_NED",
+    "TIERS",
     "AnnounceGate",
     "CameraMount",
+    "ConfidenceModel",
     "ErrorModel",
     "GimbalAttitude",
     "Hole",
+    "HoleEvidence",
     "HoleSighting",
     "HoleTracker",
     "LocalCameraPose",
     "LocalFrame",
     "MergeParams",
+    "Tier",
     "VehiclePose",
+    "box_cut_by_border",
     "camera_pose_local",
     "dcm_from_euler",
     "dcm_from_quaternion",
+    "evidence_of",
     "geotag_detection",
     "geotag_frame",
     "local_en_m",
     "nearest_pairs",
     "project_to_pixel",
     "rotation_ned_from_optical",
+    "viewpoint_of",
 ]

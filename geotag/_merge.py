@@ -22,8 +22,23 @@ How sightings are matched (deterministic; no clocks, no randomness):
 * Sightings from another GPS source (another flight or vehicle: :meth:`HoleTracker.update`'s
   ``source``) carry an independent GPS error: for them the bias drift is at its cap at
   once, however close in time the flights were.
+* **One opening, one hole**, however the detector boxes it. Sightings of one frame whose
+  openings overlap (centres closer than half the sum of their major axes: in one frame
+  the GPS error is shared, so their separation is exact to centimetres) are parts of one
+  opening, split by the detector (parts up to 0.1 m apart) or boxed twice: the frame's
+  view of it is the part not cut by the image border with the best score, and the hole
+  takes that one. A view cut by
+  the image border shows part of the opening: its size is not compared with the hole's.
+  Two holes whose openings come to overlap (their estimates closer than half the sum of
+  their major axes) and that were never seen apart in one frame are one opening: the
+  younger is fused into the older, whose id stays; the younger id is retired (never
+  reused; :meth:`HoleTracker.merged` maps it to the survivor).
 * A sighting that joins no hole starts a new one. A single false detection therefore
   becomes a hole with ``sightings == 1``: consumers ask :meth:`HoleTracker.confirmed`.
+
+Each hole's confidence ``p_hole`` comes from all its sightings (:mod:`geotag._confidence`:
+best and median score, distinct viewpoints rather than frames, size and position
+consistency, rim seen).
 
 Reported position: inverse-variance weighted mean of all sightings, weighted by their
 non-GPS variance (attitude, depth, timing, and where the detector put the opening: an
@@ -38,19 +53,23 @@ their error, it does not average down), the rest of the non-GPS error (averages 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import pymap3d
 
-from holescan.detect import p_hole_of_score
 from holescan.errors import InputError
+from holescan.geotag._confidence import (
+    DEFAULT_CONFIDENCE,
+    ConfidenceModel,
+    EvidenceAccumulator,
+    HoleEvidence,
+)
 from holescan.geotag._project import HoleSighting
 
-__all__ = ["AnnounceGate", "Hole", "HoleTracker", "MergeParams"]
+__all__ = ["Hole", "HoleTracker", "MergeParams"]
 
 _MIN_REL_SIGMA_M = 0.01
-_P_HOLE_MAX = 0.99  # detect's p_hole is kept within [0.01, 0.99]
 
 
 @dataclass(frozen=True)
@@ -90,8 +109,12 @@ class Hole:
     sightings : number of sightings merged (require >= N to drop one-off false alarms).
     t_first_boot_ns, t_last_boot_ns : autopilot boot time of the first and last sighting.
     best_frame_index, best_box : frame and box of the best view (highest
-        ``score * (1 - off_centre / 2)``: confident and near the image centre).
+        ``score * (1 - off_centre / 2)``: confident and near the image centre; a view cut
+        by the image border only when there is no other).
     major_m, minor_m : opening size seen in the best view, metres.
+    p_hole : probability that it is a true access hole, from all its sightings
+        (:class:`geotag.ConfidenceModel`); NaN for holes read from logs written before.
+    views : distinct viewpoints it was seen from (:func:`geotag.viewpoint_of`; 0: unknown).
     """
 
     id: int
@@ -107,6 +130,8 @@ class Hole:
     best_box: tuple[int, int, int, int]
     major_m: float
     minor_m: float
+    p_hole: float = math.nan
+    views: int = 0
 
 
 class _Track:
@@ -128,9 +153,18 @@ class _Track:
         self.best_quality = -math.inf
         self.best_score = -math.inf
         self.source: str | None = None
+        self.seen: list[HoleSighting] = []
+        self.acc = EvidenceAccumulator()
+        self.apart: set[int] = set()  # holes seen apart from this one in one frame
         self._add(s, ned)
 
+    def evidence(self) -> HoleEvidence:
+        """What its sightings say together (kept up to date as they come)."""
+        return self.acc.evidence()
+
     def _add(self, s: HoleSighting, ned: tuple[float, float, float]) -> None:
+        self.acc.add(s, ned[0], ned[1])
+        self.seen.append(s)
         w = 1.0 / _rel_var(s)  # GPS error is shared: it cannot tell sightings apart
         self.count += 1
         self.w_sum += w
@@ -143,7 +177,7 @@ class _Track:
         self.t_first = min(self.t_first, s.t_boot_ns)
         self.t_last = max(self.t_last, s.t_boot_ns)
         self.best_score = max(self.best_score, s.score)
-        quality = s.score * (1.0 - 0.5 * s.off_centre)
+        quality = s.score * (1.0 - 0.5 * s.off_centre) - (1.0 if s.cut_by_border else 0.0)
         if quality > self.best_quality:
             self.best_quality = quality
             self.best = s
@@ -174,6 +208,26 @@ class _Track:
         self.p = (1.0 - k) * p
         self._add(s, ned)
 
+    def absorb(self, o: _Track) -> None:
+        """Fuse the younger track ``o`` (the same opening) into this one."""
+        p = 1.0 / (1.0 / self.p + 1.0 / o.p)
+        self.kn = p * (self.kn / self.p + o.kn / o.p)
+        self.ke = p * (self.ke / self.p + o.ke / o.p)
+        self.p = p
+        self.count += o.count
+        self.w_sum += o.w_sum
+        self.wn, self.we, self.wd = self.wn + o.wn, self.we + o.we, self.wd + o.wd
+        self.inv_noise_var += o.inv_noise_var
+        self.w_opening += o.w_opening
+        self.gps_sum += o.gps_sum
+        self.t_first, self.t_last = min(self.t_first, o.t_first), max(self.t_last, o.t_last)
+        self.best_score = max(self.best_score, o.best_score)
+        if o.best_quality > self.best_quality:
+            self.best_quality, self.best = o.best_quality, o.best
+        self.seen = sorted(self.seen + o.seen, key=lambda s: s.t_boot_ns)
+        self.acc.merge(o.acc)
+        self.apart |= o.apart
+
 
 def _rel_var(s: HoleSighting) -> float:
     """Variance of the sighting's non-GPS error (attitude, depth, timing, opening), m^2."""
@@ -191,6 +245,48 @@ def _size_ok(a: float, b: float, max_ratio: float) -> bool:
     return max(a, b) / min(a, b) <= max_ratio
 
 
+def _major(s: HoleSighting) -> float:
+    return s.major_m if math.isfinite(s.major_m) and s.major_m > 0 else 0.0
+
+
+def _overlap_m(a: float, b: float) -> float:
+    """Centres of two openings of major axes ``a`` and ``b`` closer than this overlap."""
+    return 0.5 * (a + b)
+
+
+_PART_GAP_M = 0.1  # parts of one opening split by the detector: the rubble between them
+
+
+def _parts(group: list[HoleSighting], local: list[tuple[float, float, float]]) -> list[int]:
+    """Indices of the sightings that stand for their opening in this frame: of each set
+    whose openings overlap (parts of one opening), the one not cut by the border with the
+    best score (ties: the earlier)."""
+    n = len(group)
+    root = list(range(n))
+
+    def find(i: int) -> int:
+        while root[i] != i:
+            root[i] = root[root[i]]
+            i = root[i]
+        return i
+
+    for i in range(n):
+        for j in range(i + 1, n):
+            d = math.hypot(local[i][0] - local[j][0], local[i][1] - local[j][1])
+            if d < _overlap_m(_major(group[i]), _major(group[j])) + _PART_GAP_M:
+                root[find(j)] = find(i)
+    best: dict[int, int] = {}
+    for i in range(n):
+        r = find(i)
+        s, k = group[i], best.get(r)
+        if k is None or (not s.cut_by_border, s.score) > (
+            not group[k].cut_by_border,
+            group[k].score,
+        ):
+            best[r] = i
+    return sorted(best.values())
+
+
 class HoleTracker:
     """Merges sightings into holes with stable ids (pure, deterministic).
 
@@ -198,9 +294,14 @@ class HoleTracker:
     call that share ``(t_boot_ns, frame_index)`` count as one frame.
     """
 
-    def __init__(self, params: MergeParams | None = None) -> None:
+    def __init__(
+        self, params: MergeParams | None = None, confidence: ConfidenceModel | None = None
+    ) -> None:
         self.params = params if params is not None else MergeParams()
+        self.confidence = confidence if confidence is not None else DEFAULT_CONFIDENCE
         self._tracks: list[_Track] = []
+        self._next_id = 1
+        self._merged: dict[int, int] = {}
         self._origin: tuple[float, float, float] | None = None
 
     def _local(self, s: HoleSighting) -> tuple[float, float, float]:
@@ -224,15 +325,32 @@ class HoleTracker:
         changed: set[int] = set()
         for key in sorted(frames, key=lambda k: k[0]):
             changed.update(self._update_frame(frames[key], source))
+        changed = {self._merged.get(i, i) for i in changed}
         return [self._hole(t) for t in self._tracks if t.id in changed]
 
-    def _update_frame(self, group: list[HoleSighting], source: str | None) -> list[int]:
+    def sightings_of(self, hole_id: int) -> tuple[HoleSighting, ...]:
+        """The sightings merged into hole ``hole_id`` (a retired id: its survivor's)."""
+        hole_id = self._merged.get(hole_id, hole_id)
+        for t in self._tracks:
+            if t.id == hole_id:
+                return tuple(t.seen)
+        raise InputError(f"no hole {hole_id}")
+
+    def merged(self) -> dict[int, int]:
+        """Retired id -> the id of the hole it was fused into (the same opening)."""
+        return dict(self._merged)
+
+    def _update_frame(self, all_of_frame: list[HoleSighting], source: str | None) -> list[int]:
         p = self.params
-        local = [self._local(s) for s in group]
+        local_all = [self._local(s) for s in all_of_frame]
+        keep = _parts(all_of_frame, local_all)
+        group = [all_of_frame[i] for i in keep]
+        local = [local_all[i] for i in keep]
         pairs: list[tuple[float, int, int]] = []
         for i, (s, ned) in enumerate(zip(group, local, strict=True)):
             for ti, t in enumerate(self._tracks):
-                if not _size_ok(s.major_m, t.best.major_m, p.max_size_ratio):
+                cut = s.cut_by_border or t.best.cut_by_border
+                if not cut and not _size_ok(s.major_m, t.best.major_m, p.max_size_ratio):
                     continue
                 major = max(s.major_m, t.best.major_m)
                 floor = max(p.min_radius_m, p.size_fraction * major if major > 0 else 0.0)
@@ -249,17 +367,58 @@ class HoleTracker:
                 continue
             used_tracks.add(ti)
             assigned[i] = ti
-        changed = []
+        fed: list[_Track] = []
         for i, (s, ned) in enumerate(zip(group, local, strict=True)):
             if i in assigned:
                 track = self._tracks[assigned[i]]
                 track.update(s, ned, p, source)
             else:
-                track = _Track(len(self._tracks) + 1, s, ned)
+                track = _Track(self._next_id, s, ned)
+                self._next_id += 1
                 track.source = source
                 self._tracks.append(track)
-            changed.append(track.id)
+            fed.append(track)
+        for t in fed:  # seen apart in one frame: two openings, never fused
+            t.apart.update(o.id for o in fed if o is not t)
+        changed = [t.id for t in fed]
+        for t in fed:
+            self._fuse(t)
         return changed
+
+    def _fuse(self, t: _Track) -> None:
+        """Fuse ``t`` with every other hole whose opening overlaps its own (see the module
+        docstring); the older id survives."""
+        while True:
+            other = next(
+                (
+                    o
+                    for o in self._tracks
+                    if o is not t
+                    and o.id not in t.apart
+                    and t.id not in o.apart
+                    and (
+                        o.best.cut_by_border
+                        or t.best.cut_by_border
+                        or _size_ok(o.best.major_m, t.best.major_m, self.params.max_size_ratio)
+                    )
+                    and math.hypot(o.kn - t.kn, o.ke - t.ke)
+                    < _overlap_m(_major(o.best), _major(t.best))
+                ),
+                None,
+            )
+            if other is None:
+                return
+            old, young = (t, other) if t.id < other.id else (other, t)
+            old.absorb(young)
+            self._tracks.remove(young)
+            self._merged[young.id] = old.id
+            for k, v in self._merged.items():
+                if v == young.id:
+                    self._merged[k] = old.id
+            for o in self._tracks:
+                if young.id in o.apart:
+                    o.apart.add(old.id)
+            t = old
 
     def _hole(self, t: _Track) -> Hole:
         assert self._origin is not None
@@ -272,6 +431,7 @@ class HoleTracker:
         # down): the weighted mean of the sightings' opening sigmas. The rest (depth noise,
         # attitude, timing) averages down as 1/sqrt(n).
         opening = t.w_opening / t.w_sum
+        ev = t.evidence()
         rel = math.hypot(opening, 1.0 / math.sqrt(t.inv_noise_var))
         return Hole(
             id=t.id,
@@ -287,6 +447,8 @@ class HoleTracker:
             best_box=t.best.box,
             major_m=t.best.major_m,
             minor_m=t.best.minor_m,
+            p_hole=self.confidence.p_hole(ev),
+            views=ev.views,
         )
 
     def holes(self) -> list[Hole]:
@@ -296,113 +458,3 @@ class HoleTracker:
     def confirmed(self, min_sightings: int = 2) -> list[Hole]:
         """Holes seen at least ``min_sightings`` times, sorted by id."""
         return [self._hole(t) for t in self._tracks if t.count >= min_sightings]
-
-
-@dataclass(frozen=True)
-class AnnounceGate:
-    """When a hole is worth a rescuer's look: announced, served as a waypoint, sent on.
-
-    A hole passes when all three hold:
-
-    min_p_hole : the probability that it is a true access hole, ``p_hole`` of its best
-        detector score (:func:`detect.p_hole_of_score`, see :meth:`p_hole`). ``p_hole``
-        never leaves [0.01, 0.99], so the threshold must lie in [0, 0.99].
-    min_sightings : frames it was seen in (2: the count depends on the detector's frame
-        rate, which drops to ~2.5 frames/s on a loaded computer; the time span does not).
-    min_span_s : seconds between its first and last sighting. The vehicle moves over the
-        hole meanwhile (0.6-1 m/s on a survey), so the views come from different
-        positions: a one-view artefact (a glint, a shadow edge) does not repeat.
-
-    min_separation_m, separation_fraction : a passing hole this close to one already
-        kept is the same opening seen twice (see :meth:`select`).
-
-    Holes that do not pass stay *candidates*: logged and written to the hole files marked
-    as such, never a waypoint.
-
-    The calibration is the **default** detector mode's (Platt scaling fitted on its
-    scores). Paper mode's scores are not calibrated (its detections carry ``p_hole =
-    None``); the gate still maps them through the same curve, a monotone map, so in paper
-    mode ``min_p_hole`` is a raw-score threshold in disguise (0.5 is a paper score of
-    0.37), not a probability. One rule for both modes keeps one config key and one meaning
-    of "announced" on the ground; paper mode (2.5-3.5 s a frame) is a reference, not a
-    flight mode, and falling back to the raw score would silently change what a given
-    ``announce_min_p_hole`` lets through.
-
-    The default ``min_p_hole = 0.5`` was measured with the current detector
-    (``benchmarks/bench_announce.py``: 8 simulated worlds, 6,000 frames; figures in the
-    README, "What is announced"): every true hole seen twice over 0.3 s had p_hole >=
-    0.973, every false one (cracks, stains, small holes, a depression) <= 0.112, so any
-    threshold from 0.2 to 0.95 delivers the same 23 holes, all true (precision 1.000),
-    21 of the 22 true holes in view (the 22nd: one detection at score 0.09 in the whole
-    lap), first sighting to delivery median 0.3 s. Through the whole demo path
-    (``benchmarks/bench_delivery.py``, the same 8 worlds, 14-21 detected frames/s) 0.5
-    announced 20 holes, all true, all 20 true holes in view, median 0.4 s, max 17.6 s. But
-    on an idle machine (29 detected frames/s) ``holescan demo`` saw a stain 11 times at
-    score 0.43 (p_hole 0.73) and announced it at 0.5: more frames give a weak false box
-    more sightings. Hence 0.9: still far below every true hole seen twice (0.973), above
-    that stain; on independent single detections it keeps 91 of 101 true ones (0.5: 98),
-    and in flight a hole is judged on its best of many views.
-
-    Examples
-    --------
-    >>> gate = AnnounceGate(min_p_hole=0.5, min_sightings=2, min_span_s=0.3)
-    >>> gate.min_p_hole
-    0.5
-    >>> from detect import p_hole_of_score  # p_hole 0.5 is a best score of 0.368
-    >>> p_hole_of_score(0.37) >= gate.min_p_hole > p_hole_of_score(0.36)
-    True
-    """
-
-    min_p_hole: float = 0.9
-    min_sightings: int = 2
-    min_span_s: float = 0.3
-    min_separation_m: float = 0.5
-    separation_fraction: float = 0.5
-
-    def __post_init__(self) -> None:
-        if not 0.0 <= self.min_p_hole <= _P_HOLE_MAX:
-            raise InputError(
-                f"announce min_p_hole must be in [0, {_P_HOLE_MAX}] (p_hole never exceeds "
-                f"{_P_HOLE_MAX}), got {self.min_p_hole}"
-            )
-        if self.min_sightings < 1 or not self.min_span_s >= 0.0:
-            raise InputError("announce min_sightings must be >= 1 and min_span_s >= 0")
-
-    def p_hole(self, hole: Hole) -> float:
-        """``p_hole`` of ``hole``: of its best detector score."""
-        return p_hole_of_score(hole.score)
-
-    def select(self, holes: Sequence[Hole], announced: Iterable[int] = ()) -> list[Hole]:
-        """The holes to announce and serve: those that pass, less duplicates.
-
-        A duplicate lies within ``max(min_separation_m, separation_fraction * major
-        axis)`` of a hole kept before it: the tracker keeps one sighting per hole per
-        frame, so a detector that boxes one opening twice in a frame makes two holes at
-        the same place. Holes already ``announced`` are always kept (the ground has them);
-        the others in id order. Sorted by id.
-        """
-        done = set(announced)
-        ordered = sorted(
-            (h for h in holes if self.passes(h)), key=lambda h: (h.id not in done, h.id)
-        )
-        kept: list[Hole] = []
-        for h in ordered:
-            if h.id not in done and any(_duplicate(h, k, self) for k in kept):
-                continue
-            kept.append(h)
-        return sorted(kept, key=lambda h: h.id)
-
-    def passes(self, hole: Hole) -> bool:
-        """True when ``hole`` is strong enough to be announced."""
-        span_s = (hole.t_last_boot_ns - hole.t_first_boot_ns) * 1e-9
-        return (
-            self.p_hole(hole) >= self.min_p_hole
-            and hole.sightings >= self.min_sightings
-            and span_s >= self.min_span_s
-        )
-
-
-def _duplicate(a: Hole, b: Hole, gate: AnnounceGate) -> bool:
-    radius = max(gate.min_separation_m, gate.separation_fraction * max(a.major_m, b.major_m))
-    n, e, _ = pymap3d.geodetic2ned(a.lat_deg, a.lon_deg, b.alt_m, b.lat_deg, b.lon_deg, b.alt_m)
-    return bool(math.hypot(float(n), float(e)) < radius)

@@ -37,6 +37,7 @@ __all__ = [
     "CIRCLE_95_PER_SIGMA",
     "ErrorModel",
     "HoleSighting",
+    "box_cut_by_border",
     "geotag_detection",
     "geotag_frame",
     "project_to_pixel",
@@ -111,6 +112,8 @@ class HoleSighting:
         (without a rim plane: the ray's angle off the optical axis, the camera taken to
         face the ground as on a survey).
     rim_seen : fraction of the opening's rim the sensor saw (NaN: not measured).
+    cut_by_border : the box touches the image border (the opening may go on beyond it: its
+        size and centre are those of the part in view).
     """
 
     lat_deg: float
@@ -130,6 +133,7 @@ class HoleSighting:
     sigma_opening_m: float = 0.0
     view_angle_deg: float = float("nan")
     rim_seen: float = float("nan")
+    cut_by_border: bool = False
 
 
 def _check_pose(pose: VehiclePose) -> None:
@@ -229,7 +233,20 @@ def geotag_detection(
         sigma_opening_m=opening,
         view_angle_deg=math.degrees(view),
         rim_seen=float(det.rim_seen) if det.rim_seen is not None else math.nan,
+        cut_by_border=box_cut_by_border(det.box, camera.width, camera.height),
     )
+
+
+def box_cut_by_border(box: tuple[int, int, int, int], width: int, height: int) -> bool:
+    """True when ``box`` (x, y, w, h pixels) reaches within 2 px of the image's border.
+
+    Examples
+    --------
+    >>> box_cut_by_border((0, 100, 50, 40), 640, 480), box_cut_by_border((5, 5, 50, 40), 640, 480)
+    (True, False)
+    """
+    x, y, w, h = box
+    return x <= 1 or y <= 1 or x + w >= width - 1 or y + h >= height - 1
 
 
 def _opening_centre(det: Detection) -> FloatArray | None:

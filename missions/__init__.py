@@ -33,8 +33,9 @@ from holescan.missions._holecards import (
 from holescan.missions._holefiles import (
     HOLE_FORMATS,
     HOLE_SUFFIXES,
+    HOLE_TIERS,
     HoleFormat,
-    candidate_points,
+    HoleTier,
     hole_description,
     hole_mission,
     hole_points,
@@ -47,6 +48,7 @@ from holescan.missions._holeserver import (
     MissionServerError,
     hole_statustext,
     hole_waypoints,
+    radio_budget,
 )
 from holescan.missions._link import MavConnection, mavlink, mavutil, open_link, parser
 from holescan.missions._protocol import (
@@ -102,6 +104,7 @@ __all__ = [
     "CARD_PAYLOAD",
     "HOLE_FORMATS",
     "HOLE_SUFFIXES",
+    "HOLE_TIERS",
     "MAV_CMD_DO_CHANGE_SPEED",
     "MAV_CMD_NAV_LAND",
     "MAV_CMD_NAV_RETURN_TO_LAUNCH",
@@ -120,6 +123,7 @@ __all__ = [
     "FlightCheck",
     "HoleFormat",
     "HoleMissionServer",
+    "HoleTier",
     "MavConnection",
     "MissionError",
     "MissionReceiver",
@@ -136,7 +140,6 @@ __all__ = [
     "SurveyPlan",
     "UploadReport",
     "Waypoint",
-    "candidate_points",
     "card_facts",
     "check_flight",
     "connect",
@@ -155,6 +158,7 @@ __all__ = [
     "open_link",
     "parser",
     "plan_survey",
+    "radio_budget",
     "rank_holes",
     "read_area",
     "read_card",

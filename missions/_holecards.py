@@ -80,8 +80,9 @@ def read_card(card: bytes) -> dict[str, Any] | None:
     return facts if isinstance(facts, dict) else None
 
 
-def card_facts(hole: Any, why: str, revision: int) -> dict[str, Any]:
-    """The facts a card carries for a :class:`geotag.Hole` (7 decimals: 1 cm)."""
+def card_facts(hole: Any, why: str, revision: int, tier: str = "announced") -> dict[str, Any]:
+    """The facts a card carries for a :class:`geotag.Hole` (7 decimals: 1 cm): ``tier``
+    (``announced`` or ``review``) and ``p`` (the hole-level ``p_hole``) among them."""
 
     def r(v: float, nd: int) -> float | None:
         return round(float(v), nd) if math.isfinite(v) else None
@@ -94,6 +95,8 @@ def card_facts(hole: Any, why: str, revision: int) -> dict[str, Any]:
         "alt": r(hole.alt_m, 2),
         "sigma": r(hole.sigma_h_m, 2),
         "score": r(hole.score, 3),
+        "p": r(getattr(hole, "p_hole", math.nan), 3),
+        "tier": tier,
         "n": hole.sightings,
         "major": r(hole.major_m, 2),
         "minor": r(hole.minor_m, 2),
@@ -116,6 +119,7 @@ class _Outgoing:
     key: int
     card: bytes
     sent: int = -1  # -1: handshake not sent yet; else packets sent
+    priority: int = 0  # lower goes first (0: announced holes, 1: for review)
 
 
 @dataclass
@@ -141,6 +145,7 @@ class CardSender:
     cards_sent: int = 0
     _queue: collections.deque[_Outgoing] = field(default_factory=collections.deque)
     _latest: dict[int, bytes] = field(default_factory=dict)
+    _priority: dict[int, int] = field(default_factory=dict)
     _repeat_at: dict[int, tuple[float, int]] = field(default_factory=dict)
     _tokens: float = 0.0
     _t_last: float | None = None
@@ -149,22 +154,37 @@ class CardSender:
         if not self.bytes_per_s >= _PACKET_BYTES / 10.0:
             raise InputError(f"card byte budget must be >= 27 B/s, got {self.bytes_per_s}")
 
-    def put(self, key: int, card: bytes) -> None:
-        """Queue ``card`` for hole ``key``; an unsent older card of the same hole is dropped."""
+    def put(self, key: int, card: bytes, priority: int = 0) -> None:
+        """Queue ``card`` for hole ``key``; an unsent older card of the same hole is dropped.
+
+        Cards go out by ``priority`` (lower first: 0 announced holes, 1 holes for review),
+        in order of arrival within one; the card being sent is never cut off.
+        """
         self._latest[key] = card
-        for item in self._queue:
+        self._priority[key] = priority
+        for item in list(self._queue):
             if item.key == key and item.sent < 0:
-                item.card = card
-                return
-        self._queue.append(_Outgoing(key, card))
+                if item.priority == priority:
+                    item.card = card
+                    return
+                self._queue.remove(item)
+        self._enqueue(_Outgoing(key, card, priority=priority))
         self._repeat_at[key] = (math.inf, 0)
+
+    def _enqueue(self, item: _Outgoing) -> None:
+        at = len(self._queue)
+        while (
+            at > 0 and self._queue[at - 1].sent < 0 and self._queue[at - 1].priority > item.priority
+        ):
+            at -= 1
+        self._queue.insert(at, item)
 
     def resend_all(self) -> None:
         """Queue every hole's newest card again (a ground station asked for them)."""
         queued = {item.key for item in self._queue if item.sent < 0}  # not started yet
         for key, card in sorted(self._latest.items()):
             if key not in queued:
-                self._queue.append(_Outgoing(key, card))
+                self._enqueue(_Outgoing(key, card, priority=self._priority.get(key, 0)))
 
     @property
     def pending(self) -> int:
@@ -181,7 +201,8 @@ class CardSender:
         if self.repeat_s is not None:
             for key, (t, n) in list(self._repeat_at.items()):
                 if now >= t and all(item.key != key for item in self._queue):
-                    self._queue.append(_Outgoing(key, self._latest[key]))
+                    card = self._latest[key]
+                    self._enqueue(_Outgoing(key, card, priority=self._priority.get(key, 0)))
                     self._repeat_at[key] = (math.inf, n)
         while self._queue:
             item = self._queue[0]

@@ -28,6 +28,15 @@ What each format holds:
   The ``.plan`` items carry each hole's name, description and data under the key
   ``"holescan"``; a WPL line has no room for them: its lines are in rank order.
 
+What each hole is: every file says it, per hole: ``hole_id``, ``tier`` (``announced``,
+``review``, ``confirmed``, ``rejected``: :data:`HOLE_TIERS`), ``p_hole`` (the hole-level
+confidence, :attr:`geotag.Hole.p_hole`), ``sightings``, the size (``major_m``,
+``minor_m``) and ``sigma_h_m`` (GeoJSON properties, KML data and description, GPX
+description, ``.plan`` item data). The missions (``.plan``, WPL) hold only the announced
+and confirmed holes; holes for review or rejected are points, never waypoints to fly to.
+Candidates below the review tier are not in these files at all (they stay in the flight
+log and the report).
+
 Latitudes and longitudes are written with 8 decimals (about 1 mm).
 """
 
@@ -54,8 +63,9 @@ from holescan.missions._waypoint import MAV_FRAME_GLOBAL, MAV_FRAME_GLOBAL_RELAT
 __all__ = [
     "HOLE_FORMATS",
     "HOLE_SUFFIXES",
+    "HOLE_TIERS",
     "HoleFormat",
-    "candidate_points",
+    "HoleTier",
     "hole_description",
     "hole_mission",
     "hole_points",
@@ -76,6 +86,19 @@ HOLE_SUFFIXES: Final[Mapping[HoleFormat, str]] = {
 }
 _KMZ_IMAGE_DIR = "images"
 
+HoleTier = Literal["announced", "review", "confirmed", "rejected"]
+HOLE_TIERS: Final[tuple[HoleTier, ...]] = get_args(HoleTier)
+_MISSION_TIERS: Final = ("announced", "confirmed")
+
+
+def _tier_of(tiers: Mapping[int, str] | None, hole_id: int) -> str:
+    tier = "announced" if tiers is None else tiers.get(hole_id, "announced")
+    if tier not in HOLE_TIERS:
+        raise InputError(
+            f"hole {hole_id}: tier must be one of {', '.join(HOLE_TIERS)}, not {tier!r}"
+        )
+    return tier
+
 
 def rank_holes(holes: Iterable[Hole]) -> list[Hole]:
     """Holes by confidence: best score, then more sightings, then lower id."""
@@ -93,7 +116,9 @@ def _r(value: float, digits: int) -> float | None:
     return round(float(value), digits) if math.isfinite(value) else None
 
 
-def hole_properties(hole: Hole, rank: int, boot_to_unix_ns: int | None = None) -> dict[str, Any]:
+def hole_properties(
+    hole: Hole, rank: int, boot_to_unix_ns: int | None = None, tier: str = "announced"
+) -> dict[str, Any]:
     """The data of one hole as JSON-ready key/values (GeoJSON properties, KML data).
 
     Parameters
@@ -101,9 +126,12 @@ def hole_properties(hole: Hole, rank: int, boot_to_unix_ns: int | None = None) -
     hole : the hole. rank : its place by confidence, from 1.
     boot_to_unix_ns : add this to an autopilot boot time to get Unix time (ns); when
         given, ``first_seen_utc`` / ``last_seen_utc`` (ISO 8601) are included.
+    tier : what it is (:data:`HOLE_TIERS`).
     """
     props: dict[str, Any] = {
         "hole_id": hole.id,
+        "tier": tier,
+        "p_hole": _r(hole.p_hole, 4),
         "rank": rank,
         "score": _r(hole.score, 4),
         "sightings": hole.sightings,
@@ -133,10 +161,17 @@ def _seen(hole: Hole, boot_to_unix_ns: int | None) -> str:
     return f"first seen {first}, last seen {last}"
 
 
-def hole_description(hole: Hole, rank: int, boot_to_unix_ns: int | None = None) -> str:
+def _p(hole: Hole) -> str:
+    return f"p_hole {hole.p_hole:.2f}" if math.isfinite(hole.p_hole) else "p_hole unknown"
+
+
+def hole_description(
+    hole: Hole, rank: int, boot_to_unix_ns: int | None = None, tier: str = "announced"
+) -> str:
     """One ASCII line a person reads on a handheld GPS: the hole's data and position."""
     return (
-        f"hole {hole.id} (rank {rank}): score {hole.score:.2f}, seen in {hole.sightings} "
+        f"hole {hole.id} ({tier}, rank {rank}): {_p(hole)}, score {hole.score:.2f}, seen in "
+        f"{hole.sightings} "
         f"frames, opening {hole.major_m:.2f} x {hole.minor_m:.2f} m, position +-"
         f"{hole.sigma_h_m:.2f} m (1 sigma), {_seen(hole, boot_to_unix_ns)}, "
         f"lat {hole.lat_deg:.7f} lon {hole.lon_deg:.7f}, alt {hole.alt_m:.1f} m MSL"
@@ -144,9 +179,11 @@ def hole_description(hole: Hole, rank: int, boot_to_unix_ns: int | None = None) 
 
 
 def _html_description(
-    hole: Hole, rank: int, boot_to_unix_ns: int | None, image_src: str | None
+    hole: Hole, rank: int, boot_to_unix_ns: int | None, image_src: str | None, tier: str
 ) -> str:
     rows = [
+        ("tier", tier),
+        ("p_hole", _p(hole).removeprefix("p_hole ")),
         ("rank", str(rank)),
         ("score", f"{hole.score:.2f}"),
         ("sightings", str(hole.sightings)),
@@ -175,6 +212,7 @@ def hole_points(
     boot_to_unix_ns: int | None = None,
     on_ground: bool = False,
     image_src: Mapping[int, str] | None = None,
+    tiers: Mapping[int, str] | None = None,
 ) -> list[Waypoint]:
     """Points of interest, one per hole, by confidence (GPX, KML, GeoJSON).
 
@@ -186,41 +224,23 @@ def hole_points(
         ``relativeToGround``) instead of at the hole's MSL altitude (frame 0).
     image_src : hole id -> image URL for an HTML description (KML); without it the
         description is the plain line of :func:`hole_description`.
+    tiers : hole id -> its tier (:data:`HOLE_TIERS`; missing or None: ``announced``).
     """
     out = []
     for rank, h in enumerate(rank_holes(holes), start=1):
+        tier = _tier_of(tiers, h.id)
         if image_src is not None:
-            desc = _html_description(h, rank, boot_to_unix_ns, image_src.get(h.id))
+            desc = _html_description(h, rank, boot_to_unix_ns, image_src.get(h.id), tier)
         else:
-            desc = hole_description(h, rank, boot_to_unix_ns)
+            desc = hole_description(h, rank, boot_to_unix_ns, tier)
         out.append(
             Waypoint(
                 h.lat_deg,
                 h.lon_deg,
                 0.0 if on_ground else h.alt_m,
-                name=f"hole {h.id}",
+                name=f"hole {h.id}" if tier in _MISSION_TIERS else f"{tier} {h.id}",
                 description=desc,
-                properties=hole_properties(h, rank, boot_to_unix_ns),
-                frame=MAV_FRAME_GLOBAL_RELATIVE_ALT if on_ground else MAV_FRAME_GLOBAL,
-            )
-        )
-    return out
-
-
-def candidate_points(holes: Iterable[Hole], *, on_ground: bool = False) -> list[Waypoint]:
-    """Weaker holes (candidates, not announced) as points marked so, by confidence."""
-    out = []
-    for rank, h in enumerate(rank_holes(holes), start=1):
-        props = {**hole_properties(h, rank), "candidate": True}
-        out.append(
-            Waypoint(
-                h.lat_deg,
-                h.lon_deg,
-                0.0 if on_ground else h.alt_m,
-                name=f"candidate {h.id}",
-                description="candidate, not announced (too weak to send a crew): "
-                + hole_description(h, rank),
-                properties=props,
+                properties=hole_properties(h, rank, boot_to_unix_ns, tier),
                 frame=MAV_FRAME_GLOBAL_RELATIVE_ALT if on_ground else MAV_FRAME_GLOBAL,
             )
         )
@@ -234,6 +254,7 @@ def hole_mission(
     rel_alt_m: float = 10.0,
     clearance_m: float = 5.0,
     boot_to_unix_ns: int | None = None,
+    tiers: Mapping[int, str] | None = None,
 ) -> tuple[Waypoint | None, list[Waypoint]]:
     """A mission to fly over the holes, by confidence: ``(home, items)``.
 
@@ -259,8 +280,8 @@ def hole_mission(
         items.append(
             dataclasses.replace(
                 item,
-                description=hole_description(h, seq, boot_to_unix_ns),
-                properties=hole_properties(h, seq, boot_to_unix_ns),
+                description=hole_description(h, seq, boot_to_unix_ns, _tier_of(tiers, h.id)),
+                properties=hole_properties(h, seq, boot_to_unix_ns, _tier_of(tiers, h.id)),
             )
         )
     home_wp = None
@@ -275,9 +296,12 @@ def _write_kmz(
     thumbnails: Mapping[int, bytes],
     boot_to_unix_ns: int | None,
     name: str,
+    tiers: Mapping[int, str] | None,
 ) -> Path:
     images = {h.id: f"{_KMZ_IMAGE_DIR}/hole_{h.id}.jpg" for h in holes if h.id in thumbnails}
-    points = hole_points(holes, boot_to_unix_ns=boot_to_unix_ns, on_ground=True, image_src=images)
+    points = hole_points(
+        holes, boot_to_unix_ns=boot_to_unix_ns, on_ground=True, image_src=images, tiers=tiers
+    )
     with tempfile.TemporaryDirectory(prefix="holescan-kmz-") as tmp:
         doc = write_kml(Path(tmp) / "doc.kml", points, document_name=name)
         with zipfile.ZipFile(path, "w") as kmz:
@@ -298,7 +322,7 @@ def write_hole_file(
     rel_alt_m: float = 10.0,
     clearance_m: float = 5.0,
     name: str = "holescan holes",
-    candidates: Iterable[Hole] = (),
+    tiers: Mapping[int, str] | None = None,
 ) -> Path:
     """Write ``holes`` to ``path`` in format ``fmt`` (see the module docstring).
 
@@ -313,9 +337,11 @@ def write_hole_file(
     boot_to_unix_ns : add to autopilot boot times to get Unix time (first/last seen).
     rel_alt_m, clearance_m : mission altitude (``plan``/``wpl``), see :func:`hole_mission`.
     name : the KML document's name.
-    candidates : weaker holes (not announced): added to GPX, KML and GeoJSON as points
-        named ``candidate <id>`` with ``properties["candidate"] = True``; never in a
-        mission (``plan``, ``wpl``) nor in the KMZ.
+    tiers : hole id -> its tier (:data:`HOLE_TIERS`; missing or None: ``announced``).
+        Holes for review and rejected ones are points named ``review <id>`` /
+        ``rejected <id>`` (GPX, KML, KMZ, GeoJSON), never in a mission (``plan``,
+        ``wpl``). Pass no candidates (holes below the review tier): they are not for the
+        crew.
     """
     path = Path(path)
     holes = tuple(holes)
@@ -324,11 +350,10 @@ def write_hole_file(
     if fmt not in HOLE_FORMATS:
         raise InputError(f"unknown hole file format {fmt!r}; use one of {', '.join(HOLE_FORMATS)}")
     thumbs = thumbnails or {}
-    weak = candidate_points(candidates, on_ground=fmt == "kml")
     if fmt == "gpx":
-        return write_gpx(path, hole_points(holes, boot_to_unix_ns=boot_to_unix_ns) + weak)
+        return write_gpx(path, hole_points(holes, boot_to_unix_ns=boot_to_unix_ns, tiers=tiers))
     if fmt == "geojson":
-        points = hole_points(holes, boot_to_unix_ns=boot_to_unix_ns) + weak
+        points = hole_points(holes, boot_to_unix_ns=boot_to_unix_ns, tiers=tiers)
         return write_geojson(path, points, altitude=False)
     if fmt == "kml":
         src = {
@@ -336,16 +361,19 @@ def write_hole_file(
             for h in holes
             if h.id in thumbs
         }
-        points = hole_points(holes, boot_to_unix_ns=boot_to_unix_ns, on_ground=True, image_src=src)
-        return write_kml(path, points + weak, document_name=name)
+        points = hole_points(
+            holes, boot_to_unix_ns=boot_to_unix_ns, on_ground=True, image_src=src, tiers=tiers
+        )
+        return write_kml(path, points, document_name=name)
     if fmt == "kmz":
-        return _write_kmz(path, holes, thumbs, boot_to_unix_ns, name)
+        return _write_kmz(path, holes, thumbs, boot_to_unix_ns, name, tiers)
     home_wp, items = hole_mission(
-        holes,
+        [h for h in holes if _tier_of(tiers, h.id) in _MISSION_TIERS],
         home=home,
         rel_alt_m=rel_alt_m,
         clearance_m=clearance_m,
         boot_to_unix_ns=boot_to_unix_ns,
+        tiers=tiers,
     )
     if fmt == "plan":
         return write_plan(path, items, home_wp, item_data=True)

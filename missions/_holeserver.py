@@ -4,7 +4,10 @@
 component 191 (MAV_COMP_ID_ONBOARD_COMPUTER) of the vehicle's system, so a ground station
 targeting that component (MAVProxy: ``--target-component 191``, then ``wp list`` /
 ``wp save FILE``) downloads one waypoint per hole, and announces each new or updated hole
-with a STATUSTEXT ``HOLE <id> <score> <lat> <lon>`` that every GCS shows.
+with a STATUSTEXT ``HOLE <id> <score> <lat> <lon>`` that every GCS shows. Holes for
+review (:meth:`geotag.AnnounceGate.tier`) are not in the mission: they get a STATUSTEXT
+``REVIEW <id> ...`` and a card whose facts say ``"tier": "review"``, sent after the
+announced holes' cards under the same byte budget.
 
 The mission (decided after reading MAVProxy's ``wp save`` and the QGC WPL 110 format):
 
@@ -41,7 +44,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from typing import Any
 
 from holescan.errors import InputError
@@ -59,6 +62,7 @@ __all__ = [
     "MissionServerError",
     "hole_statustext",
     "hole_waypoints",
+    "radio_budget",
 ]
 
 _log = logging.getLogger(__name__)
@@ -108,17 +112,49 @@ def hole_waypoints(
     return tuple(items)
 
 
-def hole_statustext(hole: Hole) -> str:
-    """``HOLE <id> <score> <lat> <lon>``, at most 50 characters (STATUSTEXT's text field).
+def hole_statustext(hole: Hole, tier: str = "announced") -> str:
+    """``HOLE <id> <score> <lat> <lon>``, at most 50 characters (STATUSTEXT's text field);
+    ``REVIEW <id> ...`` for a hole sent for review (not announced: an operator confirms it).
 
     Seven decimals (1 cm) fit for any id below 10**9; fewer are used only if needed.
+
+    >>> from holescan.geotag import Hole
+    >>> h = Hole(3, 43.65331, -79.38312, 120.0, 0.5, 0.88, 4, 0, 10, 1, (0, 0, 9, 9), 1.0, 0.7)
+    >>> hole_statustext(h), hole_statustext(h, "review")
+    ('HOLE 3 0.88 43.6533100 -79.3831200', 'REVIEW 3 0.88 43.6533100 -79.3831200')
     """
+    if tier not in ("announced", "review"):
+        raise InputError(f"a hole sent to the ground is announced or review, not {tier!r}")
+    word = "HOLE" if tier == "announced" else "REVIEW"
     for decimals in (7, 6, 5, 4):
         lat, lon = f"{hole.lat_deg:.{decimals}f}", f"{hole.lon_deg:.{decimals}f}"
-        text = f"HOLE {hole.id} {hole.score:.2f} {lat} {lon}"
+        text = f"{word} {hole.id} {hole.score:.2f} {lat} {lon}"
         if len(text) <= _STATUSTEXT_MAX:
             return text
     raise InputError(f"hole id {hole.id} too long for a STATUSTEXT")
+
+
+_MIN_CARD_BYTES_PER_S = 50.0
+
+
+def radio_budget(current: float, ceiling: float, txbuf_pct: int) -> float:
+    """The hole cards' byte budget after a RADIO_STATUS, B/s.
+
+    ``txbuf_pct`` is how much of the radio's transmit buffer is free (SiK radios report it;
+    ArduPilot slows its own streams on it the same way): under 20 % the link is
+    overrun, the budget halves; under 50 % it shrinks by a fifth; over 90 % it grows by a
+    tenth, up to ``ceiling`` (the configured budget); between, it stays. Never under
+    50 B/s (a card still gets through, slowly).
+    """
+    if txbuf_pct < 20:
+        new = current * 0.5
+    elif txbuf_pct < 50:
+        new = current * 0.8
+    elif txbuf_pct > 90:
+        new = current * 1.1
+    else:
+        new = current
+    return max(min(new, ceiling), min(_MIN_CARD_BYTES_PER_S, ceiling))
 
 
 class HoleMissionServer(MissionServer):
@@ -127,7 +163,10 @@ class HoleMissionServer(MissionServer):
     Parameters
     ----------
     connection_string : pymavlink connection, e.g. ``udpout:127.0.0.1:14550`` (towards a
-        GCS or router), ``udpin:0.0.0.0:14560``, ``tcp:HOST:PORT``, a serial device.
+        GCS or router), ``udpin:0.0.0.0:14560``, ``tcp:HOST:PORT``, a serial device; None
+        with ``sender``: the companion's one link to the autopilot, which routes the
+        announcements, the mission and the cards to the GCS on its other port (see
+        :class:`missions.MissionServer`; the link's owner feeds it with :meth:`feed`).
     sysid : the vehicle's system id (GCS modules only listen to their target system).
     compid : our component id (191 = onboard computer).
     home : (lat_deg, lon_deg, alt_m MSL) of the vehicle's home, if known (see
@@ -135,7 +174,9 @@ class HoleMissionServer(MissionServer):
     rel_alt_m, clearance_m : waypoint altitude, see :func:`hole_waypoints`.
     heartbeat_period_s : HEARTBEAT interval (MAV_TYPE_ONBOARD_CONTROLLER).
     card_bytes_per_s : byte budget of the hole cards (best view + facts, see
-        :mod:`missions._holecards`) sent by :meth:`send_card`.
+        :mod:`missions._holecards`) sent by :meth:`send_card`: the most they may take. A
+        radio on the way that reports RADIO_STATUS (a SiK radio, seen through the
+        autopilot's routing) adapts it to what the link carries (:func:`radio_budget`).
 
     Use as a context manager; the link opens on enter and closes on exit. Errors of the
     background thread are raised as :class:`MissionServerError` by :meth:`close`.
@@ -145,7 +186,7 @@ class HoleMissionServer(MissionServer):
 
     def __init__(
         self,
-        connection_string: str,
+        connection_string: str | None,
         sysid: int,
         compid: int = MAV_COMP_ID_ONBOARD_COMPUTER,
         *,
@@ -154,6 +195,7 @@ class HoleMissionServer(MissionServer):
         clearance_m: float = 5.0,
         heartbeat_period_s: float = 1.0,
         card_bytes_per_s: float = 1000.0,
+        sender: Callable[[Callable[[Any], None]], None] | None = None,
         signing: SigningKey | None = None,
     ) -> None:
         if not (1 <= sysid <= 255 and 1 <= compid <= 255):
@@ -167,6 +209,7 @@ class HoleMissionServer(MissionServer):
             heartbeat_period_s=heartbeat_period_s,
             mav_type=mavlink.MAV_TYPE_ONBOARD_CONTROLLER,
             autopilot=mavlink.MAV_AUTOPILOT_INVALID,
+            sender=sender,
             signing=signing,
         )
         self.connection_string = connection_string
@@ -178,6 +221,8 @@ class HoleMissionServer(MissionServer):
         self._holes: tuple[Hole, ...] = ()
         self.cards = CardSender(bytes_per_s=card_bytes_per_s)
         self._card_revs: dict[int, int] = {}
+        self.card_ceiling_bytes_per_s = card_bytes_per_s
+        self.radio_status_seen = 0
         self._rebuild()
 
     # -- lifecycle -----------------------------------------------------------------------
@@ -196,7 +241,7 @@ class HoleMissionServer(MissionServer):
             raise MissionServerError(str(err)) from err
         _log.info(
             "hole mission server on %s as %d/%d%s",
-            self.connection_string,
+            self.connection_string or "the autopilot link",
             self.sysid,
             self.compid,
             "" if self.signing is None else f", MAVLink signed ({self.signing})",
@@ -237,26 +282,28 @@ class HoleMissionServer(MissionServer):
         with self._lock:
             return self.receiver.mission
 
-    def announce(self, hole: Hole) -> str:
-        """Send STATUSTEXT ``HOLE <id> <score> <lat> <lon>`` (severity NOTICE); return it."""
-        text = hole_statustext(hole)
-        self._send_or_fail(
-            lambda mav: mav.statustext_send(mavlink.MAV_SEVERITY_NOTICE, text.encode("ascii"))
-        )
+    def announce(self, hole: Hole, tier: str = "announced") -> str:
+        """Send STATUSTEXT ``HOLE <id> <score> <lat> <lon>`` (severity NOTICE), or for a
+        hole for review ``REVIEW ...`` (severity INFO); return it."""
+        text = hole_statustext(hole, tier)
+        severity = mavlink.MAV_SEVERITY_NOTICE if tier == "announced" else mavlink.MAV_SEVERITY_INFO
+        self._send_or_fail(lambda mav: mav.statustext_send(severity, text.encode("ascii")))
         _log.info("announced %s", text)
         return text
 
-    def send_card(self, hole: Hole, jpeg: bytes, why: str = "") -> int:
-        """Queue hole ``hole``'s card (its best view ``jpeg`` and facts); return its size.
+    def send_card(self, hole: Hole, jpeg: bytes, why: str = "", tier: str = "announced") -> int:
+        """Queue hole ``hole``'s card (its best view ``jpeg`` and facts, ``tier`` among
+        them); return its size.
 
-        Sent under the byte budget by the server's thread; a newer card of the same hole
-        replaces one not yet started.
+        Sent under the byte budget by the server's thread, announced holes' cards before
+        those of holes for review; a newer card of the same hole replaces one not yet
+        started.
         """
         with self._lock:
             rev = self._card_revs.get(hole.id, 0) + 1
             self._card_revs[hole.id] = rev
-            card = make_card(jpeg, card_facts(hole, why, rev))
-            self.cards.put(hole.id, card)
+            card = make_card(jpeg, card_facts(hole, why, rev, tier))
+            self.cards.put(hole.id, card, priority=0 if tier == "announced" else 1)
         return len(card)
 
     def flush_cards(self, timeout_s: float = 10.0) -> bool:
@@ -277,6 +324,20 @@ class HoleMissionServer(MissionServer):
 
     # -- hooks of the server's thread ----------------------------------------------------
     def on_message(self, msg: Any) -> None:
+        if msg.get_type() == "RADIO_STATUS":
+            with self._lock:
+                self.radio_status_seen += 1
+                old = self.cards.bytes_per_s
+                self.cards.bytes_per_s = radio_budget(
+                    old, self.card_ceiling_bytes_per_s, int(msg.txbuf)
+                )
+            if self.cards.bytes_per_s != old:
+                _log.debug(
+                    "radio tx buffer %d %% free: card budget %.0f B/s",
+                    msg.txbuf,
+                    self.cards.bytes_per_s,
+                )
+            return
         if msg.get_type() != "DATA_TRANSMISSION_HANDSHAKE":  # no target fields: any peer
             return
         if msg.size == 0 and msg.packets == 0:  # a ground station asks for every card

@@ -26,34 +26,30 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import datetime as dt
+import functools
 import json
 import logging
 import math
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
 from holescan.capture import (
     Flight,
     FlightConfig,
     FlightSummary,
     HoleView,
-    LoggedFrame,
-    LoggedPose,
-    crop_view,
-    read_flight_log,
 )
 from holescan.errors import InputError
-from holescan.geotag import AnnounceGate, Hole, VehiclePose
+from holescan.geotag import AnnounceGate, Hole, Tier
 from holescan.ground import GroundOptions, GroundStation, ReprocessOptions, write_hole_outputs
 from holescan.missions import HoleMissionServer
-from holescan.sim._demo_map import DemoMap, DemoMapper
+from holescan.sim._demo_map import DemoMap, DemoMapper, views_and_track
 from holescan.sim._scoring import FalseHole, TruthRow, frames_in_view, score_holes
 from holescan.sim._sortie import SimSortie, SortieParams, loop_length_m
 
@@ -144,6 +140,10 @@ class DemoResult:
     match_m: float = 0.5
     cards_sent: int = 0
     pictures_at_ground: int = 0
+    review: tuple[Hole, ...] = ()
+    review_true: int = 0
+    review_latency_s: tuple[float, ...] = ()
+    area_m2: float = 0.0
     search: DemoMap | None = None
 
     @property
@@ -163,6 +163,9 @@ class DemoResult:
             "not_in_view": sum(r.status == "not in view" for r in self.truth),
             "false": len(self.false),
             "candidates": self.candidates,
+            "review": [h.id for h in self.review],
+            "review_true": self.review_true,
+            "review_latency_s": list(self.review_latency_s),
             "gate": dataclasses.asdict(self.gate),
             "latency_s": list(self.latency_s),
             "card_bytes": self.card_bytes,
@@ -199,12 +202,11 @@ class DemoResult:
             "interrupted": self.interrupted,
             "log_files": [str(p) for p in self.log_files],
             "files": {k: str(p) for k, p in self.files},
-            "searched_fraction": self.search.searched_fraction if self.search else None,
-            "missed_why": {
-                str(r.truth.id): self.search.why_missed(r.truth.id)
-                for r in self.truth
-                if self.search is not None and r.status != "found"
-            },
+            **(
+                self.search.numbers([r.truth.id for r in self.truth if r.status != "found"])
+                if self.search
+                else {"searched_fraction": None, "missed_why": {}}
+            ),
         }
 
 
@@ -228,7 +230,9 @@ class _Ground:
         new = [h for h in holes if h.id not in self._told]
         self._told.update(h.id for h in new)
         return tuple(
-            f"hole {h.id} score {h.score:.2f} at {h.lat_deg:.7f}, {h.lon_deg:.7f}" for h in new
+            f"hole {h.id} ({h.vehicle_tier}) score {h.score:.2f} at {h.lat_deg:.7f}, "
+            f"{h.lon_deg:.7f}"
+            for h in new
         )
 
     def wait_complete(self, ids: set[int], timeout_s: float) -> bool:
@@ -268,36 +272,6 @@ def _free_udp_port() -> int:
         return int(s.getsockname()[1])
 
 
-def _views_and_track(
-    files: Sequence[Path], holes: Sequence[Hole], on_frame: Callable[[LoggedFrame], None]
-) -> tuple[
-    dict[int, tuple[npt.NDArray[np.uint8], npt.NDArray[np.uint16], tuple[int, ...]]],
-    list[VehiclePose],
-    int | None,
-]:
-    """Read the flight log once: each hole's best view (cropped), the track, boot -> Unix;
-    every frame also to ``on_frame`` (the search map)."""
-    wanted: dict[int, list[Hole]] = {}
-    for h in holes:
-        if h.best_frame_index is not None:
-            wanted.setdefault(h.best_frame_index, []).append(h)
-    views: dict[int, tuple[npt.NDArray[np.uint8], npt.NDArray[np.uint16], tuple[int, ...]]] = {}
-    track: list[VehiclePose] = []
-    boot_to_unix: int | None = None
-    for rec in read_flight_log(files, kinds={LoggedFrame, LoggedPose}):
-        if isinstance(rec, LoggedPose):
-            track.append(rec.pose)
-            boot_to_unix = rec.t_unix_ns - rec.pose.t_boot_ns
-            continue
-        assert isinstance(rec, LoggedFrame)
-        on_frame(rec)
-        for h in wanted.get(rec.frame.index, ()):
-            rgb, box = crop_view(rec.frame.rgb, h.best_box)
-            depth, _ = crop_view(rec.frame.depth, h.best_box)
-            views[h.id] = (rgb.copy(), depth.copy(), box)
-    return views, track, boot_to_unix
-
-
 def run_demo(
     opts: DemoOptions | None = None,
     *,
@@ -332,6 +306,7 @@ def run_demo(
     gcs_port = _free_udp_port()
     announced: list[str] = []
     first_announced: dict[int, float] = {}
+    first_review: dict[int, float] = {}
     card_bytes = cards_sent = 0
     mission_items: int | None = None
     mission_error: str | None = None
@@ -345,14 +320,21 @@ def run_demo(
             HoleMissionServer(f"udpout:127.0.0.1:{gcs_port}", 1, home=home)
         )
 
-        def on_holes(served: list[Hole], news: list[Hole], views: Mapping[int, HoleView]) -> None:
+        def on_holes(
+            served: list[Hole],
+            news: list[Hole],
+            views: Mapping[int, HoleView],
+            tiers: Mapping[int, Tier],
+        ) -> None:
             server.update_holes(served)
-            announced.extend(server.announce(h) for h in news)
-            for h in news:
-                if h.id not in first_announced:  # boot-clock span first sighting -> now
-                    first_announced[h.id] = (h.t_last_boot_ns - h.t_first_boot_ns) * 1e-9
+            for h in sorted(news, key=lambda h: tiers[h.id] != "announced"):
+                tier = tiers[h.id]
+                announced.append(server.announce(h, tier))
+                told = first_announced if tier == "announced" else first_review
+                if h.id not in told:  # boot-clock span first sighting -> now
+                    told[h.id] = (h.t_last_boot_ns - h.t_first_boot_ns) * 1e-9
                 if h.id in views:
-                    server.send_card(h, views[h.id].jpeg, views[h.id].why)
+                    server.send_card(h, views[h.id].jpeg, views[h.id].why, tier)
 
         stack.enter_context(sortie)
         cfg = FlightConfig(
@@ -360,6 +342,7 @@ def run_demo(
             announce_min_p_hole=opts.gate.min_p_hole,
             announce_min_sightings=opts.gate.min_sightings,
             announce_min_span_s=opts.gate.min_span_s,
+            review_min_p_hole=opts.gate.review_min_p_hole,
             config_record={
                 "demo": {"sortie": dataclasses.asdict(opts.sortie), "duration_s": duration}
             },
@@ -416,19 +399,17 @@ def run_demo(
         card_bytes, cards_sent = server.cards.bytes_sent, server.cards.cards_sent
     interrupted = capture_s < duration - 1.0
     confirmed = tuple(opts.gate.select(summary.holes, first_announced))
+    announced_ids = {h.id for h in confirmed}
+    review = tuple(h for h in summary.holes if h.id in first_review and h.id not in announced_ids)
     truth = sortie.truth
-    rows, false = score_holes(
-        confirmed,
-        truth,
-        sortie.world,
-        anchor,
-        frames_in_view(sortie.sources),
-        match_m=opts.match_m,
-        min_frames_in_view=opts.min_frames_in_view,
+    in_view = frames_in_view(sortie.sources)
+    scored = functools.partial(
+        score_holes, match_m=opts.match_m, min_frames_in_view=opts.min_frames_in_view
     )
+    rows, false = scored(confirmed, truth, sortie.world, anchor, in_view)
     log_files = tuple(summary.log.files)
     mapper = DemoMapper(sortie.world, opts.sortie, sortie.camera, sortie.mount)
-    views, track, boot_to_unix = _views_and_track(log_files, confirmed, mapper.add)
+    views, track, boot_to_unix = views_and_track(log_files, (*confirmed, *review), mapper.add)
     search = mapper.finish(out, confirmed, boot_to_unix)
     kinds = Counter(str(h.kind) for h in sortie.world.holes)
     facts = {
@@ -440,10 +421,12 @@ def run_demo(
         f"{sum(r.status == 'missed' for r in rows)}, false {len(false)} (a find: inside a "
         f"true opening or within {opts.match_m:g} m of its centre)",
     }
+    review_rows, _ = scored(review, truth, sortie.world, anchor, in_view)
+    tiers = {h.id: "announced" for h in confirmed} | {h.id: "review" for h in review}
     files = write_hole_outputs(
         out,
         "flight",
-        confirmed,
+        (*confirmed, *review),
         views,  # type: ignore[arg-type]
         track,
         opts=ReprocessOptions(workers=0, min_sightings=opts.gate.min_sightings),
@@ -453,12 +436,12 @@ def run_demo(
         facts=facts,
         title="holescan demo: simulated dawn survey",
         search_map=search.section,
+        tiers=tiers,
     )
-    files = [*search.files, *files]
     result = DemoResult(
         out=out,
         log_files=log_files,
-        files=tuple(files),
+        files=(*search.files, *files),
         truth=rows,
         false=false,
         confirmed=confirmed,
@@ -471,7 +454,11 @@ def run_demo(
         interrupted=interrupted,
         world_features=dict(kinds),
         gate=opts.gate,
-        candidates=len(summary.holes) - len(confirmed),
+        candidates=len(summary.holes) - len(confirmed) - len(review),
+        review=review,
+        review_true=sum(r.status == "found" for r in review_rows),
+        review_latency_s=tuple(first_review[h.id] for h in review),
+        area_m2=opts.sortie.size_m[0] * opts.sortie.size_m[1],
         latency_s=tuple(first_announced[h.id] for h in confirmed if h.id in first_announced),
         card_bytes=card_bytes,
         cards_sent=cards_sent,

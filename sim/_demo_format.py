@@ -22,19 +22,20 @@ def format_result(r: DemoResult) -> list[str]:
         f"{n_access} access holes and {distractors} distractors in the field",
         f"frames: {c.frames_captured} captured ({c.frames_captured / max(r.capture_s, 1e-9):.1f}"
         f"/s), {c.frames_detected} detected, {c.frames_unposed} not posed at capture",
-        f"holes against the simulator's truth (an announced hole: p_hole >= "
+        f"holes against the simulator's truth (announced: hole-level p_hole >= "
         f"{r.gate.min_p_hole:g}, >= {r.gate.min_sightings} sightings over >= "
-        f"{r.gate.min_span_s:g} s; inside a true opening or within {r.match_m:g} m of its "
-        f"centre finds it; {r.candidates} weaker candidates not announced):",
+        f"{r.gate.min_span_s:g} s; for review: p_hole >= {r.gate.review_min_p_hole:g}; "
+        f"inside a true opening or within {r.match_m:g} m of its centre finds it; "
+        f"{r.candidates} weaker candidates kept in the log only):",
     ]
     for row in r.truth:
         t = row.truth
         where = f"true hole {t.id} at ({t.x_m:.1f}, {t.y_m:.1f}) m, {t.major_m:.2f} m wide"
         if row.status == "found":
-            score = next(h.score for h in r.confirmed if h.id == row.hole_id)
+            h = next(h for h in r.confirmed if h.id == row.hole_id)
             lines.append(
-                f"  {where}: FOUND as hole {row.hole_id} (score {score:.2f}), "
-                f"{100 * row.error_m:.0f} cm off, {row.sightings} sightings"
+                f"  {where}: FOUND, ANNOUNCED as hole {row.hole_id} (p_hole {h.p_hole:.2f}, "
+                f"score {h.score:.2f}), {100 * row.error_m:.0f} cm off, {row.sightings} sightings"
             )
         elif row.status == "missed":
             lines.append(f"  {where}: MISSED (whole in view in {row.frames_in_view} frames)")
@@ -47,6 +48,18 @@ def format_result(r: DemoResult) -> list[str]:
             f"  hole {f.hole.id}: FALSE (score {f.hole.score:.2f}, {f.hole.sightings} sightings;"
             f" nearest feature: {f.nearest}, {f.distance_m:.2f} m)"
         )
+    if r.review:
+        per_ha = len(r.review) / (r.area_m2 / 1e4) if r.area_m2 else float("nan")
+        lines.append(
+            f"  for review (sent to the ground with their pictures, not in the mission nor "
+            f"TAK until an operator confirms): {len(r.review)} holes, {r.review_true} at a "
+            f"true opening, {per_ha:.0f} per hectare surveyed"
+        )
+        for h in r.review:
+            lines.append(
+                f"    hole {h.id}: REVIEW (p_hole {h.p_hole:.2f}, score {h.score:.2f}, "
+                f"{h.sightings} sightings from {h.views} viewpoints)"
+            )
     errors = [row.error_m for row in r.truth if row.status == "found"]
     in_view = sum(row.status != "not in view" for row in r.truth)
     err = (
@@ -69,6 +82,11 @@ def format_result(r: DemoResult) -> list[str]:
         lines.append(
             f"  first sighting -> announcement: median {statistics.median(r.latency_s):.1f} s, "
             f"max {max(r.latency_s):.1f} s (autopilot clock)"
+        )
+    if r.review_latency_s:
+        lines.append(
+            f"  first sighting -> sent for review: median "
+            f"{statistics.median(r.review_latency_s):.1f} s, max {max(r.review_latency_s):.1f} s"
         )
     gcs = f"ground station: {len(r.announcements)} STATUSTEXT announcements"
     if r.capture_s > 0:

@@ -12,23 +12,25 @@ are written too (:func:`ground.searchmap.write_map_outputs`).
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import shapely
 from shapely.geometry import Polygon, box
 
-from holescan.capture import LoggedFrame
+from holescan.capture import LoggedFrame, LoggedPose, crop_view, read_flight_log
 from holescan.detect import CameraIntrinsics
-from holescan.geotag import CameraMount, Hole, camera_pose_local
+from holescan.geotag import CameraMount, Hole, VehiclePose, camera_pose_local
 from holescan.ground.report.searchmap import search_map_section
 from holescan.mapping import MapGrid, MapLayers, SearchMap
 from holescan.missions import SurveyParams
 from holescan.sim._sortie import SortieParams
 from holescan.sim._world import RubbleWorld
 
-__all__ = ["DemoMap", "DemoMapper"]
+__all__ = ["DemoMap", "DemoMapper", "views_and_track"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -46,6 +48,11 @@ class DemoMap:
     note: str = ""
     section: str | None = None
     """The report's search-map section."""
+
+    def numbers(self, missed_ids: Sequence[int]) -> dict[str, Any]:
+        """``searched_fraction`` and, per true hole not found, ``missed_why`` (demo.json)."""
+        why = {str(i): self.why_missed(i) for i in missed_ids}
+        return {"searched_fraction": self.searched_fraction, "missed_why": why}
 
     def why_missed(self, truth_id: int) -> str:
         c = self.hole_coverage.get(truth_id, 0.0)
@@ -156,3 +163,32 @@ def _searched(layers: MapLayers, area: Polygon, threshold: float) -> float:
     if not inside.any():
         return 0.0
     return float(np.mean(layers.coverage[inside] >= threshold))
+
+
+def views_and_track(
+    files: Sequence[Path], holes: Sequence[Hole], on_frame: Callable[[LoggedFrame], None]
+) -> tuple[
+    dict[int, tuple[npt.NDArray[np.uint8], npt.NDArray[np.uint16], tuple[int, ...]]],
+    list[VehiclePose],
+    int | None,
+]:
+    """Read the log once: best views (cropped), track, boot -> Unix; frames to ``on_frame``."""
+    wanted: dict[int, list[Hole]] = {}
+    for h in holes:
+        if h.best_frame_index is not None:
+            wanted.setdefault(h.best_frame_index, []).append(h)
+    views: dict[int, tuple[npt.NDArray[np.uint8], npt.NDArray[np.uint16], tuple[int, ...]]] = {}
+    track: list[VehiclePose] = []
+    boot_to_unix: int | None = None
+    for rec in read_flight_log(files, kinds={LoggedFrame, LoggedPose}):
+        if isinstance(rec, LoggedPose):
+            track.append(rec.pose)
+            boot_to_unix = rec.t_unix_ns - rec.pose.t_boot_ns
+            continue
+        assert isinstance(rec, LoggedFrame)
+        on_frame(rec)
+        for h in wanted.get(rec.frame.index, ()):
+            rgb, box = crop_view(rec.frame.rgb, h.best_box)
+            depth, _ = crop_view(rec.frame.depth, h.best_box)
+            views[h.id] = (rgb.copy(), depth.copy(), box)
+    return views, track, boot_to_unix

@@ -10,6 +10,7 @@ from __future__ import annotations
 import base64
 import dataclasses
 import logging
+import math
 import os
 from collections.abc import Collection, Iterable, Iterator, Mapping
 from pathlib import Path
@@ -99,13 +100,18 @@ class LoggedHoles:
 
     def as_holes(self) -> tuple[Hole, ...]:
         """The holes as :class:`geotag.Hole` records (when they were logged as such)."""
-        names = {f.name for f in dataclasses.fields(Hole)}
+        fields = dataclasses.fields(Hole)
+        names = {f.name for f in fields}
+        required = {f.name for f in fields if f.default is dataclasses.MISSING}
         out = []
         for h in self.holes:
-            if set(h) != names:
+            if not required <= set(h) <= names:  # logs from before p_hole and views
                 raise FlightLogError(f"logged hole fields {sorted(h)} are not a geotag.Hole")
             box = h["best_box"]
-            out.append(Hole(**{**h, "best_box": tuple(box) if box is not None else box}))
+            values: dict[str, Any] = {k: v for k, v in h.items() if k != "p_hole"}
+            p = h.get("p_hole")
+            values["p_hole"] = math.nan if p is None else float(p)
+            out.append(Hole(**{**values, "best_box": tuple(box) if box is not None else box}))
         return tuple(out)
 
 

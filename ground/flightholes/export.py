@@ -14,7 +14,7 @@ from pathlib import Path
 
 from holescan.capture import check_output, output_via_part
 from holescan.errors import InputError
-from holescan.geotag import Hole
+from holescan.geotag import AnnounceGate, Hole
 from holescan.ground.flightholes.read import (
     FlightHoles,
     flight_log_files,
@@ -116,12 +116,20 @@ def export_flight_holes(
     flight = read_flight_holes(logs, thumbnails=need_pictures, thumb_height_px=thumb_height_px)
     if not flight.holes:
         raise InputError(f"{flight.paths[0]}: the flight found no holes (its hole list is empty)")
-    keep = tuple(h for h in flight.holes if h.sightings >= min_sightings)
-    if not keep:
+    gate = AnnounceGate()
+    tiers = {h.id: gate.tier(h) for h in flight.holes}
+    seen = tuple(h for h in flight.holes if h.sightings >= min_sightings)
+    if not seen:
         most = max(h.sightings for h in flight.holes)
         raise InputError(
             f"none of the {len(flight.holes)} holes was seen in >= {min_sightings} frames "
             f"(at most {most}); lower --min-sightings to export them"
+        )
+    keep = tuple(h for h in seen if tiers[h.id] != "candidate")  # candidates: not for the crew
+    if not keep:
+        raise InputError(
+            f"none of the {len(seen)} holes seen in >= {min_sightings} frames is announced or "
+            f"for review (p_hole >= {gate.review_min_p_hole}): no file for the crew"
         )
     jpegs = {hid: t.jpeg for hid, t in flight.thumbnails.items()}
     name = f"holescan holes: {log_stem(flight.paths[0]).name}"
@@ -138,7 +146,7 @@ def export_flight_holes(
                 rel_alt_m=rel_alt_m,
                 clearance_m=clearance_m,
                 name=name,
-                candidates=[h for h in flight.holes if h not in keep],
+                tiers={h.id: tiers[h.id] for h in keep},
             )
         written.append((fmt, path))
     return ExportReport(flight, tuple(rank_holes(keep)), tuple(written))

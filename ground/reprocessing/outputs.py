@@ -20,7 +20,7 @@ import numpy as np
 import numpy.typing as npt
 
 from holescan.capture import jsonable, output_via_part
-from holescan.geotag import Hole, VehiclePose
+from holescan.geotag import AnnounceGate, Hole, VehiclePose
 from holescan.ground.flightholes.views import render_thumbnail
 from holescan.ground.report.page import write_report
 from holescan.ground.reprocessing.options import HoleMatch, ReprocessOptions
@@ -136,8 +136,10 @@ def _hole_files(
     thumbnails: Mapping[int, bytes],
     home: tuple[float, float, float] | None,
     boot_to_unix_ns: int | None,
+    tiers: Mapping[int, str],
 ) -> list[tuple[str, Path]]:
     written: list[tuple[str, Path]] = []
+    holes = [h for h in holes if tiers.get(h.id, "candidate") != "candidate"]
     if not holes:
         return written
     for fmt in opts.formats:
@@ -153,6 +155,7 @@ def _hole_files(
                 rel_alt_m=opts.rel_alt_m,
                 clearance_m=opts.clearance_m,
                 name=f"holescan holes: {name}",
+                tiers=tiers,
             )
         written.append((fmt, path))
     return written
@@ -197,6 +200,7 @@ def write_hole_outputs(
     track_breaks: Sequence[int] = (),
     search_map: str | None = None,
     overlay: Path | None = None,
+    tiers: Mapping[int, str] | None = None,
 ) -> list[tuple[str, Path]]:
     """Write a flight's hole files (``NAME_holes.*``), TAK data package
     (``NAME_holes_datapackage.zip``) and report (``NAME_report.html``).
@@ -205,18 +209,26 @@ def write_hole_outputs(
     its best view, the box (x, y, w, h) in that picture's pixels. track : vehicle poses.
     truth : (name, lat_deg, lon_deg) drawn on the report's map. track_breaks : where in
     ``track`` another flight starts (a campaign). search_map : the report's search-map
-    section. overlay : the map overlay (``.kmz``) for the data package (None:
-    ``NAME_map.kmz`` in ``out`` when it exists). Returns (kind, path) pairs.
+    section. overlay : the map overlay (``.kmz``) for
+    the data package (None: ``NAME_map.kmz`` in ``out`` when it exists). tiers : hole id ->
+    ``announced``, ``review``, ``confirmed``, ``rejected`` or ``candidate`` (default: the
+    vehicle's :meth:`geotag.AnnounceGate.tier` with its default thresholds); candidates
+    are left out of the hole files, holes for review out of the TAK data package (they
+    all stay in the report). Returns (kind, path) pairs.
     """
     opts = opts or ReprocessOptions()
+    if tiers is None:
+        gate = AnnounceGate()
+        tiers = {h.id: gate.tier(h) for h in holes}
     wanted = {h.id for h in holes}
     jpegs = {
         hid: render_thumbnail(rgb, depth, box)[0]
         for hid, (rgb, depth, box) in views.items()
         if hid in wanted
     }
-    written = _hole_files(out, name, holes, opts, jpegs, home, boot_to_unix_ns)
-    written += _datapackage(out, name, holes, jpegs, boot_to_unix_ns, overlay)
+    written = _hole_files(out, name, holes, opts, jpegs, home, boot_to_unix_ns, tiers)
+    for_tak = [h for h in holes if tiers.get(h.id) in ("announced", "confirmed")]
+    written += _datapackage(out, name, for_tak, jpegs, boot_to_unix_ns, overlay)
     report_holes = [
         dataclasses.replace(h, best_box=views[h.id][2]) if h.id in views else h for h in holes
     ]

@@ -54,6 +54,8 @@ def hole_waypoint(h: GroundHole, image_src: str | None = None) -> Waypoint:
     """The hole as the project's waypoint record (MSL altitude when known)."""
     props: dict[str, Any] = {
         "hole_id": h.id,
+        "tier": h.tier,
+        "p_hole": h.p_hole,
         "score": round(h.score, 3),
         "mark": h.mark,
         "sightings": h.sightings,
@@ -62,7 +64,8 @@ def hole_waypoint(h: GroundHole, image_src: str | None = None) -> Waypoint:
         "minor_m": h.minor_m,
         "why": h.why,
     }
-    desc = hole_summary(h)
+    p = "unknown" if h.p_hole is None else f"{h.p_hole:.2f}"
+    desc = f"{h.tier}, p_hole {p}: {hole_summary(h)}"
     if image_src is not None:
         props["picture"] = image_src
     return Waypoint(

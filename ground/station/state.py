@@ -62,7 +62,7 @@ TIERS: tuple[Tier, ...] = ("announced", "review", "confirmed", "rejected")
 FORMAT = "holescan-ground-2"
 """The state file's ``format``; ``holescan-ground-1`` files (older stations) are read too."""
 _FORMAT_1 = "holescan-ground-1"
-_STATUSTEXT = re.compile(r"HOLE (\d+) ([\d.]+) (-?[\d.]+) (-?[\d.]+)")
+_STATUSTEXT = re.compile(r"(?:HOLE|REVIEW) (\d+) ([\d.]+) (-?[\d.]+) (-?[\d.]+)")
 _TRACK_MAX = 20_000
 _TRACK_SAVE_NS = 10 * 10**9
 _NS_PER_S = 1_000_000_000
@@ -72,11 +72,13 @@ _OLD_SECONDS = {"first_unix": "t_first_unix_ns", "updated_unix": "t_updated_unix
 
 
 def parse_hole_statustext(text: str) -> tuple[int, float, float, float] | None:
-    """``HOLE <id> <score> <lat> <lon>`` -> (id, score, lat_deg, lon_deg); None for other
-    texts.
+    """``HOLE <id> <score> <lat> <lon>`` (an announced hole) or ``REVIEW <id> ...`` (a hole
+    for review) -> (id, score, lat_deg, lon_deg); None for other texts.
 
     >>> parse_hole_statustext("HOLE 3 0.88 43.6533100 -79.3831200")
     (3, 0.88, 43.65331, -79.38312)
+    >>> parse_hole_statustext("REVIEW 4 0.30 43.6533100 -79.3831200")
+    (4, 0.3, 43.65331, -79.38312)
     >>> parse_hole_statustext("PreArm: GPS") is None
     True
     """
@@ -103,6 +105,9 @@ class GroundHole:
     seq : waypoint number in the downloaded
     hole mission (None: not in it). t_first_unix_ns, t_updated_unix_ns : when the ground
     first heard of it / last changed it (Unix clock, ns).
+    The vehicle says the tier by STATUSTEXT ``HOLE`` / ``REVIEW`` and by its card's
+    ``"tier"``. p_hole : the vehicle's hole-level confidence (its card's ``p``; None: not
+    told).
     """
 
     id: int
@@ -122,6 +127,7 @@ class GroundHole:
     t_first_unix_ns: int = 0
     t_updated_unix_ns: int = 0
     vehicle_tier: VehicleTier = "announced"
+    p_hole: float | None = None
 
     @property
     def tier(self) -> Tier:
@@ -287,12 +293,18 @@ class StationState:
         if parsed is None:
             return None
         hid, score, lat, lon = parsed
+        tier: VehicleTier = "review" if text.strip().startswith("REVIEW") else "announced"
         with self._lock:
             h = self.holes.get(hid)
-            if h is not None and (h.lat_deg, h.lon_deg, h.score) == (lat, lon, score):
+            if h is not None and (h.lat_deg, h.lon_deg, h.score, h.vehicle_tier) == (
+                lat,
+                lon,
+                score,
+                tier,
+            ):
                 return h
             h = self._hole(hid, lat, lon, score)
-            h.lat_deg, h.lon_deg, h.score = lat, lon, score
+            h.lat_deg, h.lon_deg, h.score, h.vehicle_tier = lat, lon, score, tier
         self._changed()
         return h
 
@@ -319,6 +331,8 @@ class StationState:
             h.minor_m = _opt(facts.get("minor"))
             h.sightings = int(facts.get("n", h.sightings))
             h.why = str(facts.get("why", h.why))[:500]
+            h.vehicle_tier = "review" if facts.get("tier") == "review" else "announced"
+            h.p_hole = _opt(facts.get("p"))
         self._changed()
         return h
 

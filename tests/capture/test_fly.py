@@ -169,7 +169,6 @@ def test_missing_config_file_is_an_input_error(tmp_path: Path) -> None:
     [
         (["--sensor", "oni:{tmp}/none.oni"], "none.oni"),
         (["--sensor", "mcap:{tmp}/none.mcap"], "flight log not found"),
-        (["--sensor", "sim", "--mavlink", "tcp:127.0.0.1:5760"], "needs a udpin:HOST:PORT"),
         (["--sensor", "sim"], "no log folder"),
     ],
 )
@@ -264,8 +263,9 @@ def test_fly_sim_serves_holes_to_the_gcs_and_stops_cleanly_on_sigint(tmp_path: P
                 continue
             if msg.get_type() == "STATUSTEXT":
                 texts.append(msg.text)
-                # Download the served mission: it lists the hole after home.
-                gcs.mav.mission_request_list_send(1, 191)
+                if msg.text.startswith("HOLE"):  # REVIEW ones are not in the mission
+                    # Download the served mission: it lists the hole after home.
+                    gcs.mav.mission_request_list_send(1, 191)
             else:
                 count = msg.count
     finally:
@@ -274,10 +274,10 @@ def test_fly_sim_serves_holes_to_the_gcs_and_stops_cleanly_on_sigint(tmp_path: P
         gcs.close()
     assert code == 0, err[-3000:]
     # Ids follow first sighting; which hole is confirmed (announced) first depends on load.
-    assert texts and re.match(r"HOLE \d+ [01]\.\d\d -?\d+\.\d{7} -?\d+\.\d{7}$", texts[0]), (
-        texts,
-        err[-3000:],
-    )
+    announced = [t for t in texts if not t.startswith("REVIEW")]
+    assert announced and re.match(
+        r"HOLE \d+ [01]\.\d\d -?\d+\.\d{7} -?\d+\.\d{7}$", announced[0]
+    ), (texts, err[-3000:])
     assert count is not None and count >= 2
     assert "SIGINT: finishing the flight" in err
     assert "dropped from the log 0" in out and "true access hole" in out

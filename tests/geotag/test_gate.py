@@ -65,3 +65,27 @@ def test_the_threshold_is_the_detectors_calibrated_probability() -> None:
 def test_bad_settings_are_input_errors(kw: dict[str, float]) -> None:
     with pytest.raises(InputError):
         AnnounceGate(**kw)  # type: ignore[arg-type]
+
+
+def test_tiers_announced_review_candidate_from_the_hole_level_p_hole() -> None:
+    import dataclasses
+
+    gate = AnnounceGate(min_p_hole=0.9, review_min_p_hole=0.1)
+    # the case: seen in 240 frames from one hover, p_hole 0.76: for review, not lost
+    hover = dataclasses.replace(hole(1, 0.44, 240, 20.0, north_m=10.0), p_hole=0.76)
+    assert gate.tier(hover) == "review"
+    assert gate.tier(dataclasses.replace(hover, p_hole=0.95)) == "announced"
+    # the hole-level p_hole decides, not the best frame: a high score alone is not enough
+    assert gate.tier(dataclasses.replace(hole(2, 0.9, 5, 1.0), p_hole=0.3)) == "review"
+    assert gate.tier(dataclasses.replace(hole(3, 0.05, 6, 1.0), p_hole=0.02)) == "candidate"
+    # strong but seen once: for review until seen again from elsewhere
+    assert gate.tier(dataclasses.replace(hole(4, 0.9, 1, 0.0), p_hole=0.99)) == "review"
+    # a log from before p_hole: its best frame's
+    assert gate.p_hole(hole(5, 0.9, 5, 1.0)) == p_hole_of_score(0.9)
+    # for review: not at the place of an announced hole
+    strong = dataclasses.replace(hole(6, 0.9, 5, 1.0), p_hole=0.97)
+    twin = dataclasses.replace(hole(7, 0.3, 3, 1.0, north_m=0.1), p_hole=0.4)
+    apart = dataclasses.replace(hole(8, 0.3, 3, 1.0, north_m=3.0), p_hole=0.4)
+    assert [h.id for h in gate.review([strong, twin, apart, hover])] == [1, 8]
+    with pytest.raises(InputError):
+        AnnounceGate(review_min_p_hole=1.0)

@@ -145,21 +145,91 @@ def test_newer_card_replaces_an_unsent_one_and_repeats_are_bounded() -> None:
         CardSender(bytes_per_s=1.0)
 
 
-def test_candidates_are_marked_in_the_files_and_never_a_waypoint(tmp_path: Any) -> None:
+@pytest.mark.parametrize("tier", ["review", "rejected"])
+def test_every_file_says_what_each_hole_is_and_only_announced_ones_are_waypoints(
+    tmp_path: Any, tier: str
+) -> None:
+    import dataclasses
     import json as _json
+    import xml.etree.ElementTree as ET
 
-    from holescan.missions import write_hole_file
+    from holescan.missions import read_gpx, write_hole_file
 
-    strong = HOLE
+    strong = dataclasses.replace(HOLE, p_hole=0.97)
     weak = Hole(
-        8, 43.6533, -79.3833, 121.0, 0.5, 0.21, 4, 10**9, 2 * 10**9, 3, (1, 2, 3, 4), 0.3, 0.2
+        8,
+        43.6533,
+        -79.3833,
+        121.0,
+        0.5,
+        0.21,
+        4,
+        10**9,
+        2 * 10**9,
+        3,
+        (1, 2, 3, 4),
+        0.3,
+        0.2,
+        p_hole=0.31,
     )
-    gj = write_hole_file(tmp_path / "h.geojson", [strong], "geojson", candidates=[weak])
+    holes, tiers = [strong, weak], {7: "announced", 8: tier}
+    gj = write_hole_file(tmp_path / "h.geojson", holes, "geojson", tiers=tiers)
     feats = {
-        f["properties"]["name"]: f["properties"] for f in _json.loads(gj.read_text())["features"]
+        f["properties"]["hole_id"]: f["properties"] for f in _json.loads(gj.read_text())["features"]
     }
-    assert feats["hole 7"].get("candidate") is None and feats["candidate 8"]["candidate"] is True
-    plan = write_hole_file(tmp_path / "h.plan", [strong], "plan", candidates=[weak])
-    assert len(_json.loads(plan.read_text())["mission"]["items"]) == 1
-    kml = write_hole_file(tmp_path / "h.kml", [strong], "kml", candidates=[weak]).read_text()
-    assert "candidate 8" in kml and "not announced" in kml
+    for hid, want_tier, p in ((7, "announced", 0.97), (8, tier, 0.31)):
+        f = feats[hid]
+        assert (f["tier"], f["p_hole"]) == (want_tier, p)
+        assert {"sightings", "major_m", "minor_m", "sigma_h_m"} <= set(f)
+    assert feats[8]["name"] == f"{tier} 8"
+    for fmt in ("plan", "wpl"):  # a mission: announced (and confirmed) holes only
+        path = write_hole_file(tmp_path / f"h.{fmt}", holes, fmt, tiers=tiers)  # type: ignore[arg-type]
+        if fmt == "plan":
+            items = _json.loads(path.read_text())["mission"]["items"]
+            assert [it["holescan"]["properties"]["hole_id"] for it in items] == [7]
+            assert items[0]["holescan"]["properties"]["tier"] == "announced"
+        else:
+            assert len(path.read_text().splitlines()) == 3  # header, home, hole 7
+    gpx = read_gpx(write_hole_file(tmp_path / "h.gpx", holes, "gpx", tiers=tiers))
+    descs = {w.name: w.description or "" for w in gpx}
+    assert "(announced, rank 1): p_hole 0.97" in descs["hole 7"]
+    assert f"({tier}, rank 2): p_hole 0.31" in descs[f"{tier} 8"]
+    assert "+-0.50 m" in descs[f"{tier} 8"] and "0.30 x 0.20 m" in descs[f"{tier} 8"]
+    kml = write_hole_file(tmp_path / "h.kml", holes, "kml", tiers=tiers).read_text()
+    root = ET.fromstring(kml)
+    data = {
+        d.get("name"): d.findtext("{http://www.opengis.net/kml/2.2}value")
+        for d in root.iter("{http://www.opengis.net/kml/2.2}Data")
+    }
+    assert data["tier"] is not None and f"{tier} 8" in kml and "p_hole" in data
+    with pytest.raises(InputError, match="tier"):
+        write_hole_file(tmp_path / "x.gpx", holes, "gpx", tiers={8: "candidate"})
+
+
+def test_announced_holes_cards_go_before_those_for_review() -> None:
+    now = [0.0]
+    sender = CardSender(bytes_per_s=1000.0, clock=lambda: now[0], repeat_s=None)
+    wire = Wire()
+    cards = {k: make_card(jpeg(k), {"id": k, "rev": 1}) for k in (1, 2, 3, 4)}
+    sender.put(1, cards[1], priority=1)  # review, started first
+    for _ in range(2):  # its handshake goes out: a card begun is never cut off
+        sender.pump(wire.send)
+        now[0] += 0.1
+    assert wire.bytes
+    sender.put(2, cards[2], priority=1)  # review
+    sender.put(3, cards[3], priority=0)  # announced: before the waiting review card
+    sender.put(4, cards[4], priority=0)
+    p, asm, got = parser(), CardAssembler(), []
+    for _ in range(400):
+        sender.pump(wire.send)
+        now[0] += 0.1
+    for b in wire.bytes:
+        for msg in p.parse_buffer(b) or []:
+            if (card := asm.add(msg)) is not None:
+                got.append(read_card(card)["id"])  # type: ignore[index]
+    assert got == [1, 3, 4, 2]
+    # a review hole that becomes announced jumps the queue too
+    sender.put(5, make_card(jpeg(5), {"id": 5, "rev": 1}), priority=1)
+    sender.put(6, make_card(jpeg(6), {"id": 6, "rev": 1}), priority=1)
+    sender.put(6, make_card(jpeg(6), {"id": 6, "rev": 2}), priority=0)
+    assert [item.key for item in sender._queue] == [6, 5]

@@ -122,7 +122,7 @@ def test_gpx_parses_with_gpxpy(tmp_path: Path) -> None:
         assert wpt.latitude == pytest.approx(h.lat_deg, abs=1e-7)
         assert wpt.longitude == pytest.approx(h.lon_deg, abs=1e-7)
         assert wpt.elevation == pytest.approx(h.alt_m)  # MSL, what GPX elevation means
-        assert f"hole {hid} (rank" in wpt.description
+        assert f"hole {hid} (announced, rank" in wpt.description
         assert f"score {h.score:.2f}" in wpt.description
         assert f"seen in {h.sightings} frames" in wpt.description
     # At least 7 decimals in the file itself.
@@ -229,7 +229,7 @@ def test_plan_items_carry_hole_data(tmp_path: Path) -> None:
         assert item["params"][6] == pytest.approx(max(3.0, h.alt_m - HOME[2] + 2.0))
     _home, items = read_plan(path)
     assert [w.properties["hole_id"] for w in items] == RANKED_IDS
-    assert items[0].description.startswith("hole 3 (rank 1)")
+    assert items[0].description.startswith("hole 3 (announced, rank 1)")
 
 
 def test_wpl_loads_in_pymavlink(tmp_path: Path) -> None:

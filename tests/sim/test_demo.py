@@ -59,7 +59,8 @@ def test_printed_score_is_the_truth(demo: tuple[Path, str]) -> None:
     a = sortie.anchor
     truth = {t.id: t for t in true_holes(world, a)}
     flight = read_flight_holes(sorted(out.glob("flight_*.mcap")), thumbnails=False)
-    said = {int(t.split()[1]) for t in json.loads((out / "demo.json").read_text())["announcements"]}
+    told = json.loads((out / "demo.json").read_text())["announcements"]
+    said = {int(t.split()[1]) for t in told if t.startswith("HOLE ")}
     confirmed = {h.id: h for h in AnnounceGate().select(flight.holes, said)}
 
     def centre_m(h: Hole, t: TrueHole) -> float:
@@ -78,7 +79,7 @@ def test_printed_score_is_the_truth(demo: tuple[Path, str]) -> None:
         t = truth[int(tid)]
         assert (float(x), float(y)) == (round(t.x_m, 1), round(t.y_m, 1))
         if status == "FOUND":
-            m = re.search(r"as hole (\d+) \(score [\d.]+\), (\d+) cm off", rest)
+            m = re.search(r"as hole (\d+) \(p_hole [\d.]+, score [\d.]+\), (\d+) cm off", rest)
             assert m is not None
             h = confirmed[int(m[1])]  # a confirmed hole of the logged flight
             assert finds(h, t) and abs(100 * centre_m(h, t) - int(m[2])) <= 1
@@ -114,23 +115,33 @@ def test_flight_log_ground_station_and_files(demo: tuple[Path, str]) -> None:
     assert info.frames == doc["frames_captured"] > 50
     assert "/mavlink/raw" in info.topics and "/holes" in info.topics
     confirmed = doc["found"] + doc["false"]
-    # Each confirmed hole was announced to the ground station and served as a waypoint.
-    texts = doc["announcements"]
+    # Each confirmed hole was announced to the ground station and served as a waypoint;
+    # each hole for review was sent too (REVIEW), never a waypoint.
+    texts = [t for t in doc["announcements"] if t.startswith("HOLE ")]
+    told = [t for t in doc["announcements"] if not t.startswith("HOLE ")]
     assert len({t.split()[1] for t in texts}) == confirmed
     assert all(re.fullmatch(r"HOLE \d+ [\d.]+ -?[\d.]+ -?[\d.]+", t) for t in texts)
+    assert all(re.fullmatch(r"REVIEW \d+ [\d.]+ -?[\d.]+ -?[\d.]+", t) for t in told)
+    review = doc["review"]
+    assert {int(t.split()[1]) for t in told} >= set(review)
     assert doc["mission_items"] == confirmed
     assert f"downloaded a mission of {confirmed} hole waypoints" in text
     files = doc["files"]
     gpx = gpxpy.parse(Path(files["gpx"]).read_text())
-    assert len(gpx.waypoints) == confirmed
+    assert len(gpx.waypoints) == confirmed + len(review)
+    assert sum(w.name.startswith("review ") for w in gpx.waypoints) == len(review)
     plan = json.loads(Path(files["plan"]).read_text())
     assert len(plan["mission"]["items"]) == confirmed
-    assert len(json.loads(Path(files["geojson"]).read_text())["features"]) == confirmed
-    page = Path(files["report"]).read_text()
-    # Two pictures per hole, and the search map's coverage layer.
-    assert (
-        page.count("true hole") >= 4 and page.count("data:image/png;base64,") == 2 * confirmed + 1
+    feats = json.loads(Path(files["geojson"]).read_text())["features"]
+    assert sorted(f["properties"]["tier"] for f in feats) == sorted(
+        ["announced"] * confirmed + ["review"] * len(review)
     )
+    if review:
+        assert "for review (sent to the ground with their pictures" in text
+    page = Path(files["report"]).read_text()
+    shown = confirmed + len(review)
+    # Two pictures per hole shown, and the search map's coverage layer.
+    assert page.count("true hole") >= 4 and page.count("data:image/png;base64,") == 2 * shown + 1
     assert "Search map" in page
     for path in files.values():
         assert str(out) in path

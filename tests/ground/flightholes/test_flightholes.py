@@ -57,8 +57,9 @@ class Truth:
 
 
 TRUTHS = (
-    Truth(1, 43.71234567, 10.40123456, (4, 6, 8, 10, 12), 8, (40, 30, 20, 16)),
-    Truth(2, 43.71238901, 10.40129876, (12, 14, 16, 18, 20), 16, (90, 60, 24, 20)),
+    # six views over 0.33 s: announced (AnnounceGate: two sightings over 0.3 s)
+    Truth(1, 43.71234567, 10.40123456, (4, 6, 8, 10, 12, 14), 8, (40, 30, 20, 16)),
+    Truth(2, 43.71238901, 10.40129876, (12, 14, 16, 18, 20, 22), 16, (90, 60, 24, 20)),
     Truth(3, 43.71231111, 10.40122222, (22,), 22, (60, 40, 18, 18)),  # seen once
 )
 
@@ -237,9 +238,8 @@ def test_every_format_parses_back_with_its_standard_reader(
 
     # GPX: gpxpy.
     gpx = gpxpy.parse((tmp_path / "out" / "h.gpx").read_text(encoding="utf-8"))
-    # the hole seen once follows, marked as a candidate (never a waypoint of the mission)
-    assert [p.name for p in gpx.waypoints] == [f"hole {i}" for i in ids] + ["candidate 3"]
-    assert "candidate, not announced" in (gpx.waypoints[-1].description or "")
+    # the hole seen once is not for the crew (below --min-sightings): not in the files
+    assert [p.name for p in gpx.waypoints] == [f"hole {i}" for i in ids]
     for wpt, h in zip(gpx.waypoints[:2], holes, strict=True):
         assert (wpt.latitude, wpt.longitude) == (
             pytest.approx(h.lat_deg, abs=1e-7), pytest.approx(h.lon_deg, abs=1e-7))  # fmt: skip
@@ -253,13 +253,14 @@ def test_every_format_parses_back_with_its_standard_reader(
     # KML: an XML parser; thumbnails inline as data: URIs.
     root = ET.parse(tmp_path / "out" / "h.kml").getroot()
     pms = root.findall(".//k:Placemark", KML)
-    assert len(pms) == 3 and pms[2].findtext("k:name", "", KML) == "candidate 3"
+    assert len(pms) == 2
     for pm, h in zip(pms[:2], holes, strict=True):
         data = {
             d.get("name"): json.loads(d.findtext("k:value", "", KML))
             for d in pm.iterfind(".//k:Data", KML)
         }
         assert (data["hole_id"], data["score"], data["sightings"]) == (h.id, h.score, h.sightings)
+        assert data["tier"] == "announced" and data["p_hole"] is None  # a log from before
         lon, lat, _ = (float(v) for v in pm.findtext(".//k:coordinates", "", KML).split(","))
         assert (lat, lon) == (
             pytest.approx(h.lat_deg, abs=1e-7),
@@ -281,7 +282,7 @@ def test_every_format_parses_back_with_its_standard_reader(
 
     # GeoJSON: json.
     feats = json.loads((tmp_path / "out" / "h.geojson").read_text())["features"]
-    assert feats[-1]["properties"]["candidate"] is True and len(feats) == 3
+    assert len(feats) == 2 and [f["properties"]["tier"] for f in feats] == ["announced"] * 2
     for f, h in zip(feats[:2], holes, strict=True):
         lon, lat = f["geometry"]["coordinates"]
         assert (lat, lon) == (
@@ -328,7 +329,9 @@ def test_default_names_repeated_formats_and_min_sightings(
     assert sorted(p.name for p in tmp_path.iterdir()) == [
         "flight_0000.mcap", "flight_holes.gpx", "flight_holes.waypoints"]  # fmt: skip
     gpx = gpxpy.parse((tmp_path / "flight_holes.gpx").read_text())
-    assert [p.name for p in gpx.waypoints] == ["hole 1", "hole 2", "hole 3"]  # by score
+    assert [p.name for p in gpx.waypoints] == ["hole 1", "hole 2", "review 3"]  # by score
+    wpl = (tmp_path / "flight_holes.waypoints").read_text().splitlines()
+    assert len(wpl) == 4  # header, home, holes 1 and 2: a hole for review is no waypoint
     assert "wrote" in capsys.readouterr().out
 
 
@@ -347,8 +350,9 @@ def test_rotated_parts_are_read_as_one_flight(tmp_path: Path, main: Main) -> Non
     out = tmp_path / "rot.geojson"
     assert main(["holes", str(paths[0]), "--format", "geojson", "--out", str(out)]) == 0
     feats = json.loads(out.read_text())["features"]
-    assert [f["properties"]["hole_id"] for f in feats] == [1, 2, 3]
-    assert [f["properties"].get("candidate", False) for f in feats] == [False, False, True]
+    # hole 3, seen once, is below --min-sightings (2): not for the crew
+    assert [f["properties"]["hole_id"] for f in feats] == [1, 2]
+    assert [f["properties"]["tier"] for f in feats] == ["announced", "announced"]
 
 
 def test_a_log_cut_off_by_a_crash_still_exports(
@@ -367,7 +371,7 @@ def test_a_log_cut_off_by_a_crash_still_exports(
     assert "recover" in got.truncated[0]
     assert got.holes == tuple(final_holes()[k] for k in (1, 2, 3))
     pms = ET.parse(out).getroot().findall(".//k:Placemark", KML)
-    assert [pm.findtext("k:name", "", KML) for pm in pms] == ["hole 1", "hole 2", "candidate 3"]
+    assert [pm.findtext("k:name", "", KML) for pm in pms] == ["hole 1", "hole 2"]  # 3: seen once
 
 
 def test_a_best_view_missing_from_the_log_only_loses_its_picture(

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from holescan.errors import InputError
-from holescan.geotag import LocalFrame
+from holescan.geotag import Hole, LocalFrame
 from holescan.ground import GroundHole, StationFileError, StationState, TrackPoint
 
 HOME = (43.6532, -79.3832)
@@ -99,3 +99,28 @@ def test_mission_items_pair_with_holes_nearest_first(tmp_path: Path) -> None:
     items = [(1, *at(0.3, 0.0)), (2, *at(0.1, 0.0)), (3, *at(50.0, 0.0))]
     assert state.on_mission(items) == 1  # item 3 matches no hole
     assert {h.id: h.seq for h in state.holes.values()} == {1: 2, 2: 1, 3: None}
+
+
+def test_the_vehicles_tier_from_statustext_and_card_and_in_the_files(tmp_path: Path) -> None:
+    from holescan.ground.station.files import hole_waypoint
+    from holescan.missions import card_facts, make_card
+
+    state = StationState.open(tmp_path / "st")
+    state.clock = lambda: T_NS
+    h = state.on_statustext("REVIEW 4 0.30 43.6533100 -79.3831200")
+    assert h is not None and h.vehicle_tier == "review"
+    jpeg = b"\xff\xd8\xff\xd9"
+    hole = Hole(4, 43.65331, -79.38312, 120.0, 0.4, 0.3, 3, 0, 10**9, 1, (0, 0, 9, 9), 0.9, 0.5,
+                p_hole=0.42)  # fmt: skip
+    facts = card_facts(hole, "why", 1, "review")
+    got = state.on_card(facts, make_card(jpeg, facts))
+    assert got is not None and (got.vehicle_tier, got.p_hole) == ("review", 0.42)
+    props = hole_waypoint(got).properties
+    assert (props["tier"], props["p_hole"], props["hole_id"]) == ("review", 0.42, 4)
+    # announced later (the vehicle saw it again): the card says so
+    facts = card_facts(hole, "why", 2, "announced")
+    assert state.on_card(facts, make_card(jpeg, facts)).vehicle_tier == "announced"  # type: ignore[union-attr]
+    state.mark(4, "confirmed")
+    assert state.holes[4].tier == "confirmed"
+    again = StationState.open(tmp_path / "st")
+    assert again.holes[4].vehicle_tier == "announced" and again.holes[4].p_hole == 0.42

@@ -1,0 +1,139 @@
+"""Which holes go to the ground crew, and how: announced, for review, or kept as candidates.
+
+See :class:`AnnounceGate`: its :meth:`~AnnounceGate.tier` is the vehicle's decision.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import pymap3d
+
+from holescan.detect import p_hole_of_score
+from holescan.errors import InputError
+from holescan.geotag._merge import Hole
+
+__all__ = ["TIERS", "AnnounceGate", "Tier"]
+
+_P_HOLE_MAX = 0.99  # p_hole is kept within [0.01, 0.99]
+
+Tier = Literal["announced", "review", "candidate"]
+TIERS: tuple[Tier, ...] = ("announced", "review", "candidate")
+
+
+@dataclass(frozen=True)
+class AnnounceGate:
+    """Which tier a hole is in: *announced*, *for review*, or a *candidate*.
+
+    * **announced** (high confidence) goes to the crew as before: STATUSTEXT ``HOLE ...``,
+      a waypoint of the hole mission (component 191), its picture, TAK. A hole is
+      announced when ``p_hole >= min_p_hole``, it was seen ``min_sightings`` times over
+      ``min_span_s`` seconds (a one-view artefact does not repeat as the vehicle moves);
+    * **review** (plausible, not sure) reaches the ground station too, with its picture
+      (a card marked ``"tier": "review"``, STATUSTEXT ``REVIEW ...``), for an operator to
+      confirm or reject; it is not in the mission and not sent to TAK until confirmed. A
+      hole not announced is for review when ``p_hole >= review_min_p_hole``;
+    * **candidate**: everything else; logged and in the flight's report, not in the crew's
+      files.
+
+    ``p_hole`` is the hole-level confidence of all its sightings (:attr:`Hole.p_hole`,
+    :class:`geotag.ConfidenceModel`); holes read from logs that predate it use the best
+    frame's (:func:`detect.p_hole_of_score` of the best score). It never leaves
+    [0.01, 0.99], so thresholds lie in [0, 0.99].
+
+    min_separation_m, separation_fraction : a passing hole this close to one already kept
+        is the same opening seen twice (see :meth:`select`; the tracker fuses overlapping
+        openings, this is a last guard).
+
+    The defaults were chosen from measured curves (``benchmarks/bench_tiers.py``, flights
+    over worlds and seeds not used to fit the confidence; README, "Tiers"): announced
+    precision >= 0.9 and announced + review recall >= 0.99 of the holes in view.
+
+    Examples
+    --------
+    >>> gate = AnnounceGate(min_p_hole=0.5, min_sightings=2, min_span_s=0.3)
+    >>> gate.min_p_hole
+    0.5
+    >>> from detect import p_hole_of_score  # p_hole 0.5 is a best score of 0.368
+    >>> p_hole_of_score(0.37) >= gate.min_p_hole > p_hole_of_score(0.36)
+    True
+    """
+
+    min_p_hole: float = 0.9
+    min_sightings: int = 2
+    min_span_s: float = 0.3
+    review_min_p_hole: float = 0.1
+    min_separation_m: float = 0.5
+    separation_fraction: float = 0.5
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.min_p_hole <= _P_HOLE_MAX:
+            raise InputError(
+                f"announce min_p_hole must be in [0, {_P_HOLE_MAX}] (p_hole never exceeds "
+                f"{_P_HOLE_MAX}), got {self.min_p_hole}"
+            )
+        if self.min_sightings < 1 or not self.min_span_s >= 0.0:
+            raise InputError("announce min_sightings must be >= 1 and min_span_s >= 0")
+        if not 0.0 <= self.review_min_p_hole <= _P_HOLE_MAX:
+            raise InputError(
+                f"review min_p_hole must be in [0, {_P_HOLE_MAX}], got {self.review_min_p_hole}"
+            )
+
+    def p_hole(self, hole: Hole) -> float:
+        """``p_hole`` of ``hole``: its hole-level confidence (logs from before: its best
+        frame's)."""
+        return hole.p_hole if math.isfinite(hole.p_hole) else p_hole_of_score(hole.score)
+
+    def tier(self, hole: Hole) -> Tier:
+        """``announced``, ``review`` or ``candidate`` (see the class docstring)."""
+        if self.passes(hole):
+            return "announced"
+        return "review" if self.p_hole(hole) >= self.review_min_p_hole else "candidate"
+
+    def review(self, holes: Sequence[Hole], announced: Iterable[int] = ()) -> list[Hole]:
+        """The holes for review: in the review tier, not at the place of an announced one
+        (:meth:`select`'s duplicate rule). Sorted by id."""
+        kept = self.select(holes, announced)
+        out = []
+        for h in sorted(holes, key=lambda h: h.id):
+            if self.tier(h) == "review" and not any(_duplicate(h, k, self) for k in kept):
+                out.append(h)
+        return out
+
+    def select(self, holes: Sequence[Hole], announced: Iterable[int] = ()) -> list[Hole]:
+        """The holes to announce and serve: those that pass, less duplicates.
+
+        A duplicate lies within ``max(min_separation_m, separation_fraction * major
+        axis)`` of a hole kept before it: the tracker keeps one sighting per hole per
+        frame, so a detector that boxes one opening twice in a frame makes two holes at
+        the same place. Holes already ``announced`` are always kept (the ground has them);
+        the others in id order. Sorted by id.
+        """
+        done = set(announced)
+        ordered = sorted(
+            (h for h in holes if self.passes(h)), key=lambda h: (h.id not in done, h.id)
+        )
+        kept: list[Hole] = []
+        for h in ordered:
+            if h.id not in done and any(_duplicate(h, k, self) for k in kept):
+                continue
+            kept.append(h)
+        return sorted(kept, key=lambda h: h.id)
+
+    def passes(self, hole: Hole) -> bool:
+        """True when ``hole`` is strong enough to be announced."""
+        span_s = (hole.t_last_boot_ns - hole.t_first_boot_ns) * 1e-9
+        return (
+            self.p_hole(hole) >= self.min_p_hole
+            and hole.sightings >= self.min_sightings
+            and span_s >= self.min_span_s
+        )
+
+
+def _duplicate(a: Hole, b: Hole, gate: AnnounceGate) -> bool:
+    radius = max(gate.min_separation_m, gate.separation_fraction * max(a.major_m, b.major_m))
+    n, e, _ = pymap3d.geodetic2ned(a.lat_deg, a.lon_deg, b.alt_m, b.lat_deg, b.lon_deg, b.alt_m)
+    return bool(math.hypot(float(n), float(e)) < radius)
