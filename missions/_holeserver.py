@@ -46,7 +46,7 @@ from typing import Any
 
 from holescan.errors import InputError
 from holescan.geotag import Hole
-from holescan.missions._holecards import CardSender, card_facts, make_card
+from holescan.missions._holecards import CardSender, TileSource, card_facts, make_card
 from holescan.missions._link import mavlink
 from holescan.missions._protocol import MissionError
 from holescan.missions._vehicle import MissionReceiver, MissionServer
@@ -251,6 +251,12 @@ class HoleMissionServer(MissionServer):
             card = make_card(jpeg, card_facts(hole, why, rev))
             self.cards.put(hole.id, card)
         return len(card)
+
+    def set_tiles(self, tiles: TileSource | None) -> None:
+        """Send the live map's tiles from ``tiles`` with what the cards leave of the budget
+        (:mod:`missions._maptiles`); None stops them."""
+        with self._lock:
+            self.cards.tiles = tiles
 
     def flush_cards(self, timeout_s: float = 10.0) -> bool:
         """Wait (at most ``timeout_s``) until every queued card is sent; True when done."""

@@ -10,6 +10,8 @@ vehicle's MAVLink stream (MAVProxy ``--out``, a UDP port or a serial radio):
   ``holes.gpx``; :mod:`ground.station.files`), TAK (each new or changed hole re-sent as
   CoT, a rejected one withdrawn; :mod:`ground.station.cot`), the live page
   (:mod:`ground.station.web`, Server-Sent Events);
+* the live map's tiles (coverage, orthophoto) kept in ``DIR/map/``
+  (:mod:`ground.station.mapstore`) and drawn on the page (:mod:`ground.station.maplayers`);
 * every ``cot_refresh_s`` all holes are sent to TAK again (markers outlive their stale
   time only while the station runs).
 """
@@ -27,6 +29,7 @@ from holescan.capture import OutputPathError
 from holescan.ground.station.cot import DEFAULT_COT_URL, CotPublisher, hole_cot, withdraw_cot
 from holescan.ground.station.files import write_station_files
 from holescan.ground.station.link import VehicleLink
+from holescan.ground.station.mapstore import MapStore
 from holescan.ground.station.state import GroundHole, StationState
 from holescan.ground.station.web import StationWeb
 
@@ -68,6 +71,7 @@ class GroundStation:
     def __init__(self, opts: GroundOptions) -> None:
         self.opts = opts
         self.state = StationState.open(opts.out)
+        self.map_store = MapStore.open(opts.out / "map")
         self._stack = contextlib.ExitStack()
         self._sent: dict[int, tuple[object, ...]] = {}
         self._files_key: tuple[object, ...] | None = None
@@ -83,7 +87,13 @@ class GroundStation:
         try:
             if o.http_port is not None:
                 self.web = self._stack.enter_context(
-                    StationWeb(self.state, o.http_host, o.http_port, on_mark=self.mark)
+                    StationWeb(
+                        self.state,
+                        o.http_host,
+                        o.http_port,
+                        on_mark=self.mark,
+                        map_store=self.map_store,
+                    )
                 )
             if o.cot_url is not None:
                 extra = {"TAK_PROTO": str(o.cot_proto)}
@@ -94,7 +104,12 @@ class GroundStation:
             self._stack.callback(self._halt)
             self.link = self._stack.enter_context(
                 VehicleLink(
-                    o.mavlink, self.state, sysid=o.sysid, baud=o.baud, silence_s=o.silence_s
+                    o.mavlink,
+                    self.state,
+                    sysid=o.sysid,
+                    baud=o.baud,
+                    silence_s=o.silence_s,
+                    map_store=self.map_store,
                 )
             )
         except BaseException:

@@ -6,7 +6,8 @@ or a serial radio, :class:`VehicleLink` (one thread) takes from the stream:
 * ``STATUSTEXT`` ``HOLE <id> <score> <lat> <lon>`` from the companion computer: a hole,
   at once;
 * the image transmission protocol from component 191 (``DATA_TRANSMISSION_HANDSHAKE`` +
-  ``ENCAPSULATED_DATA``): hole cards, picture and facts (:func:`missions.read_card`);
+  ``ENCAPSULATED_DATA``): hole cards, picture and facts (:func:`missions.read_card`), and
+  the live map's tiles (:func:`missions.is_map_tile`), kept in the ``map_store``;
 * ``GLOBAL_POSITION_INT`` / ``ATTITUDE`` from the autopilot: the track (1 point/s kept),
   decoded by capture's one MAVLink adapter (:func:`capture.position_from_global_position_int`);
 * the hole mission of component 191, downloaded by this thread itself (the MAVLink
@@ -32,10 +33,12 @@ from collections.abc import Callable
 from typing import Any
 
 from holescan.capture import position_from_global_position_int
+from holescan.ground.station.mapstore import MapStore
 from holescan.ground.station.state import StationState, TrackPoint
 from holescan.missions import (
     CardAssembler,
     MavConnection,
+    is_map_tile,
     mavlink,
     open_link,
     read_card,
@@ -71,6 +74,7 @@ class VehicleLink:
         ``MAV_COMP_ID_MISSIONPLANNER`` by default).
     clock : monotonic seconds, for the link's timeouts (the track's times are the state's
         Unix clock).
+    map_store : where the live map's tiles go (None: they are ignored).
     """
 
     def __init__(
@@ -85,8 +89,11 @@ class VehicleLink:
         silence_s: float = 3.0,
         mission_period_s: float = 30.0,
         clock: Callable[[], float] = time.monotonic,
+        map_store: MapStore | None = None,
     ) -> None:
         self.connection = connection
+        self.map_store = map_store
+        self.tiles_received = 0
         self.state = state
         self.sysid = sysid
         self.source_system = source_system
@@ -227,7 +234,11 @@ class VehicleLink:
                 self._next_mission = min(self._next_mission, now + 3.0)
         elif kind in ("DATA_TRANSMISSION_HANDSHAKE", "ENCAPSULATED_DATA") and comp == _COMPANION:
             card = self.cards.add(msg)
-            if card is not None:
+            if card is not None and is_map_tile(card):
+                self.tiles_received += 1
+                if self.map_store is not None:
+                    self.map_store.put(card)
+            elif card is not None:
                 facts = read_card(card)
                 if facts is None:
                     self.bad += 1

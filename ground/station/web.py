@@ -30,6 +30,8 @@ from typing import Any
 from holescan.errors import InputError
 from holescan.geotag import CIRCLE_95_PER_SIGMA, LocalFrame
 from holescan.ground.station.files import hole_summary
+from holescan.ground.station.maplayers import map_route
+from holescan.ground.station.mapstore import MapStore
 from holescan.ground.station.state import StationState
 from holescan.missions import XTION, Camera
 
@@ -91,7 +93,8 @@ class StationWeb:
     """The page's HTTP server on its own thread. Use as a context manager.
 
     on_mark(hole_id, mark) is called for the operator's marks (default: set it in the
-    state). port 0 picks a free port (see :attr:`url`).
+    state). port 0 picks a free port (see :attr:`url`). map_store : the live map's tiles
+    (:mod:`ground.station.maplayers`; None: no map).
     """
 
     def __init__(
@@ -100,8 +103,10 @@ class StationWeb:
         host: str = "127.0.0.1",
         port: int = 8080,
         on_mark: Callable[[int, str], Any] | None = None,
+        map_store: MapStore | None = None,
     ) -> None:
         self.state = state
+        self.map_store = map_store
         self.on_mark = on_mark or state.mark
         self._cond = threading.Condition()
         self._version = state.version
@@ -164,7 +169,11 @@ def _handler(web: StationWeb) -> type[BaseHTTPRequestHandler]:
             self.wfile.write(body)
 
         def do_GET(self) -> None:
-            path = self.path.split("?", 1)[0]
+            path, _, query = self.path.partition("?")
+            mapped = map_route(web.map_store, path, query)  # the map layers (maplayers.py)
+            if mapped is not None:
+                self._reply(*mapped)
+                return
             if path in ("/", "/index.html"):
                 self._reply(200, _page(), "text/html; charset=utf-8")
             elif path == "/state.json":

@@ -1,0 +1,131 @@
+"""The live page's map layers: orthophoto and coverage tiles, served from the map store.
+
+One route function, :func:`map_route`, that the page's HTTP handler calls first for every
+GET (kept apart from :mod:`ground.station.web` so that the map is one clearly separated
+piece of the server):
+
+* ``GET /maplayers.js`` the page's map-layer script (``maplayers.js``, no CDN);
+* ``GET /map.json?lat=..&lon=..`` every tile kept, its corners in the page's local metres
+  (:class:`geotag.LocalFrame` at the page's origin ``lat``/``lon``, the state document's
+  ``origin``; without them, the first map's own origin) and where to fetch it;
+* ``GET /map/<file>`` a tile as received (coverage PNG, orthophoto JPEG);
+* ``GET /map/view/<file>`` a coverage tile coloured for the page: seen cells green, cells
+  of the tile not seen red (both translucent), RGBA PNG.
+
+Every request is hostile: file names are looked up in the store's list (never opened as
+given), numbers are parsed and range-checked, anything else is 404 / 400.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from importlib import resources
+from urllib.parse import parse_qs
+
+import cv2
+import numpy as np
+
+from holescan.geotag import LocalFrame
+from holescan.ground.station.mapstore import MapStore
+from holescan.missions import read_tile
+
+__all__ = ["coverage_view_png", "map_document", "map_route"]
+
+Reply = tuple[int, bytes, str]
+_NAME = re.compile(r"m\d{1,10}-(cov|ortho)--?\d{1,7}_-?\d{1,7}\.(png|jpg)")
+_SEEN_RGBA = (46, 125, 50, 90)
+_UNSEEN_RGBA = (211, 47, 47, 120)
+
+
+def coverage_view_png(levels: np.ndarray) -> bytes:
+    """A coverage tile's levels (n, n) uint8 -> RGBA PNG: seen green, not seen red."""
+    seen = levels > 0
+    rgba = np.empty((*levels.shape, 4), np.uint8)
+    rgba[seen] = _SEEN_RGBA
+    rgba[~seen] = _UNSEEN_RGBA
+    bgra = rgba[..., [2, 1, 0, 3]]
+    ok, buf = cv2.imencode(".png", np.ascontiguousarray(bgra))
+    if not ok:  # cannot happen for a uint8 image; say so rather than serve garbage
+        raise ValueError("PNG encoding failed")
+    return bytes(buf.tobytes())
+
+
+def _origin(query: str) -> tuple[float, float] | None:
+    try:
+        q = parse_qs(query[:200], max_num_fields=4)
+        lat, lon = float(q["lat"][0]), float(q["lon"][0])
+    except (KeyError, IndexError, ValueError):  # also too many fields
+        return None
+    if not (math.isfinite(lat) and math.isfinite(lon) and abs(lat) <= 90 and abs(lon) <= 180):
+        return None
+    return lat, lon
+
+
+def map_document(store: MapStore, origin: tuple[float, float] | None) -> dict[str, object]:
+    """``/map.json``: the store's version and each tile's corners in the page's metres.
+
+    origin : (lat_deg, lon_deg) of the page's local frame (None: the first map's own).
+    """
+    tiles = store.tiles()
+    out: list[dict[str, object]] = []
+    if tiles and origin is None:
+        origin = (tiles[0].facts.lat0_deg, tiles[0].facts.lon0_deg)
+    frame = LocalFrame(*origin) if origin is not None else None
+    shift: dict[tuple[float, float], tuple[float, float]] = {}
+    for t in tiles:
+        f = t.facts
+        assert frame is not None
+        key = (f.lat0_deg, f.lon0_deg)
+        if key not in shift:
+            e, n = frame.to_en(*key)
+            shift[key] = (float(e), float(n))
+        dx, dy = shift[key]
+        x0, y0, x1, y1 = f.bounds_m
+        href = f"/map/view/{t.name}" if f.layer == "cov" else f"/map/{t.name}"
+        out.append(
+            {
+                "layer": f.layer,
+                "map": f.map_id,
+                "x0": round(x0 + dx, 3),
+                "y0": round(y0 + dy, 3),
+                "x1": round(x1 + dx, 3),
+                "y1": round(y1 + dy, 3),
+                "href": f"{href}?v={f.version}",
+            }
+        )
+    return {"version": store.version, "origin": origin, "tiles": out}
+
+
+def _script() -> bytes:
+    return resources.files("holescan.ground.station").joinpath("maplayers.js").read_bytes()
+
+
+def map_route(store: MapStore | None, path: str, query: str = "") -> Reply | None:
+    """The reply to a GET of ``path`` (without its query) if it is a map path, else None.
+
+    Returns (status, body, content type).
+    """
+    if path == "/maplayers.js":
+        return 200, _script(), "text/javascript; charset=utf-8"
+    if path == "/map.json":
+        if store is None:
+            return 200, b'{"version": 0, "origin": null, "tiles": []}', "application/json"
+        body = json.dumps(map_document(store, _origin(query))).encode()
+        return 200, body, "application/json"
+    if not path.startswith("/map/"):
+        return None
+    view = path.startswith("/map/view/")
+    name = path[len("/map/view/") :] if view else path[len("/map/") :]
+    if store is None or not _NAME.fullmatch(name) or (view and not name.endswith(".png")):
+        return 404, b"no such tile", "text/plain"
+    data = store.read(name)
+    if data is None:
+        return 404, b"no such tile", "text/plain"
+    if not view:
+        return 200, data, "image/png" if name.endswith(".png") else "image/jpeg"
+    got = read_tile(data)
+    if got is None:
+        return 404, b"no such tile", "text/plain"
+    return 200, coverage_view_png(got[1]), "image/png"
