@@ -7,6 +7,7 @@ from holescan.geotag._camera import (
     dcm_from_quaternion,
     rotation_ned_from_optical,
 )
+from holescan.geotag._campose import R_ENU_NED, LocalCameraPose, camera_pose_local
 from holescan.geotag._local import LocalFrame, local_en_m
 from holescan.geotag._matching import nearest_pairs
 from holescan.geotag._merge import AnnounceGate, Hole, HoleTracker, MergeParams
@@ -22,6 +23,7 @@ from holescan.geotag._types import VehiclePose
 
 __all__ = [
     "CIRCLE_95_PER_SIGMA",
+    "R_ENU_NED",
     "AnnounceGate",
     "CameraMount",
     "ErrorModel",
@@ -29,9 +31,11 @@ __all__ = [
     "Hole",
     "HoleSighting",
     "HoleTracker",
+    "LocalCameraPose",
     "LocalFrame",
     "MergeParams",
     "VehiclePose",
+    "camera_pose_local",
     "dcm_from_euler",
     "dcm_from_quaternion",
     "geotag_detection",
