@@ -55,6 +55,9 @@ from holescan.geotag import Hole, VehiclePose, local_en_m
 log = logging.getLogger(__name__)
 
 SourceFactory = Callable[[], FrameSource]
+FrameListener = Callable[[Frame, VehiclePose | None], None]
+"""``on_frame(frame, pose)``: each captured frame and its pose (None: unposed), on the
+capture thread, after the log and the detector have it; must never wait (the live map)."""
 HoleListener = Callable[[list[Hole], list[Hole], Mapping[int, HoleView]], None]
 """``on_holes(served, news, views)``: every hole that passes the announce gate (the
 waypoints), those new or changed enough to announce now, and the best view of each hole
@@ -74,8 +77,10 @@ class Flight:
         telemetry_factory: Callable[..., Telemetry] = Telemetry,
         usb_reset: Callable[[], None] | None = None,
         on_holes: HoleListener | None = None,
+        on_frame: FrameListener | None = None,
     ) -> None:
         self.config = config
+        self._on_frame_hook = on_frame
         self.camera = camera
         self._source_factory = source_factory
         self._mavlink = mavlink
@@ -263,6 +268,11 @@ class Flight:
             c.frames_log_dropped += 1
         self._views.add_frame(frame.index, frame.rgb)
         self._worker.offer(frame)
+        if self._on_frame_hook is not None:
+            try:
+                self._on_frame_hook(frame, pose)
+            except Exception:  # a listener's bug must not stop capture
+                log.exception("frame listener failed on frame %d", frame.index)
 
     def _capture(self, t_end: float | None) -> None:
         cfg = self.config

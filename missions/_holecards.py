@@ -198,6 +198,11 @@ class CardSender:
         """Cards queued or under way (tiles not counted)."""
         return sum(not item.tile for item in self._queue)
 
+    @property
+    def queued(self) -> int:
+        """Pictures queued or under way: cards, and the tile being sent."""
+        return len(self._queue)
+
     def _next_tile(self) -> bool:
         if self.tiles is None:
             return False

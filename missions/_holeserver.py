@@ -259,11 +259,12 @@ class HoleMissionServer(MissionServer):
             self.cards.tiles = tiles
 
     def flush_cards(self, timeout_s: float = 10.0) -> bool:
-        """Wait (at most ``timeout_s``) until every queued card is sent; True when done."""
+        """Wait (at most ``timeout_s``) until every queued card (and the map tile under
+        way) is sent; True when done."""
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
             with self._lock:
-                if self.cards.pending == 0:
+                if self.cards.queued == 0:
                     return True
             time.sleep(0.1)
         return False

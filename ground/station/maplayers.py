@@ -35,8 +35,8 @@ __all__ = ["coverage_view_png", "map_document", "map_route"]
 
 Reply = tuple[int, bytes, str]
 _NAME = re.compile(r"m\d{1,10}-(cov|ortho)--?\d{1,7}_-?\d{1,7}\.(png|jpg)")
-_SEEN_RGBA = (46, 125, 50, 90)
-_UNSEEN_RGBA = (211, 47, 47, 120)
+_SEEN_RGBA = (46, 125, 50, 45)
+_UNSEEN_RGBA = (211, 47, 47, 110)
 
 
 def coverage_view_png(levels: np.ndarray) -> bytes:
