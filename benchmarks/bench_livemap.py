@@ -28,6 +28,7 @@ import os
 import statistics
 import sys
 import time
+from collections.abc import Collection
 
 import numpy as np
 
@@ -68,8 +69,8 @@ def render_frames(n: int) -> tuple[list[tuple[Frame, VehiclePose]], CameraIntrin
     return out, cam
 
 
-def pct(v: list[float], q: float) -> float:
-    return float(np.percentile(v, q)) if v else math.nan
+def pct(v: Collection[float], q: float) -> float:
+    return float(np.percentile(list(v), q)) if v else math.nan
 
 
 def fuse_alone(frames: list[tuple[Frame, VehiclePose]], cam: CameraIntrinsics) -> LiveMap:
@@ -79,7 +80,7 @@ def fuse_alone(frames: list[tuple[Frame, VehiclePose]], cam: CameraIntrinsics) -
         lm = LiveMap(cam, CameraMount(), LiveMapConfig(pixel_stride=stride))
         for f, pose in frames:
             lm.fuse(f, pose)
-        c = lm.stats.fuse_cpu_ms[1:]  # the first builds the grid
+        c = list(lm.stats.fuse_cpu_ms)[1:]  # the first builds the grid
         t0 = time.thread_time()
         n = lm.publish()
         pub = (time.thread_time() - t0) * 1000.0
@@ -154,6 +155,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--frames", type=int, default=300)
     ap.add_argument("--seconds", type=float, default=20.0)
+    ap.add_argument("--repeats", type=int, default=2, help="runs with and without, alternated")
     a = ap.parse_args(argv)
     py = sys.version.split()[0]
     print(f"machine: {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}; python {py}")
@@ -161,11 +163,20 @@ def main(argv: list[str] | None = None) -> int:
     frames, cam = render_frames(a.frames)
     print(f"rendered {len(frames)} frames in {time.monotonic() - t0:.0f} s")
     lm = fuse_alone(frames, cam)
-    for with_map in (False, True):
-        r = live(frames, cam, a.seconds, with_map)
-        print(f"live {'with' if with_map else 'without'} the map ({a.seconds:g} s at 30 fps):")
-        for k, v in r.items():
-            print(f"  {k}: {v:.3f}" if isinstance(v, float) else f"  {k}: {v}")
+    for rep in range(a.repeats):  # alternated: the machine's load drifts
+        for with_map in (False, True):
+            r = live(frames, cam, a.seconds, with_map)
+            what = "with" if with_map else "without"
+            print(
+                f"live {what} the map, run {rep + 1} ({a.seconds:g} s at 30 fps), load "
+                f"{os.getloadavg()[0]:.1f}:"
+            )
+            print(
+                "  "
+                + ", ".join(
+                    f"{k} {v:.3f}" if isinstance(v, float) else f"{k} {v}" for k, v in r.items()
+                )
+            )
     s = lm.stats
     cov, ortho = s.tile_bytes["cov"], s.tile_bytes["ortho"]
     cov_air, ortho_air = on_air(int(statistics.median(cov))), on_air(int(statistics.median(ortho)))

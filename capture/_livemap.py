@@ -31,6 +31,7 @@ import os
 import threading
 import time
 import zlib
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -49,10 +50,12 @@ from holescan.missions import (
     encode_ortho_tile,
 )
 
-__all__ = ["LiveMap", "LiveMapConfig", "LiveMapStats"]
+__all__ = ["SAMPLES", "LiveMap", "LiveMapConfig", "LiveMapStats"]
 
 _log = logging.getLogger(__name__)
 _NICE = 15
+SAMPLES = 100_000
+"""How many recent samples :class:`LiveMapStats` keeps of each kind."""
 
 
 @dataclass(frozen=True)
@@ -109,7 +112,9 @@ class LiveMapStats:
     pose. skipped_budget : frames passed over for lack of CPU credit or ``frame_every``.
     fuse_cpu_ms : thread CPU of each fused frame (fusing only). publish_cpu_ms : of each
     tile cut (layers + encoding). offer_ns : wall time of each :meth:`LiveMap.offer`.
-    tiles_encoded : tiles put in the outbox; tile_bytes : their sizes by layer.
+    tile_bytes : the sizes of the tiles encoded, by layer. These four keep the last
+    ``SAMPLES`` values (a long flight's memory stays bounded); the totals are exact.
+    tiles_encoded : tiles put in the outbox.
     """
 
     offered: int = 0
@@ -117,16 +122,15 @@ class LiveMapStats:
     unposed: int = 0
     skipped_budget: int = 0
     outside: int = 0
-    fuse_cpu_ms: list[float] = field(default_factory=list)
-    publish_cpu_ms: list[float] = field(default_factory=list)
-    offer_ns: list[int] = field(default_factory=list)
+    fuse_cpu_ms: deque[float] = field(default_factory=lambda: deque(maxlen=SAMPLES))
+    publish_cpu_ms: deque[float] = field(default_factory=lambda: deque(maxlen=SAMPLES))
+    offer_ns: deque[int] = field(default_factory=lambda: deque(maxlen=SAMPLES))
     tiles_encoded: int = 0
-    tile_bytes: dict[str, list[int]] = field(default_factory=lambda: {"cov": [], "ortho": []})
-
-    @property
-    def cpu_ms(self) -> float:
-        """The map thread's CPU time so far (fusing and tile cutting), ms."""
-        return sum(self.fuse_cpu_ms) + sum(self.publish_cpu_ms)
+    tile_bytes: dict[str, deque[int]] = field(
+        default_factory=lambda: {"cov": deque(maxlen=SAMPLES), "ortho": deque(maxlen=SAMPLES)}
+    )
+    cpu_ms: float = 0.0
+    """The map thread's CPU time so far (fusing and tile cutting), ms."""
 
 
 @dataclass
@@ -160,7 +164,8 @@ class LiveMap:
         self._tiles_k = math.ceil(self.config.radius_m / self.config.tile_m)
         self._slot: tuple[Frame, VehiclePose] | None = None
         self._cond = threading.Condition()
-        self._lock = threading.Lock()  # the map and the outbox
+        self._lock = threading.Lock()  # the map
+        self._out_lock = threading.Lock()  # the outbox (the sender's thread)
         self._stop = False
         self._credit_ms = 0.0
         self._since_fused = 0
@@ -262,6 +267,7 @@ class LiveMap:
         self.stats.fused += 1
         self.stats.outside += done.outside
         self.stats.fuse_cpu_ms.append(cost)
+        self.stats.cpu_ms += cost
         with self._cond:
             self._credit_ms -= cost
 
@@ -303,7 +309,7 @@ class LiveMap:
             cov = np.where(seen, np.maximum(w.coverage, 1e-3), 0.0)
             out[("cov", tx, ty)] = encode_coverage_tile(cov, facts("cov"))
             out[("ortho", tx, ty)] = encode_ortho_tile(w.rgb, seen, facts("ortho"))
-        with self._lock:
+        with self._out_lock:
             self._published = version
             for key, data in out.items():
                 o = self._outbox.get(key)
@@ -315,14 +321,16 @@ class LiveMap:
                     o.data, o.sent = data, False
                 self.stats.tile_bytes[key[0]].append(len(data))
             self.stats.tiles_encoded += len(out)
-        self.stats.publish_cpu_ms.append((time.thread_time() - t0) * 1000.0)
+        cost = (time.thread_time() - t0) * 1000.0
+        self.stats.publish_cpu_ms.append(cost)
+        self.stats.cpu_ms += cost
         return len(out)
 
     # -- the sender (missions.TileSource) ---------------------------------------------
     def next_tile(self) -> tuple[int, bytes] | None:
         """The next tile due: coverage first, then orthophoto (see the module docstring)."""
         now = self._clock()
-        with self._lock:
+        with self._out_lock:
             for layer, period, kind in (
                 ("cov", self.config.cov_resend_s, TYPE_COVERAGE),
                 ("ortho", self.config.ortho_resend_s, TYPE_ORTHO),
@@ -341,7 +349,7 @@ class LiveMap:
 
     def finish(self) -> None:
         """The flight is over: every tile not sent yet is due at once (no resend wait)."""
-        with self._lock:
+        with self._out_lock:
             self._final = True
 
     def flush(self, timeout_s: float = 30.0) -> bool:
@@ -355,17 +363,17 @@ class LiveMap:
 
     def resend_all(self) -> None:
         """Every tile is sent again (a ground station asked)."""
-        with self._lock:
+        with self._out_lock:
             for o in self._outbox.values():
                 o.sent, o.sent_at = False, -math.inf
 
     def outbox(self) -> dict[tuple[MapLayer, int, int], bytes]:
         """The newest encoded bytes of every tile (what the ground should end up holding)."""
-        with self._lock:
+        with self._out_lock:
             return {k: o.data for k, o in self._outbox.items()}
 
     @property
     def pending_tiles(self) -> int:
         """Tiles whose newest bytes are not sent yet."""
-        with self._lock:
+        with self._out_lock:
             return sum(not o.sent for o in self._outbox.values())
