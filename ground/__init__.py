@@ -87,6 +87,7 @@ from holescan.ground.reprocessing import (
 )
 from holescan.ground.station import (
     COT_TYPE,
+    DATAPACKAGE_NAME,
     DEFAULT_COT_URL,
     MARKS,
     CotPublisher,
@@ -95,6 +96,7 @@ from holescan.ground.station import (
     GroundStation,
     StationState,
     StationWeb,
+    TakTls,
     TrackPoint,
     VehicleLink,
     hole_cot,
@@ -104,12 +106,14 @@ from holescan.ground.station import (
     run_ground,
     state_document,
     withdraw_cot,
+    write_datapackage,
     write_station_files,
 )
 
 __all__ = [
     "CATEGORY",
     "COT_TYPE",
+    "DATAPACKAGE_NAME",
     "DEFAULT_COT_URL",
     "MARKS",
     "SCORE_BANDS",
@@ -140,6 +144,7 @@ __all__ = [
     "StationFileError",
     "StationState",
     "StationWeb",
+    "TakTls",
     "TrackPoint",
     "VehicleLink",
     "brier_score",
@@ -184,6 +189,7 @@ __all__ = [
     "state_document",
     "withdraw_cot",
     "write_coco_results",
+    "write_datapackage",
     "write_dataset",
     "write_depth",
     "write_hole_outputs",

@@ -1,7 +1,9 @@
 """Files a reprocessed flight (or a campaign) leaves for the ground crew and for people.
 
 :func:`write_hole_outputs` writes the hole files (``NAME_holes.gpx|.kml|.geojson|.plan``,
-the ground crew's formats, :func:`missions.write_hole_file`) and the HTML report
+the ground crew's formats, :func:`missions.write_hole_file`), the TAK data package
+(``NAME_holes_datapackage.zip``: the holes with their pictures and the map overlay
+``NAME_map.kmz`` when there is one, :func:`ground.station.write_datapackage`) and the HTML report
 (:func:`ground.write_report`); :class:`FlightResult` is one flight's numbers, also
 written as ``NAME_reprocess.json``.
 """
@@ -22,6 +24,7 @@ from holescan.geotag import Hole, VehiclePose
 from holescan.ground.flightholes.views import render_thumbnail
 from holescan.ground.report.page import write_report
 from holescan.ground.reprocessing.options import HoleMatch, ReprocessOptions
+from holescan.ground.station.datapackage import ground_hole_of, write_datapackage
 from holescan.missions import HOLE_SUFFIXES, write_hole_file
 
 __all__ = ["FlightResult", "write_hole_outputs"]
@@ -150,6 +153,29 @@ def _hole_files(
     return written
 
 
+def _datapackage(
+    out: Path,
+    name: str,
+    holes: Sequence[Hole],
+    thumbnails: Mapping[int, bytes],
+    boot_to_unix_ns: int | None,
+    overlay: Path | None,
+) -> list[tuple[str, Path]]:
+    if not holes:
+        return []
+    if overlay is None and (out / f"{name}_map.kmz").is_file():
+        overlay = out / f"{name}_map.kmz"
+    path = write_datapackage(
+        out / f"{name}_holes_datapackage.zip",
+        [ground_hole_of(h, boot_to_unix_ns) for h in holes],
+        thumbnails,
+        station=name,
+        name=f"holescan holes: {name}",
+        overlay=overlay,
+    )
+    return [("datapackage", path)]
+
+
 def write_hole_outputs(
     out: Path,
     name: str,
@@ -164,13 +190,17 @@ def write_hole_outputs(
     facts: Mapping[str, str] | None = None,
     title: str | None = None,
     track_breaks: Sequence[int] = (),
+    overlay: Path | None = None,
 ) -> list[tuple[str, Path]]:
-    """Write a flight's hole files (``NAME_holes.*``) and report (``NAME_report.html``).
+    """Write a flight's hole files (``NAME_holes.*``), TAK data package
+    (``NAME_holes_datapackage.zip``) and report (``NAME_report.html``).
 
     holes : the holes to write (confirmed ones). views : hole id -> (rgb, depth, box) of
     its best view, the box (x, y, w, h) in that picture's pixels. track : vehicle poses.
     truth : (name, lat_deg, lon_deg) drawn on the report's map. track_breaks : where in
-    ``track`` another flight starts (a campaign). Returns (kind, path) pairs.
+    ``track`` another flight starts (a campaign). overlay : the map overlay (``.kmz``) for
+    the data package (None: ``NAME_map.kmz`` in ``out`` when it exists). Returns (kind,
+    path) pairs.
     """
     opts = opts or ReprocessOptions()
     wanted = {h.id for h in holes}
@@ -180,6 +210,7 @@ def write_hole_outputs(
         if hid in wanted
     }
     written = _hole_files(out, name, holes, opts, jpegs, home, boot_to_unix_ns)
+    written += _datapackage(out, name, holes, jpegs, boot_to_unix_ns, overlay)
     report_holes = [
         dataclasses.replace(h, best_box=views[h.id][2]) if h.id in views else h for h in holes
     ]

@@ -5,17 +5,29 @@
   mission, the track);
 * :mod:`.state` - :class:`StationState`, everything learnt, kept in ``DIR/station.json``;
 * :mod:`.files` - KML/GeoJSON/GPX always current; :mod:`.cot` - holes as TAK CoT;
+  :mod:`.tak` - the link to TAK (mesh, TAK server over TCP/TLS); :mod:`.datapackage` -
+  the TAK data package with the pictures;
 * :mod:`.web` - the live page (``station.html``) and its state document.
 """
 
 from holescan.ground.station.app import GroundOptions, GroundStation, run_ground
 from holescan.ground.station.cot import (
     COT_TYPE,
-    DEFAULT_COT_URL,
-    CotError,
-    CotPublisher,
+    TIERS,
+    Tier,
+    cot_uid,
     hole_cot,
+    hole_tier,
+    on_tak,
+    point_age,
     withdraw_cot,
+)
+from holescan.ground.station.datapackage import (
+    DATAPACKAGE_NAME,
+    PACKAGE_STALE_S,
+    ground_hole_of,
+    package_holes,
+    write_datapackage,
 )
 from holescan.ground.station.files import hole_summary, hole_waypoint, write_station_files
 from holescan.ground.station.link import VehicleLink
@@ -26,12 +38,22 @@ from holescan.ground.station.state import (
     TrackPoint,
     parse_hole_statustext,
 )
+from holescan.ground.station.tak import (
+    DEFAULT_COT_URL,
+    CotError,
+    CotPublisher,
+    TakTls,
+    tak_settings,
+)
 from holescan.ground.station.web import StationWeb, state_document
 
 __all__ = [
     "COT_TYPE",
+    "DATAPACKAGE_NAME",
     "DEFAULT_COT_URL",
     "MARKS",
+    "PACKAGE_STALE_S",
+    "TIERS",
     "CotError",
     "CotPublisher",
     "GroundHole",
@@ -39,14 +61,24 @@ __all__ = [
     "GroundStation",
     "StationState",
     "StationWeb",
+    "TakTls",
+    "Tier",
     "TrackPoint",
     "VehicleLink",
+    "cot_uid",
+    "ground_hole_of",
     "hole_cot",
     "hole_summary",
+    "hole_tier",
     "hole_waypoint",
+    "on_tak",
+    "package_holes",
     "parse_hole_statustext",
+    "point_age",
     "run_ground",
     "state_document",
+    "tak_settings",
     "withdraw_cot",
+    "write_datapackage",
     "write_station_files",
 ]

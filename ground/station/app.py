@@ -7,9 +7,12 @@ vehicle's MAVLink stream (MAVProxy ``--out``, a UDP port or a serial radio):
   mission of component 191) and the track into a
   :class:`~ground.station.state.StationState` kept in ``DIR/station.json``;
 * after each change: the files (``holes.kml``, ``holes_live.kml``, ``holes.geojson``,
-  ``holes.gpx``; :mod:`ground.station.files`), TAK (each new or changed hole re-sent as
-  CoT, a rejected one withdrawn; :mod:`ground.station.cot`), the live page
-  (:mod:`ground.station.web`, Server-Sent Events);
+  ``holes.gpx``; :mod:`ground.station.files`; ``holes_datapackage.zip``, the TAK data
+  package with the pictures, :mod:`ground.station.datapackage`), TAK (each new or changed
+  hole of a tier TAK shows re-sent as CoT, a rejected one, or one TAK showed that is no
+  longer of such a tier, withdrawn; :mod:`ground.station.cot`, the link
+  :mod:`ground.station.tak`), the live page (:mod:`ground.station.web`, Server-Sent
+  Events);
 * the live map's tiles (coverage, orthophoto) kept in ``DIR/map/``
   (:mod:`ground.station.mapstore`) and drawn on the page (:mod:`ground.station.maplayers`);
 * every ``cot_refresh_s`` all holes are sent to TAK again (markers outlive their stale
@@ -26,11 +29,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from holescan.capture import OutputPathError
-from holescan.ground.station.cot import DEFAULT_COT_URL, CotPublisher, hole_cot, withdraw_cot
+from holescan.errors import InputError
+from holescan.ground.station.cot import hole_cot, hole_tier, on_tak, withdraw_cot
+from holescan.ground.station.datapackage import DATAPACKAGE_NAME, write_datapackage
 from holescan.ground.station.files import write_station_files
 from holescan.ground.station.link import VehicleLink
 from holescan.ground.station.mapstore import MapStore
 from holescan.ground.station.state import GroundHole, StationState
+from holescan.ground.station.tak import DEFAULT_COT_URL, CotPublisher, TakTls, tak_settings
 from holescan.ground.station.web import StationWeb
 
 __all__ = ["GroundOptions", "GroundStation", "run_ground"]
@@ -45,9 +51,11 @@ class GroundOptions:
     mavlink : connection to the vehicle's stream. out : the station's folder (state,
     pictures, files). sysid : the vehicle (None: first heard). http_host, http_port :
     the live page (port 0: any free one; None: no page). cot_url : pytak COT_URL (None:
-    no TAK). cot_proto : 0 = CoT XML, 1 = TAK protocol v1 (protobuf, via takproto).
-    station : name in the CoT uids. cot_stale_s, cot_refresh_s : CoT stale time
-    and re-send period. kml_refresh_s : Google Earth's NetworkLink reload period.
+    no TAK). cot_tls : the client certificate for a ``tls://`` TAK server. cot_proto :
+    0 = CoT XML, 1 = TAK protocol v1 (protobuf, via takproto). station : name in the CoT
+    uids. cot_stale_s, cot_refresh_s : CoT stale time (from each sending) and re-send
+    period, s. kml_refresh_s : Google Earth's NetworkLink reload period. overlay : a map
+    overlay (``.kmz``) for the data package.
     """
 
     mavlink: str
@@ -58,11 +66,28 @@ class GroundOptions:
     http_port: int | None = 8080
     cot_url: str | None = DEFAULT_COT_URL
     cot_proto: int = 0
+    cot_tls: TakTls | None = None
     station: str = "ground"
     cot_stale_s: float = 3600.0
     cot_refresh_s: float = 600.0
     kml_refresh_s: float = 5.0
     silence_s: float = 3.0
+    overlay: Path | None = None
+
+    def check(self) -> None:
+        """Raise InputError for options that cannot work together."""
+        if not 0 < self.cot_refresh_s < self.cot_stale_s:
+            raise InputError(
+                f"the CoT re-send period ({self.cot_refresh_s:g} s) must be above 0 and "
+                f"below the stale time ({self.cot_stale_s:g} s), or markers blink out"
+            )
+        if self.cot_proto == 1 and (self.cot_url or "").lower().startswith(("tcp", "tls")):
+            raise InputError(
+                "--cot-proto 1 (TAK protocol v1) is for mesh udp:// only: a TAK server's "
+                "stream starts in CoT XML (--cot-proto 0)"
+            )
+        if self.overlay is not None and not self.overlay.is_file():
+            raise InputError(f"map overlay {self.overlay}: no such file")
 
 
 class GroundStation:
@@ -70,10 +95,13 @@ class GroundStation:
 
     def __init__(self, opts: GroundOptions) -> None:
         self.opts = opts
+        opts.check()  # the options first: a bad one creates nothing
+        self._tak = tak_settings(opts.cot_url, opts.cot_tls) if opts.cot_url is not None else None
         self.state = StationState.open(opts.out)
         self.map_store = MapStore.open(opts.out / "map")
         self._stack = contextlib.ExitStack()
         self._sent: dict[int, tuple[object, ...]] = {}
+        self._on_tak: set[int] = set()
         self._files_key: tuple[object, ...] | None = None
         self._dirty = threading.Event()
         self._stop = threading.Event()
@@ -95,8 +123,8 @@ class GroundStation:
                         map_store=self.map_store,
                     )
                 )
-            if o.cot_url is not None:
-                extra = {"TAK_PROTO": str(o.cot_proto)}
+            if o.cot_url is not None and self._tak is not None:
+                extra = {**self._tak, "TAK_PROTO": str(o.cot_proto)}
                 self.cot = self._stack.enter_context(CotPublisher(o.cot_url, extra))
             self.state.listeners.append(lambda _v: self._dirty.set())
             self._dirty.set()
@@ -154,20 +182,26 @@ class GroundStation:
             if files_key != self._files_key:  # the track alone changes nothing in the files
                 try:
                     write_station_files(self.opts.out, holes, refresh_s=self.opts.kml_refresh_s)
+                    self._write_datapackage(holes)
                     self._files_key = files_key
-                except (OSError, OutputPathError) as err:
+                except (OSError, OutputPathError, InputError) as err:
                     _log.error("hole files not written: %s", err)
             if self.cot is None:
                 return
             events: list[bytes] = []
             for h in holes:
-                key = (h.lat_deg, h.lon_deg, h.score, h.mark, h.card_rev, h.sigma_h_m)
+                tier = hole_tier(h)
+                key = (h.lat_deg, h.lon_deg, h.score, tier, h.mark, h.card_rev, h.sigma_h_m)
                 if self._sent.get(h.id) == key:
                     continue
                 self._sent[h.id] = key
-                if h.mark == "rejected":
-                    events += withdraw_cot(h.id, station=self.opts.station)
+                if not on_tak(tier):
+                    # rejected, or held for review: off every map that has it
+                    if tier == "rejected" or h.id in self._on_tak:
+                        events += withdraw_cot(h.id, station=self.opts.station)
+                    self._on_tak.discard(h.id)
                 else:
+                    self._on_tak.add(h.id)
                     url = None
                     if self.web is not None and h.has_picture:
                         url = f"{self.web.url}cards/hole-{h.id}.jpg"
@@ -182,6 +216,22 @@ class GroundStation:
             if events:
                 self.cot.publish(events)
 
+    def _write_datapackage(self, holes: list[GroundHole]) -> None:
+        pictures = {}
+        for h in holes:
+            if h.has_picture:
+                try:
+                    pictures[h.id] = self.state.card_path(h.id).read_bytes()
+                except OSError as err:
+                    _log.warning("hole %d's picture left out of the data package: %s", h.id, err)
+        write_datapackage(
+            self.opts.out / DATAPACKAGE_NAME,
+            holes,
+            pictures,
+            station=self.opts.station,
+            overlay=self.opts.overlay,
+        )
+
 
 def run_ground(opts: GroundOptions, stop: threading.Event) -> GroundStation:
     """Run the station until ``stop`` is set; return it (closed) for its counters."""
@@ -189,7 +239,8 @@ def run_ground(opts: GroundOptions, stop: threading.Event) -> GroundStation:
         if station.web is not None:
             _log.warning("live page: %s", station.web.url)
         _log.warning(
-            "files in %s: holes.kml, holes_live.kml (Google Earth), holes.geojson, holes.gpx",
+            "files in %s: holes.kml, holes_live.kml (Google Earth), holes.geojson, holes.gpx, "
+            "holes_datapackage.zip (TAK data package)",
             opts.out,
         )
         stop.wait()

@@ -1,4 +1,4 @@
-"""Holes as Cursor-on-Target for TAK (ATAK, WinTAK, iTAK), sent with pytak.
+"""Holes as Cursor-on-Target events for TAK (ATAK, WinTAK, iTAK).
 
 Each hole is one CoT event:
 
@@ -8,61 +8,137 @@ Each hole is one CoT event:
   as shipped by ``@tak-ps/node-cot``) names "spi", sensor point of interest: a point a
   sensor (our camera) marks for people to look at; ``how`` ``m-g`` (machine, GPS-derived);
 * ``point``: lat/lon; ``hae`` from the vehicle's MSL altitude (9999999 when unknown; the
-  geoid offset is not applied); ``ce`` = 1.62 sigma (the 95 % circle of the horizontal
-  error model, whose sigma is the 68 % circle), ``le`` = 9999999 (the vertical error is
-  not modelled);
-* ``detail``: ``contact callsign`` "HOLE <id>", ``remarks`` with size, score, sightings,
-  uncertainty, the detector's "why" and the operator's mark, ``link`` to the picture's
-  URL on the station's web page when one is served, a ``color`` by mark;
-* ``stale``: ``stale_s`` (default 1 h) after sending; the station re-sends every hole
-  before that (``refresh_s``), so a marker stays while the station runs and ages out if
-  it stops.
+  geoid offset is not applied); ``ce`` from the error model: 1.62 sigma, the 95 % circle
+  of the hole's horizontal error (its ``sigma_h_m`` is the 68 % circle). The CoT 2.0
+  schema calls ``ce`` "circular 1-sigma or a circular area about the point"; ATAK draws
+  and reads it as a circle to search, so the conservative circle is sent and the 1-sigma
+  figure is in the remarks. ``le`` = 9999999 (the vertical error is not modelled);
+* ``detail``: ``contact callsign`` "HOLE <id>", ``remarks`` starting with the tier, then
+  size, score, sightings, uncertainty, the detector's "why", the operator's mark and the
+  point's age (first seen / last updated, from ``now``); a ``holescan`` element with the
+  same facts as attributes (tier, mark, score, sightings, sigma, times) for tools; a
+  ``link`` to the picture's URL on the station's web page when one is served; a
+  ``color`` by tier;
+* ``stale``: ``stale_s`` after ``now`` (the time the event is made, never the first
+  sighting): the station re-sends every hole before that (``refresh_s``), so a marker
+  stays while the station runs and ages out if it stops.
+
+Tiers (:data:`TIERS`): ``announced`` (the vehicle's announce gate passed it),
+``review`` (held for an operator: sent to TAK only once confirmed), ``confirmed`` (an
+operator confirmed or visited it), ``rejected`` (withdrawn). :func:`hole_tier` is the one
+place that reads a hole's tier; :func:`on_tak` says which tiers TAK shows.
 
 A rejected hole is withdrawn: an event of the same uid with ``stale`` = now, followed by a
 TAK delete (``t-x-d-d`` with a ``link`` to the uid and ``__forcedelete``).
 
-:class:`CotPublisher` runs pytak's client (``udp+wo://239.2.3.1:6969`` mesh multicast by
-default, ``tcp://HOST:8087`` or ``tls://HOST:8089`` for a TAK server) on its own asyncio
-thread; :meth:`CotPublisher.publish` may be called from any thread.
+The link to TAK (mesh multicast, a TAK server over TCP or TLS) is
+:class:`~ground.station.tak.CotPublisher`; the offline data package is
+:mod:`ground.station.datapackage`.
 """
 
 from __future__ import annotations
 
-import asyncio
-import configparser
-import contextlib
 import datetime as dt
-import logging
-import threading
+import json
 import xml.etree.ElementTree as ET
-from typing import Any
+from typing import Literal
 
 from holescan.geotag import CIRCLE_95_PER_SIGMA
-from holescan.ground.errors import CotError
 from holescan.ground.station.files import hole_summary
 from holescan.ground.station.state import GroundHole
 
-__all__ = ["COT_TYPE", "DEFAULT_COT_URL", "CotError", "CotPublisher", "hole_cot", "withdraw_cot"]
-
-_log = logging.getLogger(__name__)
+__all__ = [
+    "COT_TYPE",
+    "TIERS",
+    "Tier",
+    "cot_uid",
+    "hole_cot",
+    "hole_tier",
+    "on_tak",
+    "point_age",
+    "withdraw_cot",
+]
 
 COT_TYPE = "b-m-p-s-p-i"
-DEFAULT_COT_URL = "udp+wo://239.2.3.1:6969"
+Tier = Literal["announced", "review", "confirmed", "rejected"]
+TIERS: tuple[Tier, ...] = ("announced", "review", "confirmed", "rejected")
 _UNKNOWN = "9999999.0"
-_COLOURS = {  # ARGB as TAK writes it (signed 32-bit)
-    "new": -256,  # yellow
+_NS_PER_S = 1_000_000_000
+_COLOURS: dict[Tier, int] = {  # ARGB as TAK writes it (signed 32-bit)
+    "announced": -256,  # yellow
+    "review": -23296,  # orange
     "confirmed": -65536,  # red: go there
-    "visited": -16711936,  # green
     "rejected": -8355712,  # grey
 }
+
+
+def hole_tier(h: GroundHole) -> Tier:
+    """The hole's tier: ``h.tier`` when the hole record has one, else from the mark.
+
+    >>> hole_tier(GroundHole(1, 0.0, 0.0, 0.9, mark="visited"))
+    'confirmed'
+    >>> hole_tier(GroundHole(1, 0.0, 0.0, 0.9))
+    'announced'
+    """
+    tier = getattr(h, "tier", None)
+    if tier in TIERS:
+        return tier  # type: ignore[no-any-return]
+    if h.mark == "rejected":
+        return "rejected"
+    return "confirmed" if h.mark in ("confirmed", "visited") else "announced"
+
+
+def on_tak(tier: Tier) -> bool:
+    """Whether TAK shows a hole of this tier (announced and confirmed ones)."""
+    return tier in ("announced", "confirmed")
+
+
+def cot_uid(station: str, hole_id: int) -> str:
+    """The hole's CoT uid (one per station and hole id)."""
+    return f"holescan-{station}-hole-{hole_id}"
 
 
 def _time(t: dt.datetime) -> str:
     return t.strftime("%Y-%m-%dT%H:%M:%S.") + f"{t.microsecond // 1000:03d}Z"
 
 
-def _uid(station: str, hole_id: int) -> str:
-    return f"holescan-{station}-hole-{hole_id}"
+def _utc(t_unix_ns: int) -> dt.datetime:
+    return dt.datetime.fromtimestamp(t_unix_ns / _NS_PER_S, dt.UTC)
+
+
+def _span(seconds: float) -> str:
+    """A short duration for people.
+
+    >>> _span(42), _span(600), _span(5400), _span(200000)
+    ('42 s', '10 min', '1.5 h', '2.3 d')
+    """
+    s = max(0.0, seconds)
+    if s < 90:
+        return f"{s:.0f} s"
+    if s < 90 * 60:
+        return f"{s / 60:.0f} min"
+    if s < 48 * 3600:
+        return f"{s / 3600:.1f} h"
+    return f"{s / 86400:.1f} d"
+
+
+def point_age(h: GroundHole, now: dt.datetime) -> str:
+    """The point's age at ``now`` in words: first seen and last updated (empty when the
+    hole carries no times).
+
+    >>> t = dt.datetime(2026, 12, 3, 12, 30, tzinfo=dt.UTC)
+    >>> ns = int(t.timestamp()) * 10**9
+    >>> h = GroundHole(1, 0.0, 0.0, 0.9, t_first_unix_ns=ns, t_updated_unix_ns=ns + 540 * 10**9)
+    >>> point_age(h, t + dt.timedelta(minutes=12))
+    'first seen 12 min ago (12:30Z), updated 3 min ago'
+    """
+    if h.t_first_unix_ns <= 0:
+        return ""
+    first = _utc(h.t_first_unix_ns)
+    text = f"first seen {_span((now - first).total_seconds())} ago ({first:%H:%MZ})"
+    if h.t_updated_unix_ns > h.t_first_unix_ns:
+        text += f", updated {_span((now - _utc(h.t_updated_unix_ns)).total_seconds())} ago"
+    return text
 
 
 def hole_cot(
@@ -72,14 +148,25 @@ def hole_cot(
     now: dt.datetime | None = None,
     stale_s: float = 3600.0,
     picture_url: str | None = None,
+    attachment_sha256: str | None = None,
+    archive: bool = False,
 ) -> bytes:
-    """The CoT event (XML bytes) of one hole; see the module docstring."""
+    """The CoT event (XML bytes) of one hole; see the module docstring.
+
+    now : when the event is made (default: the clock now); ``time``/``start`` are ``now``,
+    ``stale`` is ``now + stale_s``. attachment_sha256 : SHA-256 (hex) of the picture
+    packed beside the event in a data package (``attachment_list``, as ATAK's QuickPic
+    writes it). archive : ATAK keeps the marker (``<archive/>``), for data packages.
+    """
+    if stale_s <= 0:
+        raise ValueError(f"stale_s must be > 0 seconds, got {stale_s}")
     now = now or dt.datetime.now(dt.UTC)
+    tier = hole_tier(h)
     ev = ET.Element(
         "event",
         {
             "version": "2.0",
-            "uid": _uid(station, h.id),
+            "uid": cot_uid(station, h.id),
             "type": COT_TYPE,
             "how": "m-g",
             "time": _time(now),
@@ -93,11 +180,25 @@ def hole_cot(
     ET.SubElement(ev, "point", {"lat": lat, "lon": lon, "hae": hae, "ce": ce, "le": _UNKNOWN})
     detail = ET.SubElement(ev, "detail")
     ET.SubElement(detail, "contact", {"callsign": f"HOLE {h.id}"})
-    ET.SubElement(detail, "remarks").text = hole_summary(h)
-    ET.SubElement(detail, "color", {"argb": str(_COLOURS.get(h.mark, -256))})
+    age = point_age(h, now)
+    remarks = f"{tier.upper()}: {hole_summary(h)}"
+    ET.SubElement(detail, "remarks").text = f"{remarks} ({age})" if age else remarks
+    facts = {"tier": tier, "mark": h.mark, "score": f"{h.score:.3f}", "sightings": str(h.sightings)}
+    if h.sigma_h_m is not None:
+        facts["sigma_h_m"] = f"{h.sigma_h_m:.3f}"
+    if h.t_first_unix_ns > 0:
+        facts["first_seen"] = _time(_utc(h.t_first_unix_ns))
+    if h.t_updated_unix_ns > 0:
+        facts["updated"] = _time(_utc(h.t_updated_unix_ns))
+    ET.SubElement(detail, "holescan", facts)
+    ET.SubElement(detail, "color", {"argb": str(_COLOURS[tier])})
     ET.SubElement(detail, "precisionlocation", {"geopointsrc": "GPS", "altsrc": "GPS"})
     if picture_url is not None:
         ET.SubElement(detail, "link", {"url": picture_url, "relation": "r-u", "mime": "image/jpeg"})
+    if attachment_sha256 is not None:
+        ET.SubElement(detail, "attachment_list", {"hashes": json.dumps([attachment_sha256])})
+    if archive:
+        ET.SubElement(detail, "archive")
     return bytes(ET.tostring(ev, encoding="utf-8", xml_declaration=False))
 
 
@@ -106,7 +207,7 @@ def withdraw_cot(
 ) -> list[bytes]:
     """Events that take a hole off TAK maps: stale now, then a ``t-x-d-d`` delete."""
     now = now or dt.datetime.now(dt.UTC)
-    uid = _uid(station, hole_id)
+    uid = cot_uid(station, hole_id)
     stamp = {"time": _time(now), "start": _time(now), "stale": _time(now)}
     stale = ET.Element(
         "event", {"version": "2.0", "uid": uid, "type": COT_TYPE, "how": "m-g", **stamp}
@@ -134,103 +235,3 @@ def withdraw_cot(
     ET.SubElement(d, "link", {"uid": uid, "relation": "none", "type": COT_TYPE})
     ET.SubElement(d, "__forcedelete")
     return [ET.tostring(e, encoding="utf-8") for e in (stale, delete)]
-
-
-class CotPublisher:
-    """pytak's client on its own asyncio thread; :meth:`publish` queues events.
-
-    url : pytak ``COT_URL`` (``udp+wo://239.2.3.1:6969``, ``udp://HOST:PORT``,
-    ``tcp://HOST:8087``, ``tls://HOST:8089`` with ``tls`` settings). extra : more pytak
-    settings (``PYTAK_TLS_CLIENT_CERT`` ...). A link that cannot be opened or breaks is
-    logged in one line and retried; events wait in the queue meanwhile (newest kept).
-    """
-
-    def __init__(self, url: str = DEFAULT_COT_URL, extra: dict[str, str] | None = None) -> None:
-        self.url = url
-        self._config = {"COT_URL": url, **(extra or {})}
-        self._loop = asyncio.new_event_loop()
-        self._queue: asyncio.Queue[bytes] | None = None
-        self._thread = threading.Thread(target=self._run, name="cot", daemon=True)
-        self._ready = threading.Event()
-        self._task: asyncio.Task[None] | None = None
-        self.sent = 0
-        self.errors = 0
-
-    def __enter__(self) -> CotPublisher:
-        self._thread.start()
-        self._ready.wait(5.0)
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-    def close(self) -> None:
-        """Send what is queued (up to 2 s), then stop the thread."""
-        if self._loop.is_running():
-            asyncio.run_coroutine_threadsafe(self._shutdown(), self._loop)
-        self._thread.join(timeout=5.0)
-
-    async def _shutdown(self) -> None:
-        q = self._queue
-        for _ in range(20):
-            if q is None or q.empty():
-                break
-            await asyncio.sleep(0.1)
-        if self._task is not None:
-            self._task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._task
-        self._loop.stop()
-
-    def publish(self, events: list[bytes]) -> None:
-        """Queue events for sending (any thread)."""
-        q = self._queue
-        if q is None:
-            return
-        for e in events:
-            self._loop.call_soon_threadsafe(q.put_nowait, e)
-
-    def _run(self) -> None:
-        asyncio.set_event_loop(self._loop)
-        self._queue = asyncio.Queue()
-        self._task = self._loop.create_task(self._send_loop())
-        self._ready.set()
-        try:
-            self._loop.run_forever()
-        finally:
-            self._loop.close()
-
-    async def _send_loop(self) -> None:
-        import pytak  # imported here: pytak is needed only when TAK is on
-
-        assert self._queue is not None
-        parser = configparser.ConfigParser()
-        parser["holescan"] = self._config
-        config = parser["holescan"]
-        tx: Any = None
-        pending: bytes | None = None
-        warned = False
-        while True:
-            if tx is None:
-                try:
-                    _, writer = await pytak.protocol_factory(config)
-                    tx = pytak.TXWorker(self._queue, config, writer)
-                    if warned:
-                        _log.warning("TAK link %s is up again", self.url)
-                    warned = False
-                except Exception as err:
-                    if not warned:
-                        _log.warning("TAK link %s cannot be opened (%s); retrying", self.url, err)
-                    warned = True
-                    await asyncio.sleep(2.0)
-                    continue
-            data = pending if pending is not None else await self._queue.get()
-            try:
-                await tx.send_data(data)
-                self.sent += 1
-                pending = None
-            except Exception as err:
-                self.errors += 1
-                _log.warning("TAK send to %s failed (%s); reconnecting", self.url, err)
-                pending, tx = data, None
-                await asyncio.sleep(1.0)

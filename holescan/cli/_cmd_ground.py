@@ -34,15 +34,53 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument(
         "--cot",
         default="udp+wo://239.2.3.1:6969",
-        help="TAK: pytak COT_URL (default mesh multicast udp+wo://239.2.3.1:6969; "
-        "tcp://HOST:8087, tls://HOST:8089), or 'off'",
+        help="TAK: mesh multicast udp+wo://239.2.3.1:6969 (default), a TAK server "
+        "tcp://HOST:8087 or tls://HOST:8089 (with --tak-cert), or 'off'",
+    )
+    p.add_argument(
+        "--tak-cert",
+        type=Path,
+        help="tls:// only: the client certificate, a .p12 (with --tak-password-file) or a "
+        "PEM certificate (with --tak-key)",
+    )
+    p.add_argument("--tak-key", type=Path, help="the PEM client certificate's key")
+    p.add_argument(
+        "--tak-password-file",
+        type=Path,
+        help="a file holding the .p12's password (TAK servers' default is atakatak)",
+    )
+    p.add_argument(
+        "--tak-ca", type=Path, help="the CA (PEM) that signed the TAK server's certificate"
+    )
+    p.add_argument(
+        "--tak-server-name",
+        help="the name in the server's certificate, when --cot has its IP address",
+    )
+    p.add_argument(
+        "--cot-stale",
+        type=float,
+        default=3600.0,
+        metavar="S",
+        help="each CoT event goes stale S seconds after it is sent (default 3600)",
+    )
+    p.add_argument(
+        "--cot-refresh",
+        type=float,
+        default=600.0,
+        metavar="S",
+        help="every hole is sent again every S seconds, below --cot-stale (default 600)",
+    )
+    p.add_argument(
+        "--overlay",
+        type=Path,
+        help="a map overlay (.kmz) to put in holes_datapackage.zip with the holes",
     )
     p.add_argument(
         "--cot-proto",
         type=int,
         choices=(0, 1),
         default=0,
-        help="0: CoT XML (default), 1: TAK protocol v1 protobuf (needs takproto)",
+        help="0: CoT XML (default), 1: TAK protocol v1 protobuf (mesh only; needs takproto)",
     )
     p.add_argument("--station", default="ground", help="name used in the CoT uids")
     p.set_defaults(func=run)
@@ -50,7 +88,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from holescan.errors import InputError
-    from holescan.ground import GroundOptions, run_ground
+    from holescan.ground import GroundOptions, TakTls, run_ground
 
     host, port = "127.0.0.1", None
     if args.http != "off":
@@ -59,6 +97,22 @@ def run(args: argparse.Namespace) -> int:
             port = int(port_text)
         except ValueError as err:
             raise InputError(f"--http wants HOST:PORT or 'off', got {args.http!r}") from err
+    tls = None
+    if args.tak_cert is not None:
+        password = None
+        if args.tak_password_file is not None:
+            try:
+                password = args.tak_password_file.read_text().rstrip("\r\n")
+            except OSError as err:
+                raise InputError(
+                    f"--tak-password-file {args.tak_password_file}: {err.strerror or err}"
+                ) from err
+        tls = TakTls(args.tak_cert, args.tak_key, args.tak_ca, password, args.tak_server_name)
+    elif any(
+        v is not None
+        for v in (args.tak_key, args.tak_ca, args.tak_password_file, args.tak_server_name)
+    ):
+        raise InputError("--tak-key, --tak-ca, --tak-password-file go with --tak-cert")
     opts = GroundOptions(
         mavlink=args.mavlink,
         out=args.out,
@@ -68,7 +122,11 @@ def run(args: argparse.Namespace) -> int:
         http_port=port,
         cot_url=None if args.cot == "off" else args.cot,
         cot_proto=args.cot_proto,
+        cot_tls=tls,
         station=args.station,
+        cot_stale_s=args.cot_stale,
+        cot_refresh_s=args.cot_refresh,
+        overlay=args.overlay,
     )
     stop = threading.Event()
 

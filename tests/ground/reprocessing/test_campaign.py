@@ -84,8 +84,9 @@ def test_a_hole_seen_on_both_sorties_is_one_hole(
 
 def test_campaign_files_and_summary(campaign: ReprocessResult) -> None:
     kinds = dict(campaign.files)
-    assert set(kinds) == {"gpx", "kml", "geojson", "plan", "report"}
+    assert set(kinds) == {"gpx", "kml", "geojson", "plan", "datapackage", "report"}
     out = campaign.summary_path.parent
+    assert kinds["datapackage"] == out / "campaign_holes_datapackage.zip"
     assert kinds["gpx"] == out / "campaign_holes.gpx"
     geo = json.loads(kinds["geojson"].read_text())
     assert len(geo["features"]) == len(campaign.campaign)

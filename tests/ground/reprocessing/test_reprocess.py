@@ -13,6 +13,8 @@ import subprocess
 import sys
 import threading
 import time
+import xml.etree.ElementTree as ET
+import zipfile
 from collections import defaultdict
 from pathlib import Path
 
@@ -95,8 +97,15 @@ def test_in_process_run_reads_every_frame_and_writes_a_sidecar(
     info = log_info(path)  # every CRC; summary counts against the content
     assert not info.truncated and info.metadata["ground.reprocess"]["frames"] == "all"
     kinds = dict(f.files)
-    assert set(kinds) == {"gpx", "kml", "geojson", "plan", "report", "summary"}
+    assert set(kinds) == {"gpx", "kml", "geojson", "plan", "datapackage", "report", "summary"}
     assert kinds["kml"].read_text().count("data:image/jpeg;base64,") == len(f.confirmed)
+    with zipfile.ZipFile(kinds["datapackage"]) as z:  # every confirmed hole + its picture
+        names = z.namelist()
+        assert "MANIFEST/manifest.xml" in names
+        cots = [n for n in names if n.endswith(".cot")]
+        assert len(cots) == len(f.confirmed) == sum(n.endswith(".jpg") for n in names)
+        ev = ET.fromstring(z.read(cots[0]))
+        assert ev.get("uid", "").startswith("holescan-sortie-hole-")
     doc = json.loads(reference.summary_path.read_text())
     assert doc["flights"][0] == json.loads(kinds["summary"].read_text())
 
@@ -360,7 +369,8 @@ def test_cli(flight: Flown, tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
     assert rc == 0, text.err
     assert "frames/s" in text.out and "summary:" in text.out
     doc = json.loads((out / "summary.json").read_text())["flights"][0]
-    assert set(doc["files"]) == {"report", "summary"} | ({"gpx"} if doc["confirmed"] else set())
+    holes = {"gpx", "datapackage"} if doc["confirmed"] else set()  # the package: always
+    assert set(doc["files"]) == {"report", "summary"} | holes
     meta = log_info(out / "sortie_reprocess.mcap").metadata["ground.reprocess"]
     assert json.loads(meta["params"])["searcher"]["name"] == "dog"
     assert cli.main(["reprocess", str(tmp_path / "nope.mcap"), "--out", str(out)]) == 2
