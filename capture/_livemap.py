@@ -77,7 +77,7 @@ class LiveMapConfig:
     tile_cells: int = 64
     radius_m: float = 50.0
     pixel_stride: int = 8
-    frame_every: int = 2
+    frame_every: int = 4
     budget_ms: float = 2.0
     budget_burst_ms: float = 60.0
     publish_s: float = 3.0

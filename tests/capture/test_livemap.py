@@ -8,7 +8,7 @@ import time
 import numpy as np
 import pytest
 
-from holescan.capture import Frame, LiveMap, LiveMapConfig
+from holescan.capture import Frame, LiveMap, LiveMapConfig, parse_fly_config
 from holescan.detect import CameraIntrinsics
 from holescan.errors import InputError
 from holescan.geotag import CameraMount, VehiclePose
@@ -120,3 +120,15 @@ def test_bad_settings_are_refused() -> None:
     for bad in ({"cell_m": 0.0}, {"pixel_stride": 0}, {"budget_ms": -1.0}, {"tile_cells": 4}):
         with pytest.raises(InputError):
             LiveMapConfig(**bad)  # type: ignore[arg-type]
+
+
+def test_map_table_of_the_fly_configuration() -> None:
+    base = {"log_dir": "/tmp/x"}
+    assert parse_fly_config(base).live_map == LiveMapConfig()
+    assert parse_fly_config({**base, "map": {"enabled": False}}).live_map is None
+    cfg = parse_fly_config({**base, "map": {"cell_m": 0.2, "pixel_stride": 16}}).live_map
+    assert cfg is not None and cfg.cell_m == 0.2 and cfg.pixel_stride == 16
+    with pytest.raises(InputError, match=r"\[map\]"):
+        parse_fly_config({**base, "map": {"budget_ms": 0.0}})
+    with pytest.raises(InputError, match=r"map\.colour"):
+        parse_fly_config({**base, "map": {"colour": True}})
