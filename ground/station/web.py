@@ -170,10 +170,6 @@ def _handler(web: StationWeb) -> type[BaseHTTPRequestHandler]:
 
         def do_GET(self) -> None:
             path, _, query = self.path.partition("?")
-            mapped = map_route(web.map_store, path, query)  # the map layers (maplayers.py)
-            if mapped is not None:
-                self._reply(*mapped)
-                return
             if path in ("/", "/index.html"):
                 self._reply(200, _page(), "text/html; charset=utf-8")
             elif path == "/state.json":
@@ -189,6 +185,8 @@ def _handler(web: StationWeb) -> type[BaseHTTPRequestHandler]:
                     self._reply(404, b"no such picture", "text/plain")
                     return
                 self._reply(200, data, "image/jpeg")
+            elif (mapped := map_route(web.map_store, path, query)) is not None:
+                self._reply(*mapped)  # the map layers (maplayers.py)
             else:
                 self._reply(404, b"not found", "text/plain")
 
