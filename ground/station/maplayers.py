@@ -4,7 +4,8 @@ One route function, :func:`map_route`, that the page's HTTP handler calls first 
 GET (kept apart from :mod:`ground.station.web` so that the map is one clearly separated
 piece of the server):
 
-* ``GET /maplayers.js`` the page's map-layer script (``maplayers.js``, no CDN);
+* ``GET /static/maplayers.js`` the page's map-layer script (``maplayers.js``, no CDN;
+  the path a generic ``/static/NAME.js`` route serves it under too);
 * ``GET /map.json?lat=..&lon=..`` every tile kept, its corners in the page's local metres
   (:class:`geotag.LocalFrame` at the page's origin ``lat``/``lon``, the state document's
   ``origin``; without them, the first map's own origin) and where to fetch it;
@@ -107,7 +108,7 @@ def map_route(store: MapStore | None, path: str, query: str = "") -> Reply | Non
 
     Returns (status, body, content type).
     """
-    if path == "/maplayers.js":
+    if path == "/static/maplayers.js":
         return 200, _script(), "text/javascript; charset=utf-8"
     if path == "/map.json":
         if store is None:
