@@ -17,8 +17,12 @@ A hole is **detected** when a default-mode detection with ``p_hole >= --min-p-ho
 covering at least half of its visible part. Holes whose ring has under 200 read pixels
 cannot be measured (counted and printed). Recall per (range, angle) bin is printed with its
 count; ``--write`` stores it as ``mapping/recall_table.json`` with its provenance (the
-command, datasets, counts and date). Bins measured on fewer than ``--min-holes`` views
-(default 15) are written as 0: the map claims no coverage it has not measured.
+command, datasets, counts and date). A bin measured on fewer than ``--min-holes`` views
+(default 15) takes the lower of its own recall and that of itself and its 8 neighbours
+pooled; a bin with no view the lowest measured neighbour; both only when the
+neighbourhood holds ``--min-holes`` views, else 0: the map claims no coverage it has not
+measured. ``--rows FILE`` keeps the
+per-view measurements (a second run with the same file re-bins without detecting).
 """
 
 from __future__ import annotations
@@ -122,11 +126,14 @@ def main() -> None:
     ap.add_argument("--min-p-hole", type=float, default=0.5)
     ap.add_argument("--min-holes", type=int, default=15)
     ap.add_argument("--write", action="store_true")
+    ap.add_argument("--rows", type=Path, help="save the per-view rows here (or read them back)")
     a = ap.parse_args()
     from holescan.mapping import RecallTable
 
     rows: list[tuple[str, float, float, int, int]] = []
-    for root in a.datasets:
+    if a.rows is not None and a.rows.exists():
+        rows = [tuple(r) for r in json.loads(a.rows.read_text())]  # type: ignore[misc]
+    for root in a.datasets if not rows else []:
         ds = _dataset(str(root))
         jobs = [(str(root), i, a.min_p_hole) for i in range(len(ds.images))]  # type: ignore[attr-defined]
         if a.workers > 1:
@@ -143,6 +150,8 @@ def main() -> None:
             f"({int(arr[:, 3].sum())} cut by the border), {int((~meas).sum())} unmeasurable, "
             f"recall {arr[:, 2].mean():.3f} (measured {arr[meas, 2].mean():.3f})"
         )
+    if a.rows is not None and not a.rows.exists():
+        a.rows.write_text(json.dumps(rows))
     arr = np.array([r[1:] for r in rows], dtype=np.float64)
     meas = np.isfinite(arr[:, 0])
     arr = arr[meas]
@@ -162,7 +171,31 @@ def main() -> None:
     for i in range(nr):
         cells = " | ".join(f"{rec[i, j]:.2f} ({n[i, j]})" if n[i, j] else "-" for j in range(na))
         print(f"{re[i]:.1f}-{re[i + 1]:.1f} m | {cells}")
-    table = np.where(n >= a.min_holes, rec, 0.0)
+    # A bin with few views takes the recall of it and its 8 neighbours pooled, when those
+    # hold enough; a bin outside everything measured stays 0.
+    pn = np.zeros_like(n)
+    pk = np.zeros_like(k)
+    for i in range(nr):
+        for j in range(na):
+            sl = (slice(max(0, i - 1), i + 2), slice(max(0, j - 1), j + 2))
+            pn[i, j], pk[i, j] = n[sl].sum(), k[sl].sum()
+    table = np.zeros((nr, na))
+    for i in range(nr):
+        for j in range(na):
+            pooled = pk[i, j] / pn[i, j] if pn[i, j] >= a.min_holes else 0.0
+            sl = (slice(max(0, i - 1), i + 2), slice(max(0, j - 1), j + 2))
+            if n[i, j] >= a.min_holes:
+                table[i, j] = rec[i, j]
+            elif n[i, j] > 0:  # few views: never above what they showed
+                table[i, j] = min(pooled, rec[i, j])
+            elif pooled > 0:  # none: the worst measured neighbour
+                table[i, j] = min(pooled, float(rec[sl][n[sl] > 0].min()))
+    print("written table (sparse bins: see --help):")
+    for i in range(nr):
+        print(
+            f"{re[i]:.1f}-{re[i + 1]:.1f} m | "
+            + " | ".join(f"{table[i, j]:.2f}" for j in range(na))
+        )
     if a.write:
         t = RecallTable(
             re,
@@ -180,7 +213,9 @@ def main() -> None:
                 "measured": int(meas.sum()),
                 "detected_when": f"p_hole >= {a.min_p_hole} and IoU > 0.5 (border-cut: covers "
                 "half the visible part)",
-                "bins_below_min_holes": f"written as 0 (fewer than {a.min_holes} views)",
+                "bins_below_min_holes": f"fewer than {a.min_holes} views: the lower of its own "
+                "recall and that of it and its 8 neighbours pooled; no view: the lowest measured "
+                "neighbour; 0 when the neighbourhood holds fewer views",
                 "date": datetime.date.today().isoformat(),
             },
         )

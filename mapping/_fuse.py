@@ -4,26 +4,33 @@ Per frame (``pixel_stride`` s: every s-th pixel of every s-th row):
 
 
 0. ``pixel_stride`` is by default the largest step that leaves no cell in view without a
-   sample (a cell's width at the frame's median range).
+   sample: a cell's width at the frame's median range, times the cosine of the off-nadir
+   angle of the most oblique edge midpoint (oblique rays spread on the ground).
 1. Each read pixel is back-projected (:class:`detect.CameraIntrinsics`) and moved into the
    local frame by the camera's pose (:func:`geotag.camera_pose_local`). Its **view angle**
    is the angle between the line of sight and the terrain's normal there, the normal taken
-   from the points ``normal_span_m`` either side (about a hole's rim: 0.25 m at
-   3 m), as ``benchmarks/bench_recall.py`` measured it; where those are not read, the
-   normal is up.
-2. An unread pixel is a look too when enough of the image around it (``void_window_m``)
-   was read: an access hole's void has no reading, but its rim has, and that is what the
-   detector finds it by. It is placed where its ray meets the mean height of the readings
-   around it; its view angle is to the vertical. Unread far field or sheet metal without
-   readings around it is not a look.
+   from the points ``normal_span_m`` (0.75 m) either side: the scale of the terrain plane
+   around a hole's box that ``benchmarks/bench_recall.py`` measured the angle to; where
+   those are not read, the normal is up.
+2. An unread pixel is a look too when enough of the image around it (``void_window_m``,
+   1.6 m: wider than the largest access hole, so a void's centre sees its rim) was read:
+   an access hole's void has no reading, but its rim has, and that is what the detector
+   finds it by. It is placed where its ray meets the height of the lowest reading around
+   it (inside a hole the ray runs down past the rim; at an occluding edge it runs on to the
+   ground beyond); its view angle is to the vertical. Unread far field or sheet metal without
+   readings around it is not a look, nor an unread pixel beside a surface over 0.5 m
+   nearer than that (a dropout at an occluding edge: its ray stops there).
 3. **Z-buffer per cell**: of the samples falling in one cell, the highest read one is the
    cell's surface in this frame (then the highest unread-void one): a wall or a floor below
    the rim seen in the same cell is not the cell's look. A cell behind a slab receives no
    sample and is not looked at; a 2.5-D map cannot tell a surface under an overhang.
 4. The look's probability of detection is the measured recall at its range and angle
-   (:class:`RecallTable`). Looks from camera positions within ``independent_m`` of where a
-   cell's current pass began are one pass (their best POD: consecutive frames miss alike);
-   passes combine as POD = 1 - prod(1 - POD_pass).
+   (:class:`RecallTable`); for a sample 0.2 m or more below the mean height of the readings
+   around it (a hole's floor, a void) at the range where its ray crosses that level, and
+   the angle to the vertical: a look into a hole is a look at its opening. Looks from
+   camera positions within ``independent_m`` of where a cell's current pass began are one
+   pass (their best POD: consecutive frames miss alike); passes combine as
+   POD = 1 - prod(1 - POD_pass).
 5. The best look (least range / cos(off-nadir)) gives the cell's height and colour.
 """
 
@@ -48,6 +55,9 @@ __all__ = ["FrameFused", "FuseParams", "SearchMap"]
 F32 = npt.NDArray[np.float32]
 
 _MAX_POD = 0.999  # one pass never proves a cell empty (and ln(1 - POD) stays finite)
+_OCCLUDER_WINDOW_M = 0.3  # an unread pixel's neighbourhood searched for a nearer surface
+_OCCLUDER_GAP_M = 0.5  # that much nearer than the terrain behind: an occluding edge
+_BELOW_TERRAIN_M = 0.2  # a sample this far below the terrain's level around it is in a hole
 
 
 @dataclass(frozen=True)
@@ -65,8 +75,8 @@ class FuseParams:
     """
 
     pixel_stride: int | None = None
-    normal_span_m: float = 0.25
-    void_window_m: float = 0.85
+    normal_span_m: float = 0.75
+    void_window_m: float = 1.6
     void_min_read: float = 0.25
     independent_m: float = 1.0
 
@@ -210,7 +220,28 @@ class SearchMap:
         px_per_m = camera.fx / max(z_med, 0.1)
         stride = pixel_stride if pixel_stride is not None else self.params.pixel_stride
         if stride is None:
-            stride = min(64, max(1, math.floor(self.grid.cell_m * px_per_m)))
+            # Oblique rays spread their samples on the ground: by 1 / cos(off-nadir) at the
+            # edges' midpoints, the most oblique part of the image that matters.
+            mids = np.array(
+                [
+                    [camera.width / 2, 0.0],
+                    [camera.width / 2, camera.height - 1.0],
+                    [0.0, camera.height / 2],
+                    [camera.width - 1.0, camera.height / 2],
+                ]
+            )
+            rays_e = (
+                np.column_stack(
+                    [
+                        (mids[:, 0] - camera.cx) / camera.fx,
+                        (mids[:, 1] - camera.cy) / camera.fy,
+                        np.ones(4),
+                    ]
+                )
+                @ pose.rotation.T
+            )
+            spread = float(np.min(np.abs(rays_e[:, 2]) / np.linalg.norm(rays_e, axis=1)))
+            stride = min(64, max(1, math.floor(self.grid.cell_m * px_per_m * max(spread, 0.2))))
         s = int(stride)
         if not 1 <= s <= 64:
             raise MapError(f"pixel_stride must be 1-64, got {s}")
@@ -226,10 +257,19 @@ class SearchMap:
         k = max(1, round(self.params.normal_span_m * px_per_m / s))
         cos_view = self._cos_view(pts, read, dirs, ray_len, k)
         window = max(3, round(self.params.void_window_m * px_per_m / s) | 1)
-        void, void_pts, void_t = self._voids(pts, read, dirs, c, window)
-        rng = np.where(read, z, void_t) * ray_len
-        cos_view = np.where(read, cos_view, up_cos)
+        near = max(3, round(_OCCLUDER_WINDOW_M * px_per_m / s) | 1)
+        void, void_pts, void_t, level = self._voids(pts, z, read, dirs, c, window, near)
+        t_pt = np.where(read, z, void_t)
+        rng = t_pt * ray_len
         pts = np.where(read[..., None], pts, void_pts)
+        # A sample well below the terrain around it (a hole's floor, a void placed on the
+        # lowest reading) is a look at the opening: its range is where its ray crosses the
+        # terrain's level, its angle the line of sight's to the vertical.
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t_level = (level - c[2]) / dirs[..., 2]
+        in_hole = (pts[..., 2] < level - _BELOW_TERRAIN_M) & np.isfinite(t_level) & (t_level > 0)
+        rng_pod = np.where(in_hole, np.minimum(t_level, t_pt), t_pt) * ray_len
+        cos_view = np.where(read & ~in_hole, cos_view, up_cos)
         looked = read | void
         ang = np.degrees(np.arccos(np.clip(cos_view, 0.0, 1.0)))
 
@@ -248,7 +288,7 @@ class SearchMap:
         top = order[last]
         cell = idx[top]
         src = sel[top]
-        pod = np.minimum(self.recall.pod(rng.ravel()[src], ang.ravel()[src]), _MAX_POD)
+        pod = np.minimum(self.recall.pod(rng_pod.ravel()[src], ang.ravel()[src]), _MAX_POD)
         self.version += 1
         self._update(cell, src, is_read[top], pod, pts, rgb[::s, ::s], rng, up_cos, c)
         return FrameFused(
@@ -282,22 +322,40 @@ class SearchMap:
         return np.asarray(np.abs(np.einsum("ijk,ijk->ij", n, dirs)) / ray_len, dtype=np.float32)
 
     def _voids(
-        self, pts: F32, read: npt.NDArray[np.bool_], dirs: F32, c: F32, ks: int
-    ) -> tuple[npt.NDArray[np.bool_], F32, F32]:
-        """Unread samples that are looks: their mask, points and optical depth."""
+        self,
+        pts: F32,
+        z: F32,
+        read: npt.NDArray[np.bool_],
+        dirs: F32,
+        c: F32,
+        ks: int,
+        near: int,
+    ) -> tuple[npt.NDArray[np.bool_], F32, F32, F32]:
+        """Unread samples that are looks: their mask, points and optical depth; and the
+        terrain's level around every sample (the mean height of the readings).
+
+        Not a look: an unread pixel beside a surface much nearer than where its ray would
+        meet the terrain (a dropout or projector shadow at an occluding edge: its ray ends
+        on that surface, not behind it)."""
         rf = read.astype(np.float32)
         frac = cv2.blur(rf, (ks, ks), borderType=cv2.BORDER_REPLICATE)
-        zsum = cv2.blur(
+        # The lowest read surface around: inside a hole the ray runs down past the rim; at
+        # an occluding edge it runs on to the ground beyond.
+        kernel = np.ones((ks, ks), np.uint8)
+        zloc = cv2.erode(np.where(read, pts[..., 2], np.float32(1e4)).astype(np.float32), kernel)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (zloc - c[2]) / dirs[..., 2]
+        zmin = cv2.erode(np.where(read, z, np.float32(1e4)), np.ones((near, near), np.uint8))
+        void = ~read & (frac >= self.params.void_min_read) & np.isfinite(t) & (t > 0)
+        void &= t <= zmin + _OCCLUDER_GAP_M
+        t = np.where(void, t, 0.0).astype(np.float32)
+        hsum = cv2.blur(
             np.where(read, pts[..., 2], 0.0).astype(np.float32),
             (ks, ks),
             borderType=cv2.BORDER_REPLICATE,
         )
-        zloc = zsum / np.maximum(frac, 1e-6)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (zloc - c[2]) / dirs[..., 2]
-        void = ~read & (frac >= self.params.void_min_read) & np.isfinite(t) & (t > 0)
-        t = np.where(void, t, 0.0).astype(np.float32)
-        return void, (dirs * t[..., None] + c).astype(np.float32), t
+        level = (hsum / np.maximum(frac, 1e-6)).astype(np.float32)
+        return void, (dirs * t[..., None] + c).astype(np.float32), t, level
 
     def _update(
         self,

@@ -53,6 +53,7 @@ from holescan.errors import InputError
 from holescan.geotag import AnnounceGate, Hole, VehiclePose
 from holescan.ground import GroundOptions, GroundStation, ReprocessOptions, write_hole_outputs
 from holescan.missions import HoleMissionServer
+from holescan.sim._demo_map import DemoMap, DemoMapper
 from holescan.sim._scoring import FalseHole, TruthRow, frames_in_view, score_holes
 from holescan.sim._sortie import SimSortie, SortieParams, loop_length_m
 
@@ -143,6 +144,7 @@ class DemoResult:
     match_m: float = 0.5
     cards_sent: int = 0
     pictures_at_ground: int = 0
+    search: DemoMap | None = None
 
     @property
     def found(self) -> int:
@@ -197,6 +199,12 @@ class DemoResult:
             "interrupted": self.interrupted,
             "log_files": [str(p) for p in self.log_files],
             "files": {k: str(p) for k, p in self.files},
+            "searched_fraction": self.search.searched_fraction if self.search else None,
+            "missed_why": {
+                str(r.truth.id): self.search.why_missed(r.truth.id)
+                for r in self.truth
+                if self.search is not None and r.status != "found"
+            },
         }
 
 
@@ -261,13 +269,14 @@ def _free_udp_port() -> int:
 
 
 def _views_and_track(
-    files: Sequence[Path], holes: Sequence[Hole]
+    files: Sequence[Path], holes: Sequence[Hole], on_frame: Callable[[LoggedFrame], None]
 ) -> tuple[
     dict[int, tuple[npt.NDArray[np.uint8], npt.NDArray[np.uint16], tuple[int, ...]]],
     list[VehiclePose],
     int | None,
 ]:
-    """Read the flight log once: each hole's best view (cropped), the track, boot -> Unix."""
+    """Read the flight log once: each hole's best view (cropped), the track, boot -> Unix;
+    every frame also to ``on_frame`` (the search map)."""
     wanted: dict[int, list[Hole]] = {}
     for h in holes:
         if h.best_frame_index is not None:
@@ -281,6 +290,7 @@ def _views_and_track(
             boot_to_unix = rec.t_unix_ns - rec.pose.t_boot_ns
             continue
         assert isinstance(rec, LoggedFrame)
+        on_frame(rec)
         for h in wanted.get(rec.frame.index, ()):
             rgb, box = crop_view(rec.frame.rgb, h.best_box)
             depth, _ = crop_view(rec.frame.depth, h.best_box)
@@ -417,7 +427,9 @@ def run_demo(
         min_frames_in_view=opts.min_frames_in_view,
     )
     log_files = tuple(summary.log.files)
-    views, track, boot_to_unix = _views_and_track(log_files, confirmed)
+    mapper = DemoMapper(sortie.world, opts.sortie, sortie.camera, sortie.mount)
+    views, track, boot_to_unix = _views_and_track(log_files, confirmed, mapper.add)
+    search = mapper.finish(out, confirmed, boot_to_unix)
     kinds = Counter(str(h.kind) for h in sortie.world.holes)
     facts = {
         "flight log": ", ".join(p.name for p in log_files),
@@ -440,7 +452,9 @@ def run_demo(
         truth=[(f"true hole {t.id}", t.lat_deg, t.lon_deg) for t in truth],
         facts=facts,
         title="holescan demo: simulated dawn survey",
+        search_map=search.section,
     )
+    files = [*search.files, *files]
     result = DemoResult(
         out=out,
         log_files=log_files,
@@ -463,6 +477,7 @@ def run_demo(
         cards_sent=cards_sent,
         pictures_at_ground=pictures,
         match_m=opts.match_m,
+        search=search,
     )
     path = out / "demo.json"
     path.write_text(json.dumps(result.numbers(), indent=1) + "\n")

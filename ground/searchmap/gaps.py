@@ -28,6 +28,7 @@ from shapely.geometry import MultiPoint, Polygon, mapping, shape
 from shapely.ops import unary_union
 
 from holescan.capture import atomic_output
+from holescan.errors import InputError
 from holescan.geotag import LocalFrame
 from holescan.mapping import MapLayers
 from holescan.missions import Area, SurveyParams, SurveyPlan, Waypoint, plan_survey
@@ -179,6 +180,8 @@ class Refly:
     home: Waypoint
     duration_s: float
     areas: tuple[Area, ...]
+    skipped: tuple[str, ...] = ()
+    """Gap areas the planner refused (too small or thin for its rules), in words."""
 
 
 def plan_refly(
@@ -188,25 +191,36 @@ def plan_refly(
     *,
     merge_within_m: float = 1.0,
 ) -> Refly | None:
-    """Survey the gaps again (None when there are none). Gaps closer than
-    ``merge_within_m`` are flown as one area (their union's hull)."""
+    """Survey the gaps again (None when there are none, or the planner refuses them all).
+    Gaps closer than ``merge_within_m`` are flown as one area (the hull of their union grown
+    by half that)."""
     if not gaps:
         return None
     grown = unary_union([p.buffer(merge_within_m / 2) for p in gaps])
     parts = [p for p in getattr(grown, "geoms", [grown]) if isinstance(p, Polygon)]
     areas: list[Area] = []
     plans: list[SurveyPlan] = []
+    skipped: list[str] = []
     for p in sorted(parts, key=lambda q: (-q.centroid.y, q.centroid.x)):
-        hull = p.convex_hull.buffer(-merge_within_m / 4)
+        hull = p.convex_hull
         if not isinstance(hull, Polygon) or hull.is_empty:
-            hull = p.convex_hull
+            continue
         xy = np.asarray(hull.exterior.coords)[:-1]
         lat, lon = frame.to_geodetic(xy[:, 0], xy[:, 1])
         area = Area(tuple((float(a), float(b)) for a, b in zip(lat, lon, strict=True)))
+        try:
+            plan = plan_survey(area, params)
+        except InputError as err:  # the planner's rules refuse it: said, not flown
+            skipped.append(
+                f"{hull.area:.1f} m2 at ({hull.centroid.x:.1f}, {hull.centroid.y:.1f}) m: {err}"
+            )
+            continue
         areas.append(area)
-        plans.append(plan_survey(area, params))
+        plans.append(plan)
+    if not plans:
+        return None
     first = plans[0].mission_items()
     path = [w for pl in plans for w in pl.path]
     items = (first[0], first[1], *path, first[-1])
     duration = sum(pl.duration_s for pl in plans)  # each with its climb: an upper bound
-    return Refly(tuple(plans), items, plans[0].home, duration, tuple(areas))
+    return Refly(tuple(plans), items, plans[0].home, duration, tuple(areas), tuple(skipped))

@@ -48,6 +48,7 @@ class MapOutputs:
                 f"{len(self.refly.plans)} gap areas, about {self.refly.duration_s / 60:.1f} min; "
                 f"{self.sun}"
             )
+            out += [f"  re-fly: not planned: {s}" for s in self.refly.skipped]
         return out
 
 

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import math
 
+import cv2
 import numpy as np
 import pytest
 
 from holescan.detect import CameraIntrinsics
 from holescan.geotag import CameraMount, LocalCameraPose, LocalFrame, VehiclePose, camera_pose_local
 from holescan.mapping import FuseParams, MapError, MapGrid, RecallTable, SearchMap, merge_layers
-from holescan.sim import CameraPose, make_world, render
+from holescan.sim import CameraPose, RubbleWorld, make_world, render, render_exact
 
 CAM = CameraIntrinsics.xtion(160, 120)
 FRAME = LocalFrame(47.0, 8.0, 400.0)
@@ -114,6 +115,48 @@ def test_a_pose_from_geotag_places_the_frame(world) -> None:  # type: ignore[no-
     assert ce.max() - ce.min() == pytest.approx(2 * 3 * math.tan(math.radians(29.0)), abs=0.1)
     assert cn.max() - cn.min() == pytest.approx(2 * 3 * math.tan(math.radians(22.6)), abs=0.1)
     assert abs(ce.mean()) < 0.05 and abs(cn.mean()) < 0.05
+
+
+def test_cells_behind_a_slab_are_not_looked_at() -> None:
+    # A flat field with a 1 m block, seen obliquely from the west: the ground east of the
+    # block is in its shadow. Truth: the simulator's exact render (a z-buffer of its own).
+    n = 301
+    height = np.zeros((n, n), np.float32)
+    height[100:200, 150:160] = 1.0  # 0.2 m wide, 2 m long, 1 m tall, at x = 3.0-3.2 m
+    albedo = np.full((n, n, 3), 0.4, np.float32)
+    world = RubbleWorld(0, 0.02, height, albedo, albedo.copy(), (), 0.0, 0.5)
+    cam = CameraIntrinsics.xtion(320, 240)
+    pose = CameraPose.looking_down(
+        1.5, 3.0, 2.5, yaw=math.pi / 2, tilt=math.radians(30), tilt_heading=math.pi / 2
+    )
+    rgb, depth, _ = render(world, pose, cam, np.random.default_rng(0))
+    grid = MapGrid.covering(0, 0, 6, 6, 0.04)
+    m = SearchMap(grid, FRAME, RecallTable.uniform(0.9))
+    m.add_frame(depth, rgb, cam, LocalCameraPose(pose.rotation, pose.position))
+    looks = m.layers().looks
+    z, _ = render_exact(world, pose, cam)
+    e, nn = grid.centres()
+    ee, nnn = np.meshgrid(e, nn)
+    ground = np.column_stack([ee.ravel(), nnn.ravel(), np.zeros(ee.size)])
+    pc = pose.to_camera(ground)
+    u = np.round(cam.fx * pc[:, 0] / pc[:, 2] + cam.cx).astype(int)
+    v = np.round(cam.fy * pc[:, 1] / pc[:, 2] + cam.cy).astype(int)
+    inview = (pc[:, 2] > 0) & (u >= 0) & (u < cam.width) & (v >= 0) & (v < cam.height)
+    behind = np.zeros(ee.size, bool)
+    behind[inview] = z[v[inview], u[inview]] < pc[inview, 2] - 0.1  # something nearer
+    behind &= ~((ee.ravel() >= 2.98) & (ee.ravel() <= 3.24))  # not the block's own cells
+    # Wholly in the shadow: 2 cells from its edge (edge cells are partly seen).
+    shadow = behind.reshape(grid.shape).astype(np.uint8)
+    behind = cv2.erode(shadow, np.ones((5, 5), np.uint8)) > 0
+    assert behind.sum() > 200  # the shadow: over 0.3 m2
+    assert (looks[behind] > 0).mean() < 0.05
+    # Wholly in sight within the sensor's range (3.5 m): looked at.
+    zc = np.zeros(ee.size)
+    zc[inview] = z[v[inview], u[inview]]
+    lit = (inview & (zc > 0) & (pc[:, 2] <= 3.5)).reshape(grid.shape) & (shadow == 0)
+    visible = cv2.erode(lit.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+    assert visible.sum() > 1000
+    assert (looks[visible] > 0).mean() > 0.9
 
 
 def test_bad_frames_are_refused() -> None:

@@ -98,6 +98,12 @@ def test_printed_score_is_the_truth(demo: tuple[Path, str]) -> None:
     assert found >= 1  # the demo's short run over the small field finds holes
     doc = json.loads((out / "demo.json").read_text())
     assert (doc["found"], doc["missed"], doc["false"]) == (found, missed, false)
+    # The search map: the searched fraction, and why each true hole not found was missed.
+    m = re.search(r"search map: ([\d.]+)% of the planned (\d+) m2 searched", text)
+    assert m is not None and abs(float(m[1]) / 100 - doc["searched_fraction"]) < 1e-3
+    assert int(m[2]) == SIZE[0] * SIZE[1]
+    why = re.findall(r"the search map: (in a gap|seen and not detected) \(coverage ([\d.]+)", text)
+    assert len(why) == len(rows) - found == len(doc["missed_why"])
 
 
 def test_flight_log_ground_station_and_files(demo: tuple[Path, str]) -> None:
@@ -121,7 +127,11 @@ def test_flight_log_ground_station_and_files(demo: tuple[Path, str]) -> None:
     assert len(plan["mission"]["items"]) == confirmed
     assert len(json.loads(Path(files["geojson"]).read_text())["features"]) == confirmed
     page = Path(files["report"]).read_text()
-    assert page.count("true hole") >= 4 and page.count("data:image/png;base64,") == 2 * confirmed
+    # Two pictures per hole, and the search map's coverage layer.
+    assert (
+        page.count("true hole") >= 4 and page.count("data:image/png;base64,") == 2 * confirmed + 1
+    )
+    assert "Search map" in page
     for path in files.values():
         assert str(out) in path
     assert f"holescan reprocess {logs[0]}" in text
