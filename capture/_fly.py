@@ -81,6 +81,7 @@ def fly(
                     rel_alt_m=cfg.hole_rel_alt_m,
                     clearance_m=cfg.hole_clearance_m,
                     card_bytes_per_s=cfg.hole_card_bytes_per_s,
+                    signing=cfg.signing,
                 )
             )
 

@@ -46,6 +46,7 @@ from holescan.capture.flightlog.options import LogOptions
 from holescan.detect import DEFAULT, PAPER, SEARCHERS, DetectParams
 from holescan.errors import InputError
 from holescan.geotag import AnnounceGate, CameraMount, ErrorModel
+from holescan.missions import SigningKey
 
 __all__ = [
     "FlyConfig",
@@ -90,7 +91,10 @@ class FlyConfig:
     autopilot talks to, None = a free loopback port). baud : serial rate.
     log_dir : folder of the flight logs. gcs : pymavlink connection towards the ground
     station for the hole mission server (None: no server). sysid : the vehicle's MAVLink
-    system id (the hole server speaks as its component 191).
+    system id (the hole server speaks as its component 191). signing : MAVLink 2 signing
+    key of the hole server's link to the ground station (None: unsigned; fly.toml
+    ``mavlink_key`` = 64 hex digits or ``mavlink_key_file`` = a file of the key or a
+    passphrase, :class:`missions.SigningKey`; never in ``record`` or a log).
     duration_s, max_frames : stop after this long / this many frames (None: until stopped).
     usb_reset : reset the Xtion on USB after a sensor failure (``openni2`` only).
     openni_uri : OpenNI2 device URI (None: the first Xtion).
@@ -111,6 +115,7 @@ class FlyConfig:
     baud: int = DEFAULT_BAUD
     gcs: str | None = None
     sysid: int = 1
+    signing: SigningKey | None = None
     duration_s: float | None = None
     max_frames: int | None = None
     usb_reset: bool = True
@@ -175,6 +180,8 @@ _TOP: dict[str, tuple[tuple[type, ...], Any]] = {
     "log_dir": ((str,), None),
     "gcs": ((str,), None),
     "sysid": _from(FlyConfig, (int,), "sysid"),
+    "mavlink_key": ((str,), None),
+    "mavlink_key_file": ((str,), None),
     "duration_s": (_NUM, None),
     "max_frames": ((int,), None),
 }
@@ -403,6 +410,9 @@ def parse_fly_config(
     if not isinstance(sim_table, Mapping):
         raise InputError(f"{where}: [sim] must be a table")
 
+    signing = _signing_key(where, top)
+    for key in ("mavlink_key", "mavlink_key_file"):  # the secret never reaches the log
+        top[key] = None if top[key] is None else f"(set: {signing})"
     record: dict[str, Any] = {k: str(v) if isinstance(v, Path) else v for k, v in top.items()}
     for name, values in tables.items():
         record.update({f"{name}.{k}": v for k, v in values.items()})
@@ -413,6 +423,7 @@ def parse_fly_config(
         baud=top["baud"],
         gcs=top["gcs"],
         sysid=top["sysid"],
+        signing=signing,
         duration_s=None if top["duration_s"] is None else float(top["duration_s"]),
         max_frames=top["max_frames"],
         usb_reset=cap["usb_reset"],
@@ -426,6 +437,21 @@ def parse_fly_config(
         sim_table=dict(sim_table),
         record=record,
     )
+
+
+def _signing_key(where: str, top: Mapping[str, Any]) -> SigningKey | None:
+    """The hole server's MAVLink signing key from ``mavlink_key`` or ``mavlink_key_file``."""
+    text, path = top["mavlink_key"], top["mavlink_key_file"]
+    if text is not None and path is not None:
+        raise InputError(f"{where}: give mavlink_key or mavlink_key_file, not both")
+    try:
+        if text is not None:
+            return SigningKey.from_hex(text)
+        if path is not None:
+            return SigningKey.from_file(Path(path))
+    except InputError as err:
+        raise InputError(f"{where}: {err}") from err
+    return None
 
 
 def load_fly_config(

@@ -10,6 +10,7 @@
 * :func:`write_hole_file` - found holes as GPX, KML/KMZ (thumbnails), GeoJSON, .plan, WPL.
 * :class:`HoleMissionServer` - serves found holes live as a mission (component 191) and
   announces them by STATUSTEXT.
+* :class:`SigningKey` - MAVLink 2 signing of the links to and from the ground station.
 """
 
 from holescan.missions._files import read_area, read_waypoints, write_waypoints
@@ -76,6 +77,7 @@ from holescan.missions._protocol import (
     waypoint_from_mission_item,
 )
 from holescan.missions._qgcfiles import read_plan, read_wpl, write_plan, write_wpl
+from holescan.missions._signing import SigningKey
 from holescan.missions._sun import (
     SUNRISE_ELEVATION_DEG,
     FlightCheck,
@@ -146,6 +148,7 @@ __all__ = [
     "MissionServerError",
     "MissionTimeoutError",
     "MissionsError",
+    "SigningKey",
     "SunDay",
     "SunWindow",
     "SunWindowError",

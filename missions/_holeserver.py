@@ -49,6 +49,7 @@ from holescan.geotag import Hole
 from holescan.missions._holecards import CardSender, TileSource, card_facts, make_card
 from holescan.missions._link import mavlink
 from holescan.missions._protocol import MissionError
+from holescan.missions._signing import SigningKey
 from holescan.missions._vehicle import MissionReceiver, MissionServer
 from holescan.missions._waypoint import MAV_FRAME_GLOBAL, MAV_FRAME_GLOBAL_RELATIVE_ALT, Waypoint
 from holescan.missions.errors import MissionServerError
@@ -153,6 +154,7 @@ class HoleMissionServer(MissionServer):
         clearance_m: float = 5.0,
         heartbeat_period_s: float = 1.0,
         card_bytes_per_s: float = 1000.0,
+        signing: SigningKey | None = None,
     ) -> None:
         if not (1 <= sysid <= 255 and 1 <= compid <= 255):
             raise InputError(f"sysid and compid must be 1..255, got {sysid}, {compid}")
@@ -165,6 +167,7 @@ class HoleMissionServer(MissionServer):
             heartbeat_period_s=heartbeat_period_s,
             mav_type=mavlink.MAV_TYPE_ONBOARD_CONTROLLER,
             autopilot=mavlink.MAV_AUTOPILOT_INVALID,
+            signing=signing,
         )
         self.connection_string = connection_string
         self.sysid = sysid
@@ -192,7 +195,11 @@ class HoleMissionServer(MissionServer):
         except MissionError as err:
             raise MissionServerError(str(err)) from err
         _log.info(
-            "hole mission server on %s as %d/%d", self.connection_string, self.sysid, self.compid
+            "hole mission server on %s as %d/%d%s",
+            self.connection_string,
+            self.sysid,
+            self.compid,
+            "" if self.signing is None else f", MAVLink signed ({self.signing})",
         )
 
     def close(self) -> None:

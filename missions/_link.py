@@ -17,6 +17,8 @@ os.environ.setdefault("MAVLINK20", "1")  # before the first import of mavutil (s
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from holescan.missions._signing import SigningKey
+
 __all__ = ["MavConnection", "mavlink", "mavutil", "open_link", "parser"]
 
 
@@ -69,10 +71,17 @@ class MavConnection(Protocol):
 
 
 def open_link(
-    connection: str, *, source_system: int, source_component: int, **kwargs: Any
+    connection: str,
+    *,
+    source_system: int,
+    source_component: int,
+    signing: SigningKey | None = None,
+    **kwargs: Any,
 ) -> MavConnection:
     """A pymavlink connection (``udpin:``/``udpout:``/``tcp:``/serial device) speaking
-    MAVLink 2 with robust parsing (garbage is skipped up to the next start byte).
+    MAVLink 2 with robust parsing (garbage is skipped up to the next start byte), signed
+    with ``signing`` when given (:class:`missions.SigningKey`: every packet sent is signed,
+    every unsigned or badly signed one received is dropped).
 
     ``kwargs`` go to :func:`pymavlink.mavutil.mavlink_connection` (``baud``,
     ``autoreconnect`` ...). Raises what pymavlink raises (``OSError``, ``ValueError``,
@@ -85,6 +94,8 @@ def open_link(
         conn.mav = mavlink.MAVLink(conn, srcSystem=source_system, srcComponent=source_component)
         conn.WIRE_PROTOCOL_VERSION = "2.0"
     conn.mav.robust_parsing = True
+    if signing is not None:
+        signing.apply(conn)
     link: MavConnection = conn
     return link
 

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from holescan.missions._link import mavlink, open_link
+from holescan.missions._signing import SigningKey
 from holescan.missions._waypoint import (
     MAV_CMD_NAV_WAYPOINT,
     MAV_FRAME_GLOBAL,
@@ -53,7 +54,13 @@ def _result_name(result: int) -> str:
     return entry.name if entry is not None else f"MAV_MISSION_RESULT {result}"
 
 
-def connect(link: str, *, source_system: int = 255, source_component: int = 190) -> Any:
+def connect(
+    link: str,
+    *,
+    source_system: int = 255,
+    source_component: int = 190,
+    signing: SigningKey | None = None,
+) -> Any:
     """Open a pymavlink link (``udpout:HOST:PORT``, ``udpin:...``, ``tcp:...``) speaking MAVLink 2.
 
     Raises :class:`MissionError` when the link cannot be opened.
@@ -63,6 +70,7 @@ def connect(link: str, *, source_system: int = 255, source_component: int = 190)
             link,
             source_system=source_system,
             source_component=source_component,
+            signing=signing,
             autoreconnect=False,
         )
     except Exception as err:  # pymavlink raises OSError, ValueError, SerialException ...

@@ -32,6 +32,7 @@ from holescan.missions._protocol import (
     item_message,
     waypoint_from_message,
 )
+from holescan.missions._signing import SigningKey
 from holescan.missions._waypoint import Waypoint
 
 __all__ = ["MissionReceiver", "MissionServer"]
@@ -227,6 +228,8 @@ class MissionServer:
         ``udpout:127.0.0.1:14550`` (speaks first, e.g. to MAVProxy's ``udpin``).
     mav_type, autopilot : what the HEARTBEAT says we are (default: an ArduPilot quadrotor).
     heartbeat_period_s : HEARTBEAT interval.
+    signing : MAVLink 2 signing key (None: unsigned); with one, unsigned or badly signed
+        requests are dropped unanswered (:class:`missions.SigningKey`).
 
     Subclasses hook in with :meth:`on_message` (every other message) and :meth:`tick`
     (each turn of the loop, about every ``tick_s``).
@@ -243,6 +246,7 @@ class MissionServer:
         heartbeat_period_s: float = 1.0,
         mav_type: int = mavlink.MAV_TYPE_QUADROTOR,
         autopilot: int = mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
+        signing: SigningKey | None = None,
     ) -> None:
         self.receiver = receiver if receiver is not None else MissionReceiver()
         self.link = link
@@ -250,6 +254,7 @@ class MissionServer:
         self.heartbeat_period_s = heartbeat_period_s
         self.mav_type = mav_type
         self.autopilot = autopilot
+        self.signing = signing
         self.sent: list[str] = []
         self.dropped: list[str] = []
         self.received: list[str] = []
@@ -275,6 +280,7 @@ class MissionServer:
             self.link,
             source_system=self.receiver.system_id,
             source_component=self.receiver.component_id,
+            signing=self.signing,
         )
         self._thread = threading.Thread(target=self._run, name="mission-server", daemon=True)
         self._thread.start()

@@ -7,10 +7,13 @@
 * :mod:`.files` - KML/GeoJSON/GPX always current; :mod:`.cot` - holes as TAK CoT;
   :mod:`.tak` - the link to TAK (mesh, TAK server over TCP/TLS); :mod:`.datapackage` -
   the TAK data package with the pictures;
-* :mod:`.web` - the live page (``station.html``) and its state document.
+* :mod:`.web` - the live page (``station.html``) and its state document; :mod:`.webserver`
+  its HTTP server, :mod:`.guard` the checks every request passes (Host, Origin, the
+  station token, bounds), :mod:`.audit` the operators' marks in ``DIR/audit.jsonl``.
 """
 
 from holescan.ground.station.app import GroundOptions, GroundStation, run_ground
+from holescan.ground.station.audit import AuditTrail
 from holescan.ground.station.cot import (
     COT_TYPE,
     TIERS,
@@ -30,6 +33,7 @@ from holescan.ground.station.datapackage import (
     write_datapackage,
 )
 from holescan.ground.station.files import hole_summary, hole_waypoint, write_station_files
+from holescan.ground.station.guard import Limits, StationToken
 from holescan.ground.station.link import VehicleLink
 from holescan.ground.station.state import (
     MARKS,
@@ -54,12 +58,15 @@ __all__ = [
     "MARKS",
     "PACKAGE_STALE_S",
     "TIERS",
+    "AuditTrail",
     "CotError",
     "CotPublisher",
     "GroundHole",
     "GroundOptions",
     "GroundStation",
+    "Limits",
     "StationState",
+    "StationToken",
     "StationWeb",
     "TakTls",
     "Tier",

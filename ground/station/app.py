@@ -38,6 +38,7 @@ from holescan.ground.station.mapstore import MapStore
 from holescan.ground.station.state import GroundHole, StationState
 from holescan.ground.station.tak import DEFAULT_COT_URL, CotPublisher, TakTls, tak_settings
 from holescan.ground.station.web import StationWeb
+from holescan.missions import SigningKey
 
 __all__ = ["GroundOptions", "GroundStation", "run_ground"]
 
@@ -50,12 +51,15 @@ class GroundOptions:
 
     mavlink : connection to the vehicle's stream. out : the station's folder (state,
     pictures, files). sysid : the vehicle (None: first heard). http_host, http_port :
-    the live page (port 0: any free one; None: no page). cot_url : pytak COT_URL (None:
+    the live page (port 0: any free one; None: no page). http_names : host names the page
+    is served as besides its addresses (None: this machine's hostname and HOSTNAME.local;
+    see :func:`ground.station.guard.host_allowed`). cot_url : pytak COT_URL (None:
     no TAK). cot_tls : the client certificate for a ``tls://`` TAK server. cot_proto :
     0 = CoT XML, 1 = TAK protocol v1 (protobuf, via takproto). station : name in the CoT
     uids. cot_stale_s, cot_refresh_s : CoT stale time (from each sending) and re-send
     period, s. kml_refresh_s : Google Earth's NetworkLink reload period. overlay : a map
-    overlay (``.kmz``) for the data package.
+    overlay (``.kmz``) for the data package. signing : MAVLink 2 signing key shared with
+    the vehicle (None: unsigned link).
     """
 
     mavlink: str
@@ -64,6 +68,7 @@ class GroundOptions:
     baud: int = 57600
     http_host: str = "127.0.0.1"
     http_port: int | None = 8080
+    http_names: tuple[str, ...] | None = None
     cot_url: str | None = DEFAULT_COT_URL
     cot_proto: int = 0
     cot_tls: TakTls | None = None
@@ -72,6 +77,7 @@ class GroundOptions:
     cot_refresh_s: float = 600.0
     kml_refresh_s: float = 5.0
     silence_s: float = 3.0
+    signing: SigningKey | None = None
     overlay: Path | None = None
 
     def check(self) -> None:
@@ -121,6 +127,7 @@ class GroundStation:
                         o.http_port,
                         on_mark=self.mark,
                         map_store=self.map_store,
+                        names=o.http_names,
                     )
                 )
             if o.cot_url is not None and self._tak is not None:
@@ -138,6 +145,7 @@ class GroundStation:
                     baud=o.baud,
                     silence_s=o.silence_s,
                     map_store=self.map_store,
+                    signing=o.signing,
                 )
             )
         except BaseException:
@@ -237,7 +245,13 @@ def run_ground(opts: GroundOptions, stop: threading.Event) -> GroundStation:
     """Run the station until ``stop`` is set; return it (closed) for its counters."""
     with GroundStation(opts) as station:
         if station.web is not None:
-            _log.warning("live page: %s", station.web.url)
+            _log.warning("live page (read-only): %s", station.web.url)
+            _log.warning(
+                "to mark holes, open once in each operator's browser (keep it private; "
+                "delete %s/.station-token to un-pair every browser): %s",
+                opts.out,
+                station.web.pair_url,
+            )
         _log.warning(
             "files in %s: holes.kml, holes_live.kml (Google Earth), holes.geojson, holes.gpx, "
             "holes_datapackage.zip (TAK data package)",

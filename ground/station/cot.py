@@ -41,11 +41,10 @@ from __future__ import annotations
 import datetime as dt
 import json
 import xml.etree.ElementTree as ET
-from typing import Literal
 
 from holescan.geotag import CIRCLE_95_PER_SIGMA
 from holescan.ground.station.files import hole_summary
-from holescan.ground.station.state import GroundHole
+from holescan.ground.station.state import TIERS, GroundHole, Tier
 
 __all__ = [
     "COT_TYPE",
@@ -60,8 +59,6 @@ __all__ = [
 ]
 
 COT_TYPE = "b-m-p-s-p-i"
-Tier = Literal["announced", "review", "confirmed", "rejected"]
-TIERS: tuple[Tier, ...] = ("announced", "review", "confirmed", "rejected")
 _UNKNOWN = "9999999.0"
 _NS_PER_S = 1_000_000_000
 _COLOURS: dict[Tier, int] = {  # ARGB as TAK writes it (signed 32-bit)
@@ -73,19 +70,14 @@ _COLOURS: dict[Tier, int] = {  # ARGB as TAK writes it (signed 32-bit)
 
 
 def hole_tier(h: GroundHole) -> Tier:
-    """The hole's tier: ``h.tier`` when the hole record has one, else from the mark.
+    """The hole's tier (:attr:`GroundHole.tier`: the operator's mark over the vehicle's tier).
 
     >>> hole_tier(GroundHole(1, 0.0, 0.0, 0.9, mark="visited"))
     'confirmed'
     >>> hole_tier(GroundHole(1, 0.0, 0.0, 0.9))
     'announced'
     """
-    tier = getattr(h, "tier", None)
-    if tier in TIERS:
-        return tier  # type: ignore[no-any-return]
-    if h.mark == "rejected":
-        return "rejected"
-    return "confirmed" if h.mark in ("confirmed", "visited") else "announced"
+    return h.tier
 
 
 def on_tak(tier: Tier) -> bool:

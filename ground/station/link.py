@@ -38,6 +38,7 @@ from holescan.ground.station.state import StationState, TrackPoint
 from holescan.missions import (
     CardAssembler,
     MavConnection,
+    SigningKey,
     is_map_tile,
     mavlink,
     open_link,
@@ -75,6 +76,9 @@ class VehicleLink:
     clock : monotonic seconds, for the link's timeouts (the track's times are the state's
         Unix clock).
     map_store : where the live map's tiles go (None: they are ignored).
+    signing : MAVLink 2 signing key shared with the vehicle (None: unsigned). With one,
+        what this link sends is signed and every unsigned or badly signed packet is
+        dropped: a forger's HOLE STATUSTEXT, cards and mission items are never seen.
     """
 
     def __init__(
@@ -90,10 +94,12 @@ class VehicleLink:
         mission_period_s: float = 30.0,
         clock: Callable[[], float] = time.monotonic,
         map_store: MapStore | None = None,
+        signing: SigningKey | None = None,
     ) -> None:
         self.connection = connection
         self.map_store = map_store
         self.tiles_received = 0
+        self.signing = signing
         self.state = state
         self.sysid = sysid
         self.source_system = source_system
@@ -140,6 +146,7 @@ class VehicleLink:
                 source_system=self.source_system,
                 source_component=self.source_component,
                 baud=self.baud,
+                signing=self.signing,
             )
         except Exception as err:  # pymavlink: OSError, ValueError, SerialException
             if not self._open_failed:  # one line, not one every retry
@@ -151,7 +158,11 @@ class VehicleLink:
             self._open_failed = True
             return False
         self._open_failed = False
-        _log.info("listening for the vehicle on %s", self.connection)
+        _log.info(
+            "listening for the vehicle on %s%s",
+            self.connection,
+            "" if self.signing is None else f", MAVLink signed ({self.signing})",
+        )
         return True
 
     def _run(self) -> None:

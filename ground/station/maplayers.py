@@ -32,7 +32,7 @@ from holescan.geotag import LocalFrame
 from holescan.ground.station.mapstore import MapStore
 from holescan.missions import read_tile
 
-__all__ = ["coverage_view_png", "map_document", "map_route"]
+__all__ = ["Reply", "coverage_view_png", "map_document", "map_route"]
 
 Reply = tuple[int, bytes, str]
 _NAME = re.compile(r"m\d{1,10}-(cov|ortho)--?\d{1,7}_-?\d{1,7}\.(png|jpg)")

@@ -40,10 +40,14 @@ from holescan.ground.errors import StationFileError
 __all__ = [
     "FORMAT",
     "MARKS",
+    "TIERS",
+    "VEHICLE_TIERS",
     "GroundHole",
     "Mark",
     "StationState",
+    "Tier",
     "TrackPoint",
+    "VehicleTier",
     "parse_hole_statustext",
 ]
 
@@ -51,6 +55,10 @@ _log = logging.getLogger(__name__)
 
 Mark = Literal["new", "confirmed", "rejected", "visited"]
 MARKS: tuple[Mark, ...] = ("new", "confirmed", "rejected", "visited")
+VehicleTier = Literal["announced", "review"]
+VEHICLE_TIERS: tuple[VehicleTier, ...] = ("announced", "review")
+Tier = Literal["announced", "review", "confirmed", "rejected"]
+TIERS: tuple[Tier, ...] = ("announced", "review", "confirmed", "rejected")
 FORMAT = "holescan-ground-2"
 """The state file's ``format``; ``holescan-ground-1`` files (older stations) are read too."""
 _FORMAT_1 = "holescan-ground-1"
@@ -89,7 +97,10 @@ class GroundHole:
     sigma_h_m : 1-sigma horizontal uncertainty, m (None until the card came).
     score, sightings, major_m, minor_m : the detector's. why : its explanation.
     card_rev : revision of the newest card (0: no card yet). has_picture : a JPEG is kept.
-    mark : the operator's (``new`` until set). seq : waypoint number in the downloaded
+    mark : the operator's (``new`` until set). vehicle_tier : what the vehicle said of it
+    (``announced``: sure enough to send to the crews; ``review``: plausible, for an
+    operator to confirm or reject; files older than the tiers read as ``announced``).
+    seq : waypoint number in the downloaded
     hole mission (None: not in it). t_first_unix_ns, t_updated_unix_ns : when the ground
     first heard of it / last changed it (Unix clock, ns).
     """
@@ -110,9 +121,28 @@ class GroundHole:
     seq: int | None = None
     t_first_unix_ns: int = 0
     t_updated_unix_ns: int = 0
+    vehicle_tier: VehicleTier = "announced"
+
+    @property
+    def tier(self) -> Tier:
+        """What the hole is for the crews: the operator's mark overrides the vehicle's tier.
+
+        ``rejected`` -> rejected (kept, shown as rejected, withdrawn from TAK);
+        ``confirmed`` and ``visited`` -> confirmed (a crew that visited a hole stood at it:
+        it is a real place that was checked, and it stays on every map); ``new`` -> the
+        vehicle's tier (``announced`` or ``review``).
+        """
+        if self.mark == "rejected":
+            return "rejected"
+        if self.mark in ("confirmed", "visited"):
+            return "confirmed"
+        return self.vehicle_tier
 
     def to_json(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
+        """The hole's fields and its :attr:`tier` (a JSON-able dict)."""
+        d = dataclasses.asdict(self)
+        d["tier"] = self.tier
+        return d
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> GroundHole:
@@ -130,6 +160,8 @@ class GroundHole:
         h.t_first_unix_ns, h.t_updated_unix_ns = int(h.t_first_unix_ns), int(h.t_updated_unix_ns)
         if h.mark not in MARKS:
             h.mark = "new"
+        if h.vehicle_tier not in VEHICLE_TIERS:
+            h.vehicle_tier = "announced"
         return h
 
 

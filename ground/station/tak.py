@@ -28,9 +28,11 @@ import asyncio
 import configparser
 import contextlib
 import logging
+import math
 import re
 import ssl
 import threading
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -160,7 +162,9 @@ class CotPublisher:
     is read and dropped, so the server never blocks on us; its end of the stream means a
     reconnect. After a reconnect the newest event of every uid sent so far is sent again
     (a restarted server has forgotten them, and the write that met the closed stream may
-    have been lost).
+    have been lost). A link that keeps failing soon after it opens (a server refusing our
+    certificate) backs off up to 30 s between tries, and each distinct warning is logged
+    at most once a minute.
     """
 
     def __init__(self, url: str = DEFAULT_COT_URL, extra: dict[str, str] | None = None) -> None:
@@ -175,6 +179,8 @@ class CotPublisher:
         self.errors = 0
         self.connects = 0
         self._last: dict[bytes, bytes] = {}  # uid -> the newest event sent under it
+        self._replay: list[bytes] = []  # of _last, still to send again after a reconnect
+        self._warned_at: dict[str, float] = {}
 
     def __enter__(self) -> CotPublisher:
         self._thread.start()
@@ -225,9 +231,8 @@ class CotPublisher:
         import pytak  # imported here: pytak is needed only when TAK is on
 
         reader, writer = await pytak.protocol_factory(config)
-        if self.connects and self._queue is not None:  # a reconnect: send them all again
-            for event in self._last.values():
-                self._queue.put_nowait(event)
+        if self.connects:  # a reconnect: send them all again (replacing an older replay)
+            self._replay = list(self._last.values())
         drain = None
         if isinstance(reader, asyncio.StreamReader):
             drain = asyncio.get_running_loop().create_task(_drain(reader))
@@ -238,7 +243,14 @@ class CotPublisher:
     def _ended(self, drain: asyncio.Task[str]) -> None:
         """Say at once why the server ended the stream (a refused certificate ...)."""
         if not drain.cancelled():
-            _log.warning("TAK link %s: %s", self.url, drain.result())
+            self._warn(f"TAK link {self.url}: {drain.result()}")
+
+    def _warn(self, text: str) -> None:
+        """Log a warning, each distinct one at most once a minute."""
+        now = time.monotonic()
+        if now - self._warned_at.get(text, -math.inf) >= 60.0:
+            self._warned_at[text] = now
+            _log.warning("%s", text)
 
     async def _send_loop(self) -> None:
         assert self._queue is not None
@@ -249,11 +261,13 @@ class CotPublisher:
         drain: asyncio.Task[str] | None = None
         pending: bytes | None = None
         warned = False
+        opened_at, fails = 0.0, 0
         try:
             while True:
                 if tx is None:
                     try:
                         tx, drain = await self._open(config)
+                        opened_at = time.monotonic()
                         if warned:
                             _log.warning("TAK link %s is up again", self.url)
                         warned = False
@@ -265,7 +279,12 @@ class CotPublisher:
                         warned = True
                         await asyncio.sleep(2.0)
                         continue
-                data = pending if pending is not None else await self._queue.get()
+                if pending is not None:
+                    data = pending
+                elif self._replay:
+                    data = self._replay.pop(0)
+                else:
+                    data = await self._queue.get()
                 try:
                     if drain is not None and drain.done():
                         raise ConnectionError(drain.result())
@@ -278,11 +297,12 @@ class CotPublisher:
                     pending = None
                 except Exception as err:
                     self.errors += 1
-                    _log.warning("TAK send to %s failed (%s); reconnecting", self.url, err)
+                    self._warn(f"TAK send to {self.url} failed ({err}); reconnecting")
                     _close(drain)
                     _close_writer(tx)
                     pending, tx = data, None
-                    await asyncio.sleep(1.0)
+                    fails = fails + 1 if time.monotonic() - opened_at < 10.0 else 1
+                    await asyncio.sleep(min(30.0, 2.0 ** (fails - 1)))
         finally:
             _close(drain)
 

@@ -3,41 +3,61 @@
 ``http://HOST:PORT/`` shows the vehicle's track, the camera's footprints and the holes with
 their uncertainty circles (95 %: 1.62 sigma, the 68 % radius) drawn to scale in local metres
 (:class:`geotag.LocalFrame` at the first hole or track point), with a north arrow and a
-scale bar; beside the map, each hole's picture, facts and the detector's "why", and three
-buttons: confirmed / rejected / visited.
+scale bar; beside the map, the review queue: each hole's picture, facts, the detector's
+"why", its tier and who marked it, and the operator's marks (confirmed / rejected /
+visited; keyboard shortcuts, see ``review.js``).
 
-Endpoints (stdlib :mod:`http.server`, one thread per request):
+Endpoints (stdlib :mod:`http.server`, one thread per connection, HTTP/1.0):
 
-* ``GET /`` the page; ``GET /state.json`` everything it draws (local metres included);
+* ``GET /`` the page; ``GET /static/NAME.js`` its scripts; ``GET /state.json`` everything
+  it draws (local metres included); ``GET /cards/hole-<id>.jpg`` a hole's picture;
 * ``GET /events`` Server-Sent Events: ``data: <version>`` after every change, so new holes
-  appear without a reload (the page re-reads ``/state.json``);
-* ``GET /cards/hole-<id>.jpg`` a hole's picture;
-* ``POST /holes/<id>/mark`` with body ``confirmed|rejected|visited|new``: the operator's
-  mark, persisted at once (then TAK and the files follow).
+  and other operators' marks appear without a reload (the page re-reads ``/state.json``);
+* ``POST /holes/<id>/mark`` with ``Authorization: Bearer TOKEN``, ``Content-Type:
+  application/json`` and ``{"mark": "confirmed|rejected|visited|new", "operator": NAME}``:
+  the operator's mark, written to the audit trail (:mod:`ground.station.audit`), then to
+  the state (then TAK and the files follow).
+
+Every request passes :mod:`ground.station.guard` first (Host, Origin, the token for
+changes, rate and size bounds, deadlines); a refused one gets a 4xx and touches nothing.
 """
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
+import ipaddress
 import json
 import logging
 import math
+import socket
 import threading
-from collections.abc import Callable
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
-from importlib import resources
+from collections.abc import Callable, Iterable
 from typing import Any
 
 from holescan.errors import InputError
 from holescan.geotag import CIRCLE_95_PER_SIGMA, LocalFrame
+from holescan.ground.station.audit import AuditEntry, AuditTrail, check_operator
 from holescan.ground.station.files import hole_summary
-from holescan.ground.station.maplayers import map_route
+from holescan.ground.station.guard import (
+    Deadlines,
+    Limits,
+    RateLimiter,
+    StationToken,
+    default_names,
+)
+from holescan.ground.station.maplayers import Reply, map_route
 from holescan.ground.station.mapstore import MapStore
-from holescan.ground.station.state import StationState
+from holescan.ground.station.state import MARKS, GroundHole, StationState
+from holescan.ground.station.webserver import make_server
 from holescan.missions import XTION, Camera
 
 __all__ = ["StationWeb", "state_document"]
 
 _log = logging.getLogger(__name__)
+
+MarkedBy = dict[int, tuple[str, int]]
+"""hole id -> (operator, Unix clock ns) of its newest mark."""
 
 
 def _footprint(
@@ -53,9 +73,17 @@ def _footprint(
     return out
 
 
-def state_document(state: StationState, footprint_every: int = 3) -> dict[str, Any]:
-    """What the page draws, with positions in local metres (east, north)."""
+def state_document(
+    state: StationState, footprint_every: int = 3, marked_by: MarkedBy | None = None
+) -> dict[str, Any]:
+    """What the page draws, with positions in local metres (east, north).
+
+    Each hole has its fields (:meth:`GroundHole.to_json`, ``tier`` and ``vehicle_tier``
+    included), ``x``/``y``/``r95`` in local metres, ``summary``, ``picture`` (its URL or
+    None) and ``marked_by`` (``{"operator", "t_unix_ns"}`` of its newest mark, or None).
+    """
     version, holes, track = state.snapshot()
+    marked_by = marked_by or {}
     origin = (
         (holes[0].lat_deg, holes[0].lon_deg)
         if holes
@@ -76,6 +104,11 @@ def state_document(state: StationState, footprint_every: int = 3) -> dict[str, A
             r95=round(CIRCLE_95_PER_SIGMA * h.sigma_h_m, 3) if h.sigma_h_m is not None else None,
             summary=hole_summary(h),
             picture=f"/cards/hole-{h.id}.jpg?rev={h.card_rev}" if h.has_picture else None,
+            marked_by=(
+                {"operator": marked_by[h.id][0], "t_unix_ns": marked_by[h.id][1]}
+                if h.id in marked_by
+                else None
+            ),
         )
         doc["holes"].append(d)
     fps = []
@@ -89,12 +122,29 @@ def state_document(state: StationState, footprint_every: int = 3) -> dict[str, A
     return doc
 
 
+def _shown_host(host: str) -> str:
+    """The address to print for a server bound to ``host`` (0.0.0.0: the primary one)."""
+    try:
+        unspecified = ipaddress.ip_address(host).is_unspecified
+    except ValueError:
+        return host
+    if not unspecified:
+        return host
+    with contextlib.suppress(OSError), socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.connect(("10.255.255.255", 1))  # no packet is sent: only picks the route
+        return str(s.getsockname()[0])
+    return "127.0.0.1"
+
+
 class StationWeb:
     """The page's HTTP server on its own thread. Use as a context manager.
 
-    on_mark(hole_id, mark) is called for the operator's marks (default: set it in the
-    state). port 0 picks a free port (see :attr:`url`). map_store : the live map's tiles
-    (:mod:`ground.station.maplayers`; None: no map).
+    on_mark(hole_id, mark) makes an operator's mark (default: set it in the state) after
+    :meth:`mark` wrote it to the audit trail. port 0 picks a free port (see :attr:`url`).
+    token : the secret for changes (default: the folder's, :meth:`StationToken.load_or_create`).
+    names : host names the page is served as, besides its addresses (default: this
+    machine's hostname and HOSTNAME.local). limits : the request bounds. map_store : the
+    live map's tiles (:mod:`ground.station.maplayers`; None: no map).
     """
 
     def __init__(
@@ -103,29 +153,55 @@ class StationWeb:
         host: str = "127.0.0.1",
         port: int = 8080,
         on_mark: Callable[[int, str], Any] | None = None,
+        *,
+        token: StationToken | None = None,
+        names: Iterable[str] | None = None,
+        limits: Limits | None = None,
         map_store: MapStore | None = None,
     ) -> None:
         self.state = state
         self.map_store = map_store
         self.on_mark = on_mark or state.mark
+        self.token = token or StationToken.load_or_create(state.folder)
+        self.names = tuple(default_names() if names is None else names)
+        self.limits = limits = limits or Limits()
+        self.audit = AuditTrail(state.folder)
+        self.marked_by: MarkedBy = {}
+        for e in self.audit.read():
+            with contextlib.suppress(KeyError, TypeError, ValueError):
+                self.marked_by[int(e["hole"])] = (str(e["operator"]), int(e["t_unix_ns"]))
+        self.rate = RateLimiter(limits.rate_per_s, limits.burst)
+        self.deadlines = Deadlines()
+        self.refused = 0
+        """Requests answered 4xx so far."""
+        self._mark_lock = threading.Lock()
         self._cond = threading.Condition()
         self._version = state.version
         self._closing = False
+        self._event_clients = 0
         state.listeners.append(self._changed)
-        handler = _handler(self)
         try:
-            self.httpd = ThreadingHTTPServer((host, port), handler)
+            self.httpd = make_server(self, host, port)
         except OSError as err:
             raise InputError(f"cannot serve the page on {host}:{port}: {err.strerror}") from err
-        self.httpd.daemon_threads = True
         self._thread = threading.Thread(target=self.httpd.serve_forever, name="web", daemon=True)
 
     @property
+    def port(self) -> int:
+        return int(self.httpd.server_address[1])
+
+    @property
     def url(self) -> str:
-        host, port = self.httpd.server_address[:2]
-        return f"http://{host!s}:{port}/"
+        """The page, read-only (no token)."""
+        return f"http://{_shown_host(str(self.httpd.server_address[0]))}:{self.port}/"
+
+    @property
+    def pair_url(self) -> str:
+        """The page with the token: opened once in a browser, it lets that browser mark."""
+        return f"{self.url}?token={self.token.value}"
 
     def __enter__(self) -> StationWeb:
+        self.deadlines.__enter__()
         self._thread.start()
         _log.info("live page on %s", self.url)
         return self
@@ -137,6 +213,25 @@ class StationWeb:
         self.httpd.shutdown()
         self.httpd.server_close()
         self._thread.join(timeout=5.0)
+        self.deadlines.__exit__()
+
+    @property
+    def closing(self) -> bool:
+        return self._closing
+
+    def state_json(self, can_mark: bool) -> bytes:
+        """:func:`state_document` as JSON, with ``can_mark`` (the asker has the token)."""
+        doc = state_document(self.state, marked_by=dict(self.marked_by))
+        doc["can_mark"] = can_mark
+        return json.dumps(doc).encode()
+
+    def card(self, hole_id: int) -> bytes:
+        """A hole's picture (raises OSError when there is none)."""
+        return self.state.card_path(hole_id).read_bytes()
+
+    def map_reply(self, path: str, query: str) -> Reply | None:
+        """The live map's answer to a GET of ``path`` (None: not a map path)."""
+        return map_route(self.map_store, path, query)
 
     def _changed(self, version: int) -> None:
         with self._cond:
@@ -148,78 +243,42 @@ class StationWeb:
             self._cond.wait_for(lambda: self._version != seen or self._closing, timeout_s)
             return self._version
 
+    def mark(self, hole_id: int, mark: str, operator: object, client: str) -> GroundHole:
+        """An operator's mark: into the audit trail first (a change that cannot be audited
+        is not made), then :attr:`on_mark`.
 
-def _page() -> bytes:
-    return resources.files("holescan.ground.station").joinpath("station.html").read_bytes()
+        Raises
+        ------
+        LookupError : no such hole. InputError : a bad mark or name. AuditError : the
+            trail cannot be written (nothing is changed).
+        """
+        if mark not in MARKS:
+            raise InputError(f"mark must be one of {', '.join(MARKS)}, got {mark!r}")
+        operator = check_operator(operator)
+        with self._mark_lock:
+            before = next((h for h in self.state.snapshot()[1] if h.id == hole_id), None)
+            if before is None:
+                raise LookupError(f"no hole {hole_id}")
+            after = dataclasses.replace(before, mark=mark)
+            t_ns = self.state.clock()
+            entry = AuditEntry(
+                t_ns, operator, client, hole_id, before.mark, mark, before.tier, after.tier
+            )
+            self.audit.append(entry)
+            self.marked_by[hole_id] = (operator, t_ns)
+            h: GroundHole = self.on_mark(hole_id, mark)
+        _log.info("hole %d marked %s by %s (%s)", hole_id, mark, operator, client)
+        return h
 
+    def event_slot(self) -> bool:
+        """Take one of the ``/events`` slots (False: all taken); give it back with
+        :meth:`event_done`."""
+        with self._cond:
+            if self._event_clients >= self.limits.max_event_clients:
+                return False
+            self._event_clients += 1
+            return True
 
-def _handler(web: StationWeb) -> type[BaseHTTPRequestHandler]:
-    class Handler(BaseHTTPRequestHandler):
-        server_version = "holescan-ground"
-
-        def log_message(self, format: str, *args: Any) -> None:
-            _log.debug("web: " + format, *args)
-
-        def _reply(self, code: int, body: bytes, ctype: str) -> None:
-            self.send_response(code)
-            self.send_header("Content-Type", ctype)
-            self.send_header("Content-Length", str(len(body)))
-            self.send_header("Cache-Control", "no-store")
-            self.end_headers()
-            self.wfile.write(body)
-
-        def do_GET(self) -> None:
-            path, _, query = self.path.partition("?")
-            if path in ("/", "/index.html"):
-                self._reply(200, _page(), "text/html; charset=utf-8")
-            elif path == "/state.json":
-                body = json.dumps(state_document(web.state)).encode()
-                self._reply(200, body, "application/json")
-            elif path == "/events":
-                self._events()
-            elif path.startswith("/cards/hole-") and path.endswith(".jpg"):
-                try:
-                    hid = int(path[len("/cards/hole-") : -4])
-                    data = web.state.card_path(hid).read_bytes()
-                except (ValueError, OSError):
-                    self._reply(404, b"no such picture", "text/plain")
-                    return
-                self._reply(200, data, "image/jpeg")
-            elif (mapped := map_route(web.map_store, path, query)) is not None:
-                self._reply(*mapped)  # the map layers (maplayers.py)
-            else:
-                self._reply(404, b"not found", "text/plain")
-
-        def _events(self) -> None:
-            self.send_response(200)
-            self.send_header("Content-Type", "text/event-stream")
-            self.send_header("Cache-Control", "no-store")
-            self.end_headers()
-            seen = -1
-            try:
-                while not web._closing:
-                    version = web.wait_change(seen, 10.0)
-                    if version == seen:
-                        self.wfile.write(b": keep-alive\n\n")
-                    else:
-                        self.wfile.write(f"data: {version}\n\n".encode())
-                        seen = version
-                    self.wfile.flush()
-            except (BrokenPipeError, ConnectionResetError):
-                return
-
-        def do_POST(self) -> None:
-            parts = self.path.strip("/").split("/")
-            if len(parts) != 3 or parts[0] != "holes" or parts[2] != "mark":
-                self._reply(404, b"not found", "text/plain")
-                return
-            n = min(int(self.headers.get("Content-Length") or 0), 100)
-            mark = self.rfile.read(n).decode("utf-8", "replace").strip()
-            try:
-                h = web.on_mark(int(parts[1]), mark)
-            except (ValueError, InputError) as err:
-                self._reply(400, str(err).encode(), "text/plain")
-                return
-            self._reply(200, json.dumps({"id": h.id, "mark": h.mark}).encode(), "application/json")
-
-    return Handler
+    def event_done(self) -> None:
+        with self._cond:
+            self._event_clients -= 1

@@ -30,7 +30,20 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--baud", type=int, default=57600, help="serial links only (default 57600)")
     p.add_argument("-o", "--out", type=Path, required=True, help="station folder")
     p.add_argument("--sysid", type=int, help="the vehicle's system id (default: first heard)")
-    p.add_argument("--http", default="127.0.0.1:8080", help="live page HOST:PORT, or 'off'")
+    p.add_argument(
+        "--http",
+        default="127.0.0.1:8080",
+        help="live page HOST:PORT, or 'off' (0.0.0.0:PORT: every network of the laptop; "
+        "marking always needs the station token, printed at start)",
+    )
+    p.add_argument(
+        "--http-name",
+        action="append",
+        default=None,
+        metavar="NAME",
+        help="a host name the page is opened by besides its IP addresses (repeatable; "
+        "default: this machine's hostname and HOSTNAME.local); other names are refused",
+    )
     p.add_argument(
         "--cot",
         default="udp+wo://239.2.3.1:6969",
@@ -83,12 +96,28 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="0: CoT XML (default), 1: TAK protocol v1 protobuf (mesh only; needs takproto)",
     )
     p.add_argument("--station", default="ground", help="name used in the CoT uids")
+    key = p.add_mutually_exclusive_group()
+    key.add_argument(
+        "--mavlink-key-file",
+        type=Path,
+        metavar="FILE",
+        help="MAVLink 2 signing: a file of one line, the key as 64 hex digits or a "
+        "passphrase (as MAVProxy's 'signing key PASSPHRASE'); the vehicle's fly.toml "
+        "mavlink_key/mavlink_key_file holds the same. Unsigned packets are then dropped",
+    )
+    key.add_argument(
+        "--mavlink-key",
+        metavar="HEX",
+        help="the signing key as 64 hex digits (visible to other users in 'ps': prefer "
+        "--mavlink-key-file)",
+    )
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from holescan.errors import InputError
     from holescan.ground import GroundOptions, TakTls, run_ground
+    from holescan.missions import SigningKey
 
     host, port = "127.0.0.1", None
     if args.http != "off":
@@ -120,6 +149,7 @@ def run(args: argparse.Namespace) -> int:
         baud=args.baud,
         http_host=host or "127.0.0.1",
         http_port=port,
+        http_names=None if args.http_name is None else tuple(args.http_name),
         cot_url=None if args.cot == "off" else args.cot,
         cot_proto=args.cot_proto,
         cot_tls=tls,
@@ -127,6 +157,13 @@ def run(args: argparse.Namespace) -> int:
         cot_stale_s=args.cot_stale,
         cot_refresh_s=args.cot_refresh,
         overlay=args.overlay,
+        signing=(
+            SigningKey.from_file(args.mavlink_key_file)
+            if args.mavlink_key_file is not None
+            else SigningKey.from_hex(args.mavlink_key)
+            if args.mavlink_key is not None
+            else None
+        ),
     )
     stop = threading.Event()
 

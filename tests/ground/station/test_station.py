@@ -248,9 +248,17 @@ def test_holes_pictures_files_and_cot(rig: dict[str, Any]) -> None:
     assert e1.detail.contact.callsign == "HOLE 1"
     # the operator rejects hole 2 on the page: withdrawn from TAK and the files
     n0 = len(rx.got)
-    req = urllib.request.Request(f"{station.web.url}holes/2/mark", data=b"rejected", method="POST")
+    req = urllib.request.Request(
+        f"{station.web.url}holes/2/mark",
+        data=json.dumps({"mark": "rejected", "operator": "Ana"}).encode(),
+        headers={
+            "Authorization": f"Bearer {station.web.token.value}",
+            "Content-Type": "application/json",
+        },
+        method="POST",
+    )
     with urllib.request.urlopen(req, timeout=5) as resp:
-        assert json.loads(resp.read()) == {"id": 2, "mark": "rejected"}
+        assert json.loads(resp.read()) == {"id": 2, "mark": "rejected", "tier": "rejected"}
     wait_for(lambda: len(rx.got) >= n0 + 2, 5.0, "the withdrawal")
     tail = parse_tak(rx.got[n0:])
     assert tail[0].uid == "holescan-ground-hole-2" and tail[0].staleTime <= tail[0].sendTime

@@ -5,7 +5,8 @@ server) -> the real MAVProxy (``--master udpin`` ``--out udpout``) -> a UDP rela
 the link for 10 s mid-flight -> ``holescan ground`` (a separate process) -> CoT over UDP
 to a real pytak client (TAK protocol v1, decoded by takproto) and the live page in headless
 Chromium (driven over the DevTools protocol: it must show a new hole within 2 s of the
-vehicle's announcement; a click on "confirmed" must reach the state, TAK and the KML).
+vehicle's announcement; a click on "confirmed" in the browser paired with the station's
+token must reach the state, TAK and the KML).
 
 The screenshot is kept (``HOLESCAN_ARTEFACTS`` folder if set, else the test's tmp dir).
 """
@@ -200,7 +201,9 @@ def test_flight_mavproxy_ground_page_tak(tmp_path: Path) -> None:
     try:
         page = f"http://127.0.0.1:{http}/"
         wait_for(lambda: _up(page), 30.0, "the ground station's page")
-        browser = Chromium(page, tmp_path / "profile")
+        token = (station_dir / ".station-token").read_text().strip()
+        assert f"?token={token}" in (tmp_path / "ground.log").read_text()  # the pairing link
+        browser = Chromium(f"{page}?token={token}", tmp_path / "profile")
         wait_for(lambda: browser.js("document.readyState") == "complete", 20.0, "page load")
         fly = holescan(
             "fly",
@@ -244,6 +247,7 @@ def test_flight_mavproxy_ground_page_tak(tmp_path: Path) -> None:
         # the operator confirms the first hole with a click on the page
         hid = min(announced)
         n_cot = len(rx.got)
+        browser.js("localStorage.setItem('holescan-operator', 'flight test')")
         browser.js(
             f'document.querySelector(\'button[data-id="{hid}"][data-mark="confirmed"]\').click()'
         )
@@ -255,6 +259,8 @@ def test_flight_mavproxy_ground_page_tak(tmp_path: Path) -> None:
             5.0,
             "the mark in the state file",
         )
+        audit = [json.loads(x) for x in (station_dir / "audit.jsonl").read_text().splitlines()]
+        assert audit[-1]["operator"] == "flight test" and audit[-1]["hole"] == hid
         wait_for(lambda: len(rx.got) > n_cot, 5.0, "CoT after the click")
         ev = [e for e in parse_tak(rx.got[n_cot:]) if e.uid == f"holescan-ground-hole-{hid}"][-1]
         assert "operator: confirmed" in ev.detail.xmlDetail
