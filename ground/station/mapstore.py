@@ -11,6 +11,7 @@ log line.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import threading
 from collections.abc import Callable
@@ -42,10 +43,13 @@ def tile_file_name(f: TileFacts) -> str:
 
 @dataclass(frozen=True)
 class StoredTile:
-    """A tile kept: its facts and its file name in the map folder."""
+    """A tile kept: its facts, its file name in the map folder and its arrival order
+    (``seq``: the store's version when it was kept; for a folder read back, its order of
+    modification time)."""
 
     facts: TileFacts
     name: str
+    seq: int = 0
 
 
 @dataclass
@@ -68,7 +72,11 @@ class MapStore:
         """The store of ``folder`` (created if missing), with every readable tile in it."""
         folder.mkdir(parents=True, exist_ok=True)
         store = cls(folder)
-        for path in sorted(folder.glob("m*-*")):
+        paths = []
+        for path in folder.glob("m*-*"):
+            with contextlib.suppress(OSError):
+                paths.append((path.stat().st_mtime_ns, path.name, path))
+        for seq, (_, _, path) in enumerate(sorted(paths), start=1):
             if ".part" in path.name:
                 continue
             try:
@@ -79,8 +87,8 @@ class MapStore:
             if got is None or tile_file_name(got[0]) != path.name:
                 _log.warning("%s is not a map tile of this station; skipped", path.name)
                 continue
-            store._tiles[path.name] = StoredTile(got[0], path.name)
-        store.version = len(store._tiles)
+            store._tiles[path.name] = StoredTile(got[0], path.name, seq)
+        store.version = max((t.seq for t in store._tiles.values()), default=0)
         return store
 
     def put(self, data: bytes) -> TileFacts | None:
@@ -98,8 +106,8 @@ class MapStore:
                 return None
             with atomic_output(self.folder / name, force=True) as f:
                 f.write(data)
-            self._tiles[name] = StoredTile(facts, name)
             self.version += 1
+            self._tiles[name] = StoredTile(facts, name, self.version)
             version = self.version
         for fn in list(self.listeners):
             try:

@@ -46,6 +46,7 @@ from holescan.ground.station.guard import (
     StationToken,
     default_names,
 )
+from holescan.ground.station.mapcombine import CombinedCache
 from holescan.ground.station.maplayers import Reply, map_route
 from holescan.ground.station.mapstore import MapStore
 from holescan.ground.station.state import MARKS, GroundHole, StationState
@@ -161,6 +162,7 @@ class StationWeb:
     ) -> None:
         self.state = state
         self.map_store = map_store
+        self._map_cache = CombinedCache(map_store) if map_store is not None else None
         self.on_mark = on_mark or state.mark
         self.token = token or StationToken.load_or_create(state.folder)
         self.names = tuple(default_names() if names is None else names)
@@ -231,7 +233,7 @@ class StationWeb:
 
     def map_reply(self, path: str, query: str) -> Reply | None:
         """The live map's answer to a GET of ``path`` (None: not a map path)."""
-        return map_route(self.map_store, path, query)
+        return map_route(self.map_store, path, query, self._map_cache)
 
     def _changed(self, version: int) -> None:
         with self._cond:
