@@ -32,6 +32,7 @@ import threading
 import time
 import zlib
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -361,10 +362,13 @@ class LiveMap:
             time.sleep(0.1)
         return self.pending_tiles == 0
 
-    def resend_all(self) -> None:
-        """Every tile is sent again (a ground station asked)."""
+    def resend_all(self, held: Callable[[bytes], bool] | None = None) -> None:
+        """Every tile is sent again (a ground station asked), but those whose newest bytes
+        ``held`` says the station holds already."""
         with self._out_lock:
             for o in self._outbox.values():
+                if o.sent and held is not None and held(o.data):
+                    continue
                 o.sent, o.sent_at = False, -math.inf
 
     def outbox(self) -> dict[tuple[MapLayer, int, int], bytes]:

@@ -124,8 +124,9 @@ class TileSource(Protocol):
         """(handshake type, picture bytes) of the next tile to send, or None: none due."""
         ...
 
-    def resend_all(self) -> None:
-        """Send every tile again (a ground station asked for everything)."""
+    def resend_all(self, held: Callable[[bytes], bool] | None = None) -> None:
+        """Send every tile again (a ground station asked for everything), but those
+        ``held(tile bytes)`` says the station already holds (None: every tile)."""
         ...
 
 
@@ -183,11 +184,11 @@ class CardSender:
         self._queue.append(_Outgoing(key, card))
         self._repeat_at[key] = (math.inf, 0)
 
-    def resend_all(self) -> None:
+    def resend_all(self, held: Callable[[bytes], bool] | None = None) -> None:
         """Queue every hole's newest card again (a ground station asked for them), and
-        every map tile after them."""
+        every map tile after them but those ``held`` (see :meth:`TileSource.resend_all`)."""
         if self.tiles is not None:
-            self.tiles.resend_all()
+            self.tiles.resend_all(held)
         queued = {item.key for item in self._queue if item.sent < 0}  # not started yet
         for key, card in sorted(self._latest.items()):
             if key not in queued:

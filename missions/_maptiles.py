@@ -52,6 +52,7 @@ __all__ = [
     "encode_ortho_tile",
     "is_map_tile",
     "read_tile",
+    "tile_facts",
     "tile_facts_of",
     "tiles_per_hectare",
 ]
@@ -238,6 +239,12 @@ def is_map_tile(data: bytes) -> bool:
         return True
     facts = read_card(data)
     return facts is not None and "map" in facts
+
+
+def tile_facts(data: bytes) -> TileFacts | None:
+    """The facts of a map tile's bytes (None: not a tile). Cheap: no pixel is decoded."""
+    d = _png_facts(data) if data.startswith(_PNG_SIG) else read_card(data)
+    return tile_facts_of(d) if d is not None else None
 
 
 def read_tile(data: bytes) -> tuple[TileFacts, npt.NDArray[Any]] | None:

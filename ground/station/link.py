@@ -16,10 +16,12 @@ or a serial radio, :class:`VehicleLink` (one thread) takes from the stream:
   hole and every ``mission_period_s``, without stopping the other traffic.
 
 After a silence longer than ``silence_s`` (a cut radio, a restarted MAVProxy) or at start,
-it asks component 191 for every card again (DATA_TRANSMISSION_HANDSHAKE with size 0), and
-also when the mission has waypoints no known hole explains: holes announced while the
-link was down are caught up. A link that cannot be opened, dies or delivers garbage is
-reported in one log line and retried; nothing collected is lost (it is in the state).
+it asks component 191 for every card again (DATA_TRANSMISSION_HANDSHAKE with size 0),
+first saying which live-map tiles it holds (:func:`missions.send_inventory`: only the
+others are sent again), and also when the mission has waypoints no known hole explains:
+holes announced while the link was down are caught up. A link that cannot be opened,
+dies or delivers garbage is reported in one log line and retried; nothing collected is
+lost (it is in the state).
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ from holescan.missions import (
     mavlink,
     open_link,
     read_card,
+    send_inventory,
     waypoint_from_mission_item,
 )
 
@@ -282,6 +285,9 @@ class VehicleLink:
 
     def _request_cards(self) -> None:
         self.resync_requests += 1
+        inv = self.map_store.inventory() if self.map_store is not None else None
+        if inv is not None:  # first what it holds: only the other tiles come again
+            self._send(lambda mav: send_inventory(mav, inv))
         self._send(
             lambda mav: mav.data_transmission_handshake_send(
                 mavlink.MAVLINK_DATA_STREAM_IMG_JPEG, 0, 0, 0, 0, 0, 0

@@ -23,7 +23,7 @@ import numpy as np
 import numpy.typing as npt
 
 from holescan.capture import atomic_output
-from holescan.missions import TileFacts, coverage_from_levels, read_tile
+from holescan.missions import TileFacts, TileInventory, coverage_from_levels, read_tile
 
 __all__ = ["MapStore", "StoredTile", "tile_file_name"]
 
@@ -161,6 +161,20 @@ class MapStore:
             sw.map_id, "cov", tx0, ty0, n, sw.cell_m, sw.lat0_deg, sw.lon0_deg, sw.version
         )
         return out, origin
+
+    def inventory(self) -> TileInventory | None:
+        """What is held of the newest map (that of the tile kept last): each tile's
+        version, for the companion to re-send only the others (None: no tile)."""
+        tiles = self.tiles()
+        if not tiles:
+            return None
+        newest = max(tiles, key=lambda t: t.seq).facts.map_id
+        have = {
+            (t.facts.layer, t.facts.tx, t.facts.ty): t.facts.version
+            for t in tiles
+            if t.facts.map_id == newest
+        }
+        return TileInventory(newest, have)
 
     def summary(self) -> dict[str, Any]:
         """Counts for logs and tests: tiles per layer, version, rejected pictures."""

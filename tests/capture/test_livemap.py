@@ -12,7 +12,14 @@ from holescan.capture import Frame, LiveMap, LiveMapConfig, parse_fly_config
 from holescan.detect import CameraIntrinsics
 from holescan.errors import InputError
 from holescan.geotag import CameraMount, VehiclePose
-from holescan.missions import TYPE_COVERAGE, TYPE_ORTHO, read_tile
+from holescan.missions import (
+    TYPE_COVERAGE,
+    TYPE_ORTHO,
+    TileInventory,
+    held_by,
+    read_tile,
+    tile_facts,
+)
 from holescan.sim import (
     Conditions,
     SimAutopilot,
@@ -69,6 +76,22 @@ def test_fused_frames_become_tiles_coverage_first(frames: list[tuple[Frame, Vehi
     assert kinds == [TYPE_COVERAGE] * (n // 2) + [TYPE_ORTHO] * (n // 2)
     assert lm.pending_tiles == 0
     lm.resend_all()
+    assert lm.pending_tiles == n
+    # a station that says what it holds gets only the rest again
+    while lm.next_tile() is not None:
+        pass
+    have = {}
+    for data in lm.outbox().values():
+        f = tile_facts(data)
+        assert f is not None
+        have[(f.layer, f.tx, f.ty)] = f.version
+    missing = sorted(have)[0]
+    lm.resend_all(held_by(TileInventory(lm.map_id, have)))
+    assert lm.pending_tiles == 0
+    del have[missing]
+    lm.resend_all(held_by(TileInventory(lm.map_id, have)))
+    assert lm.pending_tiles == 1
+    lm.resend_all(held_by(TileInventory(lm.map_id + 1, have)))  # another flight's map
     assert lm.pending_tiles == n
     # a tile that changes again waits for its resend period
     lm2 = LiveMap(CAM, CameraMount(), LiveMapConfig(cov_resend_s=1e6, ortho_resend_s=1e6))

@@ -4,6 +4,7 @@ from real MAVLink bytes."""
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 
 import cv2
 import numpy as np
@@ -98,7 +99,7 @@ class Tiles:
     def next_tile(self) -> tuple[int, bytes] | None:
         return self.q.popleft() if self.q else None
 
-    def resend_all(self) -> None:
+    def resend_all(self, held: Callable[[bytes], bool] | None = None) -> None:
         self.resent += 1
         self.q = deque(self.all)
 
