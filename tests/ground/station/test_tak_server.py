@@ -11,8 +11,10 @@ from __future__ import annotations
 
 import dataclasses
 import datetime as dt
+import json
 import socket
 import xml.etree.ElementTree as ET
+import zipfile
 from pathlib import Path
 
 import pytest
@@ -28,8 +30,9 @@ from takserver import (
 from test_station import hole, picture, wait_for
 
 from holescan import cli
-from holescan.ground import CotError, GroundOptions, GroundStation, TakTls
-from holescan.ground.station import tak_settings
+from holescan.ground import CotError, GroundHole, GroundOptions, GroundStation, TakTls
+from holescan.ground.station import DATAPACKAGE_NAME, tak_settings
+from holescan.ground.station.state import FORMAT
 from holescan.missions import HoleMissionServer
 
 UID = "holescan-ground-hole-1"
@@ -144,6 +147,45 @@ def test_station_reconnects_when_the_server_restarts(tmp_path: Path) -> None:
                 "holes 1 and 2 through the second server",
             )
         assert station.cot is not None and station.cot.connects >= 2
+
+
+def test_review_holes_reach_tak_only_once_confirmed(tmp_path: Path) -> None:
+    """A hole the vehicle sent for review is not on TAK (nor in the data package) until an
+    operator confirms it; set back to the vehicle's word it is withdrawn again."""
+    out = tmp_path / "station"
+    out.mkdir()
+    holes = [
+        GroundHole(1, hole(1).lat_deg, -79.38319, 0.95, t_first_unix_ns=1),
+        GroundHole(2, hole(2).lat_deg, -79.38318, 0.6, vehicle_tier="review", t_first_unix_ns=1),
+    ]
+    doc = {"format": FORMAT, "version": 1, "holes": [h.to_json() for h in holes], "track": []}
+    (out / "station.json").write_text(json.dumps(doc))  # a station resumed with both holes
+    review = "holescan-ground-hole-2"
+    with Taky(tmp_path / "taky") as server, TakClient(server.url) as reader:
+        opts = GroundOptions(
+            mavlink=f"udpin:127.0.0.1:{free_udp_port()}",
+            out=out,
+            http_port=None,
+            cot_url=server.url,
+        )
+        with GroundStation(opts) as station:
+            wait_for(lambda: reader.of(UID), 30.0, "the announced hole")
+            assert not reader.of(review)
+            assert package_uids(out) == {UID}
+            station.mark(2, "confirmed")
+            wait_for(lambda: reader.of(review), 30.0, "the confirmed review hole")
+            assert package_uids(out) == {UID, review}
+            station.mark(2, "new")  # the operator takes it back: the vehicle's "review"
+            wait_for(lambda: reader.of(f"{review}-delete"), 30.0, "its withdrawal")
+            assert package_uids(out) == {UID}
+    (sent,) = [e for e in reader.of(review) if e.get("stale") != e.get("time")]
+    assert remarks(sent).startswith("CONFIRMED: hole 2")
+    assert not reader.of(f"{UID}-delete")
+
+
+def package_uids(folder: Path) -> set[str]:
+    with zipfile.ZipFile(folder / DATAPACKAGE_NAME) as z:
+        return {n.split("/")[0] for n in z.namelist() if n.endswith(".cot")}
 
 
 @pytest.fixture
