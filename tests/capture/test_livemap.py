@@ -116,6 +116,12 @@ def test_budget_holds_whatever_the_machine(frames: list[tuple[Frame, VehiclePose
                 lm.offer(f, pose)
                 offered += 1
                 time.sleep(0.005)
+        # the map's thread runs at nice +15: on a loaded machine it may not have run yet
+        deadline = time.monotonic() + 30.0
+        while lm.stats.fused == 0 and time.monotonic() < deadline:
+            lm.offer(*frames[0])
+            offered += 1
+            time.sleep(0.05)
         lm.offer(frames[0][0], None)  # unposed: counted, never fused
     s = lm.stats
     assert s.offered == offered + 1 and s.unposed == 1
