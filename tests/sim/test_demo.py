@@ -120,6 +120,10 @@ def test_flight_log_ground_station_and_files(demo: tuple[Path, str]) -> None:
     assert all(re.fullmatch(r"HOLE \d+ [\d.]+ -?[\d.]+ -?[\d.]+", t) for t in texts)
     assert doc["mission_items"] == confirmed
     assert f"downloaded a mission of {confirmed} hole waypoints" in text
+    # the live map flew too: its tiles reached the ground station's store, on disk
+    tiles = doc["map_tiles_at_ground"]
+    assert tiles >= 2 and f"{tiles} live-map tiles" in text
+    assert len(list((out / "ground" / "map").glob("m*-cov-*.png"))) * 2 >= tiles
     files = doc["files"]
     gpx = gpxpy.parse(Path(files["gpx"]).read_text())
     assert len(gpx.waypoints) == confirmed
