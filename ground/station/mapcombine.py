@@ -114,6 +114,12 @@ def combined_places(store: MapStore) -> tuple[TileFacts, dict[tuple[int, int], t
     return base, out
 
 
+def _span(rs: npt.NDArray[np.intp], cs: npt.NDArray[np.intp]) -> tuple[slice, slice]:
+    """The raster block of rows ``rs`` and columns ``cs`` (each contiguous: the cell
+    indices are monotonic), as slices so that it is a view."""
+    return slice(int(rs[0]), int(rs[-1]) + 1), slice(int(cs[0]), int(cs[-1]) + 1)
+
+
 def combine(store: MapStore) -> Combined | None:
     """Every map of ``store`` combined on the base grid (None: no tiles)."""
     tiles = store.tiles()
@@ -156,7 +162,7 @@ def combine(store: MapStore) -> Combined | None:
                 continue
             ci = col[cs] - f.tx * nm
             ri = (f.ty + 1) * nm - 1 - row[rs]  # tile row 0 is its north edge
-            block = np.ix_(rs, cs)
+            block = _span(rs, cs)
             if f.layer == "cov":
                 cov_m[block] = coverage_from_levels(got[1])[np.ix_(ri, ci)]
             else:  # colour is taken below, once this map's coverage is known
@@ -167,16 +173,13 @@ def combine(store: MapStore) -> Combined | None:
             rs = np.nonzero((row >= tty * nm) & (row < (tty + 1) * nm))[0]
             if not len(cs) or not len(rs):
                 continue
-            block = np.ix_(rs, cs)
+            block = _span(rs, cs)  # views: written in place
             c = cov_m[block]
-            take = (c > 0) & (c >= best[block])
-            colours = img[np.ix_((tty + 1) * nm - 1 - row[rs], col[cs] - ttx * nm)]
-            sub = rgb[block]
-            sub[take] = colours[take]
-            rgb[block] = sub
             b = best[block]
+            take = (c > 0) & (c >= b)
+            colours = img[np.ix_((tty + 1) * nm - 1 - row[rs], col[cs] - ttx * nm)]
+            rgb[block][take] = colours[take]
             b[take] = c[take]
-            best[block] = b
     return Combined(base, tx0, ty1, 1.0 - miss, rgb, best > 0)
 
 
