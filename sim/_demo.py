@@ -44,6 +44,7 @@ from holescan.capture import (
     FlightConfig,
     FlightSummary,
     HoleView,
+    LiveMap,
 )
 from holescan.errors import InputError
 from holescan.geotag import AnnounceGate, Hole, Tier
@@ -144,6 +145,7 @@ class DemoResult:
     review_true: int = 0
     review_latency_s: tuple[float, ...] = ()
     area_m2: float = 0.0
+    map_tiles_at_ground: int = 0
     search: DemoMap | None = None
 
     @property
@@ -171,6 +173,7 @@ class DemoResult:
             "card_bytes": self.card_bytes,
             "cards_sent": self.cards_sent,
             "pictures_at_ground": self.pictures_at_ground,
+            "map_tiles_at_ground": self.map_tiles_at_ground,
             "card_bytes_per_s": self.card_bytes / self.capture_s if self.capture_s else None,
             "position_error_m": {
                 "mean": float(np.mean(errors)) if errors else None,
@@ -310,7 +313,7 @@ def run_demo(
     card_bytes = cards_sent = 0
     mission_items: int | None = None
     mission_error: str | None = None
-    pictures = 0
+    pictures = map_tiles = 0
     capture_s = 0.0
     report("start", duration_s=duration)
     with contextlib.ExitStack() as stack:
@@ -337,6 +340,8 @@ def run_demo(
                     server.send_card(h, views[h.id].jpeg, views[h.id].why, tier)
 
         stack.enter_context(sortie)
+        live_map = stack.enter_context(LiveMap(sortie.camera, sortie.mount))
+        server.set_tiles(live_map)  # the live map's tiles down the same link, after cards
         cfg = FlightConfig(
             log_prefix=out / "flight",
             announce_min_p_hole=opts.gate.min_p_hole,
@@ -348,7 +353,12 @@ def run_demo(
             },
         )
         flight = Flight(
-            cfg, sortie.source, sortie.camera, mavlink=sortie.mavlink, on_holes=on_holes
+            cfg,
+            sortie.source,
+            sortie.camera,
+            mavlink=sortie.mavlink,
+            on_holes=on_holes,
+            on_frame=live_map.offer,
         )
         flight.stop = stop
         t_first: list[float] = []
@@ -389,12 +399,17 @@ def run_demo(
             announcements=gcs.take_new(),
         )
         served_ids = {h.id for h in opts.gate.select(summary.holes, first_announced)}
+        live_map.close()  # the last changes cut into tiles, all due now
+        live_map.finish()
         server.flush_cards(timeout_s=30.0)
+        live_map.flush(timeout_s=10.0)
+        server.flush_cards(timeout_s=5.0)
         if not gcs.wait_complete(served_ids, timeout_s=30.0):
             mission_error = "not every announced hole reached the ground with its picture"
         _, ground_holes, _ = gcs.station.state.snapshot()
         mission_items = sum(h.seq is not None for h in ground_holes)
         pictures = sum(h.has_picture for h in ground_holes if h.id in served_ids)
+        map_tiles = sum(int(gcs.station.map_store.summary()[k]) for k in ("cov", "ortho"))
         received = tuple(announced)
         card_bytes, cards_sent = server.cards.bytes_sent, server.cards.cards_sent
     interrupted = capture_s < duration - 1.0
@@ -463,6 +478,7 @@ def run_demo(
         card_bytes=card_bytes,
         cards_sent=cards_sent,
         pictures_at_ground=pictures,
+        map_tiles_at_ground=map_tiles,
         match_m=opts.match_m,
         search=search,
     )

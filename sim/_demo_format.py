@@ -93,7 +93,8 @@ def format_result(r: DemoResult) -> list[str]:
         gcs += (
             f", {r.cards_sent} hole pictures sent ({r.card_bytes} B, "
             f"{r.card_bytes / r.capture_s:.0f} B/s over the flight), "
-            f"{r.pictures_at_ground} of {len(r.confirmed)} announced holes have theirs"
+            f"{r.pictures_at_ground} of {len(r.confirmed)} announced holes have theirs, "
+            f"{r.map_tiles_at_ground} live-map tiles"
         )
     if r.mission_items is not None:
         gcs += f", downloaded a mission of {r.mission_items} hole waypoints (component 191)"
