@@ -19,6 +19,7 @@ from holescan.capture._flyconfig import (
 )
 from holescan.capture._frame import Frame, FrameSource
 from holescan.capture._holepipeline import FrameHoles, HolePipeline, HoleView, crop_view, view_jpeg
+from holescan.capture._livemap import LiveMap, LiveMapConfig, LiveMapStats
 from holescan.capture._mavadapt import (
     TelemetrySample,
     attitude_from_attitude,
@@ -43,11 +44,10 @@ from holescan.capture._outpath import (
 )
 from holescan.capture._posebuffer import (
     AttitudeSample,
-    GpsFix,
     PoseBuffer,
-    PositionSample,
     quat_from_euler,
 )
+from holescan.capture._posevalidity import GpsFix, NavStatus, PoseValidity, PositionSample
 from holescan.capture._sensorsetup import PacedReplay, SensorSetup, open_sensor
 from holescan.capture._telemetryreplay import TelemetryReplay
 from holescan.capture._usb import UsbDeviceInfo, find_xtion, reset_xtion
@@ -58,6 +58,7 @@ from holescan.capture.errors import (
     ClockUnavailable,
     FlightLogError,
     OutputPathError,
+    PoseInvalid,
     PoseUnavailable,
     SensorError,
     TelemetryError,
@@ -159,6 +160,9 @@ __all__ = [
     "GpsFix",
     "HolePipeline",
     "HoleView",
+    "LiveMap",
+    "LiveMapConfig",
+    "LiveMapStats",
     "LogInfo",
     "LogLayout",
     "LogOptions",
@@ -173,6 +177,7 @@ __all__ = [
     "MavlinkStream",
     "McapFile",
     "McapSource",
+    "NavStatus",
     "OniInfo",
     "OniSource",
     "OniStreamInfo",
@@ -181,7 +186,9 @@ __all__ = [
     "OutputPathError",
     "PacedReplay",
     "PoseBuffer",
+    "PoseInvalid",
     "PoseUnavailable",
+    "PoseValidity",
     "PositionSample",
     "RecoveryReport",
     "ScanState",

@@ -15,8 +15,11 @@ Threads and processes of one flight:
 
 A sensor that fails (raises, or delivers nothing for ``frame_timeout_s``) is closed, reset
 on USB when a reset function is given, and reopened with back-off; telemetry and logging
-go on meanwhile. Frames that cannot be posed (MAVLink silent, clock not synchronised) are
-still logged, marked unposed, and counted.
+go on meanwhile. Frames that cannot be posed (MAVLink silent, clock not synchronised, or a
+position the autopilot does not have: no 3-D fix, EKF without a horizontal position,
+lat = lon = 0, a jump) are still logged, marked unposed, detected and counted; their
+detections are never placed on the Earth, so nothing is announced from them (a pose not
+there *yet* is waited for, ``pose_wait_s``; one the autopilot did not have stays unplaced).
 """
 
 from __future__ import annotations
@@ -44,6 +47,7 @@ from holescan.capture._worker import DetectionWorker, WorkerResult
 from holescan.capture.errors import (
     ClockUnavailable,
     FlightLogError,
+    PoseInvalid,
     PoseUnavailable,
     SensorError,
     TelemetryTimeoutError,
@@ -55,6 +59,9 @@ from holescan.geotag import Hole, Tier, VehiclePose, local_en_m
 log = logging.getLogger(__name__)
 
 SourceFactory = Callable[[], FrameSource]
+FrameListener = Callable[[Frame, VehiclePose | None], None]
+"""``on_frame(frame, pose)``: each captured frame and its pose (None: unposed), on the
+capture thread, after the log and the detector have it; must never wait (the live map)."""
 HoleListener = Callable[[list[Hole], list[Hole], Mapping[int, HoleView], Mapping[int, Tier]], None]
 """``on_holes(served, news, views, tiers)``: every announced hole (the waypoints), the
 holes new or changed enough to tell the ground now (announced and for review), the best
@@ -76,14 +83,18 @@ class Flight:
         telemetry_factory: Callable[..., Telemetry] = Telemetry,
         usb_reset: Callable[[], None] | None = None,
         on_holes: HoleListener | None = None,
+        before_close: Callable[[], None] | None = None,
+        on_frame: FrameListener | None = None,
     ) -> None:
         self.config = config
+        self._on_frame_hook = on_frame
         self.camera = camera
         self._source_factory = source_factory
         self._mavlink = mavlink
         self._telemetry_factory = telemetry_factory
         self._usb_reset = usb_reset
         self._on_holes = on_holes
+        self._before_close = before_close  # e.g. the last pictures out on the shared link
         self.counters = FlightCounters()
         self.hole_pipeline = HolePipeline(camera, config.mount, errors=config.errors)
         self.tracker = self.hole_pipeline.tracker
@@ -98,6 +109,7 @@ class Flight:
         self._lock = threading.Lock()
         self._unix_minus_mono = time.time_ns() - time.monotonic_ns()
         self._finished = False  # ended by a limit or the source's end, not by a stop
+        self.invalid = ""  # why the last frame refused as PoseInvalid was
 
     # -- clocks ---------------------------------------------------------------------------
 
@@ -111,12 +123,25 @@ class Flight:
                 pass
         return t_mono_ns + self._unix_minus_mono
 
-    def pose(self, t_mono_ns: int, wait_s: float = 0.0) -> VehiclePose | None:
+    def pose(
+        self, t_mono_ns: int, wait_s: float = 0.0, invalid: list[str] | None = None
+    ) -> VehiclePose | None:
+        """The vehicle pose at a frame time, or None: no telemetry, not synchronised, or a
+        position the autopilot does not have (:class:`PoseInvalid`: no fix, EKF without a
+        position, 0/0, a jump; its reason is appended to ``invalid`` and kept in
+        :attr:`invalid`)."""
         tel = self._telemetry
         if tel is None:
             return None
         try:
             return tel.pose_at_mono(t_mono_ns, wait_s=wait_s)
+        except PoseInvalid as err:
+            if str(err) != self.invalid:
+                log.info("frames not posed: %s", err)
+            self.invalid = str(err)
+            if invalid is not None:
+                invalid.append(str(err))
+            return None
         except PoseUnavailable as err:
             log.debug("frame at mono %d not posed: %s", t_mono_ns, err)
             return None
@@ -167,13 +192,15 @@ class Flight:
             return
         c.detections += len(r.detections)
         self._writer.write_detections(r.frame_index, r.detections, self.unix_ns(r.t_mono_ns))
+        invalid: list[str] = []
         step = self.hole_pipeline.add(
             r.frame_index,
             r.detections,
-            lambda: self.pose(r.t_mono_ns, wait_s=self.config.pose_wait_s),
+            lambda: self.pose(r.t_mono_ns, wait_s=self.config.pose_wait_s, invalid=invalid),
         )
-        if step.refused:
+        if step.refused:  # logged and detected, never placed: nothing announced from it
             c.pose_refusals += 1
+            c.pose_invalid += bool(invalid)
             return
         changed = step.changed
         if not changed:
@@ -226,6 +253,8 @@ class Flight:
             "detect_ms_mean": c.detect_ms_total / max(c.frames_detected, 1),
             "frames_unposed": c.frames_unposed,
             "pose_refusals": c.pose_refusals,
+            "pose_invalid": c.pose_invalid,
+            "pose_invalid_why": self.invalid,
             "sensor_failures": c.sensor_failures,
             "holes": len(self.tracker.holes()),
         }
@@ -283,6 +312,11 @@ class Flight:
             c.frames_log_dropped += 1
         self._views.add_frame(frame.index, frame.rgb)
         self._worker.offer(frame)
+        if self._on_frame_hook is not None:
+            try:
+                self._on_frame_hook(frame, pose)
+            except Exception:  # a listener's bug must not stop capture
+                log.exception("frame listener failed on frame %d", frame.index)
 
     def _capture(self, t_end: float | None) -> None:
         cfg = self.config
@@ -444,6 +478,11 @@ class Flight:
                 deadline.cancel()
             done.set()
             self.stop.set()  # also ends a telemetry retry still waiting for the autopilot
+            if self._before_close is not None:
+                try:
+                    self._before_close()
+                except Exception:  # the flight's end must not fail on it
+                    log.exception("before-close hook failed")
             if self._telemetry is not None:
                 self._telemetry.close()
             try:

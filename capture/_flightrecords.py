@@ -89,6 +89,7 @@ class FlightCounters:
     detect_ms_total: float = 0.0
     detect_errors: int = 0
     pose_refusals: int = 0
+    pose_invalid: int = 0
     sensor_failures: int = 0
     sensor_reopens: int = 0
     announcements: int = 0

@@ -2,11 +2,12 @@
 
 :func:`fly` composes a :class:`~capture._flyconfig.FlyConfig` and the
 :class:`~capture._flyconfig.SensorSetup` it is given (the Xtion, a recording, or the
-simulator's, from :func:`sim.fly_sim`) into a :class:`~capture._daemon.Flight` and, when a
-ground station link is configured, a
-:class:`missions.HoleMissionServer` that serves the holes passing the announce gate as a
-mission, announces each new or moved one by STATUSTEXT and sends its card (best view and
-facts, under the byte budget) through the daemon's ``on_holes``.
+simulator's, from :func:`sim.fly_sim`) into a :class:`~capture._daemon.Flight` and a
+:class:`missions.HoleMissionServer` (on the ``gcs`` link when one is configured; else on
+the one link to the autopilot, which routes to the ground station on its other port, as
+on a real vehicle: companion on TELEM2, radio on TELEM1) that serves the holes passing the
+announce gate as a mission, announces each new or moved one by STATUSTEXT and sends its
+card (best view and facts, under the byte budget) through the daemon's ``on_holes``.
 :func:`format_report` is the operator's summary.
 """
 
@@ -15,17 +16,20 @@ from __future__ import annotations
 import contextlib
 import logging
 import threading
-from collections.abc import Mapping
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
 
 from holescan.capture._daemon import Flight
 from holescan.capture._flightrecords import FlightSummary
 from holescan.capture._flyconfig import FlyConfig
 from holescan.capture._holepipeline import HoleView
+from holescan.capture._livemap import LiveMap, LiveMapStats
 from holescan.capture._mavlink import Telemetry
 from holescan.capture._sensorsetup import SensorSetup, open_sensor
+from holescan.capture.errors import TelemetryError
 from holescan.geotag import AnnounceGate, Hole, Tier
-from holescan.missions import HoleMissionServer
+from holescan.missions import HoleMissionServer, MapLayer
 
 __all__ = ["FlyReport", "fly", "format_report"]
 
@@ -40,6 +44,10 @@ class FlyReport:
     announced : STATUSTEXTs sent to the ground station, in order.
     cards_sent, card_bytes : hole cards (best view + facts) sent whole, and the MAVLink
     bytes they took.
+    tiles_sent, tile_bytes : live map tiles sent whole and their MAVLink bytes.
+    map_stats : the live map's counters (None: no live map).
+    map_tiles : the newest bytes of every map tile the flight held at its end
+        ((layer, tx, ty) -> picture), what the ground station should hold.
     """
 
     summary: FlightSummary
@@ -47,6 +55,10 @@ class FlyReport:
     announced: tuple[str, ...] = ()
     cards_sent: int = 0
     card_bytes: int = 0
+    tiles_sent: int = 0
+    tile_bytes: int = 0
+    map_stats: LiveMapStats | None = None
+    map_tiles: Mapping[tuple[MapLayer, int, int], bytes] = field(default_factory=dict)
 
 
 def fly(
@@ -62,9 +74,20 @@ def fly(
     """
     announced: list[str] = []
     fc = cfg.flight_config()
+    if setup is None:
+        setup = open_sensor(cfg)
+    links: list[Telemetry] = []  # the flight's telemetry links, newest last
+
+    def via_autopilot(fn: Callable[[Any], None]) -> None:
+        if not links:
+            raise TelemetryError("no autopilot link yet")
+        links[-1].send_with(fn)
+
     with contextlib.ExitStack() as stack:
         server: HoleMissionServer | None = None
-        if cfg.gcs:
+        if cfg.gcs or setup.mavlink:
+            # With --gcs its own link; else the one link to the autopilot, which routes the
+            # announcements, the hole mission and the cards to the GCS on its other port.
             server = stack.enter_context(
                 HoleMissionServer(
                     cfg.gcs,
@@ -72,9 +95,11 @@ def fly(
                     rel_alt_m=cfg.hole_rel_alt_m,
                     clearance_m=cfg.hole_clearance_m,
                     card_bytes_per_s=cfg.hole_card_bytes_per_s,
-                    signing=cfg.signing,
+                    sender=None if cfg.gcs else via_autopilot,
+                    signing=cfg.signing if cfg.gcs else None,  # its own link only
                 )
             )
+        shared = server if server is not None and not cfg.gcs else None
 
         def on_holes(
             served: list[Hole],
@@ -101,34 +126,84 @@ def fly(
                     if h.id in views:
                         server.send_card(h, views[h.id].jpeg, views[h.id].why, tiers[h.id])
 
-        if setup is None:
-            setup = open_sensor(cfg)
+        live_map: LiveMap | None = None
+        if server is not None and cfg.live_map is not None:
+            live_map = stack.enter_context(LiveMap(setup.camera, fc.mount, cfg.live_map))
+            server.set_tiles(live_map)
         mavlink = setup.mavlink
         _log.info(
             "flight log %s; sensor %s; MAVLink %s; ground station %s",
             fc.log_prefix,
             cfg.sensor,
             mavlink or "none",
-            cfg.gcs or "none",
+            cfg.gcs or ("through the autopilot" if mavlink else "none"),
         )
+        hook = setup.on_telemetry
+
+        def telemetry(conn: str, **kw: Any) -> Telemetry:
+            log_message = kw.pop("on_message", None)
+
+            def on_message(msg: Any, t_mono_ns: int) -> None:
+                if log_message is not None:
+                    log_message(msg, t_mono_ns)
+                if shared is not None:
+                    shared.feed(msg)
+
+            tel = Telemetry(conn, baud=cfg.baud, on_message=on_message, **kw)
+            links.append(tel)
+            if hook is not None:
+                hook(tel)
+            return tel
+
+        def flush_shared() -> None:
+            if shared is None:
+                return
+            if live_map is not None:  # the last tiles too, before the one link closes
+                live_map.close()
+                live_map.finish()
+                if not live_map.flush(timeout_s=10.0):
+                    _log.warning("map tiles still queued when the autopilot link closed")
+            if not shared.flush_cards(timeout_s=10.0):
+                _log.warning("hole pictures still queued when the autopilot link closed")
+
         flight = Flight(
             fc,
             setup.factory,
             setup.camera,
             mavlink=mavlink,
-            telemetry_factory=lambda conn, **kw: Telemetry(conn, baud=cfg.baud, **kw),
+            telemetry_factory=telemetry,
             usb_reset=setup.usb_reset,
             on_holes=on_holes,
+            # On the shared link the last pictures must go out before the link closes.
+            before_close=flush_shared if shared else None,
+            on_frame=live_map.offer if live_map is not None else None,
         )
         if stop is not None:
             flight.stop = stop
         summary = flight.run()
+        map_tiles: dict[tuple[MapLayer, int, int], bytes] = {}
+        if live_map is not None:
+            live_map.close()  # the last changes cut into tiles
+            live_map.finish()  # every tile not sent yet is due now
+            map_tiles = dict(live_map.outbox())
         if server is not None:
-            server.flush_cards(timeout_s=10.0)  # let the last pictures go out
-            cards = (server.cards.cards_sent, server.cards.bytes_sent)
+            if shared is None:
+                server.flush_cards(timeout_s=10.0)  # let the last pictures go out
+                if live_map is not None:
+                    live_map.flush(timeout_s=10.0)  # and the last tiles
+                    server.flush_cards(timeout_s=5.0)  # the last one out whole
+            c = server.cards
+            counts = (c.cards_sent, c.bytes_sent, c.tiles_sent, c.tile_bytes_sent)
         else:
-            cards = (0, 0)
-    return FlyReport(summary, str(cfg.sensor), tuple(announced), *cards)
+            counts = (0, 0, 0, 0)
+    return FlyReport(
+        summary,
+        str(cfg.sensor),
+        tuple(announced),
+        *counts,
+        map_stats=live_map.stats if live_map is not None else None,
+        map_tiles=map_tiles,
+    )
 
 
 def format_report(report: FlyReport, gate: AnnounceGate | None = None) -> str:
@@ -144,7 +219,8 @@ def format_report(report: FlyReport, gate: AnnounceGate | None = None) -> str:
         f"detector: {c.frames_detected} frames ({c.frames_detected / dur:.1f}/s, mean "
         f"{c.detect_ms_total / max(c.frames_detected, 1):.1f} ms), {s.detect_skipped} of "
         f"{s.detect_offered} skipped for newer frames, {c.detect_errors} errors, "
-        f"{c.detections} detections, {c.pose_refusals} not posed",
+        f"{c.detections} detections, {c.pose_refusals} not posed ({c.pose_invalid} the "
+        "autopilot had no position for)",
         f"sensor: {c.sensor_failures} failures, {c.sensor_reopens} reopens",
         f"log: {len(s.log.files)} file(s), {size_mb:.1f} MB, {s.log.frames_synced} frames synced"
         + (f", error: {s.log.error}" if s.log.error else ""),
@@ -169,6 +245,15 @@ def format_report(report: FlyReport, gate: AnnounceGate | None = None) -> str:
         lines.append(
             f"hole pictures: {report.cards_sent} sent, {report.card_bytes} B "
             f"({report.card_bytes / dur:.0f} B/s over the flight)"
+        )
+    ms = report.map_stats
+    if ms is not None:
+        lines.append(
+            f"live map: {ms.fused} of {ms.offered} frames fused "
+            f"({ms.cpu_ms / max(ms.offered, 1):.2f} ms CPU per frame), "
+            f"{report.tiles_sent} tiles sent, {report.tile_bytes} B "
+            f"({report.tile_bytes / dur:.0f} B/s); pictures and tiles together "
+            f"{(report.card_bytes + report.tile_bytes) / dur:.0f} B/s"
         )
     for h in confirmed:
         lines.append(

@@ -6,7 +6,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from holescan.capture._posebuffer import AttitudeSample, GpsFix, PositionSample, quat_from_euler
+from holescan.capture._posebuffer import AttitudeSample, quat_from_euler
+from holescan.capture._posevalidity import GpsFix, NavStatus, PositionSample
 from holescan.missions import mavlink
 
 __all__ = [
@@ -16,6 +17,7 @@ __all__ = [
     "gps_from_gps_raw_int",
     "home_from_home_position",
     "is_autopilot_heartbeat",
+    "nav_from_ekf_status",
     "position_from_global_position_int",
     "telemetry_sample",
 ]
@@ -86,7 +88,27 @@ def gps_from_gps_raw_int(msg: Any, t_boot_ns: int) -> GpsFix:
     )
 
 
-TelemetrySample = PositionSample | AttitudeSample | GpsFix
+# ArduPilot's EKF_STATUS_FLAGS and PX4's ESTIMATOR_STATUS_FLAGS share the low bits.
+_POS_HORIZ_ABS = 16
+_CONST_POS_MODE = 128
+_GPS_GLITCH = {"EKF_STATUS_REPORT": 32768, "ESTIMATOR_STATUS": 1024}
+
+
+def nav_from_ekf_status(msg: Any, t_boot_ns: int) -> NavStatus:
+    """EKF_STATUS_REPORT (ArduPilot) or ESTIMATOR_STATUS (PX4) -> :class:`NavStatus`.
+
+    A horizontal position is there when POS_HORIZ_ABS is set, the estimator is not in
+    constant-position mode (no aiding: it holds its last position) and no GPS glitch is
+    flagged. ``t_boot_ns`` : when it was received, on the autopilot's clock (neither message
+    says when it was true in a form common to both).
+    """
+    mtype = msg.get_type()
+    flags = int(msg.flags)
+    ok = bool(flags & _POS_HORIZ_ABS) and not flags & (_CONST_POS_MODE | _GPS_GLITCH[mtype])
+    return NavStatus(t_boot_ns=t_boot_ns, horizontal_ok=ok, flags=flags, source=mtype)
+
+
+TelemetrySample = PositionSample | AttitudeSample | GpsFix | NavStatus
 """What a message from the autopilot adds to a :class:`~capture._posebuffer.PoseBuffer`."""
 
 
@@ -95,8 +117,9 @@ def telemetry_sample(msg: Any, gps_t_boot_ns: int) -> TelemetrySample | None:
 
     The one message -> sample decoder: the live link (:class:`Telemetry`) and log replay
     (:class:`capture.TelemetryReplay`) both call it. ``gps_t_boot_ns`` : the autopilot boot
-    time to stamp a GPS_RAW_INT with (see :func:`gps_from_gps_raw_int`). Raises
-    ``ValueError`` for an ATTITUDE_QUATERNION with a zero quaternion.
+    time to stamp a GPS_RAW_INT or an estimator status with (see
+    :func:`gps_from_gps_raw_int`). Raises ``ValueError`` for an ATTITUDE_QUATERNION with a
+    zero quaternion.
     """
     mtype = msg.get_type()
     if mtype == "GLOBAL_POSITION_INT":
@@ -107,6 +130,8 @@ def telemetry_sample(msg: Any, gps_t_boot_ns: int) -> TelemetrySample | None:
         return attitude_from_quaternion(msg)
     if mtype == "GPS_RAW_INT":
         return gps_from_gps_raw_int(msg, gps_t_boot_ns)
+    if mtype in _GPS_GLITCH:
+        return nav_from_ekf_status(msg, gps_t_boot_ns)
     return None
 
 

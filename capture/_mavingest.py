@@ -17,7 +17,8 @@ from typing import Any
 
 from holescan.capture._clock import ClockSync
 from holescan.capture._mavadapt import telemetry_sample
-from holescan.capture._posebuffer import AttitudeSample, GpsFix, PoseBuffer, PositionSample
+from holescan.capture._posebuffer import AttitudeSample, PoseBuffer
+from holescan.capture._posevalidity import GpsFix, NavStatus, PositionSample
 from holescan.capture.errors import ClockUnavailable
 
 _log = logging.getLogger("holescan.capture._mavlink")
@@ -108,13 +109,16 @@ class VehicleState:
         self._on_sample()
 
     def _on_gps(self, msg: Any, t_mono_ns: int) -> None:
+        """GPS_RAW_INT or an estimator status: stamped with its arrival on the boot clock."""
         try:
             t_boot_ns = self.clock.mono_to_boot_ns(t_mono_ns)
         except ClockUnavailable:
             t_boot_ns = self._last_boot_ns or 0
         sample = telemetry_sample(msg, t_boot_ns)
-        assert isinstance(sample, GpsFix)
-        self.poses.add_gps(sample)
+        if isinstance(sample, GpsFix):
+            self.poses.add_gps(sample)
+        elif isinstance(sample, NavStatus):
+            self.poses.add_nav(sample)
 
     def _on_system_time(self, msg: Any, t_mono_ns: int) -> None:
         t_boot_ns = int(msg.time_boot_ms) * _NS_PER_MS
@@ -126,5 +130,7 @@ class VehicleState:
         "ATTITUDE": _on_pose_sample,
         "ATTITUDE_QUATERNION": _on_pose_sample,
         "GPS_RAW_INT": _on_gps,
+        "EKF_STATUS_REPORT": _on_gps,
+        "ESTIMATOR_STATUS": _on_gps,
         "SYSTEM_TIME": _on_system_time,
     }

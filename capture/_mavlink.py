@@ -15,13 +15,10 @@ hands the autopilot's messages to a :class:`~capture._mavingest.VehicleState`, w
   ``timesync_hz``, arrival times of stamped messages, SYSTEM_TIME for UTC) and notices
   reboots;
 
-and itself
+and itself counts (and logs) garbage bytes and packets that fail to parse (otherwise
+ignored) and hands every parsed message with its arrival time to ``on_message``.
 
-* counts (and logs) garbage bytes and packets that fail to parse; they are otherwise ignored;
-* hands every parsed message with its arrival time to ``on_message`` (e.g. a flight logger).
-
-The link speaks MAVLink 2 through :func:`missions.open_link` (TIMESYNC and MAVProxy's
-mission module need it); message classes and enums come from :data:`missions.mavlink`.
+MAVLink 2 through :func:`missions.open_link` (TIMESYNC and MAVProxy's wp module need it).
 """
 
 from __future__ import annotations
@@ -40,7 +37,8 @@ from holescan.capture._mavadapt import is_autopilot_heartbeat
 from holescan.capture._mavingest import VehicleState
 from holescan.capture._mavrates import RateMethod, RateRequests
 from holescan.capture._mavstream import MavlinkStream
-from holescan.capture._posebuffer import GpsFix, PoseBuffer
+from holescan.capture._posebuffer import PoseBuffer
+from holescan.capture._posevalidity import GpsFix
 from holescan.capture.errors import (
     ClockUnavailable,
     PoseUnavailable,
@@ -61,14 +59,13 @@ __all__ = [
 ]
 
 _log = logging.getLogger(__name__)
-
 COMPANION_COMPONENT = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER  # 191
 DEFAULT_BAUD: Final = 921_600  # the flight controller's TELEM port (also ``fly``'s default)
-
 DEFAULT_RATES_HZ: Mapping[str, float] = {
     "GLOBAL_POSITION_INT": 10.0,
     "ATTITUDE": 50.0,
     "GPS_RAW_INT": 5.0,
+    "EKF_STATUS_REPORT": 2.0,
     "SYSTEM_TIME": 1.0,
 }
 
@@ -283,6 +280,12 @@ class Telemetry(RateRequests):
                     self._cond.wait(remaining)
         return self.poses.pose_at(t_boot_ns)
 
+    def send_with(self, fn: Callable[[Any], None]) -> None:
+        """``fn(mav)`` with this link's sender under its lock (for a server sharing the link;
+        sent as the companion, sysid/191); :class:`TelemetryError` once closed."""
+        with self._send_lock:
+            fn(self._link.mav)
+
     def latest_gps(self) -> GpsFix | None:
         return self.poses.latest_gps()
 
@@ -381,6 +384,10 @@ class Telemetry(RateRequests):
         return msgs
 
     def _send_heartbeat(self) -> None:
+        # None before the autopilot (and so our system id) is known: a GCS behind it would
+        # see a system 255 (ArduPilot SITL); except on a link that must speak first.
+        if self._target is None and not self.connection.startswith("udpout:"):
+            return
         with self._send_lock:
             self._link.mav.heartbeat_send(
                 mavlink.MAV_TYPE_ONBOARD_CONTROLLER,

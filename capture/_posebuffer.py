@@ -5,7 +5,10 @@ the requested time, or dead-reckoned from the newest sample's velocity over a sh
 Attitude (ATTITUDE / ATTITUDE_QUATERNION) is slerped (shortest arc, so yaw wrapping through
 +-pi is harmless), or propagated with the newest body rates over a short gap. A pose is
 refused (:class:`PoseUnavailable`) when the bracketing samples are too far apart, when the
-newest sample is too old, or when the time is older than the buffer holds.
+newest sample is too old, or when the time is older than the buffer holds; and refused as
+:class:`PoseInvalid` when the autopilot does not have the position it reports (no 3-D GPS
+fix, an estimator without a horizontal position, lat = lon = 0, a jump: see
+:mod:`capture._posevalidity`).
 """
 
 from __future__ import annotations
@@ -20,34 +23,15 @@ from typing import Generic, TypeVar
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from holescan.capture._posevalidity import GpsFix, NavStatus, PoseValidity, PositionSample
 from holescan.capture.errors import PoseUnavailable
 from holescan.geotag import LocalFrame, VehiclePose
 
 __all__ = [
     "AttitudeSample",
-    "GpsFix",
     "PoseBuffer",
-    "PositionSample",
     "quat_from_euler",
 ]
-
-
-@dataclass(frozen=True)
-class PositionSample:
-    """One GLOBAL_POSITION_INT, in SI units.
-
-    t_boot_ns : autopilot boot time, ns. lat_deg, lon_deg : WGS84. alt_m : above MSL, m.
-    rel_alt_m : above home, m. vn, ve, vd : NED velocity, m/s.
-    """
-
-    t_boot_ns: int
-    lat_deg: float
-    lon_deg: float
-    alt_m: float
-    rel_alt_m: float
-    vn: float
-    ve: float
-    vd: float
 
 
 @dataclass(frozen=True)
@@ -62,36 +46,6 @@ class AttitudeSample:
     t_boot_ns: int
     quat_wxyz: tuple[float, float, float, float]
     rate_frd: tuple[float, float, float] = (0.0, 0.0, 0.0)
-
-
-@dataclass(frozen=True)
-class GpsFix:
-    """One GPS_RAW_INT, in SI units.
-
-    t_boot_ns : autopilot boot time the fix was received at (estimated), ns.
-    fix_type : MAVLink GPS_FIX_TYPE (0-1 none, 2 = 2D, 3 = 3D, 4 DGPS, 5/6 RTK float/fixed).
-    satellites : visible satellites (-1 unknown).
-    hdop : horizontal dilution of precision (NaN unknown).
-    h_acc_m, v_acc_m : 1-sigma position accuracy the receiver reports, m (NaN unknown).
-    lat_deg, lon_deg, alt_m : the receiver's own position (MSL), unfiltered.
-    """
-
-    t_boot_ns: int
-    fix_type: int
-    satellites: int
-    hdop: float
-    h_acc_m: float
-    v_acc_m: float
-    lat_deg: float
-    lon_deg: float
-    alt_m: float
-
-    @property
-    def eph_m(self) -> float:
-        """1-sigma horizontal accuracy, m: ``h_acc_m``; inf without a fix; NaN if unreported."""
-        if self.fix_type < 2:
-            return math.inf
-        return self.h_acc_m
 
 
 def quat_from_euler(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
@@ -144,6 +98,7 @@ class PoseBuffer:
     max_extrapolation_ns : extrapolate past the newest sample at most this far, ns.
     reboot_ns : a sample this much older than the newest means the autopilot rebooted
         (its boot clock restarted): the buffer is cleared, ns.
+    validity : what decides whether a position is real (default :class:`PoseValidity`).
     """
 
     def __init__(
@@ -153,6 +108,7 @@ class PoseBuffer:
         max_gap_ns: int = 500_000_000,
         max_extrapolation_ns: int = 200_000_000,
         reboot_ns: int = 2_000_000_000,
+        validity: PoseValidity | None = None,
     ) -> None:
         if capacity < 2 or max_gap_ns <= 0 or max_extrapolation_ns < 0:
             raise ValueError("need capacity >= 2, max_gap_ns > 0, max_extrapolation_ns >= 0")
@@ -161,7 +117,8 @@ class PoseBuffer:
         self._reboot_ns = reboot_ns
         self._pos: _Series[PositionSample] = _Series(capacity)
         self._att: _Series[AttitudeSample] = _Series(capacity)
-        self._fixes: list[GpsFix] = []
+        self.validity = validity if validity is not None else PoseValidity()
+        self._latest_fix: GpsFix | None = None
         self._lock = threading.Lock()
         self.n_rejected = 0
         self.n_reboots = 0
@@ -174,6 +131,8 @@ class PoseBuffer:
             self._check_reboot(s.t_boot_ns)
             ok = self._pos.add(s)
             self.n_rejected += not ok
+            if ok:
+                self.validity.add_position(s)
             return ok
 
     def add_attitude(self, s: AttitudeSample) -> bool:
@@ -185,17 +144,23 @@ class PoseBuffer:
             return ok
 
     def add_gps(self, fix: GpsFix) -> None:
-        """Remember a GPS fix (its accuracy is attached to poses after it)."""
+        """Remember a GPS fix (its type decides whether poses after it are real; its
+        accuracy is attached to them)."""
         with self._lock:
-            self._fixes.append(fix)
-            if len(self._fixes) > 64:
-                del self._fixes[:-32]
+            self.validity.add_fix(fix)
+            self._latest_fix = fix
+
+    def add_nav(self, status: NavStatus) -> None:
+        """Remember an estimator status (whether it has a horizontal position)."""
+        with self._lock:
+            self.validity.add_nav(status)
 
     def clear(self) -> None:
         with self._lock:
             self._pos.clear()
             self._att.clear()
-            self._fixes.clear()
+            self.validity.clear()
+            self._latest_fix = None
 
     def _check_reboot(self, t_boot_ns: int) -> None:
         newest = max(self._pos.times[-1:] + self._att.times[-1:], default=None)
@@ -203,7 +168,8 @@ class PoseBuffer:
             self.n_reboots += 1
             self._pos.clear()
             self._att.clear()
-            self._fixes.clear()
+            self.validity.clear()
+            self._latest_fix = None
 
     # -- output ---------------------------------------------------------------------------
 
@@ -217,7 +183,7 @@ class PoseBuffer:
 
     def latest_gps(self) -> GpsFix | None:
         with self._lock:
-            return self._fixes[-1] if self._fixes else None
+            return self._latest_fix
 
     def pose_at(self, t_boot_ns: int) -> VehiclePose:
         """Vehicle pose at autopilot boot time ``t_boot_ns``.
@@ -227,12 +193,14 @@ class PoseBuffer:
         PoseUnavailable
             No samples yet, samples bracketing ``t_boot_ns`` more than ``max_gap_ns`` apart,
             newest sample older than ``max_extrapolation_ns``, or ``t_boot_ns`` older than the
-            buffer holds.
+            buffer holds; :class:`PoseInvalid` (a subclass) when the autopilot did not have
+            the position it reported then.
         """
         with self._lock:
             pos, pos_age = _at(self._pos, t_boot_ns, "position", self, _lerp_position, _dr)
             q, att_age = _at(self._att, t_boot_ns, "attitude", self, _slerp, _propagate)
-            fix = self._fix_at(t_boot_ns)
+            self.validity.check(t_boot_ns, _bracket(self._pos, t_boot_ns))
+            fix = self.validity.fix_at(t_boot_ns)
         yaw, pitch, roll = _rotation(q).as_euler("ZYX")
         return VehiclePose(
             t_boot_ns=t_boot_ns,
@@ -249,12 +217,6 @@ class PoseBuffer:
             eph_m=fix.eph_m if fix is not None else math.nan,
             age_ns=max(pos_age, att_age),
         )
-
-    def _fix_at(self, t_boot_ns: int) -> GpsFix | None:
-        before = [f for f in self._fixes if f.t_boot_ns <= t_boot_ns]
-        if before:
-            return before[-1]
-        return self._fixes[0] if self._fixes else None
 
 
 T = TypeVar("T")
@@ -296,6 +258,12 @@ def _at(
         )
     f = (t - a.t_boot_ns) / gap
     return interp(a, b, f), min(t - a.t_boot_ns, b.t_boot_ns - t)
+
+
+def _bracket(series: _Series[PositionSample], t: int) -> tuple[PositionSample, ...]:
+    """The position samples a pose at ``t`` is made of: the pair around it, or the newest."""
+    i = bisect.bisect_right(series.times, t)
+    return tuple(series.items[max(i - 1, 0) : i + 1])
 
 
 def _lerp_position(a: PositionSample, b: PositionSample, f: float) -> PositionSample:

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 from holescan.capture._flyconfig import FlyConfig
 from holescan.capture._frame import Frame, FrameSource
+from holescan.capture._mavlink import Telemetry
 from holescan.capture.errors import SensorError
 from holescan.detect import CameraIntrinsics
 from holescan.errors import InputError
@@ -68,12 +69,15 @@ class SensorSetup:
     factory : opens the frame source (called again after a sensor failure).
     camera : its intrinsics. mavlink : the autopilot's pymavlink connection (None: fly
     without telemetry). usb_reset : resets the sensor on USB after a failure (or None).
+    on_telemetry : called with each telemetry link the flight opens to the autopilot, before
+    it is used (a simulated camera rendering from the reported pose listens to it).
     """
 
     factory: Callable[[], FrameSource]
     camera: CameraIntrinsics
     mavlink: str | None = None
     usb_reset: Callable[[], None] | None = None
+    on_telemetry: Callable[[Telemetry], None] | None = None
 
 
 def open_sensor(cfg: FlyConfig) -> SensorSetup:

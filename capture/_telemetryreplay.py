@@ -17,7 +17,8 @@ from holescan.capture._mavadapt import (
     is_autopilot_heartbeat,
     telemetry_sample,
 )
-from holescan.capture._posebuffer import AttitudeSample, GpsFix, PoseBuffer, PositionSample
+from holescan.capture._posebuffer import AttitudeSample, PoseBuffer
+from holescan.capture._posevalidity import GpsFix, NavStatus, PositionSample
 from holescan.capture.errors import PoseUnavailable
 from holescan.geotag import VehiclePose
 from holescan.missions import mavlink, parser
@@ -83,6 +84,8 @@ class TelemetryReplay:
             return self.poses.add_attitude(sample)
         if isinstance(sample, GpsFix):
             self.poses.add_gps(sample)
+        elif isinstance(sample, NavStatus):
+            self.poses.add_nav(sample)
         return False
 
     def pose_at(self, t_boot_ns: int | None) -> VehiclePose | None:

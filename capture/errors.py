@@ -8,6 +8,7 @@
     │   └── TelemetryTimeoutError    ... nothing came in time (also a TimeoutError)
     ├── ClockUnavailable         no clock estimate yet
     ├── PoseUnavailable          no trustworthy pose at that time
+    │   └── PoseInvalid              ... the autopilot itself has none (no fix, jump, 0/0)
     ├── OutputPathError          an output that must not or cannot be written (an InputError)
     └── FlightLogError           a flight log cannot be written or read (an InputError)
         ├── TruncatedLogError        ... it was cut off or damaged before its end
@@ -28,6 +29,7 @@ __all__ = [
     "ClockUnavailable",
     "FlightLogError",
     "OutputPathError",
+    "PoseInvalid",
     "PoseUnavailable",
     "RecordError",
     "SensorError",
@@ -62,6 +64,12 @@ class ClockUnavailable(CaptureError):  # noqa: N818 (reads as a state, like Pose
 
 class PoseUnavailable(CaptureError):  # noqa: N818 (name from the design: "pose unavailable")
     """No trustworthy pose at the requested time; the message says why."""
+
+
+class PoseInvalid(PoseUnavailable):
+    """The autopilot reports a position it does not have: no 3-D GPS fix, an estimator
+    without a horizontal position, lat = lon = 0, or a jump no vehicle can make. Waiting
+    for more telemetry does not help: that instant stays unplaced."""
 
 
 class OutputPathError(CaptureError, InputError):

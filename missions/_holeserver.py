@@ -44,13 +44,25 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from typing import Any
 
 from holescan.errors import InputError
 from holescan.geotag import Hole
-from holescan.missions._holecards import CardSender, card_facts, make_card
+from holescan.missions._holecards import (
+    CardAssembler,
+    CardSender,
+    TileSource,
+    card_facts,
+    make_card,
+)
 from holescan.missions._link import mavlink
+from holescan.missions._mapinventory import (
+    TYPE_INVENTORY,
+    TileInventory,
+    held_by,
+    read_inventory,
+)
 from holescan.missions._protocol import MissionError
 from holescan.missions._signing import SigningKey
 from holescan.missions._vehicle import MissionReceiver, MissionServer
@@ -62,9 +74,13 @@ __all__ = [
     "MissionServerError",
     "hole_statustext",
     "hole_waypoints",
+    "radio_budget",
 ]
 
 _log = logging.getLogger(__name__)
+
+_INVENTORY_S = 10.0
+"""A station's inventory counts for the request for everything within this long after it."""
 
 MAV_COMP_ID_ONBOARD_COMPUTER: int = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
 _STATUSTEXT_MAX = 50
@@ -133,13 +149,39 @@ def hole_statustext(hole: Hole, tier: str = "announced") -> str:
     raise InputError(f"hole id {hole.id} too long for a STATUSTEXT")
 
 
+_MIN_CARD_BYTES_PER_S = 50.0
+
+
+def radio_budget(current: float, ceiling: float, txbuf_pct: int) -> float:
+    """The hole cards' byte budget after a RADIO_STATUS, B/s.
+
+    ``txbuf_pct`` is how much of the radio's transmit buffer is free (SiK radios report it;
+    ArduPilot slows its own streams on it the same way): under 20 % the link is
+    overrun, the budget halves; under 50 % it shrinks by a fifth; over 90 % it grows by a
+    tenth, up to ``ceiling`` (the configured budget); between, it stays. Never under
+    50 B/s (a card still gets through, slowly).
+    """
+    if txbuf_pct < 20:
+        new = current * 0.5
+    elif txbuf_pct < 50:
+        new = current * 0.8
+    elif txbuf_pct > 90:
+        new = current * 1.1
+    else:
+        new = current
+    return max(min(new, ceiling), min(_MIN_CARD_BYTES_PER_S, ceiling))
+
+
 class HoleMissionServer(MissionServer):
     """Live MAVLink mission server for found holes (a background thread).
 
     Parameters
     ----------
     connection_string : pymavlink connection, e.g. ``udpout:127.0.0.1:14550`` (towards a
-        GCS or router), ``udpin:0.0.0.0:14560``, ``tcp:HOST:PORT``, a serial device.
+        GCS or router), ``udpin:0.0.0.0:14560``, ``tcp:HOST:PORT``, a serial device; None
+        with ``sender``: the companion's one link to the autopilot, which routes the
+        announcements, the mission and the cards to the GCS on its other port (see
+        :class:`missions.MissionServer`; the link's owner feeds it with :meth:`feed`).
     sysid : the vehicle's system id (GCS modules only listen to their target system).
     compid : our component id (191 = onboard computer).
     home : (lat_deg, lon_deg, alt_m MSL) of the vehicle's home, if known (see
@@ -147,7 +189,9 @@ class HoleMissionServer(MissionServer):
     rel_alt_m, clearance_m : waypoint altitude, see :func:`hole_waypoints`.
     heartbeat_period_s : HEARTBEAT interval (MAV_TYPE_ONBOARD_CONTROLLER).
     card_bytes_per_s : byte budget of the hole cards (best view + facts, see
-        :mod:`missions._holecards`) sent by :meth:`send_card`.
+        :mod:`missions._holecards`) sent by :meth:`send_card`: the most they may take. A
+        radio on the way that reports RADIO_STATUS (a SiK radio, seen through the
+        autopilot's routing) adapts it to what the link carries (:func:`radio_budget`).
 
     Use as a context manager; the link opens on enter and closes on exit. Errors of the
     background thread are raised as :class:`MissionServerError` by :meth:`close`.
@@ -157,7 +201,7 @@ class HoleMissionServer(MissionServer):
 
     def __init__(
         self,
-        connection_string: str,
+        connection_string: str | None,
         sysid: int,
         compid: int = MAV_COMP_ID_ONBOARD_COMPUTER,
         *,
@@ -166,6 +210,7 @@ class HoleMissionServer(MissionServer):
         clearance_m: float = 5.0,
         heartbeat_period_s: float = 1.0,
         card_bytes_per_s: float = 1000.0,
+        sender: Callable[[Callable[[Any], None]], None] | None = None,
         signing: SigningKey | None = None,
     ) -> None:
         if not (1 <= sysid <= 255 and 1 <= compid <= 255):
@@ -179,6 +224,7 @@ class HoleMissionServer(MissionServer):
             heartbeat_period_s=heartbeat_period_s,
             mav_type=mavlink.MAV_TYPE_ONBOARD_CONTROLLER,
             autopilot=mavlink.MAV_AUTOPILOT_INVALID,
+            sender=sender,
             signing=signing,
         )
         self.connection_string = connection_string
@@ -189,7 +235,13 @@ class HoleMissionServer(MissionServer):
         self._home = home
         self._holes: tuple[Hole, ...] = ()
         self.cards = CardSender(bytes_per_s=card_bytes_per_s)
+        self._inventory = CardAssembler()  # a station's inventory (missions._mapinventory)
+        self._inventory_from: tuple[int, int] | None = None
+        self._held: TileInventory | None = None
+        self._held_at = -math.inf
         self._card_revs: dict[int, int] = {}
+        self.card_ceiling_bytes_per_s = card_bytes_per_s
+        self.radio_status_seen = 0
         self._rebuild()
 
     # -- lifecycle -----------------------------------------------------------------------
@@ -208,7 +260,7 @@ class HoleMissionServer(MissionServer):
             raise MissionServerError(str(err)) from err
         _log.info(
             "hole mission server on %s as %d/%d%s",
-            self.connection_string,
+            self.connection_string or "the autopilot link",
             self.sysid,
             self.compid,
             "" if self.signing is None else f", MAVLink signed ({self.signing})",
@@ -273,12 +325,19 @@ class HoleMissionServer(MissionServer):
             self.cards.put(hole.id, card, priority=0 if tier == "announced" else 1)
         return len(card)
 
+    def set_tiles(self, tiles: TileSource | None) -> None:
+        """Send the live map's tiles from ``tiles`` with what the cards leave of the budget
+        (:mod:`missions._maptiles`); None stops them."""
+        with self._lock:
+            self.cards.tiles = tiles
+
     def flush_cards(self, timeout_s: float = 10.0) -> bool:
-        """Wait (at most ``timeout_s``) until every queued card is sent; True when done."""
+        """Wait (at most ``timeout_s``) until every queued card (and the map tile under
+        way) is sent; True when done."""
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
             with self._lock:
-                if self.cards.pending == 0:
+                if self.cards.queued == 0:
                     return True
             time.sleep(0.1)
         return False
@@ -291,14 +350,46 @@ class HoleMissionServer(MissionServer):
 
     # -- hooks of the server's thread ----------------------------------------------------
     def on_message(self, msg: Any) -> None:
-        if msg.get_type() != "DATA_TRANSMISSION_HANDSHAKE":  # no target fields: any peer
+        kind = msg.get_type()  # no target fields: any peer
+        if kind == "RADIO_STATUS":
+            with self._lock:
+                self.radio_status_seen += 1
+                old = self.cards.bytes_per_s
+                self.cards.bytes_per_s = radio_budget(
+                    old, self.card_ceiling_bytes_per_s, int(msg.txbuf)
+                )
+            if self.cards.bytes_per_s != old:
+                _log.debug(
+                    "radio tx buffer %d %% free: card budget %.0f B/s",
+                    msg.txbuf,
+                    self.cards.bytes_per_s,
+                )
             return
-        if msg.size == 0 and msg.packets == 0:  # a ground station asks for every card
+        src = (msg.get_srcSystem(), msg.get_srcComponent())
+        if kind == "ENCAPSULATED_DATA":
+            if src == self._inventory_from and (data := self._inventory.add(msg)) is not None:
+                self._held = read_inventory(data)
+                self._inventory_from = None
+                if self._held is not None:
+                    self._held_at = time.monotonic()
+                    _log.info("%s holds %d map tiles", src, len(self._held.have))
+            return
+        if kind != "DATA_TRANSMISSION_HANDSHAKE":
+            return
+        if msg.type == TYPE_INVENTORY and msg.size > 0:  # what the station holds comes next
+            self._inventory_from = src
+            self._inventory.add(msg)
+        elif msg.size == 0 and msg.packets == 0:  # a ground station asks for every card
+            held = self._held
+            fresh = held is not None and time.monotonic() - self._held_at < _INVENTORY_S
             _log.info(
-                "hole cards requested again by %s", (msg.get_srcSystem(), msg.get_srcComponent())
+                "hole cards requested again by %s (%s)",
+                src,
+                "tiles it holds not sent" if fresh else "every map tile too",
             )
             with self._lock:
-                self.cards.resend_all()
+                self.cards.resend_all(held_by(held) if fresh and held is not None else None)
+            self._held = None
 
     def tick(self) -> None:
         with self._lock:

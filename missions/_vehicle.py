@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import functools
 import logging
+import queue
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -226,8 +227,13 @@ class MissionServer:
     ----------
     link : e.g. ``udpin:127.0.0.1:14555`` (answers whoever speaks first) or
         ``udpout:127.0.0.1:14550`` (speaks first, e.g. to MAVProxy's ``udpin``).
+        None with ``sender``: share a link another part owns (see below).
     mav_type, autopilot : what the HEARTBEAT says we are (default: an ArduPilot quadrotor).
     heartbeat_period_s : HEARTBEAT interval.
+    sender : share the owner's link instead of opening one (the companion's one link to
+        the autopilot, which routes to the GCS): ``sender(fn)`` calls ``fn(mav)`` with the
+        owner's MAVLink sender under its lock; the owner hands every message it receives
+        to :meth:`feed` and sends the heartbeats (none are sent here).
     signing : MAVLink 2 signing key (None: unsigned); with one, unsigned or badly signed
         requests are dropped unanswered (:class:`missions.SigningKey`).
 
@@ -239,15 +245,20 @@ class MissionServer:
 
     def __init__(
         self,
-        link: str,
+        link: str | None,
         receiver: MissionReceiver | None = None,
         *,
         drop: Callable[[Any], bool] | None = None,
         heartbeat_period_s: float = 1.0,
         mav_type: int = mavlink.MAV_TYPE_QUADROTOR,
         autopilot: int = mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
+        sender: Callable[[Callable[[Any], None]], None] | None = None,
         signing: SigningKey | None = None,
     ) -> None:
+        if (link is None) == (sender is None):
+            raise InputError("a mission server needs a link or a sender, not both")
+        self._sender = sender
+        self._inbox: queue.Queue[Any] = queue.Queue(maxsize=1024)
         self.receiver = receiver if receiver is not None else MissionReceiver()
         self.link = link
         self.drop = drop
@@ -276,12 +287,13 @@ class MissionServer:
         """Open the link (:class:`missions.MissionError` if it cannot be) and start."""
         if self._thread is not None:
             raise MissionError("server already started")
-        self._conn = connect(
-            self.link,
-            source_system=self.receiver.system_id,
-            source_component=self.receiver.component_id,
-            signing=self.signing,
-        )
+        if self.link is not None:
+            self._conn = connect(
+                self.link,
+                source_system=self.receiver.system_id,
+                source_component=self.receiver.component_id,
+                signing=self.signing,
+            )
         self._thread = threading.Thread(target=self._run, name="mission-server", daemon=True)
         self._thread.start()
 
@@ -308,9 +320,24 @@ class MissionServer:
                 self._accepted.wait(remaining)
             return self.receiver.mission
 
+    def feed(self, msg: Any) -> None:
+        """A message the owner of a shared link received (any thread; never blocks: when
+        the server lags 1024 messages behind, the message is dropped)."""
+        try:
+            self._inbox.put_nowait(msg)
+        except queue.Full:
+            log.debug("mission server inbox full: %s dropped", msg.get_type())
+
     # -- sending -------------------------------------------------------------------------
     def send_with(self, fn: Callable[[Any], None]) -> None:
         """Call ``fn(mav)`` with the link's MAVLink sender (any thread)."""
+        if self._sender is not None:
+            with self._lock:
+                try:
+                    self._sender(fn)
+                except Exception as err:  # the owner's link is closed or failing
+                    raise MissionError(f"shared link: {err}") from err
+            return
         conn = self._conn
         if conn is None:
             raise MissionError("server is not running: use it as a context manager")
@@ -327,6 +354,8 @@ class MissionServer:
             self.send_with(functools.partial(_send_message, msg))
 
     def _heartbeat(self) -> None:
+        if self._sender is not None:
+            return  # the owner of a shared link sends the heartbeats
         self.send_with(
             lambda mav: mav.heartbeat_send(
                 self.mav_type, self.autopilot, 0, 0, mavlink.MAV_STATE_ACTIVE
@@ -341,6 +370,14 @@ class MissionServer:
         """Called each turn of the loop (subclasses)."""
 
     # -- the thread ------------------------------------------------------------------------
+    def _receive(self, conn: Any) -> Any:
+        if conn is None:  # a shared link: the owner feeds us
+            try:
+                return self._inbox.get(timeout=self.tick_s)
+            except queue.Empty:
+                return None
+        return conn.recv_match(blocking=True, timeout=self.tick_s)
+
     def _run(self) -> None:
         conn = self._conn
         period = self.heartbeat_period_s
@@ -353,31 +390,18 @@ class MissionServer:
                     self._heartbeat()
                     next_beat = now + period
                 try:
-                    msg = conn.recv_match(blocking=True, timeout=self.tick_s)
+                    msg = self._receive(conn)
                 except OSError as err:  # e.g. udpout towards a closed port
                     log.debug("mission server link: %s", err)
                     self._stop.wait(0.2)
                     continue
-                now_ns = time.monotonic_ns()
-                before = self.receiver.uploads_accepted
-                if msg is not None and msg.get_type() != "BAD_DATA":
-                    self.received.append(msg.get_type())
-                    clients = set(getattr(conn, "clients", ()))  # udpin: peer addresses
-                    if msg.get_type() == "HEARTBEAT" and not clients <= known:
-                        known |= clients
-                        next_beat = 0.0  # a new peer: answer its heartbeat at once
-                    with self._lock:
-                        out = self.receiver.handle(msg, now_ns)
-                    self._send(out)
-                    if not msg.get_type().startswith("MISSION_"):
-                        self.on_message(msg)
-                with self._lock:
-                    out = self.receiver.poll(now_ns)
-                self._send(out)
-                self.tick()
-                if self.receiver.uploads_accepted != before:
-                    with self._accepted:
-                        self._accepted.notify_all()
+                try:
+                    next_beat = self._turn(conn, msg, known, next_beat)
+                except MissionError as err:
+                    if self._sender is None:
+                        raise
+                    log.debug("shared link not usable now: %s", err)  # closed, or not yet up
+                    self._stop.wait(0.2)
         except Exception as err:  # surfaced by wait_accepted / subclasses' close
             if not self._stop.is_set():
                 log.exception("mission server stopped")
@@ -385,3 +409,27 @@ class MissionServer:
         finally:
             with self._accepted:
                 self._accepted.notify_all()
+
+    def _turn(self, conn: Any, msg: Any, known: set[object], next_beat: float) -> float:
+        """Handle one received message (or None), poll, tick; return the next beat time."""
+        now_ns = time.monotonic_ns()
+        before = self.receiver.uploads_accepted
+        if msg is not None and msg.get_type() != "BAD_DATA":
+            self.received.append(msg.get_type())
+            clients = set(getattr(conn, "clients", ()))  # udpin: peer addresses
+            if msg.get_type() == "HEARTBEAT" and not clients <= known:
+                known |= clients
+                next_beat = 0.0  # a new peer: answer its heartbeat at once
+            with self._lock:
+                out = self.receiver.handle(msg, now_ns)
+            self._send(out)
+            if not msg.get_type().startswith("MISSION_"):
+                self.on_message(msg)
+        with self._lock:
+            out = self.receiver.poll(now_ns)
+        self._send(out)
+        self.tick()
+        if self.receiver.uploads_accepted != before:
+            with self._accepted:
+                self._accepted.notify_all()
+        return next_beat

@@ -30,6 +30,7 @@ from holescan.sim._demo_format import REVIEW_PER_HA_MEASURED, format_result
 from holescan.sim._fly import SIM_TABLE, SimFlyReport, fly_sim, format_sim_report, sortie_params
 from holescan.sim._lap import LapReplay, prerender_lap
 from holescan.sim._render import GtBox, hole_boxes, render, render_exact
+from holescan.sim._reported import ReportedPoseCamera, anchor_at_home
 from holescan.sim._scoring import count_in_view, frames_in_view, score_holes
 from holescan.sim._sortie import (
     DEFAULT_ANCHOR,
@@ -63,6 +64,7 @@ __all__ = [
     "GtBox",
     "HoleKind",
     "LapReplay",
+    "ReportedPoseCamera",
     "RubbleWorld",
     "SimAutopilot",
     "SimFlyReport",
@@ -73,6 +75,7 @@ __all__ = [
     "TrueHole",
     "TruthRow",
     "WorldAnchor",
+    "anchor_at_home",
     "camera_pose_in_world",
     "count_in_view",
     "fly_sim",

@@ -5,14 +5,25 @@ use :class:`SimAutopilot`: system 1, component 1, flying a closed loop of local 
 around a home position at a cruise speed. It behaves like an autopilot on the wire:
 
 * HEARTBEAT at 1 Hz (a quadrotor running ArduPilot, armed, in AUTO);
-* GLOBAL_POSITION_INT, ATTITUDE, ATTITUDE_QUATERNION, GPS_RAW_INT, SYSTEM_TIME only when
-  asked, at the asked rate: MAV_CMD_SET_MESSAGE_INTERVAL (ACKed; ``message_interval=False``
-  makes it answer UNSUPPORTED like an old firmware), REQUEST_DATA_STREAM (ArduPilot's
-  stream groups), MAV_CMD_REQUEST_MESSAGE; any other command is ACKed UNSUPPORTED;
+* GLOBAL_POSITION_INT, ATTITUDE, ATTITUDE_QUATERNION, GPS_RAW_INT, EKF_STATUS_REPORT,
+  SYSTEM_TIME only when asked, at the asked rate: MAV_CMD_SET_MESSAGE_INTERVAL (ACKed;
+  ``message_interval=False`` makes it answer UNSUPPORTED like an old firmware),
+  REQUEST_DATA_STREAM (ArduPilot's stream groups), MAV_CMD_REQUEST_MESSAGE; any other
+  command is ACKed UNSUPPORTED;
 * TIMESYNC requests answered with its boot clock in ns;
 * the mission protocol (upload, download, clear) through an embedded
   :class:`missions._protocol.MissionReceiver` (:attr:`SimAutopilot.mission`). The uploaded
   mission is stored, not flown: build a :class:`SimPath` from it to fly it.
+
+The GPS fix can be switched off and on (:attr:`SimAutopilot.gps_fix`), as ArduPilot
+behaves: before its first fix it sends GLOBAL_POSITION_INT with lat = lon = 0 (its EKF
+has no origin), GPS_RAW_INT with ``fix_type`` 1 and an EKF_STATUS_REPORT in
+constant-position mode; a fix lost in flight leaves the EKF dead-reckoning, its position
+drifting away from the truth (``lost_drift_m_s``) without POS_HORIZ_ABS.
+
+A SiK radio on the link can be played too (:attr:`SimAutopilot.radio_txbuf`): RADIO_STATUS
+once a second from system 51, component 68 (as SiK firmware sends it), reporting that much
+of its transmit buffer free, as ArduPilot forwards it to its other links.
 
 Its boot clock is the host's monotonic clock shifted by a realistic offset (it booted
 ``uptime_at_start_s`` before the simulator started), running ``drift_ppm`` fast, read with
@@ -33,7 +44,7 @@ import random
 import threading
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from types import TracebackType
 from typing import Any
 
@@ -56,6 +67,7 @@ _STREAMED = (
     "ATTITUDE",
     "ATTITUDE_QUATERNION",
     "GPS_RAW_INT",
+    "EKF_STATUS_REPORT",
     "SYSTEM_TIME",
 )
 # ArduPilot's REQUEST_DATA_STREAM groups, restricted to what we stream.
@@ -63,8 +75,12 @@ _STREAM_GROUPS: Mapping[int, tuple[str, ...]] = {
     mavlink.MAV_DATA_STREAM_EXTENDED_STATUS: ("GPS_RAW_INT",),
     mavlink.MAV_DATA_STREAM_POSITION: ("GLOBAL_POSITION_INT",),
     mavlink.MAV_DATA_STREAM_EXTRA1: ("ATTITUDE",),
-    mavlink.MAV_DATA_STREAM_EXTRA3: ("SYSTEM_TIME",),
+    mavlink.MAV_DATA_STREAM_EXTRA3: ("SYSTEM_TIME", "EKF_STATUS_REPORT"),
 }
+# EKF_STATUS_REPORT flags: using GPS; no fix ever (constant position); dead reckoning.
+_EKF_GOOD = 0x33F
+_EKF_NO_ORIGIN = 0x0A5
+_EKF_DEAD_RECKONING = 0x02F
 
 
 @dataclass(frozen=True)
@@ -93,6 +109,9 @@ class SimAutopilot:
     jitter_ns : standard deviation of the noise on each boot-clock reading, ns.
     message_interval : honour MAV_CMD_SET_MESSAGE_INTERVAL (False: ACK UNSUPPORTED).
     eph_m : GPS horizontal accuracy reported (h_acc), m.
+    gps_fix : whether the GPS has a 3-D fix at start (switch with :attr:`gps_fix`).
+    lost_drift_m_s : how fast the position drifts east of the truth while a fix once had is
+        lost (the EKF dead-reckoning), m/s.
     seed : for the clock jitter.
     mission : the mission-protocol state machine (default: a fresh
         :class:`~missions._protocol.MissionReceiver` for ``sysid``/``compid``).
@@ -110,6 +129,8 @@ class SimAutopilot:
         jitter_ns: int = 20_000,
         message_interval: bool = True,
         eph_m: float = 1.2,
+        gps_fix: bool = True,
+        lost_drift_m_s: float = 1.5,
         seed: int = 0,
         mission: MissionReceiver | None = None,
     ) -> None:
@@ -126,6 +147,9 @@ class SimAutopilot:
         self._mono0 = time.monotonic_ns()
         self._boot0 = round(uptime_at_start_s * _NS)
         self._unix_minus_boot = time.time_ns() - self.boot_ns_at_mono(time.monotonic_ns())
+        self.lost_drift_m_s = lost_drift_m_s
+        self._had_fix = gps_fix
+        self._lost_at_boot_ns: int | None = None if gps_fix else -1
         self._lock = threading.Lock()  # rates
         self._send_lock = threading.Lock()  # the connection's writer
         self._intervals_ns: dict[str, int] = {"HEARTBEAT": _NS}
@@ -133,6 +157,7 @@ class SimAutopilot:
         self.sent: dict[str, int] = {}
         self.received: dict[str, int] = {}
         self.silent = False
+        self.radio_txbuf: int | None = None
         self.mission = (
             mission
             if mission is not None
@@ -151,6 +176,20 @@ class SimAutopilot:
     def unix_ns_at_boot(self, t_boot_ns: int) -> int:
         """The UTC time (ns since the epoch) the autopilot reports for boot time ``t_boot_ns``."""
         return t_boot_ns + self._unix_minus_boot
+
+    @property
+    def gps_fix(self) -> bool:
+        """Whether the GPS has a 3-D fix now; set it to lose or regain the fix."""
+        return self._lost_at_boot_ns is None
+
+    @gps_fix.setter
+    def gps_fix(self, value: bool) -> None:
+        now = self.boot_ns_at_mono(time.monotonic_ns())
+        if value:
+            self._had_fix = True
+            self._lost_at_boot_ns = None
+        elif self._lost_at_boot_ns is None:
+            self._lost_at_boot_ns = now
 
     def truth_pose(self, t_boot_ns: int) -> VehiclePose:
         """The simulated vehicle's exact pose at its boot time ``t_boot_ns``."""
@@ -309,11 +348,19 @@ class SimAutopilot:
                 3,  # ArduCopter AUTO
                 mavlink.MAV_STATE_ACTIVE,
             )
+            txbuf = self.radio_txbuf
+            if txbuf is not None:  # the SiK radio's own report, routed to this link
+                ids = (mav.srcSystem, mav.srcComponent)
+                mav.srcSystem, mav.srcComponent = 51, 68
+                try:
+                    mav.radio_status_send(180, 170, txbuf, 30, 28, 0, 0)
+                finally:
+                    mav.srcSystem, mav.srcComponent = ids
         elif name == "SYSTEM_TIME":
             # both clocks read at the same instant, each truncated to its field's unit
             mav.system_time_send(self.unix_ns_at_boot(t_boot_now_ns) // 1000, t_boot_ms)
         else:
-            s = self._state(t_boot_ms * 1_000_000)
+            s = self._reported(self._state(t_boot_ms * 1_000_000))
             if name == "GLOBAL_POSITION_INT":
                 yaw_deg = math.degrees(s.rot.as_euler("ZYX")[0]) % 360.0
                 mav.global_position_int_send(
@@ -333,6 +380,19 @@ class SimAutopilot:
             elif name == "ATTITUDE_QUATERNION":
                 x, y, z, w = s.rot.as_quat()
                 mav.attitude_quaternion_send(t_boot_ms, w, x, y, z, *s.rates)
+            elif name == "EKF_STATUS_REPORT":
+                flags = (
+                    _EKF_GOOD
+                    if self.gps_fix
+                    else _EKF_DEAD_RECKONING
+                    if self._had_fix
+                    else _EKF_NO_ORIGIN
+                )
+                mav.ekf_status_report_send(flags, 0.1, 0.1, 0.1, 0.1, 0.0)
+            elif name == "GPS_RAW_INT" and not self.gps_fix:
+                mav.gps_raw_int_send(
+                    t_boot_ms * 1000, mavlink.GPS_FIX_TYPE_NO_FIX, 0, 0, 0, 9999, 9999, 0, 0, 3
+                )
             elif name == "GPS_RAW_INT":
                 vn, ve, _ = s.vel_ned
                 cog = math.degrees(math.atan2(ve, vn)) % 360.0
@@ -352,6 +412,18 @@ class SimAutopilot:
                     vel_acc=300,
                 )
         self.sent[name] = self.sent.get(name, 0) + 1
+
+    def _reported(self, s: _State) -> _State:
+        """The state as the autopilot's estimator has it: the truth with a fix; zeros before
+        the first fix; drifting east of the truth after a fix is lost."""
+        lost = self._lost_at_boot_ns
+        if lost is None:
+            return s
+        if not self._had_fix:
+            return replace(s, lat_deg=0.0, lon_deg=0.0, alt_m=0.0, rel_alt_m=0.0, vel_ned=(0, 0, 0))
+        drift = self.lost_drift_m_s * max(0, s.t_boot_ns - lost) / _NS
+        lat, lon = LocalFrame(s.lat_deg, s.lon_deg, s.alt_m).to_geodetic(drift, 0.0)
+        return replace(s, lat_deg=float(lat), lon_deg=float(lon))
 
     def _handle(self, msg: Any) -> None:
         mtype = msg.get_type()

@@ -3,7 +3,9 @@
 The ``[sim]`` table of the fly configuration is checked here (the flight side keeps it as
 written and never imports the simulator); :func:`fly_sim` opens a
 :class:`~sim._sortie.SimSortie` (world, simulated autopilot, simulated Xtion) and hands its
-frame source and autopilot link to :func:`capture.fly`.
+frame source and autopilot link to :func:`capture.fly`; with ``--mavlink CONN`` the
+autopilot at CONN flies instead and the simulated Xtion renders from the pose it reports
+(:class:`~sim._reported.ReportedPoseCamera`).
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ import dataclasses
 import math
 import statistics
 import threading
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -25,9 +27,11 @@ from holescan.capture import (
     format_report,
     numbers,
 )
+from holescan.detect import CameraIntrinsics
 from holescan.geotag import AnnounceGate, local_en_m
+from holescan.sim._reported import ReportedPoseCamera
 from holescan.sim._sortie import DEFAULT_ANCHOR, SimSortie, SortieParams, TrueHole
-from holescan.sim._source import WorldAnchor
+from holescan.sim._source import SimSource, WorldAnchor
 
 __all__ = ["SIM_TABLE", "SimFlyReport", "fly_sim", "format_sim_report", "sortie_params"]
 
@@ -95,23 +99,41 @@ class SimFlyReport:
     truth: tuple[TrueHole, ...]
 
 
-def fly_sim(cfg: FlyConfig, *, stop: threading.Event | None = None) -> SimFlyReport:
-    """Fly ``cfg`` over the simulated sortie its ``[sim]`` table describes.
+def fly_sim(
+    cfg: FlyConfig,
+    *,
+    stop: threading.Event | None = None,
+    home: tuple[float, float, float] | None = None,
+) -> SimFlyReport:
+    """Fly ``cfg`` over the simulated world its ``[sim]`` table describes.
 
-    ``cfg.mavlink`` is the ``udpin:`` address the simulated autopilot talks to (None: a free
-    loopback port). Everything else is :func:`capture.fly`'s.
+    Without ``cfg.mavlink``: the whole simulated sortie (its own simulated autopilot on a
+    free loopback port). With it: the autopilot there flies, and the simulated Xtion renders
+    each frame from the pose it reports, the world placed at its home (``home``, lat/lon/MSL,
+    places it at once; see :mod:`sim._reported`). Everything else is :func:`capture.fly`'s.
     """
     params, record = sortie_params(cfg.sim_table)
     cfg = dataclasses.replace(cfg, record={**cfg.record, **record})
+    if cfg.mavlink is not None:
+        cam = ReportedPoseCamera(params, CameraIntrinsics.xtion(), cfg.flight.mount, home=home)
+        setup = SensorSetup(cam.source, cam.camera, cfg.mavlink, on_telemetry=cam.attach)
+        report = fly(cfg, setup, stop=stop)
+        return _report(report, cam.sources, cam.truth)
     with SimSortie(params, mount=cfg.flight.mount, mavlink=cfg.mavlink) as sortie:
         setup = SensorSetup(sortie.source, sortie.camera, sortie.mavlink)
         report = fly(cfg, setup, stop=stop)
-    render_ms = [ms for src in sortie.sources for ms in src.render_ms]
+    return _report(report, sortie.sources, sortie.truth)
+
+
+def _report(
+    report: FlyReport, sources: Sequence[SimSource], truth: tuple[TrueHole, ...]
+) -> SimFlyReport:
+    render_ms = [ms for src in sources for ms in src.render_ms]
     return SimFlyReport(
         report,
-        late_frames=sum(src.late_frames for src in sortie.sources),
+        late_frames=sum(src.late_frames for src in sources),
         render_ms_median=statistics.median(render_ms) if render_ms else None,
-        truth=sortie.truth,
+        truth=truth,
     )
 
 

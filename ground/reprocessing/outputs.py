@@ -48,7 +48,8 @@ class FlightResult:
     interrupted : stopped early; the outputs hold what was done.
     partitions, partitions_cached : tasks of this flight, and how many came from the cache.
     detect_ms_mean : worker time per frame. elapsed_s : wall clock of the whole run up to
-    this flight's end.
+    this flight's end. map_summary, map_lines : the search map's figures (searched
+    fraction, gaps, re-fly; empty without a map).
     """
 
     name: str
@@ -71,6 +72,8 @@ class FlightResult:
     partitions_cached: int
     detect_ms_mean: float
     elapsed_s: float
+    map_summary: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    map_lines: tuple[str, ...] = ()
 
     @property
     def frames_per_s(self) -> float:
@@ -102,6 +105,7 @@ class FlightResult:
             "detect_ms_mean": round(self.detect_ms_mean, 2),
             "elapsed_s": round(self.elapsed_s, 2),
             "confirmed_holes": [jsonable(h) for h in self.confirmed],
+            "map": dict(self.map_summary),
         }
 
     def lines(self) -> list[str]:
@@ -118,6 +122,7 @@ class FlightResult:
             + (f" (same id {self.flight_same_ids}, farthest {worst:.2f} m)" if found else ""),
         ]
         out += [f"  {t}" for t in self.truncated]
+        out += list(self.map_lines)
         out += [f"  wrote {path} ({kind})" for kind, path in self.files]
         out += [f"  wrote {p} (sidecar mcap: open it with the logs)" for p in self.outputs]
         return out
@@ -193,6 +198,7 @@ def write_hole_outputs(
     facts: Mapping[str, str] | None = None,
     title: str | None = None,
     track_breaks: Sequence[int] = (),
+    search_map: str | None = None,
     overlay: Path | None = None,
     tiers: Mapping[int, str] | None = None,
 ) -> list[tuple[str, Path]]:
@@ -202,7 +208,8 @@ def write_hole_outputs(
     holes : the holes to write (confirmed ones). views : hole id -> (rgb, depth, box) of
     its best view, the box (x, y, w, h) in that picture's pixels. track : vehicle poses.
     truth : (name, lat_deg, lon_deg) drawn on the report's map. track_breaks : where in
-    ``track`` another flight starts (a campaign). overlay : the map overlay (``.kmz``) for
+    ``track`` another flight starts (a campaign). search_map : the report's search-map
+    section. overlay : the map overlay (``.kmz``) for
     the data package (None: ``NAME_map.kmz`` in ``out`` when it exists). tiers : hole id ->
     ``announced``, ``review``, ``confirmed``, ``rejected`` or ``candidate`` (default: the
     vehicle's :meth:`geotag.AnnounceGate.tier` with its default thresholds); candidates
@@ -235,6 +242,7 @@ def write_hole_outputs(
         truth=truth,
         facts=facts,
         track_breaks=track_breaks,
+        search_map=search_map,
     )
     written.append(("report", path))
     return written

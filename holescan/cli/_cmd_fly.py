@@ -30,12 +30,14 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument(
         "--sensor",
         help="openni2 (the Xtion), oni:PATH, mcap:PATH (replays a flight log), or sim "
-        "(the simulated sortie with its own simulated autopilot); default openni2",
+        "(the simulated Xtion: with its own simulated autopilot, or with --mavlink rendering "
+        "from the pose that autopilot reports, the world placed at its home); default openni2",
     )
     p.add_argument(
         "--mavlink",
         help="autopilot link: /dev/ttyAMA0, udpin:0.0.0.0:14550, tcp:HOST:PORT ... "
-        "(with --sensor sim: a udpin: address for the simulated autopilot)",
+        "(with --sensor sim: the autopilot the simulated Xtion flies with, e.g. ArduPilot "
+        "SITL's tcp:127.0.0.1:5762; without it a simulated autopilot is started)",
     )
     p.add_argument("--log-dir", type=Path, help="folder for the flight logs")
     p.add_argument("--config", type=Path, help="TOML configuration file")

@@ -114,6 +114,30 @@ def add_engine_arguments(p: argparse.ArgumentParser, default_out: str) -> None:
         help=f"hole file format, repeatable: {', '.join(HOLE_FORMATS)} "
         "(default: gpx, kml, geojson, plan)",
     )
+    p.add_argument(
+        "--map-cell",
+        type=float,
+        default=0.02,
+        metavar="M",
+        help="search map cells, metres (default 0.02); 0 = no map (no ortho/dsm/coverage/"
+        "kmz/gaps/re-fly files)",
+    )
+    p.add_argument(
+        "--map-every", type=int, default=3, metavar="N", help="fuse every N-th frame (default 3)"
+    )
+    p.add_argument(
+        "--gap-threshold",
+        type=float,
+        default=0.5,
+        metavar="P",
+        help="coverage below which the map's cells are gaps (default 0.5)",
+    )
+    p.add_argument(
+        "--area",
+        metavar="AREA.geojson",
+        help="the planned area (as `holescan plan` takes it): gaps and the searched fraction "
+        "within it (default: the hull of what was seen)",
+    )
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -137,6 +161,7 @@ def options(args: argparse.Namespace) -> ReprocessOptions:
 
     from holescan.detect import DEFAULT, PAPER
     from holescan.ground import ReprocessOptions
+    from holescan.missions import read_area
 
     params = (PAPER if args.mode == "paper" else DEFAULT).with_searcher(args.searcher)
     if args.min_score is not None:
@@ -151,6 +176,10 @@ def options(args: argparse.Namespace) -> ReprocessOptions:
         cache=not args.no_cache,
         announce_min_p_hole=args.announce_min_p_hole,
         review_min_p_hole=args.review_min_p_hole,
+        map_cell_m=args.map_cell if args.map_cell > 0 else None,
+        map_every=args.map_every,
+        gap_threshold=args.gap_threshold,
+        area=read_area(args.area) if args.area else None,
     )
     if args.formats:
         opts = dataclasses.replace(opts, formats=tuple(dict.fromkeys(args.formats)))

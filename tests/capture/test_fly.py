@@ -169,7 +169,6 @@ def test_missing_config_file_is_an_input_error(tmp_path: Path) -> None:
     [
         (["--sensor", "oni:{tmp}/none.oni"], "none.oni"),
         (["--sensor", "mcap:{tmp}/none.mcap"], "flight log not found"),
-        (["--sensor", "sim", "--mavlink", "tcp:127.0.0.1:5760"], "needs a udpin:HOST:PORT"),
         (["--sensor", "sim"], "no log folder"),
     ],
 )

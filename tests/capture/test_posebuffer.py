@@ -11,7 +11,9 @@ from scipy.spatial.transform import Rotation
 from holescan.capture import (
     AttitudeSample,
     GpsFix,
+    NavStatus,
     PoseBuffer,
+    PoseInvalid,
     PoseUnavailable,
     PositionSample,
     quat_from_euler,
@@ -139,13 +141,13 @@ def test_duplicates_dropped_and_reboot_clears() -> None:
 
 
 def test_longitude_interpolates_across_the_antimeridian() -> None:
-    buf = PoseBuffer()
+    buf = PoseBuffer(max_gap_ns=2 * S)  # 43 m in 1 s: fast, but no jump
     buf.add_position(PositionSample(0, -16.0, 179.9999, 10.0, 0.0, 0.0, 0.0, 0.0))
-    buf.add_position(PositionSample(100 * MS, -16.0, -179.9997, 10.0, 0.0, 0.0, 0.0, 0.0))
+    buf.add_position(PositionSample(1000 * MS, -16.0, -179.9997, 10.0, 0.0, 0.0, 0.0, 0.0))
     buf.add_attitude(_att(0, 0.0))
-    buf.add_attitude(_att(100, 0.0))
-    assert buf.pose_at(10 * MS).lon_deg == pytest.approx(179.99994, abs=1e-9)
-    assert buf.pose_at(75 * MS).lon_deg == pytest.approx(-179.9998, abs=1e-9)
+    buf.add_attitude(_att(1000, 0.0))
+    assert buf.pose_at(100 * MS).lon_deg == pytest.approx(179.99994, abs=1e-9)
+    assert buf.pose_at(750 * MS).lon_deg == pytest.approx(-179.9998, abs=1e-9)
 
 
 def test_gps_accuracy_attached() -> None:
@@ -156,6 +158,114 @@ def test_gps_accuracy_attached() -> None:
     fix = GpsFix(100 * MS, 3, 12, 0.8, 1.5, 2.5, LAT, LON, ALT)
     buf.add_gps(GpsFix(0, 1, 3, math.nan, math.nan, math.nan, 0.0, 0.0, 0.0))  # no fix yet
     buf.add_gps(fix)
-    assert buf.pose_at(50 * MS).eph_m == math.inf
+    with pytest.raises(PoseInvalid, match="no 3-D GPS fix"):  # no fix: no pose at all
+        buf.pose_at(50 * MS)
     assert buf.pose_at(500 * MS).eph_m == 1.5
     assert buf.latest_gps() == fix
+
+
+# -- poses the autopilot does not have (issue 20) -----------------------------------------
+
+
+def _filled(t_ms: range, **pos: float) -> PoseBuffer:
+    buf = PoseBuffer()
+    for t in t_ms:
+        buf.add_position(_pos(t, **pos))
+        buf.add_attitude(_att(t, 0.0))
+    return buf
+
+
+def _fix(t_ms: int, fix_type: int) -> GpsFix:
+    return GpsFix(t_ms * MS, fix_type, 12, 0.8, 1.5, 2.5, LAT, LON, ALT)
+
+
+def test_null_island_positions_are_no_pose() -> None:
+    buf = PoseBuffer()
+    for t in range(0, 1000, 100):  # ArduPilot before its EKF has an origin: zeros
+        buf.add_position(PositionSample(t * MS, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+        buf.add_attitude(_att(t, 0.0))
+    with pytest.raises(PoseInvalid, match="no position yet"):
+        buf.pose_at(450 * MS)
+    for t in range(1000, 2000, 100):  # the origin is set: real positions
+        buf.add_position(_pos(t))
+        buf.add_attitude(_att(t, 0.0))
+    with pytest.raises(PoseInvalid, match="no position yet"):  # between 0/0 and the real one
+        buf.pose_at(950 * MS)
+    assert buf.pose_at(1450 * MS).lat_deg == pytest.approx(LAT)  # no jump from 0/0
+    assert buf.validity.n_jumps == 0
+
+
+def test_gps_fix_governs_the_poses_after_it() -> None:
+    buf = _filled(range(0, 3000, 100))
+    buf.add_gps(_fix(0, 1))  # no fix at boot
+    buf.add_gps(_fix(1000, 3))  # 3-D fix from 1 s
+    buf.add_gps(_fix(2000, 2))  # 2-D only from 2 s
+    for t_ms, ok in ((500, False), (1500, True), (2500, False)):
+        if ok:
+            buf.pose_at(t_ms * MS)
+        else:
+            with pytest.raises(PoseInvalid, match="fix_type"):
+                buf.pose_at(t_ms * MS)
+    later = _filled(range(0, 6000, 100))
+    later.add_gps(_fix(0, 3))  # GPS_RAW_INT stopped coming: no longer trusted
+    later.pose_at(2000 * MS)
+    with pytest.raises(PoseInvalid, match=r"no GPS_RAW_INT for 5\.0 s"):
+        later.pose_at(5000 * MS)
+
+
+def test_estimator_without_horizontal_position_is_no_pose() -> None:
+    buf = _filled(range(0, 3000, 100))
+    buf.add_gps(_fix(0, 3))  # the receiver has a fix, the EKF does not use it yet
+    buf.add_nav(NavStatus(0, False, 0x0025, "EKF_STATUS_REPORT"))
+    buf.add_nav(NavStatus(1000 * MS, True, 0x033F, "EKF_STATUS_REPORT"))
+    with pytest.raises(PoseInvalid, match=r"no horizontal position .*0x25"):
+        buf.pose_at(500 * MS)
+    assert buf.pose_at(1500 * MS).lat_deg == pytest.approx(LAT)
+
+
+def test_a_position_jump_is_refused_until_the_new_track_lasted() -> None:
+    buf = PoseBuffer()
+    for t in range(0, 6000, 100):
+        north = 0.0 if t < 2000 else 60.0  # an EKF reset 60 m away at 2 s
+        buf.add_position(_pos(t, north_m=north))
+        buf.add_attitude(_att(t, 0.0))
+    assert buf.validity.n_jumps == 1
+    buf.pose_at(1850 * MS)  # before the jump
+    for t_ms in (1950, 2000, 3500, 3950):
+        with pytest.raises(PoseInvalid, match=r"jumped 60\.0 m"):
+            buf.pose_at(t_ms * MS)
+    n, _, _ = _ned(*(lambda p: (p.lat_deg, p.lon_deg, p.alt_m))(buf.pose_at(4050 * MS)))
+    assert n == pytest.approx(60.0, abs=0.01)
+    # A fast but possible flight (20 m/s) is no jump.
+    fast = PoseBuffer()
+    for t in range(0, 2000, 100):
+        fast.add_position(_pos(t, north_m=0.02 * t, vn=20.0))
+    assert fast.validity.n_jumps == 0
+
+
+def test_telemetry_replay_applies_the_same_rules() -> None:
+    """Reprocessing poses frames through TelemetryReplay: a logged boot without a fix gives
+    no pose there, as in flight."""
+    from holescan.capture import TelemetryReplay
+    from holescan.missions import mavlink
+
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    hb = mav.heartbeat_encode(2, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, 4).pack(mav)
+    replay = TelemetryReplay()
+    replay.feed(hb)
+    lat, lon = round(LAT * 1e7), round(LON * 1e7)
+    for t in range(0, 4000, 100):
+        fixed = t >= 2000
+        gp = mav.global_position_int_encode(
+            t, lat if fixed else 0, lon if fixed else 0, 150_000 if fixed else 0, 3000, 0, 0, 0, 0
+        )
+        replay.feed(gp.pack(mav))
+        replay.feed(mav.attitude_encode(t, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0).pack(mav))
+        gps = mav.gps_raw_int_encode(
+            t * 1000, 3 if fixed else 1, lat if fixed else 0, lon if fixed else 0, 0, 80,
+            120, 0, 0, 12,
+        )  # fmt: skip
+        replay.feed(gps.pack(mav))
+    assert replay.pose_at(1000 * MS) is None
+    pose = replay.pose_at(3000 * MS)
+    assert pose is not None and pose.lat_deg == pytest.approx(LAT)

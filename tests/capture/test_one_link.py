@@ -1,0 +1,151 @@
+"""Issue 20: the real topology, one link. With ``--mavlink`` only (no ``--gcs``) the
+announcements, the hole mission and the cards go out on the companion's link to the
+autopilot (which routes them to the GCS on its other port: ArduPilot SITL shows it, see
+``benchmarks/sitl_sortie.py``); a SiK radio's RADIO_STATUS on the way sets the cards'
+byte budget."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from holescan.capture import FlyReport, SensorSetup, fly, parse_fly_config
+from holescan.missions import radio_budget
+from holescan.sim import SimAutopilot
+from tests.capture.test_daemon import CAM, ScriptedSource, free_port, hover_path
+
+
+def test_radio_budget_follows_the_radio_buffer() -> None:
+    assert radio_budget(1000.0, 1000.0, 10) == 500.0  # overrun: halve
+    assert radio_budget(1000.0, 1000.0, 40) == 800.0
+    assert radio_budget(800.0, 1000.0, 70) == 800.0  # comfortable: keep
+    assert radio_budget(800.0, 1000.0, 95) == pytest.approx(880.0)
+    assert radio_budget(990.0, 1000.0, 100) == 1000.0  # never above the configured budget
+    b = 1000.0
+    for _ in range(20):
+        b = radio_budget(b, 1000.0, 5)
+    assert b == 50.0  # a card still gets through, slowly
+
+
+def _fly_one_link(tmp_path: Path, txbuf: int | None) -> tuple[FlyReport, dict[str, int]]:
+    port = free_port()
+    with SimAutopilot(f"udpout:127.0.0.1:{port}", hover_path()) as ap:
+        ap.radio_txbuf = txbuf
+        cfg = parse_fly_config(
+            {
+                "holes": {
+                    "announce_min_sightings": 3,
+                    "announce_min_span_s": 0.5,
+                    "announce_min_p_hole": 0.0,
+                }
+            },
+            {"log_dir": tmp_path, "mavlink": f"udpin:127.0.0.1:{port}", "max_frames": 150},
+        )
+        setup = SensorSetup(lambda: ScriptedSource(200), CAM, cfg.mavlink)
+        report = fly(cfg, setup)
+        received = dict(ap.received)
+    return report, received
+
+
+def test_holes_go_out_on_the_autopilot_link_without_gcs(tmp_path: Path) -> None:
+    report, received = _fly_one_link(tmp_path, None)
+    assert report.announced, report
+    assert received.get("STATUSTEXT", 0) >= len(report.announced)
+    assert received.get("DATA_TRANSMISSION_HANDSHAKE", 0) >= 1  # the card: on the same link
+    assert received.get("ENCAPSULATED_DATA", 0) >= 1
+    assert report.cards_sent >= 1
+    # One companion on the link: its heartbeats (ONBOARD_CONTROLLER, the vehicle's id)
+    # come from the telemetry alone, the mission server sends none of its own.
+    assert received.get("HEARTBEAT", 0) <= report.summary.duration_s + 3
+
+
+@pytest.mark.slow
+def test_a_full_radio_buffer_slows_the_cards(tmp_path: Path) -> None:
+    report, _ = _fly_one_link(tmp_path, 5)  # the SiK radio is overrun
+    assert report.announced
+    # At the 50 B/s floor a 2-3 kB card does not get through in the flight's seconds
+    # (plus the 10 s flush); at the configured 1000 B/s it does (test above).
+    assert report.cards_sent == 0, report
+    assert 0 < report.card_bytes < 2500
+
+
+def test_companion_heartbeat_is_not_a_second_vehicle() -> None:
+    """A GCS behind the autopilot sees the companion's heartbeat (the vehicle's system id,
+    component 191) and must not take it for a vehicle: pymavlink's (and so MAVProxy's)
+    vehicle test says no; the shared-link mission server sends no heartbeat of its own."""
+    import threading
+    import time
+    from typing import Any
+
+    from holescan.capture import Telemetry
+    from holescan.missions import HoleMissionServer, mavutil
+
+    port = free_port()
+    ap = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=1)
+    stop = threading.Event()
+    beats: list[Any] = []
+
+    def autopilot() -> None:  # a quadrotor running ArduPilot, listening
+        while not stop.is_set():
+            ap.mav.heartbeat_send(2, 3, 0, 0, 4)
+            msg = ap.recv_match(type="HEARTBEAT", blocking=True, timeout=0.2)
+            if msg is not None:
+                beats.append(msg)
+
+    thread = threading.Thread(target=autopilot, daemon=True)
+    thread.start()
+    with (
+        Telemetry(f"udpin:127.0.0.1:{port}", rates_hz={}, timesync_hz=0) as tel,
+        HoleMissionServer(None, 1, sender=tel.send_with),
+    ):
+        deadline = time.monotonic() + 10.0
+        while time.monotonic() < deadline and len(beats) < 4:
+            time.sleep(0.1)
+    stop.set()
+    thread.join(2.0)
+    ap.close()
+    assert len(beats) >= 2, beats
+    assert {(m.get_srcSystem(), m.get_srcComponent()) for m in beats} == {(1, 191)}
+    assert not any(ap.probably_vehicle_heartbeat(m) for m in beats)
+
+
+def test_no_heartbeat_of_an_unknown_system_before_the_autopilot_is_heard() -> None:
+    """ArduPilot SITL showed MAVProxy a vehicle 255:191: the companion's heartbeats on its
+    TCP link before the autopilot's first heartbeat, when our system id is not known. The
+    autopilot here (a TCP server) waits 2 s before its first heartbeat."""
+    import socket
+    import threading
+    import time
+    from typing import Any
+
+    from holescan.capture import Telemetry
+    from holescan.missions import mavutil
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    ap = mavutil.mavlink_connection(f"tcpin:127.0.0.1:{port}", source_system=1)
+    seen: list[Any] = []
+    stop = threading.Event()
+
+    def autopilot() -> None:
+        t0 = time.monotonic()
+        while not stop.is_set():
+            if time.monotonic() - t0 > 2.0:
+                ap.mav.heartbeat_send(2, 3, 0, 0, 4)
+            msg = ap.recv_match(type="HEARTBEAT", blocking=True, timeout=0.2)
+            if msg is not None:
+                seen.append(msg)
+
+    thread = threading.Thread(target=autopilot, daemon=True)
+    thread.start()
+    with Telemetry(f"tcp:127.0.0.1:{port}", rates_hz={}, timesync_hz=0):
+        deadline = time.monotonic() + 10.0
+        while time.monotonic() < deadline and len(seen) < 2:
+            time.sleep(0.1)
+    stop.set()
+    thread.join(2.0)
+    ap.close()
+    assert len(seen) >= 2, seen
+    assert {(m.get_srcSystem(), m.get_srcComponent()) for m in seen} == {(1, 191)}

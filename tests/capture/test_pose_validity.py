@@ -1,0 +1,109 @@
+"""Issue 20: a pose the autopilot does not have never geotags anything (flight end to end).
+
+The pymavlink autopilot reproduces what ArduPilot SITL did on the companion's link: a boot
+without a GPS fix (GLOBAL_POSITION_INT at lat = lon = 0, GPS_RAW_INT fix_type 1, EKF in
+constant-position mode), a fix that arrives late, and a fix lost in flight (the EKF
+dead-reckons, its position drifting away). Frames are logged and detected throughout;
+holes come only from frames the autopilot had a position for, at the right place.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Mapping
+from pathlib import Path
+
+from holescan.capture import Flight, FlightConfig, HoleView, LoggedFrame, read_flight_log
+from holescan.geotag import Hole, local_en_m
+from holescan.sim import SimAutopilot, SimPath
+from tests.capture.test_daemon import CAM, ScriptedSource, free_port
+
+HOME = (43.6532, -79.3832)  # SimPath's default home
+
+
+def _hover() -> SimPath:
+    """Hovering within a centimetre: the scripted frames' hole stays where it is."""
+    return SimPath(
+        waypoints_enu=((0.0, 0.0, 2.5), (0.01, 0.0, 2.5), (0.01, 0.01, 2.5)), speed_m_s=0.005
+    )
+
+
+def _fly(
+    tmp_path: Path, ap_fix: bool, script: list[tuple[float, bool]], n_frames: int
+) -> tuple[Flight, list[Hole], list[LoggedFrame]]:
+    """Fly ``n_frames`` of the scripted hole over the hovering autopilot; ``script`` sets
+    its GPS fix when that many frames were captured (30 a second). Returns the flight, every hole it
+    announced (in order) and the logged frames."""
+    port = free_port()
+    announced: list[Hole] = []
+
+    def on_holes(served: list[Hole], news: list[Hole], views: Mapping[int, HoleView]) -> None:
+        announced.extend(news)
+
+    with SimAutopilot(f"udpout:127.0.0.1:{port}", _hover(), gps_fix=ap_fix) as ap:
+        cfg = FlightConfig(log_prefix=tmp_path / "flight", max_frames=n_frames, startup_sync_s=1.0)
+        flight = Flight(
+            cfg,
+            lambda: ScriptedSource(n_frames + 10),
+            CAM,
+            mavlink=f"udpin:127.0.0.1:{port}",
+            on_holes=on_holes,
+        )
+
+        def switch() -> None:
+            for at_frame, fix in script:
+                while flight.counters.frames_captured < at_frame and not flight.stop.is_set():
+                    time.sleep(0.01)
+                ap.gps_fix = fix
+
+        threading.Thread(target=switch, daemon=True).start()
+        summary = flight.run()
+    frames = [r for r in read_flight_log(summary.log.files) if isinstance(r, LoggedFrame)]
+    assert summary.frames_logged == n_frames == len(frames)  # every frame logged
+    return flight, announced, frames
+
+
+def _dist_home_m(h: Hole) -> float:
+    return math.hypot(*local_en_m(h.lat_deg, h.lon_deg, *HOME))
+
+
+def test_boot_without_fix_geotags_nothing(tmp_path: Path) -> None:
+    flight, announced, frames = _fly(tmp_path, False, [], 75)
+    assert flight.tracker.holes() == [] and announced == []  # no Null Island hole
+    c = flight.counters
+    assert c.frames_detected >= 3 and c.detections >= 3  # detected all the same
+    assert c.pose_refusals == c.pose_invalid >= 3, c
+    assert "no position yet" in flight.invalid or "fix" in flight.invalid, flight.invalid
+    assert all(f.pose is None for f in frames)
+
+
+def test_late_fix_places_holes_only_from_then_on(tmp_path: Path) -> None:
+    flight, announced, frames = _fly(tmp_path, False, [(60, True)], 150)
+    holes = flight.tracker.holes()
+    assert len(holes) == 1, holes  # one opening, one hole (not a second at 0/0)
+    assert all(_dist_home_m(h) < 1.0 for h in holes + announced), holes
+    assert flight.counters.pose_invalid >= 1, flight.counters
+    posed = [f for f in frames if f.pose is not None]
+    assert posed and frames[0].pose is None
+    assert all(abs(f.pose.lat_deg - HOME[0]) < 1e-3 for f in posed if f.pose is not None)
+
+
+def test_fix_lost_in_flight_places_nothing_while_lost(tmp_path: Path) -> None:
+    # Lost from frame 60 to 120 (2 s): the EKF drifts 1.5 m/s east meanwhile (3 m).
+    flight, announced, frames = _fly(tmp_path, True, [(60, False), (120, True)], 180)
+    holes = flight.tracker.holes()
+    assert len(holes) == 1, holes  # the drifted sightings would have made a second one
+    assert all(_dist_home_m(h) < 1.0 for h in holes + announced), holes
+    assert flight.counters.pose_invalid >= 1, flight.counters
+    before = [f for f in frames if f.pose is not None]
+    assert before
+    # No logged pose drifted: each stays where the vehicle hovers.
+    assert all(
+        math.hypot(*local_en_m(f.pose.lat_deg, f.pose.lon_deg, *HOME)) < 0.1
+        for f in before
+        if f.pose is not None
+    )
+    first = next(i for i, f in enumerate(frames) if f.pose is not None)
+    assert any(f.pose is None for f in frames[first:]), "the frames while lost: unposed"
