@@ -176,8 +176,7 @@ class Flight:
         """The holes to serve, and every hole's tier (the gate's select and review)."""
         served = self._gate.select(holes, announced=self._announced)
         review = {h.id for h in self._gate.review(holes, announced=self._announced)}
-        tiers: dict[int, Tier] = {h.id: "candidate" for h in holes}
-        tiers.update({h.id: "review" for h in holes if h.id in review})
+        tiers: dict[int, Tier] = {h.id: "review" if h.id in review else "candidate" for h in holes}
         tiers.update({h.id: "announced" for h in served})
         return served, tiers
 
