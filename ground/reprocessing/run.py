@@ -295,6 +295,7 @@ def _flight_outputs(
         facts=facts,
         title=f"holescan reprocessed flight: {plan.name}",
         search_map=mapped.section if mapped else None,
+        overlay=mapped.overlay if mapped else None,
     )
     summary_path = out / f"{plan.name}_reprocess.json"
     if mapped is not None:
@@ -375,6 +376,7 @@ def _campaign_outputs(run: _Run, holes: list[CampaignHole]) -> list[tuple[str, P
         track_breaks=breaks,
         title="holescan campaign: " + ", ".join(p.name for p in run.plans),
         search_map=mapped.section if mapped else None,
+        overlay=mapped.overlay if mapped else None,
     )
     return files + list(mapped.files if mapped else ())
 
