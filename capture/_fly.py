@@ -158,11 +158,9 @@ def fly(
         def flush_shared() -> None:
             if shared is None:
                 return
-            if live_map is not None:  # the last tiles too, before the one link closes
-                live_map.close()
+            if live_map is not None:  # the last tiles are due (sent while the cards drain;
+                live_map.close()  # not waited for: the vehicle's own traffic comes first)
                 live_map.finish()
-                if not live_map.flush(timeout_s=10.0):
-                    _log.warning("map tiles still queued when the autopilot link closed")
             if not shared.flush_cards(timeout_s=10.0):
                 _log.warning("hole pictures still queued when the autopilot link closed")
 

@@ -452,6 +452,7 @@ def run_demo(
         facts=facts,
         title="holescan demo: simulated dawn survey",
         search_map=search.section,
+        overlay=next((path for kind, path in search.files if kind == "map"), None),
         tiers=tiers,
     )
     result = DemoResult(

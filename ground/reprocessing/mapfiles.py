@@ -42,6 +42,11 @@ class MapResult:
     summary: dict[str, Any]
     lines: tuple[str, ...]
 
+    @property
+    def overlay(self) -> Path | None:
+        """The ``NAME_map.kmz`` this flight's map wrote (None: none)."""
+        return next((path for kind, path in self.files if kind == "map"), None)
+
 
 def area_polygon(area: Area, frame: LocalFrame) -> Polygon:
     """An area (WGS84) as a polygon in ``frame``'s east/north metres."""

@@ -3,8 +3,8 @@
 :func:`write_hole_outputs` writes the hole files (``NAME_holes.gpx|.kml|.geojson|.plan``,
 the ground crew's formats, :func:`missions.write_hole_file`), the TAK data package
 (``NAME_holes_datapackage.zip``: the holes with their pictures and the map overlay
-``NAME_map.kmz`` when there is one, :func:`ground.station.write_datapackage`) and the HTML report
-(:func:`ground.write_report`); :class:`FlightResult` is one flight's numbers, also
+``NAME_map.kmz`` when this run wrote one, :func:`ground.station.write_datapackage`) and
+the HTML report (:func:`ground.write_report`); :class:`FlightResult` is one flight's numbers, also
 written as ``NAME_reprocess.json``.
 """
 
@@ -171,8 +171,6 @@ def _datapackage(
 ) -> list[tuple[str, Path]]:
     if not holes:
         return []
-    if overlay is None and (out / f"{name}_map.kmz").is_file():
-        overlay = out / f"{name}_map.kmz"
     path = write_datapackage(
         out / f"{name}_holes_datapackage.zip",
         [ground_hole_of(h, boot_to_unix_ns) for h in holes],
@@ -209,8 +207,9 @@ def write_hole_outputs(
     its best view, the box (x, y, w, h) in that picture's pixels. track : vehicle poses.
     truth : (name, lat_deg, lon_deg) drawn on the report's map. track_breaks : where in
     ``track`` another flight starts (a campaign). search_map : the report's search-map
-    section. overlay : the map overlay (``.kmz``) for
-    the data package (None: ``NAME_map.kmz`` in ``out`` when it exists). tiers : hole id ->
+    section. overlay : the map overlay (``.kmz``) this run wrote, for the data package
+    (None: none; a ``NAME_map.kmz`` left in ``out`` by an earlier run is not taken).
+    tiers : hole id ->
     ``announced``, ``review``, ``confirmed``, ``rejected`` or ``candidate`` (default: the
     vehicle's :meth:`geotag.AnnounceGate.tier` with its default thresholds); candidates
     are left out of the hole files, holes for review out of the TAK data package (they

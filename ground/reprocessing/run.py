@@ -303,6 +303,7 @@ def _flight_outputs(
         title=f"holescan reprocessed flight: {plan.name}",
         tiers={h.id: gate.tier(h) for h in confirmed},
         search_map=mapped.section if mapped else None,
+        overlay=mapped.overlay if mapped else None,
     )
     summary_path = out / f"{plan.name}_reprocess.json"
     if mapped is not None:
@@ -387,6 +388,7 @@ def _campaign_outputs(run: _Run, holes: list[CampaignHole]) -> list[tuple[str, P
         title="holescan campaign: " + ", ".join(p.name for p in run.plans),
         tiers={h.id: gate.tier(h) for h in confirmed},
         search_map=mapped.section if mapped else None,
+        overlay=mapped.overlay if mapped else None,
     )
     return files + list(mapped.files if mapped else ())
 

@@ -447,6 +447,8 @@ def test_cli(flight: Flown, tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
     files, _ = flight
     out = tmp_path / "cli"
     argv = ["reprocess", str(files[0]), "--out", str(out), "--workers", "0"]
+    out.mkdir()
+    (out / "sortie_map.kmz").write_bytes(b"an earlier run's map")  # not this run's: left out
     rc = cli.main(
         [*argv, "--searcher", "dog", "-f", "gpx", "--partition-mib", "0.2", "--map-cell", "0"]
     )
@@ -458,6 +460,10 @@ def test_cli(flight: Flown, tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
     holes = {"gpx", "datapackage"} if doc["confirmed"] else set()  # the package: always
     assert set(doc["files"]) == {"report", "summary"} | holes
     assert doc["map"] == {}
+    if "datapackage" in doc["files"]:
+        with zipfile.ZipFile(doc["files"]["datapackage"]) as z:
+            assert not [n for n in z.namelist() if n.endswith(".kmz")]
+    assert (out / "sortie_map.kmz").read_bytes() == b"an earlier run's map"
     meta = log_info(out / "sortie_reprocess.mcap").metadata["ground.reprocess"]
     assert json.loads(meta["params"])["searcher"]["name"] == "dog"
     assert cli.main(["reprocess", str(tmp_path / "nope.mcap"), "--out", str(out)]) == 2
