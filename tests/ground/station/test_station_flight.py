@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from devtools import Tab
 from test_station import PytakReceiver, Relay, free_port, parse_tak, wait_for
 
 from holescan.missions import mavlink
@@ -150,12 +151,10 @@ def holescan(*args: str, log: Path) -> subprocess.Popen[str]:
     )
 
 
-class Chromium:
-    """Headless Chromium driven over the DevTools protocol (websocket-client)."""
+class Chromium(Tab):
+    """Headless Chromium driven over the DevTools protocol: its first tab."""
 
     def __init__(self, url: str, profile: Path) -> None:
-        import websocket
-
         port = free_port()
         self.proc = subprocess.Popen(
             [
@@ -187,31 +186,10 @@ class Chromium:
             return bool(targets)
 
         wait_for(page_up, 30.0, "Chromium's DevTools endpoint")
-        self.ws = websocket.create_connection(targets[0]["webSocketDebuggerUrl"], timeout=20)
-        self._id = 0
-
-    def call(self, method: str, **params: Any) -> dict[str, Any]:
-        self._id += 1
-        self.ws.send(json.dumps({"id": self._id, "method": method, "params": params}))
-        while True:
-            msg = json.loads(self.ws.recv())
-            if msg.get("id") == self._id:
-                if "error" in msg:
-                    raise AssertionError(msg["error"])
-                return dict(msg["result"])
-
-    def js(self, expr: str) -> Any:
-        r = self.call("Runtime.evaluate", expression=expr, returnByValue=True, awaitPromise=True)
-        return r["result"].get("value")
-
-    def screenshot(self, path: Path) -> None:
-        import base64
-
-        data = self.call("Page.captureScreenshot", format="png")["data"]
-        path.write_bytes(base64.b64decode(data))
+        super().__init__(targets[0]["webSocketDebuggerUrl"])
 
     def close(self) -> None:
-        self.ws.close()
+        super().close()
         self.proc.terminate()
         try:
             self.proc.wait(timeout=10)
