@@ -172,6 +172,9 @@ class Flight:
         c = self.counters
         c.frames_detected += 1
         c.detect_ms_total += r.detect_ms
+        if r.no_depth:  # too close for the sensor (on the ground) or nothing ranged
+            c.frames_no_depth += 1
+            return
         if r.error:
             c.detect_errors += 1
             log.warning("detection failed on frame %d: %s", r.frame_index, r.error)
@@ -245,6 +248,8 @@ class Flight:
             "detect_skipped": ws.skipped,
             "detect_done": ws.done,
             "detect_ms_mean": c.detect_ms_total / max(c.frames_detected, 1),
+            "detect_errors": c.detect_errors,
+            "frames_no_depth": c.frames_no_depth,
             "frames_unposed": c.frames_unposed,
             "pose_refusals": c.pose_refusals,
             "pose_invalid": c.pose_invalid,

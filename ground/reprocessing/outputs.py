@@ -48,7 +48,8 @@ class FlightResult:
     interrupted : stopped early; the outputs hold what was done.
     partitions, partitions_cached : tasks of this flight, and how many came from the cache.
     detect_ms_mean : worker time per frame. elapsed_s : wall clock of the whole run up to
-    this flight's end.
+    this flight's end. frames_no_depth : frames without any depth reading (closer than
+    the sensor's range, e.g. on the ground), counted apart from detect_errors.
     """
 
     name: str
@@ -71,6 +72,7 @@ class FlightResult:
     partitions_cached: int
     detect_ms_mean: float
     elapsed_s: float
+    frames_no_depth: int = 0
 
     @property
     def frames_per_s(self) -> float:
@@ -89,6 +91,7 @@ class FlightResult:
             "frames_unposed": self.frames_unposed,
             "detections": self.detections,
             "detect_errors": self.detect_errors,
+            "frames_no_depth": self.frames_no_depth,
             "holes": len(self.holes),
             "confirmed": len(self.confirmed),
             "flight_confirmed": len(self.flight_matches),
