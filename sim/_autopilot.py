@@ -25,6 +25,10 @@ A SiK radio on the link can be played too (:attr:`SimAutopilot.radio_txbuf`): RA
 once a second from system 51, component 68 (as SiK firmware sends it), reporting that much
 of its transmit buffer free, as ArduPilot forwards it to its other links.
 
+It reboots (:meth:`SimAutopilot.reboot`, or MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN param1 = 1)
+as ArduPilot SITL does: silent for a moment, then ``time_boot_ms`` and TIMESYNC from 0,
+only the heartbeat streaming until the rates are asked for again, the mission kept.
+
 Its boot clock is the host's monotonic clock shifted by a realistic offset (it booted
 ``uptime_at_start_s`` before the simulator started), running ``drift_ppm`` fast, read with
 ``jitter_ns`` of Gaussian noise. Motion: a periodic cubic spline through the waypoints (times
@@ -146,6 +150,9 @@ class SimAutopilot:
         self._rng = random.Random(seed)
         self._mono0 = time.monotonic_ns()
         self._boot0 = round(uptime_at_start_s * _NS)
+        self._tau_shift_ns = 0  # keeps the flight path continuous across a reboot
+        self._down_until_mono_ns = 0  # rebooting: silent, deaf
+        self.reboots = 0
         self._unix_minus_boot = time.time_ns() - self.boot_ns_at_mono(time.monotonic_ns())
         self.lost_drift_m_s = lost_drift_m_s
         self._had_fix = gps_fix
@@ -220,7 +227,27 @@ class SimAutopilot:
             return {k: _NS / v for k, v in self._intervals_ns.items()}
 
     def _tau(self, t_boot_ns: int) -> float:
-        return (t_boot_ns - self._boot0) / _NS
+        return (t_boot_ns - self._boot0 + self._tau_shift_ns) / _NS
+
+    def reboot(self, down_s: float = 1.5) -> None:
+        """Reboot as ArduPilot does: silent and deaf for ``down_s``, then its boot clock
+        (``time_boot_ms``, TIMESYNC) restarts from 0 and only the heartbeat streams (message
+        intervals do not survive a reboot). The vehicle's path and its stored mission go on
+        (the simulated vehicle keeps flying; :meth:`truth_pose` of :meth:`boot_ns_at_mono`
+        stays right for times before and after the reboot)."""
+        with self._lock:
+            back = time.monotonic_ns() + round(down_s * _NS)
+            old_boot_at_back = self.boot_ns_at_mono(back)
+            self._tau_shift_ns += round((back - self._mono0) * (1.0 + self._drift))
+            self._mono0, self._boot0 = back, 0
+            self._unix_minus_boot += old_boot_at_back
+            lost = self._lost_at_boot_ns
+            if lost is not None and lost >= 0:
+                self._lost_at_boot_ns = lost - old_boot_at_back
+            self._intervals_ns = {"HEARTBEAT": _NS}
+            self._next_due = {}
+            self._down_until_mono_ns = back
+            self.reboots += 1
 
     def _state(self, t_boot_ns: int) -> _State:
         tau = self._tau(t_boot_ns)
@@ -291,6 +318,11 @@ class SimAutopilot:
         conn = self._conn
         while not self._stop.is_set():
             now = time.monotonic_ns()
+            if now < self._down_until_mono_ns:  # rebooting: deaf and silent
+                while conn.recv_msg() is not None:
+                    pass
+                conn.select(0.02)
+                continue
             batch: list[tuple[int, str]] = []  # (sample time, message) due now
             with self._lock:
                 for name, interval in self._intervals_ns.items():
@@ -471,6 +503,8 @@ class SimAutopilot:
                 result = mavlink.MAV_RESULT_ACCEPTED
             else:
                 result = mavlink.MAV_RESULT_DENIED
+        elif msg.command == mavlink.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN and msg.param1 == 1:
+            result = mavlink.MAV_RESULT_ACCEPTED  # acknowledged, then the reboot (below)
         elif msg.command == mavlink.MAV_CMD_REQUEST_MESSAGE:
             if name in _STREAMED:
                 self._send(name)
@@ -485,6 +519,8 @@ class SimAutopilot:
                     target_system=msg.get_srcSystem(),
                     target_component=msg.get_srcComponent(),
                 )
+        if msg.command == mavlink.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN and msg.param1 == 1:
+            self.reboot()
 
 
 def _message_name(msg_id: float) -> str:
