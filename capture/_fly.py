@@ -87,7 +87,8 @@ def fly(
                     clearance_m=cfg.hole_clearance_m,
                     card_bytes_per_s=cfg.hole_card_bytes_per_s,
                     sender=None if cfg.gcs else via_autopilot,
-                    signing=cfg.signing if cfg.gcs else None,  # its own link only
+                    # its own --gcs link; else the telemetry link's signing (below) applies
+                    signing=cfg.signing if cfg.gcs else None,
                 )
             )
         shared = server if server is not None and not cfg.gcs else None
@@ -136,6 +137,10 @@ def fly(
                 if shared is not None:
                     shared.feed(msg)
 
+            if shared is not None and cfg.signing is not None:
+                # One link carries the holes too: signed as the hole server's own link
+                # would be (the autopilot must hold the same key, or nothing is heard).
+                kw.setdefault("signing_key", cfg.signing.key)
             tel = Telemetry(conn, baud=cfg.baud, on_message=on_message, **kw)
             links.append(tel)
             if hook is not None:

@@ -119,6 +119,8 @@ class SimAutopilot:
     seed : for the clock jitter.
     mission : the mission-protocol state machine (default: a fresh
         :class:`~missions._protocol.MissionReceiver` for ``sysid``/``compid``).
+    signing_key : MAVLink 2 signing key (32 bytes): sign everything sent, drop every
+        unsigned or wrongly signed packet (``received_signed`` counts the good ones).
     """
 
     def __init__(
@@ -137,7 +139,9 @@ class SimAutopilot:
         lost_drift_m_s: float = 1.5,
         seed: int = 0,
         mission: MissionReceiver | None = None,
+        signing_key: bytes | None = None,
     ) -> None:
+        self._signing_key = signing_key
         self.path = path if path is not None else SimPath()
         self._traj = Trajectory(self.path)
         self.connection = connection
@@ -163,6 +167,7 @@ class SimAutopilot:
         self._next_due: dict[str, int] = {}
         self.sent: dict[str, int] = {}
         self.received: dict[str, int] = {}
+        self.received_signed: dict[str, int] = {}  # of those, correctly signed (signing_key)
         self.silent = False
         self.radio_txbuf: int | None = None
         self.mission = (
@@ -274,6 +279,10 @@ class SimAutopilot:
         self._conn = open_link(
             self.connection, source_system=self.sysid, source_component=self.compid
         )
+        if self._signing_key is not None:  # as ArduPilot with a key: signs, drops unsigned
+            self._conn.setup_signing(
+                self._signing_key, sign_outgoing=True, allow_unsigned_callback=None
+            )
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, name="sim-autopilot", daemon=True)
         self._thread.start()
@@ -460,6 +469,8 @@ class SimAutopilot:
     def _handle(self, msg: Any) -> None:
         mtype = msg.get_type()
         self.received[mtype] = self.received.get(mtype, 0) + 1
+        if getattr(msg, "_signed", False):
+            self.received_signed[mtype] = self.received_signed.get(mtype, 0) + 1
         if mtype == "TIMESYNC" and msg.tc1 == 0:
             if not self.silent:
                 with self._send_lock:
