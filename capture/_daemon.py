@@ -265,6 +265,9 @@ class Flight:
                 mavlink_bad_packets=ts.bad_packets,
                 mavlink_age_s=tel.last_message_age_s(),
                 clock_source=tel.clock.source,
+                autopilot_mode=ts.vehicle["mode"],  # recorded only: no behaviour depends on it
+                autopilot_armed=ts.vehicle["armed"],
+                autopilot_mode_changes=ts.vehicle["mode_changes"],
             )
             with contextlib.suppress(ClockUnavailable):
                 out.update(

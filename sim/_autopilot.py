@@ -4,7 +4,8 @@ No autopilot simulator installs on this machine (no ArduPilot/PX4 SITL), so test
 use :class:`SimAutopilot`: system 1, component 1, flying a closed loop of local ENU waypoints
 around a home position at a cruise speed. It behaves like an autopilot on the wire:
 
-* HEARTBEAT at 1 Hz (a quadrotor running ArduPilot, armed, in AUTO);
+* HEARTBEAT at 1 Hz (a quadrotor running ArduPilot, armed, in AUTO: :attr:`SimAutopilot.mode`
+  and ``armed`` change that; the path flown stays the same);
 * GLOBAL_POSITION_INT, ATTITUDE, ATTITUDE_QUATERNION, GPS_RAW_INT, EKF_STATUS_REPORT,
   SYSTEM_TIME only when asked, at the asked rate: MAV_CMD_SET_MESSAGE_INTERVAL (ACKed;
   ``message_interval=False`` makes it answer UNSUPPORTED like an old firmware),
@@ -169,6 +170,8 @@ class SimAutopilot:
         self.received: dict[str, int] = {}
         self.received_signed: dict[str, int] = {}  # of those, correctly signed (signing_key)
         self.silent = False
+        self.mode = 3  # ArduCopter custom mode in the heartbeat: AUTO (6 RTL, 9 LAND ...)
+        self.armed = True
         self.radio_txbuf: int | None = None
         self.mission = (
             mission
@@ -385,8 +388,9 @@ class SimAutopilot:
             mav.heartbeat_send(
                 mavlink.MAV_TYPE_QUADROTOR,
                 mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
-                mavlink.MAV_MODE_FLAG_SAFETY_ARMED | mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
-                3,  # ArduCopter AUTO
+                mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+                | (mavlink.MAV_MODE_FLAG_SAFETY_ARMED if self.armed else 0),
+                self.mode,  # ArduCopter's custom mode number (3 = AUTO)
                 mavlink.MAV_STATE_ACTIVE,
             )
             txbuf = self.radio_txbuf
