@@ -436,12 +436,16 @@ def _reboot_report(out: Path, t_reboot_mono_ns: int) -> None:
         if re.search(r"reboot|went back|rates|clock|silent|heartbeat", line, re.I):
             print("  companion:", line[:160])
     files = sorted((out / "logs").rglob("*.mcap"))
-    frames = [r for r in read_flight_log(files, kinds={LoggedFrame}) if isinstance(r, LoggedFrame)]
-    after = [r for r in frames if r.frame.t_mono_ns > t_reboot_mono_ns]
-    posed = [r for r in after if r.pose is not None]
-    first = (posed[0].frame.t_mono_ns - t_reboot_mono_ns) / 1e9 if posed else float("nan")
-    before = [r.pose.t_boot_ns for r in frames if r.pose and r.frame.t_mono_ns < t_reboot_mono_ns]
-    boots = [r.pose.t_boot_ns for r in posed if r.pose]
+    frames = [  # (capture time, pose's boot time or None); not the images (memory)
+        (r.frame.t_mono_ns, r.pose.t_boot_ns if r.pose else None)
+        for r in read_flight_log(files, kinds={LoggedFrame})
+        if isinstance(r, LoggedFrame)
+    ]
+    after = [f for f in frames if f[0] > t_reboot_mono_ns]
+    posed = [f for f in after if f[1] is not None]
+    first = (posed[0][0] - t_reboot_mono_ns) / 1e9 if posed else float("nan")
+    before = [b for t, b in frames if b is not None and t < t_reboot_mono_ns]
+    boots = [b for _, b in posed if b is not None]
     print(
         f"frames {len(frames)}, after the reboot {len(after)}, posed {len(posed)}; first posed "
         f"{first:.1f} s after the command; boot time of poses before <= "
