@@ -19,6 +19,7 @@ from holescan.capture._flyconfig import (
 )
 from holescan.capture._frame import Frame, FrameSource
 from holescan.capture._holepipeline import FrameHoles, HolePipeline, HoleView, crop_view, view_jpeg
+from holescan.capture._livemap import LiveMap, LiveMapConfig, LiveMapStats
 from holescan.capture._mavadapt import (
     TelemetrySample,
     attitude_from_attitude,
@@ -159,6 +160,9 @@ __all__ = [
     "GpsFix",
     "HolePipeline",
     "HoleView",
+    "LiveMap",
+    "LiveMapConfig",
+    "LiveMapStats",
     "LogInfo",
     "LogLayout",
     "LogOptions",

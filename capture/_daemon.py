@@ -59,6 +59,9 @@ from holescan.geotag import Hole, Tier, VehiclePose, local_en_m
 log = logging.getLogger(__name__)
 
 SourceFactory = Callable[[], FrameSource]
+FrameListener = Callable[[Frame, VehiclePose | None], None]
+"""``on_frame(frame, pose)``: each captured frame and its pose (None: unposed), on the
+capture thread, after the log and the detector have it; must never wait (the live map)."""
 HoleListener = Callable[[list[Hole], list[Hole], Mapping[int, HoleView], Mapping[int, Tier]], None]
 """``on_holes(served, news, views, tiers)``: every announced hole (the waypoints), the
 holes new or changed enough to tell the ground now (announced and for review), the best
@@ -81,8 +84,10 @@ class Flight:
         usb_reset: Callable[[], None] | None = None,
         on_holes: HoleListener | None = None,
         before_close: Callable[[], None] | None = None,
+        on_frame: FrameListener | None = None,
     ) -> None:
         self.config = config
+        self._on_frame_hook = on_frame
         self.camera = camera
         self._source_factory = source_factory
         self._mavlink = mavlink
@@ -314,6 +319,11 @@ class Flight:
             c.frames_log_dropped += 1
         self._views.add_frame(frame.index, frame.rgb)
         self._worker.offer(frame)
+        if self._on_frame_hook is not None:
+            try:
+                self._on_frame_hook(frame, pose)
+            except Exception:  # a listener's bug must not stop capture
+                log.exception("frame listener failed on frame %d", frame.index)
 
     def _capture(self, t_end: float | None) -> None:
         cfg = self.config

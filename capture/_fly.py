@@ -17,18 +17,19 @@ import contextlib
 import logging
 import threading
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from holescan.capture._daemon import Flight
 from holescan.capture._flightrecords import FlightSummary
 from holescan.capture._flyconfig import FlyConfig
 from holescan.capture._holepipeline import HoleView
+from holescan.capture._livemap import LiveMap, LiveMapStats
 from holescan.capture._mavlink import Telemetry
 from holescan.capture._sensorsetup import SensorSetup, open_sensor
 from holescan.capture.errors import TelemetryError
 from holescan.geotag import AnnounceGate, Hole, Tier
-from holescan.missions import HoleMissionServer
+from holescan.missions import HoleMissionServer, MapLayer
 
 __all__ = ["FlyReport", "fly", "format_report"]
 
@@ -43,6 +44,10 @@ class FlyReport:
     announced : STATUSTEXTs sent to the ground station, in order.
     cards_sent, card_bytes : hole cards (best view + facts) sent whole, and the MAVLink
     bytes they took.
+    tiles_sent, tile_bytes : live map tiles sent whole and their MAVLink bytes.
+    map_stats : the live map's counters (None: no live map).
+    map_tiles : the newest bytes of every map tile the flight held at its end
+        ((layer, tx, ty) -> picture), what the ground station should hold.
     """
 
     summary: FlightSummary
@@ -50,6 +55,10 @@ class FlyReport:
     announced: tuple[str, ...] = ()
     cards_sent: int = 0
     card_bytes: int = 0
+    tiles_sent: int = 0
+    tile_bytes: int = 0
+    map_stats: LiveMapStats | None = None
+    map_tiles: Mapping[tuple[MapLayer, int, int], bytes] = field(default_factory=dict)
 
 
 def fly(
@@ -118,6 +127,10 @@ def fly(
                     if h.id in views:
                         server.send_card(h, views[h.id].jpeg, views[h.id].why, tiers[h.id])
 
+        live_map: LiveMap | None = None
+        if server is not None and cfg.live_map is not None:
+            live_map = stack.enter_context(LiveMap(setup.camera, fc.mount, cfg.live_map))
+            server.set_tiles(live_map)
         mavlink = setup.mavlink
         _log.info(
             "flight log %s; sensor %s; MAVLink %s; ground station %s",
@@ -148,7 +161,12 @@ def fly(
             return tel
 
         def flush_shared() -> None:
-            if shared is not None and not shared.flush_cards(timeout_s=10.0):
+            if shared is None:
+                return
+            if live_map is not None:  # the last tiles are due (sent while the cards drain;
+                live_map.close()  # not waited for: the vehicle's own traffic comes first)
+                live_map.finish()
+            if not shared.flush_cards(timeout_s=10.0):
                 _log.warning("hole pictures still queued when the autopilot link closed")
 
         flight = Flight(
@@ -161,17 +179,34 @@ def fly(
             on_holes=on_holes,
             # On the shared link the last pictures must go out before the link closes.
             before_close=flush_shared if shared else None,
+            on_frame=live_map.offer if live_map is not None else None,
         )
         if stop is not None:
             flight.stop = stop
         summary = flight.run()
+        map_tiles: dict[tuple[MapLayer, int, int], bytes] = {}
+        if live_map is not None:
+            live_map.close()  # the last changes cut into tiles
+            live_map.finish()  # every tile not sent yet is due now
+            map_tiles = dict(live_map.outbox())
         if server is not None:
             if shared is None:
                 server.flush_cards(timeout_s=10.0)  # let the last pictures go out
-            cards = (server.cards.cards_sent, server.cards.bytes_sent)
+                if live_map is not None:
+                    live_map.flush(timeout_s=10.0)  # and the last tiles
+                    server.flush_cards(timeout_s=5.0)  # the last one out whole
+            c = server.cards
+            counts = (c.cards_sent, c.bytes_sent, c.tiles_sent, c.tile_bytes_sent)
         else:
-            cards = (0, 0)
-    return FlyReport(summary, str(cfg.sensor), tuple(announced), *cards)
+            counts = (0, 0, 0, 0)
+    return FlyReport(
+        summary,
+        str(cfg.sensor),
+        tuple(announced),
+        *counts,
+        map_stats=live_map.stats if live_map is not None else None,
+        map_tiles=map_tiles,
+    )
 
 
 def format_report(report: FlyReport, gate: AnnounceGate | None = None) -> str:
@@ -215,6 +250,15 @@ def format_report(report: FlyReport, gate: AnnounceGate | None = None) -> str:
         lines.append(
             f"hole pictures: {report.cards_sent} sent, {report.card_bytes} B "
             f"({report.card_bytes / dur:.0f} B/s over the flight)"
+        )
+    ms = report.map_stats
+    if ms is not None:
+        lines.append(
+            f"live map: {ms.fused} of {ms.offered} frames fused "
+            f"({ms.cpu_ms / max(ms.offered, 1):.2f} ms CPU per frame), "
+            f"{report.tiles_sent} tiles sent, {report.tile_bytes} B "
+            f"({report.tile_bytes / dur:.0f} B/s); pictures and tiles together "
+            f"{(report.card_bytes + report.tile_bytes) / dur:.0f} B/s"
         )
     for h in confirmed:
         lines.append(

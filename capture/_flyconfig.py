@@ -40,6 +40,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from holescan.capture._flightrecords import FlightConfig
+from holescan.capture._livemap import LiveMapConfig
 from holescan.capture._mavlink import DEFAULT_BAUD
 from holescan.capture.flightlog.options import LogOptions
 from holescan.detect import DEFAULT, PAPER, SEARCHERS, DetectParams
@@ -103,6 +104,8 @@ class FlyConfig:
     flight : the daemon's settings (its ``log_prefix`` is set per flight by
     :meth:`flight_config`). hole_rel_alt_m, hole_clearance_m : served waypoints' altitude.
     hole_card_bytes_per_s : byte budget of the holes' pictures to the ground station.
+    live_map : the on-board live map sent to the ground station with what the pictures
+        leave of their budget (:class:`~capture._livemap.LiveMapConfig`; None: off).
     sim_table : the ``[sim]`` table as written (checked by :mod:`sim`). record : the settings
     as flat ``table.key`` -> value
     (logged as the flight's ``holescan.config`` metadata).
@@ -124,6 +127,7 @@ class FlyConfig:
     hole_rel_alt_m: float = 10.0
     hole_clearance_m: float = 5.0
     hole_card_bytes_per_s: float = 1000.0
+    live_map: LiveMapConfig | None = field(default_factory=LiveMapConfig)
     sim_table: Mapping[str, Any] = field(default_factory=dict)
     record: Mapping[str, Any] = field(default_factory=dict)
 
@@ -225,6 +229,14 @@ _TABLES: dict[str, dict[str, tuple[tuple[type, ...], Any]]] = {
         "card_bytes_per_s": _from(FlyConfig, _NUM, "hole_card_bytes_per_s"),
         "rel_alt_m": _from(FlyConfig, _NUM, "hole_rel_alt_m"),
         "clearance_m": _from(FlyConfig, _NUM, "hole_clearance_m"),
+    },
+    "map": {
+        "enabled": ((bool,), True),
+        "cell_m": _from(LiveMapConfig, _NUM, "cell_m"),
+        "pixel_stride": _from(LiveMapConfig, (int,), "pixel_stride"),
+        "frame_every": _from(LiveMapConfig, (int,), "frame_every"),
+        "budget_ms": _from(LiveMapConfig, _NUM, "budget_ms"),
+        "radius_m": _from(LiveMapConfig, _NUM, "radius_m"),
     },
 }
 
@@ -385,6 +397,20 @@ def parse_fly_config(
         startup_sync_s=float(cap["startup_sync_s"]),
     )
 
+    mp = tables["map"]
+    live_map: LiveMapConfig | None = None
+    if mp["enabled"]:
+        try:
+            live_map = LiveMapConfig(
+                cell_m=float(mp["cell_m"]),
+                pixel_stride=mp["pixel_stride"],
+                frame_every=mp["frame_every"],
+                budget_ms=float(mp["budget_ms"]),
+                radius_m=float(mp["radius_m"]),
+            )
+        except InputError as err:
+            raise InputError(f"{where}: [map] {err}") from err
+
     sim_table = doc.get("sim", {})
     if not isinstance(sim_table, Mapping):
         raise InputError(f"{where}: [sim] must be a table")
@@ -412,6 +438,7 @@ def parse_fly_config(
         hole_rel_alt_m=float(holes["rel_alt_m"]),
         hole_clearance_m=float(holes["clearance_m"]),
         hole_card_bytes_per_s=float(holes["card_bytes_per_s"]),
+        live_map=live_map,
         sim_table=dict(sim_table),
         record=record,
     )

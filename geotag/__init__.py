@@ -7,6 +7,7 @@ from holescan.geotag._camera import (
     dcm_from_quaternion,
     rotation_ned_from_optical,
 )
+from holescan.geotag._campose import R_ENU_NED, LocalCameraPose, camera_pose_local
 from holescan.geotag._confidence import (
     DEFAULT_CONFIDENCE,
     ConfidenceModel,
@@ -32,6 +33,7 @@ from holescan.geotag._types import VehiclePose
 __all__ = [
     "CIRCLE_95_PER_SIGMA",
     "DEFAULT_CONFIDENCE",
+    "R_ENU_NED",
     "TIERS",
     "AnnounceGate",
     "CameraMount",
@@ -42,11 +44,13 @@ __all__ = [
     "HoleEvidence",
     "HoleSighting",
     "HoleTracker",
+    "LocalCameraPose",
     "LocalFrame",
     "MergeParams",
     "Tier",
     "VehiclePose",
     "box_cut_by_border",
+    "camera_pose_local",
     "dcm_from_euler",
     "dcm_from_quaternion",
     "evidence_of",

@@ -19,6 +19,11 @@ all cards again by sending DATA_TRANSMISSION_HANDSHAKE with ``size = 0`` to comp
 Byte budget: :class:`CardSender` paces packets with a token bucket of ``bytes_per_s``
 (default 1,000 B/s, counting whole MAVLink 2 frames: 12 bytes of header and CRC plus the
 payload), so telemetry on the same radio is never starved.
+
+The live map's tiles (:mod:`missions._maptiles`) share that bucket at lower priority: when
+no card is queued, :class:`CardSender` asks its ``tiles`` source (a :class:`TileSource`)
+for the next tile and sends it the same way, with the tile's handshake type. A card that
+arrives meanwhile waits for at most the one tile under way (tiles are small: <= 1.2 kB).
 """
 
 from __future__ import annotations
@@ -31,7 +36,7 @@ import struct
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 from holescan.errors import InputError
 from holescan.missions._link import mavlink
@@ -40,6 +45,7 @@ __all__ = [
     "CARD_PAYLOAD",
     "CardAssembler",
     "CardSender",
+    "TileSource",
     "card_facts",
     "make_card",
     "read_card",
@@ -106,12 +112,28 @@ def card_facts(hole: Any, why: str, revision: int, tier: str = "announced") -> d
     }
 
 
-def _handshake(size: int, packets: int, mav: Any) -> None:
-    mav.data_transmission_handshake_send(_JPEG, size, 0, 0, packets, CARD_PAYLOAD, 0)
+def _handshake(size: int, packets: int, mav: Any, kind: int = _JPEG) -> None:
+    mav.data_transmission_handshake_send(kind, size, 0, 0, packets, CARD_PAYLOAD, 0)
 
 
 def _packet(seqnr: int, data: bytes, mav: Any) -> None:
     mav.encapsulated_data_send(seqnr, data)
+
+
+class TileSource(Protocol):
+    """Where :class:`CardSender` takes map tiles from when no card waits."""
+
+    def next_tile(self) -> tuple[int, bytes] | None:
+        """(handshake type, picture bytes) of the next tile to send, or None: none due."""
+        ...
+
+    def resend_all(self, held: Callable[[bytes], bool] | None = None) -> None:
+        """Send every tile again (a ground station asked for everything), but those
+        ``held(tile bytes)`` says the station already holds (None: every tile)."""
+        ...
+
+
+_TILE_PRIORITY = 2  # after every card: a tile goes only when no card waits
 
 
 @dataclass
@@ -119,7 +141,9 @@ class _Outgoing:
     key: int
     card: bytes
     sent: int = -1  # -1: handshake not sent yet; else packets sent
-    priority: int = 0  # lower goes first (0: announced holes, 1: for review)
+    priority: int = 0  # lower goes first (0: announced holes, 1: for review, 2: map tiles)
+    kind: int = _JPEG
+    tile: bool = False
 
 
 @dataclass
@@ -134,6 +158,7 @@ class CardSender:
     burst_bytes : most the bucket holds (a pause does not allow a flood afterwards).
     repeat_s : a card sent whole is queued again after this long (None: never), the newest
         revision; at most ``repeats`` times.
+    tiles : map tiles sent with what the budget leaves when no card is queued (None: none).
     """
 
     bytes_per_s: float = 1000.0
@@ -141,8 +166,11 @@ class CardSender:
     repeat_s: float | None = 60.0
     repeats: int = 2
     clock: Callable[[], float] = time.monotonic
+    tiles: TileSource | None = None
     bytes_sent: int = 0
     cards_sent: int = 0
+    tile_bytes_sent: int = 0
+    tiles_sent: int = 0
     _queue: collections.deque[_Outgoing] = field(default_factory=collections.deque)
     _latest: dict[int, bytes] = field(default_factory=dict)
     _priority: dict[int, int] = field(default_factory=dict)
@@ -163,7 +191,7 @@ class CardSender:
         self._latest[key] = card
         self._priority[key] = priority
         for item in list(self._queue):
-            if item.key == key and item.sent < 0:
+            if item.key == key and item.sent < 0 and not item.tile:
                 if item.priority == priority:
                     item.card = card
                     return
@@ -179,8 +207,11 @@ class CardSender:
             at -= 1
         self._queue.insert(at, item)
 
-    def resend_all(self) -> None:
-        """Queue every hole's newest card again (a ground station asked for them)."""
+    def resend_all(self, held: Callable[[bytes], bool] | None = None) -> None:
+        """Queue every hole's newest card again (a ground station asked for them), and
+        every map tile after them but those ``held`` (see :meth:`TileSource.resend_all`)."""
+        if self.tiles is not None:
+            self.tiles.resend_all(held)
         queued = {item.key for item in self._queue if item.sent < 0}  # not started yet
         for key, card in sorted(self._latest.items()):
             if key not in queued:
@@ -188,7 +219,23 @@ class CardSender:
 
     @property
     def pending(self) -> int:
+        """Cards queued or under way (tiles not counted)."""
+        return sum(not item.tile for item in self._queue)
+
+    @property
+    def queued(self) -> int:
+        """Pictures queued or under way: cards, and the tile being sent."""
         return len(self._queue)
+
+    def _next_tile(self) -> bool:
+        if self.tiles is None:
+            return False
+        got = self.tiles.next_tile()
+        if got is None:
+            return False
+        kind, data = got
+        self._queue.append(_Outgoing(-1, data, priority=_TILE_PRIORITY, kind=kind, tile=True))
+        return True
 
     def pump(self, send: Callable[[Callable[[Any], None]], None]) -> None:
         """Send handshakes and packets while the budget has tokens for them."""
@@ -204,23 +251,29 @@ class CardSender:
                     card = self._latest[key]
                     self._enqueue(_Outgoing(key, card, priority=self._priority.get(key, 0)))
                     self._repeat_at[key] = (math.inf, n)
-        while self._queue:
+        while self._queue or (self._tokens >= _HANDSHAKE_BYTES and self._next_tile()):
             item = self._queue[0]
             cost = _HANDSHAKE_BYTES if item.sent < 0 else _PACKET_BYTES
             if self._tokens < cost:
                 return
             self._tokens -= cost
-            self.bytes_sent += cost
+            if item.tile:
+                self.tile_bytes_sent += cost
+            else:
+                self.bytes_sent += cost
             card = item.card
             n_packets = -(-len(card) // CARD_PAYLOAD)
             if item.sent < 0:
-                send(functools.partial(_handshake, len(card), n_packets))
+                send(functools.partial(_handshake, len(card), n_packets, kind=item.kind))
             else:
                 chunk = card[item.sent * CARD_PAYLOAD : (item.sent + 1) * CARD_PAYLOAD]
                 send(functools.partial(_packet, item.sent, chunk.ljust(CARD_PAYLOAD, b"\x00")))
             item.sent += 1
             if item.sent >= n_packets:
                 self._queue.popleft()
+                if item.tile:
+                    self.tiles_sent += 1
+                    continue
                 self.cards_sent += 1
                 _, n = self._repeat_at.get(item.key, (math.inf, 0))
                 if self.repeat_s is not None and n < self.repeats:

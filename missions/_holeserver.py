@@ -49,8 +49,20 @@ from typing import Any
 
 from holescan.errors import InputError
 from holescan.geotag import Hole
-from holescan.missions._holecards import CardSender, card_facts, make_card
+from holescan.missions._holecards import (
+    CardAssembler,
+    CardSender,
+    TileSource,
+    card_facts,
+    make_card,
+)
 from holescan.missions._link import mavlink
+from holescan.missions._mapinventory import (
+    TYPE_INVENTORY,
+    TileInventory,
+    held_by,
+    read_inventory,
+)
 from holescan.missions._protocol import MissionError
 from holescan.missions._signing import SigningKey
 from holescan.missions._vehicle import MissionReceiver, MissionServer
@@ -66,6 +78,9 @@ __all__ = [
 ]
 
 _log = logging.getLogger(__name__)
+
+_INVENTORY_S = 10.0
+"""A station's inventory counts for the request for everything within this long after it."""
 
 MAV_COMP_ID_ONBOARD_COMPUTER: int = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
 _STATUSTEXT_MAX = 50
@@ -220,6 +235,10 @@ class HoleMissionServer(MissionServer):
         self._home = home
         self._holes: tuple[Hole, ...] = ()
         self.cards = CardSender(bytes_per_s=card_bytes_per_s)
+        self._inventory = CardAssembler()  # a station's inventory (missions._mapinventory)
+        self._inventory_from: tuple[int, int] | None = None
+        self._held: TileInventory | None = None
+        self._held_at = -math.inf
         self._card_revs: dict[int, int] = {}
         self.card_ceiling_bytes_per_s = card_bytes_per_s
         self.radio_status_seen = 0
@@ -306,12 +325,19 @@ class HoleMissionServer(MissionServer):
             self.cards.put(hole.id, card, priority=0 if tier == "announced" else 1)
         return len(card)
 
+    def set_tiles(self, tiles: TileSource | None) -> None:
+        """Send the live map's tiles from ``tiles`` with what the cards leave of the budget
+        (:mod:`missions._maptiles`); None stops them."""
+        with self._lock:
+            self.cards.tiles = tiles
+
     def flush_cards(self, timeout_s: float = 10.0) -> bool:
-        """Wait (at most ``timeout_s``) until every queued card is sent; True when done."""
+        """Wait (at most ``timeout_s``) until every queued card (and the map tile under
+        way) is sent; True when done."""
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
             with self._lock:
-                if self.cards.pending == 0:
+                if self.cards.queued == 0:
                     return True
             time.sleep(0.1)
         return False
@@ -324,7 +350,8 @@ class HoleMissionServer(MissionServer):
 
     # -- hooks of the server's thread ----------------------------------------------------
     def on_message(self, msg: Any) -> None:
-        if msg.get_type() == "RADIO_STATUS":
+        kind = msg.get_type()  # no target fields: any peer
+        if kind == "RADIO_STATUS":
             with self._lock:
                 self.radio_status_seen += 1
                 old = self.cards.bytes_per_s
@@ -338,14 +365,31 @@ class HoleMissionServer(MissionServer):
                     self.cards.bytes_per_s,
                 )
             return
-        if msg.get_type() != "DATA_TRANSMISSION_HANDSHAKE":  # no target fields: any peer
+        src = (msg.get_srcSystem(), msg.get_srcComponent())
+        if kind == "ENCAPSULATED_DATA":
+            if src == self._inventory_from and (data := self._inventory.add(msg)) is not None:
+                self._held = read_inventory(data)
+                self._inventory_from = None
+                if self._held is not None:
+                    self._held_at = time.monotonic()
+                    _log.info("%s holds %d map tiles", src, len(self._held.have))
             return
-        if msg.size == 0 and msg.packets == 0:  # a ground station asks for every card
+        if kind != "DATA_TRANSMISSION_HANDSHAKE":
+            return
+        if msg.type == TYPE_INVENTORY and msg.size > 0:  # what the station holds comes next
+            self._inventory_from = src
+            self._inventory.add(msg)
+        elif msg.size == 0 and msg.packets == 0:  # a ground station asks for every card
+            held = self._held
+            fresh = held is not None and time.monotonic() - self._held_at < _INVENTORY_S
             _log.info(
-                "hole cards requested again by %s", (msg.get_srcSystem(), msg.get_srcComponent())
+                "hole cards requested again by %s (%s)",
+                src,
+                "tiles it holds not sent" if fresh else "every map tile too",
             )
             with self._lock:
-                self.cards.resend_all()
+                self.cards.resend_all(held_by(held) if fresh and held is not None else None)
+            self._held = None
 
     def tick(self) -> None:
         with self._lock:

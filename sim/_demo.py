@@ -33,27 +33,24 @@ import math
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
 from holescan.capture import (
     Flight,
     FlightConfig,
     FlightSummary,
     HoleView,
-    LoggedFrame,
-    LoggedPose,
-    crop_view,
-    read_flight_log,
+    LiveMap,
 )
 from holescan.errors import InputError
-from holescan.geotag import AnnounceGate, Hole, Tier, VehiclePose
+from holescan.geotag import AnnounceGate, Hole, Tier
 from holescan.ground import GroundOptions, GroundStation, ReprocessOptions, write_hole_outputs
 from holescan.missions import HoleMissionServer
+from holescan.sim._demo_map import DemoMap, DemoMapper, views_and_track
 from holescan.sim._scoring import FalseHole, TruthRow, frames_in_view, score_holes
 from holescan.sim._sortie import SimSortie, SortieParams, loop_length_m
 
@@ -148,6 +145,8 @@ class DemoResult:
     review_true: int = 0
     review_latency_s: tuple[float, ...] = ()
     area_m2: float = 0.0
+    map_tiles_at_ground: int = 0
+    search: DemoMap | None = None
 
     @property
     def found(self) -> int:
@@ -174,6 +173,7 @@ class DemoResult:
             "card_bytes": self.card_bytes,
             "cards_sent": self.cards_sent,
             "pictures_at_ground": self.pictures_at_ground,
+            "map_tiles_at_ground": self.map_tiles_at_ground,
             "card_bytes_per_s": self.card_bytes / self.capture_s if self.capture_s else None,
             "position_error_m": {
                 "mean": float(np.mean(errors)) if errors else None,
@@ -205,6 +205,11 @@ class DemoResult:
             "interrupted": self.interrupted,
             "log_files": [str(p) for p in self.log_files],
             "files": {k: str(p) for k, p in self.files},
+            **(
+                self.search.numbers([r.truth.id for r in self.truth if r.status != "found"])
+                if self.search
+                else {"searched_fraction": None, "missed_why": {}}
+            ),
         }
 
 
@@ -270,34 +275,6 @@ def _free_udp_port() -> int:
         return int(s.getsockname()[1])
 
 
-def _views_and_track(
-    files: Sequence[Path], holes: Sequence[Hole]
-) -> tuple[
-    dict[int, tuple[npt.NDArray[np.uint8], npt.NDArray[np.uint16], tuple[int, ...]]],
-    list[VehiclePose],
-    int | None,
-]:
-    """Read the flight log once: each hole's best view (cropped), the track, boot -> Unix."""
-    wanted: dict[int, list[Hole]] = {}
-    for h in holes:
-        if h.best_frame_index is not None:
-            wanted.setdefault(h.best_frame_index, []).append(h)
-    views: dict[int, tuple[npt.NDArray[np.uint8], npt.NDArray[np.uint16], tuple[int, ...]]] = {}
-    track: list[VehiclePose] = []
-    boot_to_unix: int | None = None
-    for rec in read_flight_log(files, kinds={LoggedFrame, LoggedPose}):
-        if isinstance(rec, LoggedPose):
-            track.append(rec.pose)
-            boot_to_unix = rec.t_unix_ns - rec.pose.t_boot_ns
-            continue
-        assert isinstance(rec, LoggedFrame)
-        for h in wanted.get(rec.frame.index, ()):
-            rgb, box = crop_view(rec.frame.rgb, h.best_box)
-            depth, _ = crop_view(rec.frame.depth, h.best_box)
-            views[h.id] = (rgb.copy(), depth.copy(), box)
-    return views, track, boot_to_unix
-
-
 def run_demo(
     opts: DemoOptions | None = None,
     *,
@@ -336,7 +313,7 @@ def run_demo(
     card_bytes = cards_sent = 0
     mission_items: int | None = None
     mission_error: str | None = None
-    pictures = 0
+    pictures = map_tiles = 0
     capture_s = 0.0
     report("start", duration_s=duration)
     with contextlib.ExitStack() as stack:
@@ -363,6 +340,8 @@ def run_demo(
                     server.send_card(h, views[h.id].jpeg, views[h.id].why, tier)
 
         stack.enter_context(sortie)
+        live_map = stack.enter_context(LiveMap(sortie.camera, sortie.mount))
+        server.set_tiles(live_map)  # the live map's tiles down the same link, after cards
         cfg = FlightConfig(
             log_prefix=out / "flight",
             announce_min_p_hole=opts.gate.min_p_hole,
@@ -374,7 +353,12 @@ def run_demo(
             },
         )
         flight = Flight(
-            cfg, sortie.source, sortie.camera, mavlink=sortie.mavlink, on_holes=on_holes
+            cfg,
+            sortie.source,
+            sortie.camera,
+            mavlink=sortie.mavlink,
+            on_holes=on_holes,
+            on_frame=live_map.offer,
         )
         flight.stop = stop
         t_first: list[float] = []
@@ -415,12 +399,17 @@ def run_demo(
             announcements=gcs.take_new(),
         )
         served_ids = {h.id for h in opts.gate.select(summary.holes, first_announced)}
+        live_map.close()  # the last changes cut into tiles, all due now
+        live_map.finish()
         server.flush_cards(timeout_s=30.0)
+        live_map.flush(timeout_s=10.0)
+        server.flush_cards(timeout_s=5.0)
         if not gcs.wait_complete(served_ids, timeout_s=30.0):
             mission_error = "not every announced hole reached the ground with its picture"
         _, ground_holes, _ = gcs.station.state.snapshot()
         mission_items = sum(h.seq is not None for h in ground_holes)
         pictures = sum(h.has_picture for h in ground_holes if h.id in served_ids)
+        map_tiles = sum(int(gcs.station.map_store.summary()[k]) for k in ("cov", "ortho"))
         received = tuple(announced)
         card_bytes, cards_sent = server.cards.bytes_sent, server.cards.cards_sent
     interrupted = capture_s < duration - 1.0
@@ -434,7 +423,9 @@ def run_demo(
     )
     rows, false = scored(confirmed, truth, sortie.world, anchor, in_view)
     log_files = tuple(summary.log.files)
-    views, track, boot_to_unix = _views_and_track(log_files, (*confirmed, *review))
+    mapper = DemoMapper(sortie.world, opts.sortie, sortie.camera, sortie.mount)
+    views, track, boot_to_unix = views_and_track(log_files, (*confirmed, *review), mapper.add)
+    search = mapper.finish(out, confirmed, boot_to_unix)
     kinds = Counter(str(h.kind) for h in sortie.world.holes)
     facts = {
         "flight log": ", ".join(p.name for p in log_files),
@@ -459,12 +450,14 @@ def run_demo(
         truth=[(f"true hole {t.id}", t.lat_deg, t.lon_deg) for t in truth],
         facts=facts,
         title="holescan demo: simulated dawn survey",
+        search_map=search.section,
+        overlay=next((path for kind, path in search.files if kind == "map"), None),
         tiers=tiers,
     )
     result = DemoResult(
         out=out,
         log_files=log_files,
-        files=tuple(files),
+        files=(*search.files, *files),
         truth=rows,
         false=false,
         confirmed=confirmed,
@@ -486,7 +479,9 @@ def run_demo(
         card_bytes=card_bytes,
         cards_sent=cards_sent,
         pictures_at_ground=pictures,
+        map_tiles_at_ground=map_tiles,
         match_m=opts.match_m,
+        search=search,
     )
     path = out / "demo.json"
     path.write_text(json.dumps(result.numbers(), indent=1) + "\n")

@@ -41,6 +41,8 @@ def format_result(r: DemoResult) -> list[str]:
             lines.append(f"  {where}: MISSED (whole in view in {row.frames_in_view} frames)")
         else:
             lines.append(f"  {where}: not in view (outside what the survey saw)")
+        if row.status != "found" and r.search is not None:
+            lines.append(f"    the search map: {r.search.why_missed(t.id)}")
     for f in r.false:
         lines.append(
             f"  hole {f.hole.id}: FALSE (score {f.hole.score:.2f}, {f.hole.sightings} sightings;"
@@ -69,6 +71,13 @@ def format_result(r: DemoResult) -> list[str]:
     lines.append(
         f"  => found {r.found} of {in_view} in view, missed {r.missed}, false {len(r.false)}" + err
     )
+    if r.search is not None:
+        s = r.search
+        lines.append(
+            f"search map: {s.searched_fraction:.1%} of the planned {s.area_m2:.0f} m2 searched "
+            f"(coverage >= {s.threshold:g}: an access hole there would have been found with "
+            f"that probability; {s.frames} frames fused)" + (f"; {s.note}" if s.note else "")
+        )
     if r.latency_s:
         lines.append(
             f"  first sighting -> announcement: median {statistics.median(r.latency_s):.1f} s, "
@@ -84,7 +93,8 @@ def format_result(r: DemoResult) -> list[str]:
         gcs += (
             f", {r.cards_sent} hole pictures sent ({r.card_bytes} B, "
             f"{r.card_bytes / r.capture_s:.0f} B/s over the flight), "
-            f"{r.pictures_at_ground} of {len(r.confirmed)} announced holes have theirs"
+            f"{r.pictures_at_ground} of {len(r.confirmed)} announced holes have theirs, "
+            f"{r.map_tiles_at_ground} live-map tiles"
         )
     if r.mission_items is not None:
         gcs += f", downloaded a mission of {r.mission_items} hole waypoints (component 191)"

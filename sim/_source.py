@@ -23,15 +23,11 @@ from holescan.geotag import (
     CameraMount,
     LocalFrame,
     VehiclePose,
-    dcm_from_euler,
-    rotation_ned_from_optical,
+    camera_pose_local,
 )
 from holescan.sim._camera_model import CameraPose, Conditions, random_conditions
 from holescan.sim._render import GtBox, render
 from holescan.sim._world import RubbleWorld
-
-# ENU <- NED (swap north/east, flip down).
-R_ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 
 PoseAtMono = Callable[[int], VehiclePose]
 
@@ -60,11 +56,8 @@ class WorldAnchor:
 
 def camera_pose_in_world(pose: VehiclePose, mount: CameraMount, anchor: WorldAnchor) -> CameraPose:
     """The camera's pose in the world frame for a vehicle pose (mount offset included)."""
-    r_ned_opt = rotation_ned_from_optical(mount, pose)
-    r_ned_body = dcm_from_euler(pose.roll, pose.pitch, pose.yaw)
-    offset_ned = r_ned_body @ np.asarray(mount.offset_m, dtype=np.float64)
-    position = anchor.to_world(pose.lat_deg, pose.lon_deg, pose.alt_m) + R_ENU_NED @ offset_ned
-    return CameraPose(position, R_ENU_NED @ r_ned_opt)
+    local = camera_pose_local(anchor.frame, mount, pose)
+    return CameraPose(local.position_m, local.rotation)
 
 
 class SimSource:

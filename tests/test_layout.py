@@ -18,7 +18,7 @@ from holescan.sim import sortie_params
 
 ROOT = Path(__file__).resolve().parents[1]
 # The folders of the repository's root that are holescan's subpackages, and the namespace itself.
-PACKAGES = ("capture", "detect", "geotag", "missions", "ground", "sim", "holescan")
+PACKAGES = ("capture", "detect", "geotag", "mapping", "missions", "ground", "sim", "holescan")
 # Python code outside the installed package that follows the same rules.
 OTHER_CODE = ("benchmarks", "tests")
 MAX_MODULE_LINES = 500
@@ -70,10 +70,11 @@ def test_an_install_adds_no_import_name_but_holescan(tmp_path: Path) -> None:
     tops = {n.split("/")[0] for n in names if not n.split("/")[0].endswith(".dist-info")}
     assert tops == {"holescan"} and declared == ["holescan"], (tops, declared)
     # Every subpackage is inside, with its data files.
-    for sub in ("capture", "detect", "geotag", "missions", "ground", "sim", "cli"):
+    for sub in ("capture", "detect", "geotag", "mapping", "missions", "ground", "sim", "cli"):
         assert f"holescan/{sub}/__init__.py" in names, sub
     assert "holescan/ground/station/station.html" in names
     assert "holescan/ground/report/report.css" in names
+    assert "holescan/mapping/recall_table.json" in names
 
 
 def _private_imports(path: Path) -> Iterator[str]:

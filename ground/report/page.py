@@ -57,6 +57,7 @@ def write_report(
     truth: Sequence[tuple[str, float, float]] = (),
     facts: Mapping[str, str] | None = None,
     track_breaks: Sequence[int] = (),
+    search_map: str | None = None,
 ) -> Path:
     """Write the flight report to ``path`` as one self-contained HTML file.
 
@@ -75,6 +76,8 @@ def write_report(
     track_breaks : indices into ``track`` where another flight's track starts (a campaign):
         each flight is drawn as its own line. The line also breaks where the boot clock
         goes back or jumps by more than a minute.
+    search_map : the search map's section (:func:`ground.report.searchmap.search_map_section`),
+        shown after the map.
 
     Returns
     -------
@@ -93,6 +96,7 @@ def write_report(
         truth=truth,
         facts=facts,
         track_breaks=track_breaks,
+        search_map=search_map,
     )
     out = Path(path)
     with atomic_output(out, force=True) as f:
@@ -116,6 +120,7 @@ def render_report(
     truth: Sequence[tuple[str, float, float]] = (),
     facts: Mapping[str, str] | None = None,
     track_breaks: Sequence[int] = (),
+    search_map: str | None = None,
 ) -> str:
     """The page :func:`write_report` writes, as a string (same parameters)."""
     holes = sorted(holes, key=lambda h: h.id)
@@ -130,6 +135,7 @@ def render_report(
     holes_html = _holes_section(holes, views, frame, t0_ns, truth, bool(poses))
     maps = maps_svg(frame, holes, poses, truth, breaks)
     map_html = f"<section><h2>Map</h2>{legend_html(bool(truth))}{maps}</section>"
+    map_html += search_map or ""
     body = [
         f"<header><h1>{_e(title)}</h1>{_summary(holes, poses, frame)}"
         f"{_facts(facts or {})}</header>",

@@ -34,9 +34,11 @@ from holescan.capture import (
     jsonable,
 )
 from holescan.geotag import Hole, VehiclePose
+from holescan.ground.reprocessing.mapchunk import horizontal_gap_m
 from holescan.ground.reprocessing.options import ReprocessOptions
 from holescan.ground.reprocessing.plan import FlightPlan, PartitionTask
 from holescan.ground.reprocessing.task import Box, FrameResult, PartitionResult, View, best_view
+from holescan.mapping import MapLayers
 
 __all__ = ["FlightMerger", "box_of", "read_views"]
 
@@ -87,12 +89,22 @@ class FlightMerger:
         self._poses: dict[int, VehiclePose | None] = {}
         self._frames: dict[int, FrameResult] = {}
         self._order: deque[int] = deque()
+        self.map_parts: list[MapLayers] = []
+        self.map_frames = 0
+        self.map_s = 0.0
+        self.pose_gap_m: list[float] = []
+        self._map_every = 0
 
     # -- feeding -----------------------------------------------------------------------------
 
     def add(self, task: PartitionTask, part: PartitionResult) -> None:
         """One partition's events (partitions of the flight in order)."""
         self._task = task
+        self._map_every = task.map_every if task.map_anchor is not None else 0
+        if part.map is not None:
+            self.map_parts.append(part.map)
+        self.map_frames += part.map_frames
+        self.map_s += part.map_s
         self.damaged += part.damaged
         self.incomplete_frames += part.incomplete_frames
         for _, ev in part.events:
@@ -167,6 +179,9 @@ class FlightMerger:
             task = self._task_of.pop(index)
             self.frames_detected += 1
             self.detect_ms += fr.detect_ms
+            mapped = self._map_every and index % self._map_every == 0
+            if mapped and fr.pose is not None and pose is not None:
+                self.pose_gap_m.append(horizontal_gap_m(fr.pose, pose))
             if fr.no_depth:  # under the sensor's range (on the ground): not an error
                 self.frames_no_depth += 1
                 continue

@@ -19,7 +19,7 @@ import numpy as np
 from holescan.detect import DEFAULT, DetectParams
 from holescan.errors import InputError
 from holescan.geotag import LocalFrame, nearest_pairs
-from holescan.missions import HoleFormat
+from holescan.missions import Area, HoleFormat
 
 __all__ = ["TOPICS", "HoleMatch", "Progress", "ReprocessOptions", "match_points"]
 
@@ -54,6 +54,9 @@ class ReprocessOptions:
     topic_prefix : topics of the sidecar MCAP files.
     cache : keep finished partitions in ``OUT/.holescan-cache`` and reuse them.
     storage_options : passed to ``fsspec`` for URLs (credentials stay out of the logs).
+    map_cell_m : the search map's cells (None: no map); map_every : fuse every n-th frame.
+    gap_threshold : coverage below which the map's cells are gaps.
+    area : the planned area (None: the hull of what was seen), for gaps and searched fraction.
     """
 
     params: DetectParams = DEFAULT
@@ -68,8 +71,20 @@ class ReprocessOptions:
     topic_prefix: str = "/reprocess"
     cache: bool = True
     storage_options: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    map_cell_m: float | None = 0.02
+    map_every: int = 3
+    gap_threshold: float = 0.5
+    area: Area | None = None
 
     def __post_init__(self) -> None:
+        if self.map_cell_m is not None and not (
+            math.isfinite(self.map_cell_m) and 0.005 <= self.map_cell_m <= 1.0
+        ):
+            raise InputError(f"map cell must be 0.005-1 m, got {self.map_cell_m}")
+        if not 1 <= self.map_every <= 1000:
+            raise InputError(f"map_every must be 1-1000 frames, got {self.map_every}")
+        if not (math.isfinite(self.gap_threshold) and 0.0 < self.gap_threshold < 1.0):
+            raise InputError(f"gap threshold must be between 0 and 1, got {self.gap_threshold}")
         if self.workers < 0 or self.min_sightings < 1:
             raise InputError("workers must be >= 0 and min_sightings >= 1")
         if not self.partition_mib > 0 or not math.isfinite(self.partition_mib):
@@ -88,7 +103,7 @@ class ReprocessOptions:
 
     def settings_key(self) -> dict[str, Any]:
         """What decides a partition's result besides the log bytes (the cache key)."""
-        return {"params": repr(self.params)}
+        return {"params": repr(self.params), "map": [self.map_cell_m, self.map_every]}
 
 
 @dataclasses.dataclass(frozen=True)

@@ -3,8 +3,8 @@
 :func:`write_hole_outputs` writes the hole files (``NAME_holes.gpx|.kml|.geojson|.plan``,
 the ground crew's formats, :func:`missions.write_hole_file`), the TAK data package
 (``NAME_holes_datapackage.zip``: the holes with their pictures and the map overlay
-``NAME_map.kmz`` when there is one, :func:`ground.station.write_datapackage`) and the HTML report
-(:func:`ground.write_report`); :class:`FlightResult` is one flight's numbers, also
+``NAME_map.kmz`` when this run wrote one, :func:`ground.station.write_datapackage`) and
+the HTML report (:func:`ground.write_report`); :class:`FlightResult` is one flight's numbers, also
 written as ``NAME_reprocess.json``.
 """
 
@@ -48,8 +48,10 @@ class FlightResult:
     interrupted : stopped early; the outputs hold what was done.
     partitions, partitions_cached : tasks of this flight, and how many came from the cache.
     detect_ms_mean : worker time per frame. elapsed_s : wall clock of the whole run up to
-    this flight's end. frames_no_depth : frames without any depth reading (closer than
-    the sensor's range, e.g. on the ground), counted apart from detect_errors.
+    this flight's end. map_summary, map_lines : the search map's figures (searched
+    fraction, gaps, re-fly; empty without a map). frames_no_depth : frames without any
+    depth reading (closer than the sensor's range, e.g. on the ground), counted apart from
+    detect_errors.
     """
 
     name: str
@@ -72,6 +74,8 @@ class FlightResult:
     partitions_cached: int
     detect_ms_mean: float
     elapsed_s: float
+    map_summary: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    map_lines: tuple[str, ...] = ()
     frames_no_depth: int = 0
 
     @property
@@ -105,6 +109,7 @@ class FlightResult:
             "detect_ms_mean": round(self.detect_ms_mean, 2),
             "elapsed_s": round(self.elapsed_s, 2),
             "confirmed_holes": [jsonable(h) for h in self.confirmed],
+            "map": dict(self.map_summary),
         }
 
     def lines(self) -> list[str]:
@@ -121,6 +126,7 @@ class FlightResult:
             + (f" (same id {self.flight_same_ids}, farthest {worst:.2f} m)" if found else ""),
         ]
         out += [f"  {t}" for t in self.truncated]
+        out += list(self.map_lines)
         out += [f"  wrote {path} ({kind})" for kind, path in self.files]
         out += [f"  wrote {p} (sidecar mcap: open it with the logs)" for p in self.outputs]
         return out
@@ -169,8 +175,6 @@ def _datapackage(
 ) -> list[tuple[str, Path]]:
     if not holes:
         return []
-    if overlay is None and (out / f"{name}_map.kmz").is_file():
-        overlay = out / f"{name}_map.kmz"
     path = write_datapackage(
         out / f"{name}_holes_datapackage.zip",
         [ground_hole_of(h, boot_to_unix_ns) for h in holes],
@@ -196,6 +200,7 @@ def write_hole_outputs(
     facts: Mapping[str, str] | None = None,
     title: str | None = None,
     track_breaks: Sequence[int] = (),
+    search_map: str | None = None,
     overlay: Path | None = None,
     tiers: Mapping[int, str] | None = None,
 ) -> list[tuple[str, Path]]:
@@ -205,8 +210,10 @@ def write_hole_outputs(
     holes : the holes to write (confirmed ones). views : hole id -> (rgb, depth, box) of
     its best view, the box (x, y, w, h) in that picture's pixels. track : vehicle poses.
     truth : (name, lat_deg, lon_deg) drawn on the report's map. track_breaks : where in
-    ``track`` another flight starts (a campaign). overlay : the map overlay (``.kmz``) for
-    the data package (None: ``NAME_map.kmz`` in ``out`` when it exists). tiers : hole id ->
+    ``track`` another flight starts (a campaign). search_map : the report's search-map
+    section. overlay : the map overlay (``.kmz``) this run wrote, for the data package
+    (None: none; a ``NAME_map.kmz`` left in ``out`` by an earlier run is not taken).
+    tiers : hole id ->
     ``announced``, ``review``, ``confirmed``, ``rejected`` or ``candidate`` (default: the
     vehicle's :meth:`geotag.AnnounceGate.tier` with its default thresholds); candidates
     are left out of the hole files, holes for review out of the TAK data package (they
@@ -238,6 +245,7 @@ def write_hole_outputs(
         truth=truth,
         facts=facts,
         track_breaks=track_breaks,
+        search_map=search_map,
     )
     written.append(("report", path))
     return written

@@ -33,6 +33,7 @@ from holescan.capture import (
     ChunkSpan,
     FlightLogError,
     LoggedCalibration,
+    LoggedPose,
     LogLayout,
     decode_messages,
     errors_from_metadata,
@@ -108,6 +109,11 @@ class PartitionTask:
     camera: CameraIntrinsics
     params: DetectParams
     storage_options: Mapping[str, Any]
+    mount: CameraMount = dataclasses.field(default_factory=CameraMount)
+    map_anchor: tuple[float, float, float] | None = None
+    """The search map's local frame (lat, lon, alt) for the run; None: no map."""
+    map_cell_m: float = 0.02
+    map_every: int = 3
 
     @property
     def bytes(self) -> int:
@@ -133,6 +139,8 @@ class FlightPlan:
     config: Mapping[str, str]
     start_ns: int
     problems: tuple[str, ...]
+    first_pose: tuple[float, float, float] | None = None
+    """(lat, lon, ground altitude) of the first logged pose: the run's map frame."""
 
     @property
     def bytes(self) -> int:
@@ -196,6 +204,32 @@ def _camera(layout: LogLayout, opts: ReprocessOptions) -> CameraIntrinsics | Non
     return None
 
 
+def _first_pose(
+    layout: LogLayout, opts: ReprocessOptions, max_chunks: int = 64
+) -> tuple[float, float, float] | None:
+    """(lat, lon, altitude of the ground below) of the first pose logged, within the first
+    ``max_chunks`` chunks (the search map's frame; None when none is found there)."""
+    pid = layout.topics().get(TOPIC_POSE)
+    if pid is None:
+        return None
+    with open_log(layout.url, opts.storage_options) as f:
+        for span in layout.chunks[:max_chunks]:
+            try:
+                records = read_chunk(f, span)
+            except ChunkDamagedError:
+                continue
+            msgs = [
+                (layout.channels[pid], r)
+                for r in records
+                if isinstance(r, Message) and r.channel_id == pid
+            ]
+            for rec in decode_messages(msgs, layout, {}):
+                if isinstance(rec, LoggedPose):
+                    p = rec.pose
+                    return (p.lat_deg, p.lon_deg, p.alt_m - p.rel_alt_m)
+    return None
+
+
 def plan_flight(files: Sequence[LogRef], opts: ReprocessOptions) -> FlightPlan:
     """Read the layouts of one flight's files. Raises :class:`InputError` for a file that
     is not MCAP, or a log with chunks but no camera calibration (not a holescan log)."""
@@ -237,6 +271,12 @@ def plan_flight(files: Sequence[LogRef], opts: ReprocessOptions) -> FlightPlan:
     except FlightLogError as err:
         raise InputError(f"{files[0]}: {err}") from err
     starts = [c.start_time_ns for lay in layouts for c in lay.chunks]
+    first = None
+    if opts.map_cell_m is not None:
+        for lay in layouts:
+            first = _first_pose(lay, opts)
+            if first is not None:
+                break
     return FlightPlan(
         name=name,
         files=tuple(files),
@@ -247,6 +287,7 @@ def plan_flight(files: Sequence[LogRef], opts: ReprocessOptions) -> FlightPlan:
         config=dict(metadata.get("holescan.config", {})),
         start_ns=min(starts, default=0),
         problems=tuple(problems),
+        first_pose=first,
     )
 
 
@@ -258,9 +299,15 @@ def partition_key(layout: LogLayout, first: ChunkSpan, last: ChunkSpan, settings
     return hashlib.blake2b(json.dumps(doc).encode(), digest_size=16).hexdigest()
 
 
-def partition_flight(plan: FlightPlan, flight: int, opts: ReprocessOptions) -> list[PartitionTask]:
+def partition_flight(
+    plan: FlightPlan,
+    flight: int,
+    opts: ReprocessOptions,
+    map_anchor: tuple[float, float, float] | None = None,
+) -> list[PartitionTask]:
     """Split a flight's logs along their chunk indexes into tasks of about
-    ``opts.partition_bytes`` (whole chunks; a partition never spans two files)."""
+    ``opts.partition_bytes`` (whole chunks; a partition never spans two files).
+    ``map_anchor``: the run's search-map frame (None: no map)."""
     if plan.camera is None:
         return []
     tasks: list[PartitionTask] = []
@@ -276,7 +323,16 @@ def partition_flight(plan: FlightPlan, flight: int, opts: ReprocessOptions) -> l
                 end += 1
             tasks.append(
                 PartitionTask(
-                    key=partition_key(layout, chunks[start], chunks[end - 1], opts.settings_key()),
+                    key=partition_key(
+                        layout,
+                        chunks[start],
+                        chunks[end - 1],
+                        {
+                            **opts.settings_key(),
+                            "map_anchor": map_anchor,
+                            "mount": repr(plan.mount),
+                        },
+                    ),
                     flight=flight,
                     number=len(tasks),
                     url=layout.url,
@@ -287,6 +343,10 @@ def partition_flight(plan: FlightPlan, flight: int, opts: ReprocessOptions) -> l
                     camera=plan.camera,
                     params=opts.params,
                     storage_options=opts.storage_options,
+                    mount=plan.mount,
+                    map_anchor=map_anchor if opts.map_cell_m is not None else None,
+                    map_cell_m=opts.map_cell_m or 0.02,
+                    map_every=opts.map_every,
                 )
             )
             start = end

@@ -39,6 +39,7 @@ from holescan.geotag import VehiclePose
 from holescan.ground.reprocessing.cache import PartitionCache
 from holescan.ground.reprocessing.campaign import CampaignHole, CampaignMerge, campaign_summary
 from holescan.ground.reprocessing.engine import EngineStats, run_tasks
+from holescan.ground.reprocessing.mapfiles import flight_map_outputs
 from holescan.ground.reprocessing.merge import FlightMerger
 from holescan.ground.reprocessing.options import (
     Progress,
@@ -112,8 +113,11 @@ class _Run:
         self.left: dict[int, int] = {}
         self.cached: dict[int, int] = {}
         self.t0 = time.monotonic()
+        # One map frame for the run (a campaign's flights share its cells): the first pose.
+        firsts = [p.first_pose for p in plans if p.first_pose is not None]
+        self.map_anchor = firsts[0] if firsts and opts.map_cell_m is not None else None
         for k, plan in enumerate(plans):
-            self.tasks += partition_flight(plan, k, opts)
+            self.tasks += partition_flight(plan, k, opts, self.map_anchor)
         for task in self.tasks:
             self.left[task.flight] = self.left.get(task.flight, 0) + 1
 
@@ -190,6 +194,7 @@ class _Run:
             partitions=sum(t.flight == k for t in self.tasks),
             cached=self.cached.get(k, 0),
             elapsed=time.monotonic() - self.t0,
+            anchor=self.map_anchor,
         )
 
     def abort(self) -> None:
@@ -209,6 +214,7 @@ def _flight_outputs(
     partitions: int,
     cached: int,
     elapsed: float,
+    anchor: tuple[float, float, float] | None = None,
 ) -> FlightResult:
     holes = tuple(fl.holes()) if fl is not None else ()
     confirmed = tuple(h for h in holes if h.sightings >= opts.min_sightings)
@@ -262,6 +268,22 @@ def _flight_outputs(
     if fl is not None:
         got = fl.views({h.id for h in confirmed})
         views = {hid: (v.rgb, v.depth, v.box_in_crop) for hid, v in got.items()}
+    mapped = None
+    if fl is not None and anchor is not None:
+        mapped = flight_map_outputs(
+            out,
+            plan.name,
+            fl.map_parts,
+            anchor,
+            confirmed,
+            opts,
+            track=fl.track,
+            home=fl.home(),
+            boot_to_unix_ns=fl.boot_to_unix_ns,
+            pose_gap_m=fl.pose_gap_m,
+            map_s=fl.map_s,
+            map_frames=fl.map_frames,
+        )
     files = write_hole_outputs(
         out,
         plan.name,
@@ -273,10 +295,19 @@ def _flight_outputs(
         boot_to_unix_ns=fl.boot_to_unix_ns if fl is not None else None,
         facts=facts,
         title=f"holescan reprocessed flight: {plan.name}",
+        search_map=mapped.section if mapped else None,
+        overlay=mapped.overlay if mapped else None,
     )
     summary_path = out / f"{plan.name}_reprocess.json"
+    if mapped is not None:
+        files += mapped.files
     files.append(("summary", summary_path))
-    result = dataclasses.replace(result, files=tuple(files))
+    result = dataclasses.replace(
+        result,
+        files=tuple(files),
+        map_summary=mapped.summary if mapped else {},
+        map_lines=mapped.lines if mapped else (),
+    )
     _write_json(summary_path, result.summary())
     return result
 
@@ -320,7 +351,20 @@ def _campaign_outputs(run: _Run, holes: list[CampaignHole]) -> list[tuple[str, P
             f"{c['track_duration_s'] / 60:.1f} min; {c['holes_seen']} holes seen "
             f"({c['also_seen_by_another_flight']} also by another flight)"
         )
-    return write_hole_outputs(
+    mapped = None
+    if run.map_anchor is not None:
+        mapped = flight_map_outputs(
+            run.out,
+            "campaign",
+            [p for k in sorted(run.mergers) for p in run.mergers[k].map_parts],
+            run.map_anchor,
+            confirmed,
+            run.opts,
+            track=track,
+            home=homes[0] if homes else None,
+            boot_to_unix_ns=0,
+        )
+    files = write_hole_outputs(
         run.out,
         "campaign",
         confirmed,
@@ -332,7 +376,10 @@ def _campaign_outputs(run: _Run, holes: list[CampaignHole]) -> list[tuple[str, P
         facts=facts,
         track_breaks=breaks,
         title="holescan campaign: " + ", ".join(p.name for p in run.plans),
+        search_map=mapped.section if mapped else None,
+        overlay=mapped.overlay if mapped else None,
     )
+    return files + list(mapped.files if mapped else ())
 
 
 def _execute(

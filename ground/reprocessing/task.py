@@ -41,7 +41,9 @@ from holescan.capture import (
 from holescan.detect import Detection, detect_holes
 from holescan.errors import NoDepthError
 from holescan.geotag import VehiclePose
+from holescan.ground.reprocessing.mapchunk import MapFrame, fuse_frames
 from holescan.ground.reprocessing.plan import FRAME_TOPICS, TASK_TOPICS, PartitionTask
+from holescan.mapping import MapLayers
 
 __all__ = ["FrameResult", "PartitionResult", "View", "best_view", "run_partition"]
 
@@ -89,6 +91,8 @@ class PartitionResult:
     incomplete_frames : frames of this partition missing an image part.
     read_s, detect_s : time reading+decoding / detecting. worker : host:pid.
     peak_rss_mib : the worker process's peak resident memory so far.
+    map : the window of the search map this partition's frames saw (None: no map asked
+    for, or nothing posed); map_frames : frames fused; map_s : time fusing.
     """
 
     key: str
@@ -102,6 +106,9 @@ class PartitionResult:
     detect_s: float
     worker: str
     peak_rss_mib: float
+    map: MapLayers | None = None
+    map_frames: int = 0
+    map_s: float = 0.0
 
 
 def _crop(rgb: npt.NDArray[np.uint8], depth: npt.NDArray[np.uint16], box: Box) -> View:
@@ -203,16 +210,28 @@ def run_partition(task: PartitionTask) -> PartitionResult:
     pending: dict[int, dict[str, Any]] = {}
     detect_s = 0.0
     frames = 0
+    to_map: list[MapFrame] = []
     for pos, ch, msg in selected:
         for rec in decode_messages([(ch, msg)], task.layout, pending):
             if isinstance(rec, LoggedFrame):
                 frames += 1
+                if (
+                    task.map_anchor is not None
+                    and rec.pose is not None
+                    and rec.frame.index % task.map_every == 0
+                ):
+                    to_map.append(MapFrame(rec.frame.depth, rec.frame.rgb, rec.pose))
                 r = _detect(task, rec, pos)
                 detect_s += r.detect_ms / 1000.0
                 events.append((pos, r))
             elif isinstance(rec, LoggedMavlink | LoggedPose | LoggedDetections | LoggedHoles):
                 events.append((pos, rec))
     events.sort(key=lambda e: e[0])
+    m0 = time.perf_counter()
+    window = None
+    if task.map_anchor is not None:
+        window = fuse_frames(to_map, task.camera, task.mount, task.map_anchor, task.map_cell_m)
+    map_s = time.perf_counter() - m0
     peak_kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     return PartitionResult(
         key=task.key,
@@ -222,10 +241,13 @@ def run_partition(task: PartitionTask) -> PartitionResult:
         frames=frames,
         damaged=tuple(f"{task.url}: {d}" for d in damaged),
         incomplete_frames=len(pending),
-        read_s=time.perf_counter() - t0 - detect_s,
+        read_s=time.perf_counter() - t0 - detect_s - map_s,
         detect_s=detect_s,
         worker=f"{socket.gethostname()}:{os.getpid()}",
         peak_rss_mib=peak_kib / 1024.0,
+        map=window,
+        map_frames=len(to_map),
+        map_s=map_s,
     )
 
 

@@ -13,6 +13,8 @@ vehicle's MAVLink stream (MAVProxy ``--out``, a UDP port or a serial radio):
   longer of such a tier, withdrawn; :mod:`ground.station.cot`, the link
   :mod:`ground.station.tak`), the live page (:mod:`ground.station.web`, Server-Sent
   Events);
+* the live map's tiles (coverage, orthophoto) kept in ``DIR/map/``
+  (:mod:`ground.station.mapstore`) and drawn on the page (:mod:`ground.station.maplayers`);
 * every ``cot_refresh_s`` all holes are sent to TAK again (markers outlive their stale
   time only while the station runs).
 """
@@ -32,6 +34,7 @@ from holescan.ground.station.cot import hole_cot, hole_tier, on_tak, withdraw_co
 from holescan.ground.station.datapackage import DATAPACKAGE_NAME, write_datapackage
 from holescan.ground.station.files import write_station_files
 from holescan.ground.station.link import VehicleLink
+from holescan.ground.station.mapstore import MapStore
 from holescan.ground.station.state import GroundHole, StationState
 from holescan.ground.station.tak import DEFAULT_COT_URL, CotPublisher, TakTls, tak_settings
 from holescan.ground.station.web import StationWeb
@@ -101,6 +104,7 @@ class GroundStation:
         opts.check()  # the options first: a bad one creates nothing
         self._tak = tak_settings(opts.cot_url, opts.cot_tls) if opts.cot_url is not None else None
         self.state = StationState.open(opts.out)
+        self.map_store = MapStore.open(opts.out / "map")
         self._stack = contextlib.ExitStack()
         self._sent: dict[int, tuple[object, ...]] = {}
         self._on_tak: set[int] = set()
@@ -122,6 +126,7 @@ class GroundStation:
                         o.http_host,
                         o.http_port,
                         on_mark=self.mark,
+                        map_store=self.map_store,
                         names=o.http_names,
                     )
                 )
@@ -139,6 +144,7 @@ class GroundStation:
                     sysid=o.sysid,
                     baud=o.baud,
                     silence_s=o.silence_s,
+                    map_store=self.map_store,
                     signing=o.signing,
                 )
             )

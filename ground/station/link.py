@@ -6,7 +6,8 @@ or a serial radio, :class:`VehicleLink` (one thread) takes from the stream:
 * ``STATUSTEXT`` ``HOLE <id> <score> <lat> <lon>`` from the companion computer: a hole,
   at once;
 * the image transmission protocol from component 191 (``DATA_TRANSMISSION_HANDSHAKE`` +
-  ``ENCAPSULATED_DATA``): hole cards, picture and facts (:func:`missions.read_card`);
+  ``ENCAPSULATED_DATA``): hole cards, picture and facts (:func:`missions.read_card`), and
+  the live map's tiles (:func:`missions.is_map_tile`), kept in the ``map_store``;
 * ``GLOBAL_POSITION_INT`` / ``ATTITUDE`` from the autopilot: the track (1 point/s kept),
   decoded by capture's one MAVLink adapter (:func:`capture.position_from_global_position_int`);
 * the hole mission of component 191, downloaded by this thread itself (the MAVLink
@@ -15,10 +16,12 @@ or a serial radio, :class:`VehicleLink` (one thread) takes from the stream:
   hole and every ``mission_period_s``, without stopping the other traffic.
 
 After a silence longer than ``silence_s`` (a cut radio, a restarted MAVProxy) or at start,
-it asks component 191 for every card again (DATA_TRANSMISSION_HANDSHAKE with size 0), and
-also when the mission has waypoints no known hole explains: holes announced while the
-link was down are caught up. A link that cannot be opened, dies or delivers garbage is
-reported in one log line and retried; nothing collected is lost (it is in the state).
+it asks component 191 for every card again (DATA_TRANSMISSION_HANDSHAKE with size 0),
+first saying which live-map tiles it holds (:func:`missions.send_inventory`: only the
+others are sent again), and also when the mission has waypoints no known hole explains:
+holes announced while the link was down are caught up. A link that cannot be opened,
+dies or delivers garbage is reported in one log line and retried; nothing collected is
+lost (it is in the state).
 """
 
 from __future__ import annotations
@@ -32,14 +35,17 @@ from collections.abc import Callable
 from typing import Any
 
 from holescan.capture import position_from_global_position_int
+from holescan.ground.station.mapstore import MapStore
 from holescan.ground.station.state import StationState, TrackPoint
 from holescan.missions import (
     CardAssembler,
     MavConnection,
     SigningKey,
+    is_map_tile,
     mavlink,
     open_link,
     read_card,
+    send_inventory,
     waypoint_from_mission_item,
 )
 
@@ -72,6 +78,7 @@ class VehicleLink:
         ``MAV_COMP_ID_MISSIONPLANNER`` by default).
     clock : monotonic seconds, for the link's timeouts (the track's times are the state's
         Unix clock).
+    map_store : where the live map's tiles go (None: they are ignored).
     signing : MAVLink 2 signing key shared with the vehicle (None: unsigned). With one,
         what this link sends is signed and every unsigned or badly signed packet is
         dropped: a forger's HOLE STATUSTEXT, cards and mission items are never seen.
@@ -89,9 +96,12 @@ class VehicleLink:
         silence_s: float = 3.0,
         mission_period_s: float = 30.0,
         clock: Callable[[], float] = time.monotonic,
+        map_store: MapStore | None = None,
         signing: SigningKey | None = None,
     ) -> None:
         self.connection = connection
+        self.map_store = map_store
+        self.tiles_received = 0
         self.signing = signing
         self.state = state
         self.sysid = sysid
@@ -238,7 +248,11 @@ class VehicleLink:
                 self._next_mission = min(self._next_mission, now + 3.0)
         elif kind in ("DATA_TRANSMISSION_HANDSHAKE", "ENCAPSULATED_DATA") and comp == _COMPANION:
             card = self.cards.add(msg)
-            if card is not None:
+            if card is not None and is_map_tile(card):
+                self.tiles_received += 1
+                if self.map_store is not None:
+                    self.map_store.put(card)
+            elif card is not None:
                 facts = read_card(card)
                 if facts is None:
                     self.bad += 1
@@ -271,6 +285,9 @@ class VehicleLink:
 
     def _request_cards(self) -> None:
         self.resync_requests += 1
+        inv = self.map_store.inventory() if self.map_store is not None else None
+        if inv is not None:  # first what it holds: only the other tiles come again
+            self._send(lambda mav: send_inventory(mav, inv))
         self._send(
             lambda mav: mav.data_transmission_handshake_send(
                 mavlink.MAVLINK_DATA_STREAM_IMG_JPEG, 0, 0, 0, 0, 0, 0

@@ -46,6 +46,9 @@ from holescan.ground.station.guard import (
     StationToken,
     default_names,
 )
+from holescan.ground.station.mapcombine import CombinedCache
+from holescan.ground.station.maplayers import Reply, map_route
+from holescan.ground.station.mapstore import MapStore
 from holescan.ground.station.state import MARKS, GroundHole, StationState
 from holescan.ground.station.webserver import make_server
 from holescan.missions import XTION, Camera
@@ -141,7 +144,8 @@ class StationWeb:
     :meth:`mark` wrote it to the audit trail. port 0 picks a free port (see :attr:`url`).
     token : the secret for changes (default: the folder's, :meth:`StationToken.load_or_create`).
     names : host names the page is served as, besides its addresses (default: this
-    machine's hostname and HOSTNAME.local). limits : the request bounds.
+    machine's hostname and HOSTNAME.local). limits : the request bounds. map_store : the
+    live map's tiles (:mod:`ground.station.maplayers`; None: no map).
     """
 
     def __init__(
@@ -154,8 +158,11 @@ class StationWeb:
         token: StationToken | None = None,
         names: Iterable[str] | None = None,
         limits: Limits | None = None,
+        map_store: MapStore | None = None,
     ) -> None:
         self.state = state
+        self.map_store = map_store
+        self._map_cache = CombinedCache(map_store) if map_store is not None else None
         self.on_mark = on_mark or state.mark
         self.token = token or StationToken.load_or_create(state.folder)
         self.names = tuple(default_names() if names is None else names)
@@ -223,6 +230,10 @@ class StationWeb:
     def card(self, hole_id: int) -> bytes:
         """A hole's picture (raises OSError when there is none)."""
         return self.state.card_path(hole_id).read_bytes()
+
+    def map_reply(self, path: str, query: str) -> Reply | None:
+        """The live map's answer to a GET of ``path`` (None: not a map path)."""
+        return map_route(self.map_store, path, query, self._map_cache)
 
     def _changed(self, version: int) -> None:
         with self._cond:

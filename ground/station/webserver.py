@@ -3,8 +3,9 @@
 stdlib :mod:`http.server`, one thread per connection, HTTP/1.0 (one request per
 connection). :func:`make_server` serves a :class:`Site` (what the page shows and changes;
 :class:`~ground.station.web.StationWeb` is the one site): ``GET /``, ``/static/NAME.js``,
-``/state.json``, ``/events``, ``/cards/hole-ID.jpg``; ``POST /holes/ID/mark``. The checks,
-in order, each answered with a 4xx that touches nothing: one ``Host`` (and at most one
+``/state.json``, ``/events``, ``/cards/hole-ID.jpg``, the live map's ``/map.json`` and
+``/map/...`` (:meth:`Site.map_reply`, read-only like the state); ``POST /holes/ID/mark``.
+The checks, in order, each answered with a 4xx that touches nothing: one ``Host`` (and at most one
 ``Origin``) header, the Host names the station (403), the request is not cross-site (403),
 the client's rate (429), the method (405) and path (404); for a mark: a ``Content-Length``
 (411) within the body bound (413), the station token (401), a JSON body (415, 400), a known
@@ -76,6 +77,8 @@ class Site(Protocol):
     def state_json(self, can_mark: bool) -> bytes: ...
 
     def card(self, hole_id: int) -> bytes: ...
+
+    def map_reply(self, path: str, query: str) -> tuple[int, bytes, str] | None: ...
 
     def mark(self, hole_id: int, mark: str, operator: object, client: str) -> GroundHole: ...
 
@@ -257,7 +260,7 @@ def _handler(web: Site) -> type[BaseHTTPRequestHandler]:
                 self._refuse(405, "GET or POST only", {"Allow": "GET, POST"})
 
         def _get(self) -> None:
-            path = self.path.split("?", 1)[0]
+            path, _, query = self.path.partition("?")
             web.deadlines.release(self.connection)
             static = _STATIC.fullmatch(path)
             if path in ("/", "/index.html"):
@@ -278,6 +281,12 @@ def _handler(web: Site) -> type[BaseHTTPRequestHandler]:
                     self._refuse(404, "no such picture")
                     return
                 self._reply(200, data, "image/jpeg", {"Cache-Control": "private, max-age=3600"})
+            elif (mapped := web.map_reply(path, query)) is not None:
+                code, body, ctype = mapped  # the live map's layers (maplayers.py)
+                if code >= 400:
+                    self._refuse(code, body.decode("utf-8", "replace"))
+                else:
+                    self._reply(code, body, ctype)
             else:
                 self._refuse(404, "not found")
 

@@ -101,6 +101,30 @@ def add_engine_arguments(p: argparse.ArgumentParser, default_out: str) -> None:
         help=f"hole file format, repeatable: {', '.join(HOLE_FORMATS)} "
         "(default: gpx, kml, geojson, plan)",
     )
+    p.add_argument(
+        "--map-cell",
+        type=float,
+        default=0.02,
+        metavar="M",
+        help="search map cells, metres (default 0.02); 0 = no map (no ortho/dsm/coverage/"
+        "kmz/gaps/re-fly files)",
+    )
+    p.add_argument(
+        "--map-every", type=int, default=3, metavar="N", help="fuse every N-th frame (default 3)"
+    )
+    p.add_argument(
+        "--gap-threshold",
+        type=float,
+        default=0.5,
+        metavar="P",
+        help="coverage below which the map's cells are gaps (default 0.5)",
+    )
+    p.add_argument(
+        "--area",
+        metavar="AREA.geojson",
+        help="the planned area (as `holescan plan` takes it): gaps and the searched fraction "
+        "within it (default: the hull of what was seen)",
+    )
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -124,6 +148,7 @@ def options(args: argparse.Namespace) -> ReprocessOptions:
 
     from holescan.detect import DEFAULT, PAPER
     from holescan.ground import ReprocessOptions
+    from holescan.missions import read_area
 
     params = (PAPER if args.mode == "paper" else DEFAULT).with_searcher(args.searcher)
     if args.min_score is not None:
@@ -136,6 +161,10 @@ def options(args: argparse.Namespace) -> ReprocessOptions:
         frames=args.frames,
         min_sightings=args.min_sightings,
         cache=not args.no_cache,
+        map_cell_m=args.map_cell if args.map_cell > 0 else None,
+        map_every=args.map_every,
+        gap_threshold=args.gap_threshold,
+        area=read_area(args.area) if args.area else None,
     )
     if args.formats:
         opts = dataclasses.replace(opts, formats=tuple(dict.fromkeys(args.formats)))

@@ -99,6 +99,12 @@ def test_printed_score_is_the_truth(demo: tuple[Path, str]) -> None:
     assert found >= 1  # the demo's short run over the small field finds holes
     doc = json.loads((out / "demo.json").read_text())
     assert (doc["found"], doc["missed"], doc["false"]) == (found, missed, false)
+    # The search map: the searched fraction, and why each true hole not found was missed.
+    m = re.search(r"search map: ([\d.]+)% of the planned (\d+) m2 searched", text)
+    assert m is not None and abs(float(m[1]) / 100 - doc["searched_fraction"]) < 1e-3
+    assert int(m[2]) == SIZE[0] * SIZE[1]
+    why = re.findall(r"the search map: (in a gap|seen and not detected) \(coverage ([\d.]+)", text)
+    assert len(why) == len(rows) - found == len(doc["missed_why"])
 
 
 def test_flight_log_ground_station_and_files(demo: tuple[Path, str]) -> None:
@@ -120,6 +126,10 @@ def test_flight_log_ground_station_and_files(demo: tuple[Path, str]) -> None:
     assert {int(t.split()[1]) for t in told} >= set(review)
     assert doc["mission_items"] == confirmed
     assert f"downloaded a mission of {confirmed} hole waypoints" in text
+    # the live map flew too: its tiles reached the ground station's store, on disk
+    tiles = doc["map_tiles_at_ground"]
+    assert tiles >= 2 and f"{tiles} live-map tiles" in text
+    assert len(list((out / "ground" / "map").glob("m*-cov-*.png"))) * 2 >= tiles
     files = doc["files"]
     gpx = gpxpy.parse(Path(files["gpx"]).read_text())
     assert len(gpx.waypoints) == confirmed + len(review)
@@ -134,7 +144,9 @@ def test_flight_log_ground_station_and_files(demo: tuple[Path, str]) -> None:
         assert "for review (sent to the ground with their pictures" in text
     page = Path(files["report"]).read_text()
     shown = confirmed + len(review)
-    assert page.count("true hole") >= 4 and page.count("data:image/png;base64,") == 2 * shown
+    # Two pictures per hole shown, and the search map's coverage layer.
+    assert page.count("true hole") >= 4 and page.count("data:image/png;base64,") == 2 * shown + 1
+    assert "Search map" in page
     for path in files.values():
         assert str(out) in path
     assert f"holescan reprocess {logs[0]}" in text

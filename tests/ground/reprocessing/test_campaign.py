@@ -6,10 +6,12 @@ from __future__ import annotations
 
 import json
 import math
+import zipfile
 from pathlib import Path
 
 import pymap3d
 import pytest
+import rasterio
 
 from holescan import cli
 from holescan.capture import FlightSummary
@@ -84,8 +86,21 @@ def test_a_hole_seen_on_both_sorties_is_one_hole(
 
 def test_campaign_files_and_summary(campaign: ReprocessResult) -> None:
     kinds = dict(campaign.files)
-    assert set(kinds) == {"gpx", "kml", "geojson", "plan", "datapackage", "report"}
+    holes = {"gpx", "kml", "geojson", "plan", "datapackage", "report"}
+    maps = {"ortho", "dsm", "coverage", "map", "gaps"}
+    assert holes | maps <= set(kinds) <= holes | maps | {"refly.plan", "refly.waypoints"}
     out = campaign.summary_path.parent
+
+    # The campaign's map is both flights' together: it saw at least what each saw.
+    def seen_m2(path: Path) -> float:
+        with rasterio.open(path) as ds:
+            return float((ds.read(1) > 0).sum()) * abs(ds.transform.a * ds.transform.e)
+
+    both = seen_m2(kinds["coverage"])
+    each = [seen_m2(out / n / f"{n}_coverage.tif") for n in ("sortie", "second")]
+    assert both >= max(each) and both <= sum(each) + 1.0, (both, each)
+    with zipfile.ZipFile(kinds["datapackage"]) as z:
+        assert any(n.endswith("campaign_map.kmz") for n in z.namelist())
     assert kinds["datapackage"] == out / "campaign_holes_datapackage.zip"
     assert kinds["gpx"] == out / "campaign_holes.gpx"
     geo = json.loads(kinds["geojson"].read_text())

@@ -20,10 +20,12 @@ from pathlib import Path
 
 import pymap3d
 import pytest
+import rasterio
 from mcap.reader import make_reader
+from rasterio.warp import transform as warp_transform
 
 from holescan import cli
-from holescan.capture import FlightSummary, log_info
+from holescan.capture import FlightSummary, LoggedFrame, log_info, read_flight_log
 from holescan.detect import DetectParams
 from holescan.errors import InputError
 from holescan.geotag import Hole
@@ -66,6 +68,9 @@ def same_holes(a: tuple[Hole, ...], b: tuple[Hole, ...], tol_m: float) -> None:
         assert x.sightings == y.sightings and x.best_frame_index == y.best_frame_index
 
 
+REFLY = {"refly.plan", "refly.waypoints"}
+
+
 @pytest.fixture(scope="module")
 def reference(flight: Flown, tmp_path_factory: pytest.TempPathFactory) -> ReprocessResult:
     """Every frame, in this process (no cluster), no cache."""
@@ -97,7 +102,9 @@ def test_in_process_run_reads_every_frame_and_writes_a_sidecar(
     info = log_info(path)  # every CRC; summary counts against the content
     assert not info.truncated and info.metadata["ground.reprocess"]["frames"] == "all"
     kinds = dict(f.files)
-    assert set(kinds) == {"gpx", "kml", "geojson", "plan", "datapackage", "report", "summary"}
+    hole_files = {"gpx", "kml", "geojson", "plan", "datapackage", "report", "summary"}
+    map_files = {"ortho", "dsm", "coverage", "map", "gaps"}
+    assert hole_files | map_files <= set(kinds) <= hole_files | map_files | REFLY
     assert kinds["kml"].read_text().count("data:image/jpeg;base64,") == len(f.confirmed)
     with zipfile.ZipFile(kinds["datapackage"]) as z:  # every confirmed hole + its picture
         names = z.namelist()
@@ -108,6 +115,36 @@ def test_in_process_run_reads_every_frame_and_writes_a_sidecar(
         assert ev.get("uid", "").startswith("holescan-sortie-hole-")
     doc = json.loads(reference.summary_path.read_text())
     assert doc["flights"][0] == json.loads(kinds["summary"].read_text())
+
+
+def test_the_search_map_lies_under_the_flight(flight: Flown, reference: ReprocessResult) -> None:
+    (f,) = reference.flights
+    kinds = dict(f.files)
+    m = f.map_summary
+    assert m["frames_fused"] >= f.frames_read // 3 - f.partitions
+    assert 0.2 < m["searched_fraction"] <= 1.0 and m["area_source"] == "hull of the cells seen"
+    assert m["pose_gap_m_max"] is not None and m["pose_gap_m_max"] < 0.1
+    with rasterio.open(kinds["coverage"]) as cov:
+        assert cov.crs.is_projected and cov.crs.to_epsg() // 100 in (326, 327)
+        c = cov.read(1)
+        assert c.min() >= 0.0 and c.max() <= 1.0 and (c >= 0.5).mean() > 0.1
+        # Every confirmed hole whose best view was logged with a pose (the map places
+        # frames by it; reprocessing also poses the first frames, logged before the
+        # clocks were synchronised) lies on the map, next to a cell that was looked at.
+        files, _ = flight
+        posed = {
+            rec.frame.index
+            for rec in read_flight_log(files, kinds={LoggedFrame})
+            if isinstance(rec, LoggedFrame) and rec.pose is not None
+        }
+        placed = [h for h in f.confirmed if h.best_frame_index in posed]
+        for h in placed:
+            xs, ys = warp_transform("EPSG:4326", cov.crs, [h.lon_deg], [h.lat_deg])
+            r, col = cov.index(xs[0], ys[0])
+            near = c[max(r - 10, 0) : r + 11, max(col - 10, 0) : col + 11]  # within 0.2 m
+            assert near.max() > 0.0, h
+    report = kinds["report"].read_text()
+    assert "Search map" in report and "same errors" in report
 
 
 def test_flight_frames_reproduce_the_flights_holes(flight: Flown, tmp_path: Path) -> None:
@@ -364,13 +401,23 @@ def test_cli(flight: Flown, tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
     files, _ = flight
     out = tmp_path / "cli"
     argv = ["reprocess", str(files[0]), "--out", str(out), "--workers", "0"]
-    rc = cli.main([*argv, "--searcher", "dog", "-f", "gpx", "--partition-mib", "0.2"])
+    out.mkdir()
+    (out / "sortie_map.kmz").write_bytes(b"an earlier run's map")  # not this run's: left out
+    rc = cli.main(
+        [*argv, "--searcher", "dog", "-f", "gpx", "--partition-mib", "0.2", "--map-cell", "0"]
+    )
     text = capsys.readouterr()
     assert rc == 0, text.err
     assert "frames/s" in text.out and "summary:" in text.out
     doc = json.loads((out / "summary.json").read_text())["flights"][0]
+    # --map-cell 0: no search map, so no map files.
     holes = {"gpx", "datapackage"} if doc["confirmed"] else set()  # the package: always
     assert set(doc["files"]) == {"report", "summary"} | holes
+    assert doc["map"] == {}
+    if "datapackage" in doc["files"]:
+        with zipfile.ZipFile(doc["files"]["datapackage"]) as z:
+            assert not [n for n in z.namelist() if n.endswith(".kmz")]
+    assert (out / "sortie_map.kmz").read_bytes() == b"an earlier run's map"
     meta = log_info(out / "sortie_reprocess.mcap").metadata["ground.reprocess"]
     assert json.loads(meta["params"])["searcher"]["name"] == "dog"
     assert cli.main(["reprocess", str(tmp_path / "nope.mcap"), "--out", str(out)]) == 2

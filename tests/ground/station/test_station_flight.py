@@ -1,12 +1,16 @@
 """A simulated flight to the ground crew with real parts in between.
 
 ``holescan fly --sensor sim --gcs udpout:...`` (simulated autopilot, Xtion, daemon, hole
-server) -> the real MAVProxy (``--master udpin`` ``--out udpout``) -> a UDP relay that cuts
-the link for 10 s mid-flight -> ``holescan ground`` (a separate process) -> CoT over UDP
-to a real pytak client (TAK protocol v1, decoded by takproto) and the live page in headless
-Chromium (driven over the DevTools protocol: it must show a new hole within 2 s of the
-vehicle's announcement; a click on "confirmed" in the browser paired with the station's
-token must reach the state, TAK and the KML).
+server) -> :class:`AutopilotRouter` (the autopilot's routing, as ArduPilot forwards its
+companion's TELEM2 on the radio: the companion's packets and the autopilot's own
+HEARTBEAT, GLOBAL_POSITION_INT and ATTITUDE on one link; without it MAVProxy hears no
+autopilot and the page's track stays empty) -> the real MAVProxy (``--master udpin``
+``--out udpout``) -> a UDP relay that cuts the link for 10 s mid-flight -> ``holescan
+ground`` (a separate process) -> CoT over UDP to a real pytak client (TAK protocol v1,
+decoded by takproto) and the live page in headless Chromium (driven over the DevTools
+protocol: it must show a new hole within 2 s of the vehicle's announcement; a click on
+"confirmed" in the browser paired with the station's token must reach the state, TAK and
+the KML; the autopilot's track and the camera's footprints must reach the page).
 
 The screenshot is kept (``HOLESCAN_ARTEFACTS`` folder if set, else the test's tmp dir).
 """
@@ -19,8 +23,10 @@ import os
 import re
 import shutil
 import signal
+import socket
 import subprocess
 import sys
+import threading
 import time
 import urllib.request
 from pathlib import Path
@@ -28,6 +34,8 @@ from typing import Any
 
 import pytest
 from test_station import PytakReceiver, Relay, free_port, parse_tak, wait_for
+
+from holescan.missions import mavlink
 
 CHROMIUM = Path("/usr/bin/chromium")
 ROOT = Path(__file__).resolve().parents[3]
@@ -41,6 +49,93 @@ world_seed = 15
 n_access_holes = 4
 fps = 10.0
 """
+
+
+class AutopilotRouter:
+    """The radio link as the autopilot makes it: the companion's packets (``port``) go on
+    to MAVProxy and back, and the autopilot (system 1, component 1) adds its own
+    telemetry: HEARTBEAT at 1 Hz, GLOBAL_POSITION_INT and ATTITUDE at 4 Hz, flying a
+    line north-east at 3 m over the simulator's home."""
+
+    def __init__(self, mavproxy_port: int) -> None:
+        self.to = ("127.0.0.1", mavproxy_port)
+        self.inp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.inp.bind(("127.0.0.1", 0))
+        self.inp.settimeout(0.1)
+        self.port = int(self.inp.getsockname()[1])
+        self.out = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.out.bind(("127.0.0.1", 0))
+        self.out.settimeout(0.1)
+        self.companion: tuple[str, int] | None = None
+        self.sent_positions = 0
+        self._mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+        self._stop = threading.Event()
+        self._threads = [
+            threading.Thread(target=self._up, daemon=True),
+            threading.Thread(target=self._down, daemon=True),
+            threading.Thread(target=self._telemetry, daemon=True),
+        ]
+        for t in self._threads:
+            t.start()
+
+    def _up(self) -> None:
+        while not self._stop.is_set():
+            try:
+                data, addr = self.inp.recvfrom(65535)
+            except (TimeoutError, OSError):
+                continue
+            self.companion = addr
+            self.out.sendto(data, self.to)
+
+    def _down(self) -> None:
+        while not self._stop.is_set():
+            try:
+                data, _ = self.out.recvfrom(65535)
+            except (TimeoutError, OSError):
+                continue
+            if self.companion is not None:
+                self.inp.sendto(data, self.companion)
+
+    def _telemetry(self) -> None:
+        t0 = time.monotonic()
+        k = 0
+        while not self._stop.wait(0.25):
+            t = time.monotonic() - t0
+            ms = int(t * 1000)
+            msgs = [
+                self._mav.attitude_encode(ms, 0.0, 0.0, 0.785, 0.0, 0.0, 0.0),
+                self._mav.global_position_int_encode(
+                    ms,
+                    int((43.6532 + 0.2e-5 * t) * 1e7),
+                    int((-79.3832 + 0.3e-5 * t) * 1e7),
+                    123_000,
+                    3_000,
+                    20,
+                    20,
+                    0,
+                    4500,
+                ),
+            ]
+            if k % 4 == 0:
+                msgs.append(
+                    self._mav.heartbeat_encode(
+                        mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, 4
+                    )
+                )
+            k += 1
+            for m in msgs:
+                try:
+                    self.out.sendto(m.pack(self._mav), self.to)
+                except OSError:
+                    return
+            self.sent_positions += 1
+
+    def close(self) -> None:
+        self._stop.set()
+        for t in self._threads:
+            t.join(timeout=2.0)
+        self.inp.close()
+        self.out.close()
 
 
 def holescan(*args: str, log: Path) -> subprocess.Popen[str]:
@@ -164,6 +259,7 @@ def test_flight_mavproxy_ground_page_tak(tmp_path: Path) -> None:
     relay = Relay(ground_port)
     relay_in = relay.port
     rx = PytakReceiver(f"udp+ro://127.0.0.1:{cot}")
+    router = AutopilotRouter(gcs)
     station_dir = tmp_path / "station"
     ground = holescan(
         "ground",
@@ -215,7 +311,7 @@ def test_flight_mavproxy_ground_page_tak(tmp_path: Path) -> None:
             "--log-dir",
             str(tmp_path / "logs"),
             "--gcs",
-            f"udpout:127.0.0.1:{gcs}",
+            f"udpout:127.0.0.1:{router.port}",
             "--duration",
             "75",
             log=tmp_path / "fly.log",
@@ -276,6 +372,12 @@ def test_flight_mavproxy_ground_page_tak(tmp_path: Path) -> None:
             5.0,
             "the page to show the mark",
         )
+        # the autopilot's telemetry through MAVProxy: the track and the camera's footprints
+        with urllib.request.urlopen(page + "state.json", timeout=5) as r:
+            doc = json.loads(r.read())
+        assert router.sent_positions > 100
+        assert len(doc["track"]) >= 20 and len(doc["footprints"]) >= 5, len(doc["track"])
+        print("track points on the page:", len(doc["track"]), "footprints:", len(doc["footprints"]))
         browser.screenshot(art / "ground-station.png")
         assert (art / "ground-station.png").stat().st_size > 10_000
         # the pictures stayed inside the byte budget
@@ -296,6 +398,7 @@ def test_flight_mavproxy_ground_page_tak(tmp_path: Path) -> None:
             mav.kill()
         rx.close()
         relay.close()
+        router.close()
     log = (tmp_path / "ground.log").read_text()
     assert "Traceback" not in log, log[-3000:]
 

@@ -1,0 +1,168 @@
+"""The live page's map layers: orthophoto and coverage tiles, served from the map store.
+
+One route function, :func:`map_route`, that the page's HTTP handler calls first for every
+GET (kept apart from :mod:`ground.station.web` so that the map is one clearly separated
+piece of the server):
+
+* ``GET /static/maplayers.js`` the page's map-layer script (``maplayers.js``, no CDN;
+  the path a generic ``/static/NAME.js`` route serves it under too);
+* ``GET /map.json?lat=..&lon=..`` every place of the combined map
+  (:mod:`ground.station.mapcombine`: all flights on the first one's grid), its corners in
+  the page's local metres (:class:`geotag.LocalFrame` at the page's origin ``lat``/``lon``,
+  the state document's ``origin``; without them, the first map's own origin) and where to
+  fetch its two layers;
+* ``GET /map/all/cov-<tx>_<ty>.png`` and ``/map/all/ortho-<tx>_<ty>.png`` a combined tile
+  for the page (RGBA PNG: coverage seen green / not seen red, translucent; the orthophoto
+  of the best look, transparent where no flight saw);
+* ``GET /map/<file>`` a tile as received (coverage PNG, orthophoto JPEG);
+* ``GET /map/view/<file>`` a coverage tile coloured for the page: seen cells green, cells
+  of the tile not seen red (both translucent), RGBA PNG.
+
+Every request is hostile: file names are looked up in the store's list (never opened as
+given), numbers are parsed and range-checked, anything else is 404 / 400.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from importlib import resources
+from urllib.parse import parse_qs
+
+import cv2
+import numpy as np
+
+from holescan.geotag import LocalFrame
+from holescan.ground.station.mapcombine import CombinedCache, combined_places
+from holescan.ground.station.mapstore import MapStore
+from holescan.missions import read_tile
+
+__all__ = ["Reply", "coverage_view_png", "map_document", "map_route"]
+
+Reply = tuple[int, bytes, str]
+_ALL = re.compile(r"/map/all/(cov|ortho)-(-?\d{1,7})_(-?\d{1,7})\.png")
+_NAME = re.compile(r"m\d{1,10}-(cov|ortho)--?\d{1,7}_-?\d{1,7}\.(png|jpg)")
+_SEEN_RGBA = (46, 125, 50, 45)
+_UNSEEN_RGBA = (211, 47, 47, 110)
+
+
+def coverage_view_png(levels: np.ndarray) -> bytes:
+    """A coverage tile's levels (n, n) uint8 -> RGBA PNG: seen green, not seen red."""
+    seen = levels > 0
+    rgba = np.empty((*levels.shape, 4), np.uint8)
+    rgba[seen] = _SEEN_RGBA
+    rgba[~seen] = _UNSEEN_RGBA
+    bgra = rgba[..., [2, 1, 0, 3]]
+    ok, buf = cv2.imencode(".png", np.ascontiguousarray(bgra))
+    if not ok:  # cannot happen for a uint8 image; say so rather than serve garbage
+        raise ValueError("PNG encoding failed")
+    return bytes(buf.tobytes())
+
+
+def _png(rgba: np.ndarray) -> bytes:
+    ok, buf = cv2.imencode(".png", np.ascontiguousarray(rgba[..., [2, 1, 0, 3]]))
+    if not ok:
+        raise ValueError("PNG encoding failed")
+    return bytes(buf.tobytes())
+
+
+def _combined_tile(cache: CombinedCache, layer: str, tx: int, ty: int) -> bytes | None:
+    combined = cache.get()
+    if combined is None:
+        return None
+    if layer == "cov":
+        cov = combined.tile("cov", tx, ty)
+        return None if cov is None else coverage_view_png((cov > 0).astype(np.uint8))
+    got = combined.ortho(tx, ty)
+    if got is None:
+        return None
+    rgb, known = got
+    rgba = np.zeros((*known.shape, 4), np.uint8)
+    rgba[..., :3] = rgb
+    rgba[..., 3] = np.where(known, 255, 0)
+    return _png(rgba)
+
+
+def _origin(query: str) -> tuple[float, float] | None:
+    try:
+        q = parse_qs(query[:200], max_num_fields=4)
+        lat, lon = float(q["lat"][0]), float(q["lon"][0])
+    except (KeyError, IndexError, ValueError):  # also too many fields
+        return None
+    if not (math.isfinite(lat) and math.isfinite(lon) and abs(lat) <= 90 and abs(lon) <= 180):
+        return None
+    return lat, lon
+
+
+def map_document(store: MapStore, origin: tuple[float, float] | None) -> dict[str, object]:
+    """``/map.json``: the store's version and each combined tile's corners in the page's
+    metres, with where to fetch it (``?v=`` changes when a tile under it arrived).
+
+    origin : (lat_deg, lon_deg) of the page's local frame (None: the first map's own).
+    """
+    out: list[dict[str, object]] = []
+    if not store.tiles():
+        return {"version": store.version, "origin": origin, "tiles": out}
+    base, places = combined_places(store)
+    if origin is None:
+        origin = (base.lat0_deg, base.lon0_deg)
+    dx, dy = (float(v) for v in LocalFrame(*origin).to_en(base.lat0_deg, base.lon0_deg))
+    side = base.n * base.cell_m
+    for (tx, ty), (seq, has_ortho) in sorted(places.items()):
+        for layer in ("ortho", "cov") if has_ortho else ("cov",):
+            out.append(
+                {
+                    "layer": layer,
+                    "map": base.map_id,
+                    "x0": round(tx * side + dx, 3),
+                    "y0": round(ty * side + dy, 3),
+                    "x1": round((tx + 1) * side + dx, 3),
+                    "y1": round((ty + 1) * side + dy, 3),
+                    "href": f"/map/all/{layer}-{tx}_{ty}.png?v={seq}",
+                }
+            )
+    return {"version": store.version, "origin": origin, "tiles": out}
+
+
+def _script() -> bytes:
+    return resources.files("holescan.ground.station").joinpath("maplayers.js").read_bytes()
+
+
+def map_route(
+    store: MapStore | None, path: str, query: str = "", cache: CombinedCache | None = None
+) -> Reply | None:
+    """The reply to a GET of ``path`` (without its query) if it is a map path, else None.
+
+    cache : the store's combined map, kept between requests (None: combined for this one).
+    Returns (status, body, content type).
+    """
+    if path == "/static/maplayers.js":
+        return 200, _script(), "text/javascript; charset=utf-8"
+    if path == "/map.json":
+        if store is None:
+            return 200, b'{"version": 0, "origin": null, "tiles": []}', "application/json"
+        body = json.dumps(map_document(store, _origin(query))).encode()
+        return 200, body, "application/json"
+    if not path.startswith("/map/"):
+        return None
+    if (m := _ALL.fullmatch(path)) is not None:
+        if store is None:
+            return 404, b"no such tile", "text/plain"
+        data = _combined_tile(cache or CombinedCache(store), m[1], int(m[2]), int(m[3]))
+        if data is None:
+            return 404, b"no such tile", "text/plain"
+        return 200, data, "image/png"
+    view = path.startswith("/map/view/")
+    name = path[len("/map/view/") :] if view else path[len("/map/") :]
+    if store is None or not _NAME.fullmatch(name) or (view and not name.endswith(".png")):
+        return 404, b"no such tile", "text/plain"
+    data = store.read(name)
+    if data is None:
+        return 404, b"no such tile", "text/plain"
+    if not view:
+        return 200, data, "image/png" if name.endswith(".png") else "image/jpeg"
+    got = read_tile(data)
+    if got is None:
+        return 404, b"no such tile", "text/plain"
+    return 200, coverage_view_png(got[1]), "image/png"

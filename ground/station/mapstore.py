@@ -1,0 +1,187 @@
+"""The ground station's copy of the flight's live map: the tiles as they came, on disk.
+
+Each map tile the vehicle sends (:mod:`missions._maptiles`: coverage PNG, orthophoto JPEG,
+each carrying its own facts) is kept as received in ``DIR/map/`` as
+``m<map>-<layer>-<tx>_<ty>.png|jpg``, written through capture's output rule
+(:func:`capture.atomic_output`: ``.part``, fsync, rename), only when it is newer than the
+one kept. There is no index to keep consistent: a restarted station reads the folder back
+(each file names itself in its facts); a damaged or foreign file there is skipped with one
+log line.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from holescan.capture import atomic_output
+from holescan.missions import TileFacts, TileInventory, coverage_from_levels, read_tile
+
+__all__ = ["MapStore", "StoredTile", "tile_file_name"]
+
+_log = logging.getLogger(__name__)
+
+
+def tile_file_name(f: TileFacts) -> str:
+    """``m<map>-<layer>-<tx>_<ty>.png`` (coverage) or ``.jpg`` (orthophoto).
+
+    >>> from holescan.missions import TileFacts
+    >>> tile_file_name(TileFacts(3, "cov", -1, 2, 64, 0.1, 43.6, -79.4, 9))
+    'm3-cov--1_2.png'
+    """
+    ext = "png" if f.layer == "cov" else "jpg"
+    return f"m{f.map_id}-{f.layer}-{f.tx}_{f.ty}.{ext}"
+
+
+@dataclass(frozen=True)
+class StoredTile:
+    """A tile kept: its facts, its file name in the map folder and its arrival order
+    (``seq``: the store's version when it was kept; for a folder read back, its order of
+    modification time)."""
+
+    facts: TileFacts
+    name: str
+    seq: int = 0
+
+
+@dataclass
+class MapStore:
+    """The tiles received so far (thread-safe); :meth:`open` reads a folder back.
+
+    folder : ``DIR/map``. version : counts accepted tiles (the page polls it).
+    listeners : called with the new version after each accepted tile (lock not held).
+    """
+
+    folder: Path
+    version: int = 0
+    rejected: int = 0
+    listeners: list[Callable[[int], None]] = field(default_factory=list)
+    _tiles: dict[str, StoredTile] = field(default_factory=dict)
+    _lock: threading.Lock = field(default_factory=threading.Lock)
+
+    @classmethod
+    def open(cls, folder: Path) -> MapStore:
+        """The store of ``folder`` (created if missing), with every readable tile in it."""
+        folder.mkdir(parents=True, exist_ok=True)
+        store = cls(folder)
+        paths = []
+        for path in folder.glob("m*-*"):
+            with contextlib.suppress(OSError):
+                paths.append((path.stat().st_mtime_ns, path.name, path))
+        for seq, (_, _, path) in enumerate(sorted(paths), start=1):
+            if ".part" in path.name:
+                continue
+            try:
+                got = read_tile(path.read_bytes())
+            except OSError as err:
+                _log.warning("map tile %s not read: %s", path.name, err)
+                continue
+            if got is None or tile_file_name(got[0]) != path.name:
+                _log.warning("%s is not a map tile of this station; skipped", path.name)
+                continue
+            store._tiles[path.name] = StoredTile(got[0], path.name, seq)
+        store.version = max((t.seq for t in store._tiles.values()), default=0)
+        return store
+
+    def put(self, data: bytes) -> TileFacts | None:
+        """Keep a received tile if it is one and newer than the one kept; its facts, or
+        None (not a tile, or stale)."""
+        got = read_tile(data)
+        if got is None:
+            self.rejected += 1
+            return None
+        facts = got[0]
+        name = tile_file_name(facts)
+        with self._lock:
+            old = self._tiles.get(name)
+            if old is not None and old.facts.version >= facts.version:
+                return None
+            with atomic_output(self.folder / name, force=True) as f:
+                f.write(data)
+            self.version += 1
+            self._tiles[name] = StoredTile(facts, name, self.version)
+            version = self.version
+        for fn in list(self.listeners):
+            try:
+                fn(version)
+            except Exception:  # a listener's bug must not lose tiles
+                _log.exception("map listener failed")
+        return facts
+
+    def tiles(self) -> list[StoredTile]:
+        """Every tile kept, by file name."""
+        with self._lock:
+            return [self._tiles[k] for k in sorted(self._tiles)]
+
+    def get(self, name: str) -> StoredTile | None:
+        with self._lock:
+            return self._tiles.get(name)
+
+    def read(self, name: str) -> bytes | None:
+        """The bytes of a kept tile (None: no such tile; names are looked up, never
+        opened as given)."""
+        t = self.get(name)
+        if t is None:
+            return None
+        try:
+            return (self.folder / t.name).read_bytes()
+        except OSError:
+            return None
+
+    def coverage(self, map_id: int) -> tuple[npt.NDArray[np.float64], TileFacts] | None:
+        """Map ``map_id``'s coverage tiles in one raster: (H, W) coverage 0..1 (row 0 the
+        north edge), and the facts of its south-west tile (origin, cell, n); None: none."""
+        tiles = [t for t in self.tiles() if t.facts.map_id == map_id and t.facts.layer == "cov"]
+        if not tiles:
+            return None
+        tx0 = min(t.facts.tx for t in tiles)
+        ty0 = min(t.facts.ty for t in tiles)
+        tx1 = max(t.facts.tx for t in tiles)
+        ty1 = max(t.facts.ty for t in tiles)
+        n = tiles[0].facts.n
+        out = np.zeros(((ty1 - ty0 + 1) * n, (tx1 - tx0 + 1) * n))
+        for t in tiles:
+            data = self.read(t.name)
+            got = read_tile(data) if data is not None else None
+            if got is None or got[0].n != n:
+                continue
+            r0 = (ty1 - t.facts.ty) * n
+            c0 = (t.facts.tx - tx0) * n
+            out[r0 : r0 + n, c0 : c0 + n] = coverage_from_levels(got[1])
+        sw = min(tiles, key=lambda t: (t.facts.ty, t.facts.tx)).facts
+        origin = TileFacts(
+            sw.map_id, "cov", tx0, ty0, n, sw.cell_m, sw.lat0_deg, sw.lon0_deg, sw.version
+        )
+        return out, origin
+
+    def inventory(self) -> TileInventory | None:
+        """What is held of the newest map (that of the tile kept last): each tile's
+        version, for the companion to re-send only the others (None: no tile)."""
+        tiles = self.tiles()
+        if not tiles:
+            return None
+        newest = max(tiles, key=lambda t: t.seq).facts.map_id
+        have = {
+            (t.facts.layer, t.facts.tx, t.facts.ty): t.facts.version
+            for t in tiles
+            if t.facts.map_id == newest
+        }
+        return TileInventory(newest, have)
+
+    def summary(self) -> dict[str, Any]:
+        """Counts for logs and tests: tiles per layer, version, rejected pictures."""
+        tiles = self.tiles()
+        return {
+            "version": self.version,
+            "cov": sum(t.facts.layer == "cov" for t in tiles),
+            "ortho": sum(t.facts.layer == "ortho" for t in tiles),
+            "rejected": self.rejected,
+        }
