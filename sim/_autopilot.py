@@ -26,9 +26,8 @@ A SiK radio on the link can be played too (:attr:`SimAutopilot.radio_txbuf`): RA
 once a second from system 51, component 68 (as SiK firmware sends it), reporting that much
 of its transmit buffer free, as ArduPilot forwards it to its other links.
 
-It reboots (:meth:`SimAutopilot.reboot`, or MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN param1 = 1)
-as ArduPilot SITL does: silent for a moment, then ``time_boot_ms`` and TIMESYNC from 0,
-only the heartbeat streaming until the rates are asked for again, the mission kept.
+It reboots as ArduPilot SITL does (:meth:`SimAutopilot.reboot`, or MAV_CMD_PREFLIGHT_REBOOT_
+SHUTDOWN): boot clock and TIMESYNC from 0, streams forgotten, mission kept.
 
 Its boot clock is the host's monotonic clock shifted by a realistic offset (it booted
 ``uptime_at_start_s`` before the simulator started), running ``drift_ppm`` fast, read with
@@ -48,7 +47,6 @@ import math
 import random
 import threading
 import time
-from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from types import TracebackType
 from typing import Any
@@ -57,6 +55,7 @@ from scipy.spatial.transform import Rotation
 
 from holescan.geotag import LocalFrame, VehiclePose
 from holescan.missions import MissionReceiver, mavlink, open_link
+from holescan.sim._simcommands import STREAM_GROUPS, STREAMED, command_result, is_reboot
 from holescan.sim._trajectory import SimPath, Trajectory
 
 __all__ = ["SimAutopilot"]
@@ -66,22 +65,6 @@ _log = logging.getLogger(__name__)
 _NS = 1_000_000_000
 _BACKLOG_NS = 500_000_000  # messages due longer ago than this are dropped, not sent late
 
-_STREAMED = (
-    "HEARTBEAT",
-    "GLOBAL_POSITION_INT",
-    "ATTITUDE",
-    "ATTITUDE_QUATERNION",
-    "GPS_RAW_INT",
-    "EKF_STATUS_REPORT",
-    "SYSTEM_TIME",
-)
-# ArduPilot's REQUEST_DATA_STREAM groups, restricted to what we stream.
-_STREAM_GROUPS: Mapping[int, tuple[str, ...]] = {
-    mavlink.MAV_DATA_STREAM_EXTENDED_STATUS: ("GPS_RAW_INT",),
-    mavlink.MAV_DATA_STREAM_POSITION: ("GLOBAL_POSITION_INT",),
-    mavlink.MAV_DATA_STREAM_EXTRA1: ("ATTITUDE",),
-    mavlink.MAV_DATA_STREAM_EXTRA3: ("SYSTEM_TIME", "EKF_STATUS_REPORT"),
-}
 # EKF_STATUS_REPORT flags: using GPS; no fix ever (constant position); dead reckoning.
 _EKF_GOOD = 0x33F
 _EKF_NO_ORIGIN = 0x0A5
@@ -238,15 +221,13 @@ class SimAutopilot:
         return (t_boot_ns - self._boot0 + self._tau_shift_ns) / _NS
 
     def reboot(self, down_s: float = 1.5) -> None:
-        """Reboot as ArduPilot does: silent and deaf for ``down_s``, then its boot clock
-        (``time_boot_ms``, TIMESYNC) restarts from 0 and only the heartbeat streams (message
-        intervals do not survive a reboot). The vehicle's path and its stored mission go on
-        (the simulated vehicle keeps flying; :meth:`truth_pose` of :meth:`boot_ns_at_mono`
-        stays right for times before and after the reboot)."""
+        """Reboot as ArduPilot does: deaf and silent for ``down_s``, then the boot clock and
+        TIMESYNC from 0, only the heartbeat streaming; the path flown and the mission go on
+        (``truth_pose(boot_ns_at_mono(t))`` stays right on both sides)."""
         with self._lock:
             back = time.monotonic_ns() + round(down_s * _NS)
             old_boot_at_back = self.boot_ns_at_mono(back)
-            self._tau_shift_ns += round((back - self._mono0) * (1.0 + self._drift))
+            self._tau_shift_ns += round((back - self._mono0) * (1.0 + self._drift))  # continuous
             self._mono0, self._boot0 = back, 0
             self._unix_minus_boot += old_boot_at_back
             lost = self._lost_at_boot_ns
@@ -315,8 +296,8 @@ class SimAutopilot:
 
     def set_rate(self, name: str, hz: float) -> None:
         """Stream ``name`` at ``hz`` (<= 0 stops it), as if a GCS had asked."""
-        if name not in _STREAMED:
-            raise ValueError(f"the simulator does not stream {name!r}; it streams {_STREAMED}")
+        if name not in STREAMED:
+            raise ValueError(f"the simulator does not stream {name!r}; it streams {STREAMED}")
         with self._lock:
             if hz > 0:
                 self._intervals_ns[name] = round(_NS / hz)
@@ -485,12 +466,12 @@ class SimAutopilot:
             self._command(msg)
         elif mtype == "REQUEST_DATA_STREAM" and self._for_me(msg):
             groups = (
-                list(_STREAM_GROUPS)
+                list(STREAM_GROUPS)
                 if msg.req_stream_id == mavlink.MAV_DATA_STREAM_ALL
                 else [msg.req_stream_id]
             )
             for group in groups:
-                for name in _STREAM_GROUPS.get(group, ()):
+                for name in STREAM_GROUPS.get(group, ()):
                     self.set_rate(name, msg.req_message_rate if msg.start_stop else 0)
 
     def _send_all(self, msgs: list[Any]) -> None:
@@ -504,28 +485,9 @@ class SimAutopilot:
         return msg.target_system in (0, self.sysid) and msg.target_component in (0, self.compid)
 
     def _command(self, msg: Any) -> None:
-        result = mavlink.MAV_RESULT_UNSUPPORTED
-        name = _message_name(msg.param1)
-        if msg.command == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL and self._message_interval:
-            if name in _STREAMED:
-                interval_us = msg.param2
-                if interval_us < 0:
-                    self.set_rate(name, 0)
-                elif interval_us == 0:  # default rate: only the heartbeat streams by default
-                    self.set_rate(name, 1.0 if name == "HEARTBEAT" else 0)
-                else:
-                    self.set_rate(name, 1e6 / interval_us)
-                result = mavlink.MAV_RESULT_ACCEPTED
-            else:
-                result = mavlink.MAV_RESULT_DENIED
-        elif msg.command == mavlink.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN and msg.param1 == 1:
-            result = mavlink.MAV_RESULT_ACCEPTED  # acknowledged, then the reboot (below)
-        elif msg.command == mavlink.MAV_CMD_REQUEST_MESSAGE:
-            if name in _STREAMED:
-                self._send(name)
-                result = mavlink.MAV_RESULT_ACCEPTED
-            else:
-                result = mavlink.MAV_RESULT_DENIED
+        result = command_result(
+            msg, message_interval=self._message_interval, set_rate=self.set_rate, send=self._send
+        )
         if not self.silent:
             with self._send_lock:
                 self._conn.mav.command_ack_send(
@@ -534,10 +496,5 @@ class SimAutopilot:
                     target_system=msg.get_srcSystem(),
                     target_component=msg.get_srcComponent(),
                 )
-        if msg.command == mavlink.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN and msg.param1 == 1:
+        if is_reboot(msg):
             self.reboot()
-
-
-def _message_name(msg_id: float) -> str:
-    cls = mavlink.mavlink_map.get(int(msg_id))
-    return str(cls.msgname) if cls is not None else ""
