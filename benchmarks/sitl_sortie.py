@@ -213,6 +213,12 @@ def main() -> int:
     ap.add_argument("--altitude", type=float, default=3.0, help="survey height, m (3)")
     ap.add_argument("--fps", type=float, default=10.0, help="simulated Xtion rate (10)")
     ap.add_argument("--report-only", action="store_true", help="report a finished run in --out")
+    ap.add_argument(
+        "--reboot-at",
+        type=float,
+        help="reboot ArduPilot (forced, armed) this many s into AUTO, watch the companion "
+        "45 s more and report its reboot handling instead of the survey",
+    )
     args = ap.parse_args()
     params = SortieParams(
         world_seed=args.world_seed,
@@ -360,6 +366,19 @@ def main() -> int:
         last = len(n_items)
         ctl.mode(COPTER_AUTO)
         t_auto = time.monotonic()
+        if args.reboot_at is not None:
+            time.sleep(args.reboot_at)
+            t_reboot = time.monotonic_ns()
+            with ctl.lock:  # param1 1 = reboot; param6 = ArduPilot's "even when armed" magic
+                ctl.m.mav.command_long_send(
+                    1, 1, mavlink.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, 0, 1, 0, 0, 0, 0, 20190226, 0
+                )
+            print(f"reboot sent {args.reboot_at:.0f} s into AUTO")
+            time.sleep(45.0)
+            comp.send_signal(signal.SIGINT)
+            comp.wait(60)
+            _reboot_report(out, t_reboot)
+            return 0
         _wait(lambda: last in ctl.reached or (last - 1) in ctl.reached, 1200, "the survey's end")
         t_survey = time.monotonic() - t_auto
         ctl.mode(COPTER_LAND)
@@ -405,6 +424,38 @@ def main() -> int:
                     p.kill()
     report(out, truth)
     return 0
+
+
+def _reboot_report(out: Path, t_reboot_mono_ns: int) -> None:
+    """What the companion saw of ArduPilot's reboot: from its log and its flight log."""
+    sys.path.insert(0, str(REPO))
+    from holescan.capture import LoggedFrame, LoggedHealth, read_flight_log
+
+    text = (out / "companion.log").read_text(errors="replace")
+    for line in text.splitlines():
+        if re.search(r"reboot|went back|rates|clock|silent|heartbeat", line, re.I):
+            print("  companion:", line[:160])
+    files = sorted((out / "logs").rglob("*.mcap"))
+    frames = [  # (capture time, pose's boot time or None); not the images (memory)
+        (r.frame.t_mono_ns, r.pose.t_boot_ns if r.pose else None)
+        for r in read_flight_log(files, kinds={LoggedFrame})
+        if isinstance(r, LoggedFrame)
+    ]
+    after = [f for f in frames if f[0] > t_reboot_mono_ns]
+    posed = [f for f in after if f[1] is not None]
+    first = (posed[0][0] - t_reboot_mono_ns) / 1e9 if posed else float("nan")
+    before = [b for t, b in frames if b is not None and t < t_reboot_mono_ns]
+    boots = [b for _, b in posed if b is not None]
+    print(
+        f"frames {len(frames)}, after the reboot {len(after)}, posed {len(posed)}; first posed "
+        f"{first:.1f} s after the command; boot time of poses before <= "
+        f"{max(before, default=0) / 1e9:.1f} s, after from {min(boots, default=0) / 1e9:.1f} s"
+    )
+    health = [r.values for r in read_flight_log(files, kinds={LoggedHealth})]
+    last = [h for h in health if "clock_source" in h]
+    if last:
+        keys = ("clock_source", "autopilot_mode", "autopilot_armed", "pose_refusals")
+        print("last health:", {k: last[-1].get(k) for k in keys})
 
 
 def report(out: Path, truth: Any) -> None:

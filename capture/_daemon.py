@@ -5,21 +5,19 @@ Threads and processes of one flight:
 - **capture** (the caller's thread): reads frames from the source through a pump thread
   with a timeout, stamps each on the autopilot's clock, queues it to the log writer and
   offers it to the detection worker. Neither ever makes it wait.
-- **log writer** thread (:class:`capture.flightlog.FlightLogWriter`).
-- **telemetry** receiver thread (:class:`capture._mavlink.Telemetry`): every MAVLink
-  message is logged raw; each position message also logs the interpolated pose.
-- **detection worker** process (:class:`capture._worker.DetectionWorker`).
+- **log writer** thread (:class:`capture.flightlog.FlightLogWriter`); **detection worker**
+  process (:class:`capture._worker.DetectionWorker`); **telemetry** receiver thread
+  (:class:`capture._mavlink.Telemetry`): each message logged raw, each position also as a pose.
 - **results** thread: logs detections, poses the frame they came from (interpolated, once
   the telemetry after it has arrived), geotags, merges sightings into holes, logs the holes,
   serves them to the ground station and announces them; writes ``/health`` every second.
 
-A sensor that fails (raises, or delivers nothing for ``frame_timeout_s``) is closed, reset
-on USB when a reset function is given, and reopened with back-off; telemetry and logging
-go on meanwhile. Frames that cannot be posed (MAVLink silent, clock not synchronised, or a
-position the autopilot does not have: no 3-D fix, EKF without a horizontal position,
-lat = lon = 0, a jump) are still logged, marked unposed, detected and counted; their
-detections are never placed on the Earth, so nothing is announced from them (a pose not
-there *yet* is waited for, ``pose_wait_s``; one the autopilot did not have stays unplaced).
+A sensor that fails (raises, or nothing for ``frame_timeout_s``) is closed, reset on USB
+when it can be, and reopened with back-off; telemetry and logging go on. Frames that cannot
+be posed (MAVLink silent, clock not synchronised, or a position the autopilot does not have:
+no 3-D fix, EKF without horizontal position, lat = lon = 0, a jump) are logged, marked
+unposed, detected and counted, never placed, so nothing is announced from them (a pose not
+there *yet* is waited for, ``pose_wait_s``). Frames without depth are counted apart.
 """
 
 from __future__ import annotations
@@ -128,8 +126,7 @@ class Flight:
     ) -> VehiclePose | None:
         """The vehicle pose at a frame time, or None: no telemetry, not synchronised, or a
         position the autopilot does not have (:class:`PoseInvalid`: no fix, EKF without a
-        position, 0/0, a jump; its reason is appended to ``invalid`` and kept in
-        :attr:`invalid`)."""
+        position, 0/0, a jump; the reason appended to ``invalid``, kept in :attr:`invalid`)."""
         tel = self._telemetry
         if tel is None:
             return None
@@ -185,6 +182,9 @@ class Flight:
         c = self.counters
         c.frames_detected += 1
         c.detect_ms_total += r.detect_ms
+        if r.no_depth:  # too close for the sensor (on the ground) or nothing ranged
+            c.frames_no_depth += 1
+            return
         if r.error:
             c.detect_errors += 1
             log.warning("detection failed on frame %d: %s", r.frame_index, r.error)
@@ -250,6 +250,8 @@ class Flight:
             "detect_skipped": ws.skipped,
             "detect_done": ws.done,
             "detect_ms_mean": c.detect_ms_total / max(c.frames_detected, 1),
+            "detect_errors": c.detect_errors,
+            "frames_no_depth": c.frames_no_depth,
             "frames_unposed": c.frames_unposed,
             "pose_refusals": c.pose_refusals,
             "pose_invalid": c.pose_invalid,
@@ -265,6 +267,8 @@ class Flight:
                 mavlink_bad_packets=ts.bad_packets,
                 mavlink_age_s=tel.last_message_age_s(),
                 clock_source=tel.clock.source,
+                # autopilot_mode, _armed, _mode_changes: recorded; no behaviour depends on them
+                **{f"autopilot_{k}": v for k, v in ts.vehicle.items()},
             )
             with contextlib.suppress(ClockUnavailable):
                 out.update(
@@ -375,11 +379,8 @@ class Flight:
         c.sensor_reopens += 1
 
     def _start_telemetry(self, sync_s: float) -> None:
-        """Connect to the autopilot; if it is silent, capture anyway and keep trying.
-
-        A link that cannot be opened at all (bad connection string) is an error; an
-        autopilot that does not answer yet only leaves frames unposed until it does.
-        """
+        """Connect to the autopilot; if it is silent, capture anyway and keep trying (a link
+        that cannot be opened at all, e.g. a bad connection string, is an error)."""
         assert self._mavlink is not None
         try:
             tel = self._telemetry_factory(self._mavlink, on_message=self._on_mavlink)

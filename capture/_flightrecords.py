@@ -88,6 +88,7 @@ class FlightCounters:
     detections: int = 0
     detect_ms_total: float = 0.0
     detect_errors: int = 0
+    frames_no_depth: int = 0  # depth image without any reading: under range, not an error
     pose_refusals: int = 0
     pose_invalid: int = 0
     sensor_failures: int = 0

@@ -96,7 +96,8 @@ def fly(
                     clearance_m=cfg.hole_clearance_m,
                     card_bytes_per_s=cfg.hole_card_bytes_per_s,
                     sender=None if cfg.gcs else via_autopilot,
-                    signing=cfg.signing if cfg.gcs else None,  # its own link only
+                    # its own --gcs link; else the telemetry link's signing (below) applies
+                    signing=cfg.signing if cfg.gcs else None,
                 )
             )
         shared = server if server is not None and not cfg.gcs else None
@@ -149,6 +150,10 @@ def fly(
                 if shared is not None:
                     shared.feed(msg)
 
+            if shared is not None and cfg.signing is not None:
+                # One link carries the holes too: signed as the hole server's own link
+                # would be (the autopilot must hold the same key, or nothing is heard).
+                kw.setdefault("signing_key", cfg.signing.key)
             tel = Telemetry(conn, baud=cfg.baud, on_message=on_message, **kw)
             links.append(tel)
             if hook is not None:
@@ -217,6 +222,8 @@ def format_report(report: FlyReport, gate: AnnounceGate | None = None) -> str:
         f"detector: {c.frames_detected} frames ({c.frames_detected / dur:.1f}/s, mean "
         f"{c.detect_ms_total / max(c.frames_detected, 1):.1f} ms), {s.detect_skipped} of "
         f"{s.detect_offered} skipped for newer frames, {c.detect_errors} errors, "
+        f"{c.frames_no_depth} without depth (closer than the sensor's range or nothing "
+        "ranged), "
         f"{c.detections} detections, {c.pose_refusals} not posed ({c.pose_invalid} the "
         "autopilot had no position for)",
         f"sensor: {c.sensor_failures} failures, {c.sensor_reopens} reopens",

@@ -93,7 +93,8 @@ class FlyConfig:
     station for the hole mission server (None: the server shares the ``mavlink`` link and
     the autopilot routes to the ground station; no server without either). sysid : the
     vehicle's MAVLink system id (the hole server speaks as its component 191). signing :
-    MAVLink 2 signing key of the hole server's link to the ground station (None: unsigned;
+    MAVLink 2 signing key of the hole server's link to the ground station, or, without
+    ``gcs``, of the one link to the autopilot that the holes share (None: unsigned;
     fly.toml ``mavlink_key`` = 64 hex digits or ``mavlink_key_file`` = a file of the key or
     a passphrase, :class:`missions.SigningKey`; never in ``record`` or a log).
     duration_s, max_frames : stop after this long / this many frames (None: until stopped).

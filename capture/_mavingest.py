@@ -6,7 +6,8 @@ receiver thread hands it each message from the autopilot, and it converts units 
 and keeps the :class:`~capture._clock.ClockSync` up to date: the arrival times of stamped
 messages, SYSTEM_TIME for UTC, and our TIMESYNC round trips. A boot clock that goes back is
 an autopilot reboot: the clock sync is reset and ``on_reboot`` called (the rates must be
-asked for again).
+asked for again). Its heartbeats give the flight mode and whether it is armed (recorded in
+the health records; nothing in capture, detection or announcement depends on them).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from holescan.capture._mavadapt import telemetry_sample
 from holescan.capture._posebuffer import AttitudeSample, PoseBuffer
 from holescan.capture._posevalidity import GpsFix, NavStatus, PositionSample
 from holescan.capture.errors import ClockUnavailable
+from holescan.missions import mavlink, mavutil
 
 _log = logging.getLogger("holescan.capture._mavlink")
 
@@ -54,6 +56,9 @@ class VehicleState:
         self.timesync_received = 0
         self._last_boot_ns: int | None = None
         self._outstanding: dict[int, int] = {}  # TIMESYNC ts1 -> t0 (same value)
+        self.mode = ""  # pymavlink's name of the autopilot's flight mode ("AUTO", "RTL" ...)
+        self.armed: bool | None = None
+        self.mode_changes = 0  # mode or arming changes seen
 
     def handle(self, mtype: str, msg: Any, t_mono_ns: int) -> None:
         """Take one message of the autopilot's (types this state does not use are ignored)."""
@@ -125,7 +130,21 @@ class VehicleState:
         self._stamped(t_boot_ns, t_mono_ns)
         self.clock.add_system_time(t_boot_ns, int(msg.time_unix_usec) * 1000)
 
+    def _on_heartbeat(self, msg: Any, t_mono_ns: int) -> None:
+        mode = str(mavutil.mode_string_v10(msg))
+        armed = bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+        if (mode, armed) != (self.mode, self.armed):
+            if self.armed is not None:
+                self.mode_changes += 1
+            _log.info("autopilot: %s, %s", mode, "armed" if armed else "disarmed")
+            self.mode, self.armed = mode, armed
+
+    def flight_state(self) -> dict[str, Any]:
+        """The autopilot's mode, arming and changes seen, for the health records."""
+        return {"mode": self.mode, "armed": self.armed, "mode_changes": self.mode_changes}
+
     _HANDLERS: Mapping[str, Callable[[VehicleState, Any, int], None]] = {
+        "HEARTBEAT": _on_heartbeat,
         "GLOBAL_POSITION_INT": _on_pose_sample,
         "ATTITUDE": _on_pose_sample,
         "ATTITUDE_QUATERNION": _on_pose_sample,

@@ -12,9 +12,8 @@ hands the autopilot's messages to a :class:`~capture._mavingest.VehicleState`, w
   :class:`~capture._posebuffer.AttitudeSample` and :class:`~capture._posebuffer.GpsFix`
   records that fill a :class:`~capture._posebuffer.PoseBuffer`;
 * keeps a :class:`~capture._clock.ClockSync` up to date (TIMESYNC round trips at
-  ``timesync_hz``, arrival times of stamped messages, SYSTEM_TIME for UTC) and notices
-  reboots;
-
+  ``timesync_hz``, arrival times of stamped messages, SYSTEM_TIME for UTC), notices
+  reboots and follows the flight mode and arming (heartbeats);
 and itself counts (and logs) garbage bytes and packets that fail to parse (otherwise
 ignored) and hands every parsed message with its arrival time to ``on_message``.
 
@@ -78,9 +77,6 @@ _STREAM_LINKS = {"mavserial": False, "mavtcp": False, "mavtcpin": False}
 _DATAGRAM_LINKS = {"mavudp": True, "mavmcast": True}
 
 
-# -- the link --------------------------------------------------------------------------------
-
-
 @dataclass(frozen=True)
 class TelemetryStats:
     """Counters of a :class:`Telemetry` link.
@@ -94,6 +90,7 @@ class TelemetryStats:
     callback_errors : exceptions raised by ``on_message`` (logged, swallowed).
     rate_method : how message rates were obtained.
     timesync_sent, timesync_received : TIMESYNC requests sent / matching replies.
+    vehicle : the autopilot's flight ``mode``, ``armed`` and ``mode_changes`` seen.
     """
 
     messages: Mapping[str, int]
@@ -105,6 +102,7 @@ class TelemetryStats:
     rate_method: RateMethod
     timesync_sent: int
     timesync_received: int
+    vehicle: Mapping[str, Any]
 
 
 class Telemetry(RateRequests):
@@ -321,6 +319,7 @@ class Telemetry(RateRequests):
             rate_method=self.rate_method,
             timesync_sent=self._state.timesync_sent,
             timesync_received=self._state.timesync_received,
+            vehicle=self._state.flight_state(),
         )
 
     # -- commands --------------------------------------------------------------------------

@@ -59,6 +59,7 @@ class WorkerResult:
     detections: tuple[Detection, ...]
     detect_ms: float
     error: str | None = None
+    no_depth: bool = False  # no depth reading at all (too close, nothing ranged): no error
 
 
 @dataclass(frozen=True)
@@ -114,6 +115,7 @@ def _worker_main(
     die_with_parent(parent_pid)
 
     from holescan.detect import detect_holes
+    from holescan.errors import NoDepthError
 
     # Logging must win the CPU: detection may skip frames, the log may not drop them
     # (5-minute benchmark: 707 of 8,873 frames dropped from the log at equal priority,
@@ -142,14 +144,16 @@ def _worker_main(
             t0 = time.perf_counter()
             try:
                 dets = tuple(detect_holes(rgb, depth, camera, params))
-                err = None
+                err, no_depth = None, False
+            except NoDepthError:  # on the ground, under the sensor's range: counted, not an error
+                dets, err, no_depth = (), None, True
             except Exception as exc:  # reported to the daemon, which logs it; worker goes on
-                dets, err = (), f"{type(exc).__name__}: {exc}"
+                dets, err, no_depth = (), f"{type(exc).__name__}: {exc}", False
             ms = (time.perf_counter() - t0) * 1000.0
             with ctrl.get_lock():
                 ctrl[_BUSY] = -1
                 ctrl[_DONE] += 1
-            results.put(WorkerResult(index, t_mono, t_sensor, dets, ms, err))
+            results.put(WorkerResult(index, t_mono, t_sensor, dets, ms, err, no_depth))
     finally:
         del views
         shm.close()

@@ -7,7 +7,7 @@ import numpy as np
 import numpy.typing as npt
 
 from holescan.detect._types import CameraIntrinsics
-from holescan.errors import InputError
+from holescan.errors import InputError, NoDepthError
 
 #: Smallest frame side the detectors work on (their block grid is 4 px).
 MIN_SIDE_PX = 4
@@ -67,4 +67,4 @@ def check_frame(
         )
     check_size(depth.shape[0], depth.shape[1], paper=paper)
     if not depth.any():
-        raise InputError("depth image has no reading at all (all zero)")
+        raise NoDepthError("depth image has no reading at all (all zero)")

@@ -5,7 +5,7 @@ Each package subclasses :class:`HolescanError` for its own failures (``capture``
 ``raise ... from err``; the CLI prints any of them as one line and exits 2.
 """
 
-__all__ = ["HolescanError", "InputError"]
+__all__ = ["HolescanError", "InputError", "NoDepthError"]
 
 
 class HolescanError(Exception):
@@ -14,3 +14,12 @@ class HolescanError(Exception):
 
 class InputError(HolescanError, ValueError):
     """Bad input: wrong shape/dtype, missing or corrupt file. The message says what to fix."""
+
+
+class NoDepthError(InputError):
+    """The depth image has no reading at all: the sensor is closer than its minimum range
+    (an Xtion under 0.5 m, e.g. a vehicle on the ground) or sees nothing it can range.
+
+    Not a detector failure: in flight such frames are counted as "no depth", apart from
+    detection errors.
+    """

@@ -4,7 +4,8 @@ No autopilot simulator installs on this machine (no ArduPilot/PX4 SITL), so test
 use :class:`SimAutopilot`: system 1, component 1, flying a closed loop of local ENU waypoints
 around a home position at a cruise speed. It behaves like an autopilot on the wire:
 
-* HEARTBEAT at 1 Hz (a quadrotor running ArduPilot, armed, in AUTO);
+* HEARTBEAT at 1 Hz (a quadrotor running ArduPilot, armed, in AUTO: :attr:`SimAutopilot.mode`
+  and ``armed`` change that; the path flown stays the same);
 * GLOBAL_POSITION_INT, ATTITUDE, ATTITUDE_QUATERNION, GPS_RAW_INT, EKF_STATUS_REPORT,
   SYSTEM_TIME only when asked, at the asked rate: MAV_CMD_SET_MESSAGE_INTERVAL (ACKed;
   ``message_interval=False`` makes it answer UNSUPPORTED like an old firmware),
@@ -25,6 +26,9 @@ A SiK radio on the link can be played too (:attr:`SimAutopilot.radio_txbuf`): RA
 once a second from system 51, component 68 (as SiK firmware sends it), reporting that much
 of its transmit buffer free, as ArduPilot forwards it to its other links.
 
+It reboots as ArduPilot SITL does (:meth:`SimAutopilot.reboot`, or MAV_CMD_PREFLIGHT_REBOOT_
+SHUTDOWN): boot clock and TIMESYNC from 0, streams forgotten, mission kept.
+
 Its boot clock is the host's monotonic clock shifted by a realistic offset (it booted
 ``uptime_at_start_s`` before the simulator started), running ``drift_ppm`` fast, read with
 ``jitter_ns`` of Gaussian noise. Motion: a periodic cubic spline through the waypoints (times
@@ -43,7 +47,6 @@ import math
 import random
 import threading
 import time
-from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from types import TracebackType
 from typing import Any
@@ -52,6 +55,7 @@ from scipy.spatial.transform import Rotation
 
 from holescan.geotag import LocalFrame, VehiclePose
 from holescan.missions import MissionReceiver, mavlink, open_link
+from holescan.sim._simcommands import STREAM_GROUPS, STREAMED, command_result, is_reboot
 from holescan.sim._trajectory import SimPath, Trajectory
 
 __all__ = ["SimAutopilot"]
@@ -61,22 +65,6 @@ _log = logging.getLogger(__name__)
 _NS = 1_000_000_000
 _BACKLOG_NS = 500_000_000  # messages due longer ago than this are dropped, not sent late
 
-_STREAMED = (
-    "HEARTBEAT",
-    "GLOBAL_POSITION_INT",
-    "ATTITUDE",
-    "ATTITUDE_QUATERNION",
-    "GPS_RAW_INT",
-    "EKF_STATUS_REPORT",
-    "SYSTEM_TIME",
-)
-# ArduPilot's REQUEST_DATA_STREAM groups, restricted to what we stream.
-_STREAM_GROUPS: Mapping[int, tuple[str, ...]] = {
-    mavlink.MAV_DATA_STREAM_EXTENDED_STATUS: ("GPS_RAW_INT",),
-    mavlink.MAV_DATA_STREAM_POSITION: ("GLOBAL_POSITION_INT",),
-    mavlink.MAV_DATA_STREAM_EXTRA1: ("ATTITUDE",),
-    mavlink.MAV_DATA_STREAM_EXTRA3: ("SYSTEM_TIME", "EKF_STATUS_REPORT"),
-}
 # EKF_STATUS_REPORT flags: using GPS; no fix ever (constant position); dead reckoning.
 _EKF_GOOD = 0x33F
 _EKF_NO_ORIGIN = 0x0A5
@@ -115,6 +103,8 @@ class SimAutopilot:
     seed : for the clock jitter.
     mission : the mission-protocol state machine (default: a fresh
         :class:`~missions._protocol.MissionReceiver` for ``sysid``/``compid``).
+    signing_key : MAVLink 2 signing key (32 bytes): sign everything sent, drop every
+        unsigned or wrongly signed packet (``received_signed`` counts the good ones).
     """
 
     def __init__(
@@ -133,7 +123,9 @@ class SimAutopilot:
         lost_drift_m_s: float = 1.5,
         seed: int = 0,
         mission: MissionReceiver | None = None,
+        signing_key: bytes | None = None,
     ) -> None:
+        self._signing_key = signing_key
         self.path = path if path is not None else SimPath()
         self._traj = Trajectory(self.path)
         self.connection = connection
@@ -146,6 +138,9 @@ class SimAutopilot:
         self._rng = random.Random(seed)
         self._mono0 = time.monotonic_ns()
         self._boot0 = round(uptime_at_start_s * _NS)
+        self._tau_shift_ns = 0  # keeps the flight path continuous across a reboot
+        self._down_until_mono_ns = 0  # rebooting: silent, deaf
+        self.reboots = 0
         self._unix_minus_boot = time.time_ns() - self.boot_ns_at_mono(time.monotonic_ns())
         self.lost_drift_m_s = lost_drift_m_s
         self._had_fix = gps_fix
@@ -156,7 +151,10 @@ class SimAutopilot:
         self._next_due: dict[str, int] = {}
         self.sent: dict[str, int] = {}
         self.received: dict[str, int] = {}
+        self.received_signed: dict[str, int] = {}  # of those, correctly signed (signing_key)
         self.silent = False
+        self.mode = 3  # ArduCopter custom mode in the heartbeat: AUTO (6 RTL, 9 LAND ...)
+        self.armed = True
         self.radio_txbuf: int | None = None
         self.mission = (
             mission
@@ -220,7 +218,25 @@ class SimAutopilot:
             return {k: _NS / v for k, v in self._intervals_ns.items()}
 
     def _tau(self, t_boot_ns: int) -> float:
-        return (t_boot_ns - self._boot0) / _NS
+        return (t_boot_ns - self._boot0 + self._tau_shift_ns) / _NS
+
+    def reboot(self, down_s: float = 1.5) -> None:
+        """Reboot as ArduPilot does: deaf and silent for ``down_s``, then the boot clock and
+        TIMESYNC from 0, only the heartbeat streaming; the path flown and the mission go on
+        (``truth_pose(boot_ns_at_mono(t))`` stays right on both sides)."""
+        with self._lock:
+            back = time.monotonic_ns() + round(down_s * _NS)
+            old_boot_at_back = self.boot_ns_at_mono(back)
+            self._tau_shift_ns += round((back - self._mono0) * (1.0 + self._drift))  # continuous
+            self._mono0, self._boot0 = back, 0
+            self._unix_minus_boot += old_boot_at_back
+            lost = self._lost_at_boot_ns
+            if lost is not None and lost >= 0:
+                self._lost_at_boot_ns = lost - old_boot_at_back
+            self._intervals_ns = {"HEARTBEAT": _NS}
+            self._next_due = {}
+            self._down_until_mono_ns = back
+            self.reboots += 1
 
     def _state(self, t_boot_ns: int) -> _State:
         tau = self._tau(t_boot_ns)
@@ -247,6 +263,10 @@ class SimAutopilot:
         self._conn = open_link(
             self.connection, source_system=self.sysid, source_component=self.compid
         )
+        if self._signing_key is not None:  # as ArduPilot with a key: signs, drops unsigned
+            self._conn.setup_signing(
+                self._signing_key, sign_outgoing=True, allow_unsigned_callback=None
+            )
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, name="sim-autopilot", daemon=True)
         self._thread.start()
@@ -276,8 +296,8 @@ class SimAutopilot:
 
     def set_rate(self, name: str, hz: float) -> None:
         """Stream ``name`` at ``hz`` (<= 0 stops it), as if a GCS had asked."""
-        if name not in _STREAMED:
-            raise ValueError(f"the simulator does not stream {name!r}; it streams {_STREAMED}")
+        if name not in STREAMED:
+            raise ValueError(f"the simulator does not stream {name!r}; it streams {STREAMED}")
         with self._lock:
             if hz > 0:
                 self._intervals_ns[name] = round(_NS / hz)
@@ -291,6 +311,11 @@ class SimAutopilot:
         conn = self._conn
         while not self._stop.is_set():
             now = time.monotonic_ns()
+            if now < self._down_until_mono_ns:  # rebooting: deaf and silent
+                while conn.recv_msg() is not None:
+                    pass
+                conn.select(0.02)
+                continue
             batch: list[tuple[int, str]] = []  # (sample time, message) due now
             with self._lock:
                 for name, interval in self._intervals_ns.items():
@@ -344,8 +369,9 @@ class SimAutopilot:
             mav.heartbeat_send(
                 mavlink.MAV_TYPE_QUADROTOR,
                 mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
-                mavlink.MAV_MODE_FLAG_SAFETY_ARMED | mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
-                3,  # ArduCopter AUTO
+                mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+                | (mavlink.MAV_MODE_FLAG_SAFETY_ARMED if self.armed else 0),
+                self.mode,  # ArduCopter's custom mode number (3 = AUTO)
                 mavlink.MAV_STATE_ACTIVE,
             )
             txbuf = self.radio_txbuf
@@ -428,6 +454,8 @@ class SimAutopilot:
     def _handle(self, msg: Any) -> None:
         mtype = msg.get_type()
         self.received[mtype] = self.received.get(mtype, 0) + 1
+        if getattr(msg, "_signed", False):
+            self.received_signed[mtype] = self.received_signed.get(mtype, 0) + 1
         if mtype == "TIMESYNC" and msg.tc1 == 0:
             if not self.silent:
                 with self._send_lock:
@@ -438,12 +466,12 @@ class SimAutopilot:
             self._command(msg)
         elif mtype == "REQUEST_DATA_STREAM" and self._for_me(msg):
             groups = (
-                list(_STREAM_GROUPS)
+                list(STREAM_GROUPS)
                 if msg.req_stream_id == mavlink.MAV_DATA_STREAM_ALL
                 else [msg.req_stream_id]
             )
             for group in groups:
-                for name in _STREAM_GROUPS.get(group, ()):
+                for name in STREAM_GROUPS.get(group, ()):
                     self.set_rate(name, msg.req_message_rate if msg.start_stop else 0)
 
     def _send_all(self, msgs: list[Any]) -> None:
@@ -457,26 +485,9 @@ class SimAutopilot:
         return msg.target_system in (0, self.sysid) and msg.target_component in (0, self.compid)
 
     def _command(self, msg: Any) -> None:
-        result = mavlink.MAV_RESULT_UNSUPPORTED
-        name = _message_name(msg.param1)
-        if msg.command == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL and self._message_interval:
-            if name in _STREAMED:
-                interval_us = msg.param2
-                if interval_us < 0:
-                    self.set_rate(name, 0)
-                elif interval_us == 0:  # default rate: only the heartbeat streams by default
-                    self.set_rate(name, 1.0 if name == "HEARTBEAT" else 0)
-                else:
-                    self.set_rate(name, 1e6 / interval_us)
-                result = mavlink.MAV_RESULT_ACCEPTED
-            else:
-                result = mavlink.MAV_RESULT_DENIED
-        elif msg.command == mavlink.MAV_CMD_REQUEST_MESSAGE:
-            if name in _STREAMED:
-                self._send(name)
-                result = mavlink.MAV_RESULT_ACCEPTED
-            else:
-                result = mavlink.MAV_RESULT_DENIED
+        result = command_result(
+            msg, message_interval=self._message_interval, set_rate=self.set_rate, send=self._send
+        )
         if not self.silent:
             with self._send_lock:
                 self._conn.mav.command_ack_send(
@@ -485,8 +496,5 @@ class SimAutopilot:
                     target_system=msg.get_srcSystem(),
                     target_component=msg.get_srcComponent(),
                 )
-
-
-def _message_name(msg_id: float) -> str:
-    cls = mavlink.mavlink_map.get(int(msg_id))
-    return str(cls.msgname) if cls is not None else ""
+        if is_reboot(msg):
+            self.reboot()

@@ -119,7 +119,8 @@ def fly_sim(
         setup = SensorSetup(cam.source, cam.camera, cfg.mavlink, on_telemetry=cam.attach)
         report = fly(cfg, setup, stop=stop)
         return _report(report, cam.sources, cam.truth)
-    with SimSortie(params, mount=cfg.flight.mount, mavlink=cfg.mavlink) as sortie:
+    key = cfg.signing.key if cfg.signing is not None else None  # the autopilot holds it
+    with SimSortie(params, mount=cfg.flight.mount, mavlink=cfg.mavlink, signing_key=key) as sortie:
         setup = SensorSetup(sortie.source, sortie.camera, sortie.mavlink)
         report = fly(cfg, setup, stop=stop)
     return _report(report, sortie.sources, sortie.truth)

@@ -300,6 +300,8 @@ class SimSortie:
     mavlink : ``udpin:HOST:PORT`` the daemon will listen on (the autopilot sends there);
         None = a free loopback port.
     world, path : reuse an already built world / path (they take seconds to build).
+    signing_key : the simulated autopilot's MAVLink 2 signing key (32 bytes; None: unsigned),
+        as a real autopilot holding the flight's key.
     """
 
     params: SortieParams = field(default_factory=SortieParams)
@@ -311,6 +313,7 @@ class SimSortie:
     plan: SurveyPlan | None = None
     sources: list[SimSource] = field(default_factory=list)
     autopilot: SimAutopilot | None = None
+    signing_key: bytes | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         if self.mavlink is None:
@@ -340,6 +343,7 @@ class SimSortie:
             drift_ppm=p.drift_ppm,
             eph_m=p.eph_m,
             seed=p.noise_seed,
+            signing_key=self.signing_key,
         )
         self.autopilot.__enter__()
         return self

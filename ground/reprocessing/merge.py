@@ -80,6 +80,7 @@ class FlightMerger:
         self.damaged: list[str] = []
         self.frames_read = self.frames_detected = self.frames_unposed = 0
         self.detections = self.detect_errors = self.incomplete_frames = 0
+        self.frames_no_depth = 0
         self.detect_ms = 0.0
         self.boot_to_unix_ns: int | None = None
         self._boot_minus_mono: int | None = None
@@ -183,6 +184,9 @@ class FlightMerger:
             mapped = self._map_every and index % self._map_every == 0
             if mapped and fr.pose is not None and pose is not None:
                 self.pose_gap_m.append(horizontal_gap_m(fr.pose, pose))
+            if fr.no_depth:  # under the sensor's range (on the ground): not an error
+                self.frames_no_depth += 1
+                continue
             if fr.error is not None:
                 self.detect_errors += 1
                 _log.warning("%s: frame %d: detection failed: %s", self.plan.name, index, fr.error)

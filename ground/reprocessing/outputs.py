@@ -49,7 +49,9 @@ class FlightResult:
     partitions, partitions_cached : tasks of this flight, and how many came from the cache.
     detect_ms_mean : worker time per frame. elapsed_s : wall clock of the whole run up to
     this flight's end. map_summary, map_lines : the search map's figures (searched
-    fraction, gaps, re-fly; empty without a map).
+    fraction, gaps, re-fly; empty without a map). frames_no_depth : frames without any
+    depth reading (closer than the sensor's range, e.g. on the ground), counted apart from
+    detect_errors.
     """
 
     name: str
@@ -74,6 +76,7 @@ class FlightResult:
     elapsed_s: float
     map_summary: Mapping[str, Any] = dataclasses.field(default_factory=dict)
     map_lines: tuple[str, ...] = ()
+    frames_no_depth: int = 0
 
     @property
     def frames_per_s(self) -> float:
@@ -92,6 +95,7 @@ class FlightResult:
             "frames_unposed": self.frames_unposed,
             "detections": self.detections,
             "detect_errors": self.detect_errors,
+            "frames_no_depth": self.frames_no_depth,
             "holes": len(self.holes),
             "confirmed": len(self.confirmed),
             "flight_confirmed": len(self.flight_matches),

@@ -239,6 +239,7 @@ def _flight_outputs(
         frames_unposed=fl.frames_unposed if fl else 0,
         detections=fl.detections if fl else 0,
         detect_errors=fl.detect_errors if fl else 0,
+        frames_no_depth=fl.frames_no_depth if fl else 0,
         holes=holes,
         confirmed=confirmed,
         flight_holes=flight_holes,

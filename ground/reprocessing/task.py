@@ -39,6 +39,7 @@ from holescan.capture import (
     read_chunk,
 )
 from holescan.detect import Detection, detect_holes
+from holescan.errors import NoDepthError
 from holescan.geotag import VehiclePose
 from holescan.ground.reprocessing.mapchunk import MapFrame, fuse_frames
 from holescan.ground.reprocessing.plan import FRAME_TOPICS, TASK_TOPICS, PartitionTask
@@ -76,6 +77,7 @@ class FrameResult:
     detections: tuple[Detection, ...]
     detect_ms: float
     error: str | None
+    no_depth: bool = False  # no depth reading at all (under the sensor's range): no error
 
 
 Event = FrameResult | LoggedMavlink | LoggedPose | LoggedDetections | LoggedHoles
@@ -174,9 +176,13 @@ def _select(task: PartitionTask, f: IO[bytes], damaged: list[str]) -> list[Any]:
 def _detect(task: PartitionTask, rec: LoggedFrame, pos: Pos) -> FrameResult:
     rgb, depth = rec.frame.rgb, rec.frame.depth
     t0 = time.perf_counter()
+    no_depth = False
     try:
         dets = tuple(detect_holes(rgb, depth, task.camera, task.params))
         err = None
+    except NoDepthError:  # counted apart from errors, as the flight's worker does
+        dets, err = (), None
+        no_depth = True
     except Exception as exc:  # reported and counted, as the flight's worker does
         dets, err = (), f"{type(exc).__name__}: {exc}"
     ms = (time.perf_counter() - t0) * 1000.0
@@ -190,6 +196,7 @@ def _detect(task: PartitionTask, rec: LoggedFrame, pos: Pos) -> FrameResult:
         detections=dets,
         detect_ms=ms,
         error=err,
+        no_depth=no_depth,
     )
 
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from holescan.capture import FlyReport, SensorSetup, fly, parse_fly_config
-from holescan.missions import radio_budget
+from holescan.missions import SigningKey, radio_budget
 from holescan.sim import SimAutopilot
 from tests.capture.test_daemon import CAM, ScriptedSource, free_port, hover_path
 
@@ -149,3 +149,65 @@ def test_no_heartbeat_of_an_unknown_system_before_the_autopilot_is_heard() -> No
     ap.close()
     assert len(seen) >= 2, seen
     assert {(m.get_srcSystem(), m.get_srcComponent()) for m in seen} == {(1, 191)}
+
+
+def test_shared_link_is_signed_with_the_fly_key(tmp_path: Path) -> None:
+    """Without --gcs the holes share the autopilot link: with ``mavlink_key`` configured
+    that link is signed (an autopilot holding the key takes the announcements and cards),
+    and an unsigned request injected on it is never answered."""
+    import os
+    import threading
+    import time
+
+    os.environ.setdefault("MAVLINK20", "1")
+    from pymavlink import mavutil
+
+    key = SigningKey.from_passphrase("rubble-sortie-7")
+    port = free_port()
+    answers: list[str] = []
+    done = threading.Event()
+    sent = [0]
+
+    def spoofer() -> None:  # an unsigned peer on the companion's port
+        peer = mavutil.mavlink_connection(
+            f"udpout:127.0.0.1:{port}", source_system=255, source_component=190
+        )
+        try:
+            while not done.is_set():
+                peer.mav.mission_request_list_send(1, 191, mavutil.mavlink.MAV_MISSION_TYPE_MISSION)
+                sent[0] += 1
+                t_end = time.monotonic() + 0.3
+                while time.monotonic() < t_end:
+                    m = peer.recv_match(blocking=True, timeout=0.05)
+                    if m is not None and m.get_type() == "MISSION_COUNT":
+                        answers.append(m.get_type())
+        finally:
+            peer.close()
+
+    with SimAutopilot(f"udpout:127.0.0.1:{port}", hover_path(), signing_key=key.key) as ap:
+        cfg = parse_fly_config(
+            {
+                "mavlink_key": key.key.hex(),
+                "holes": {
+                    "announce_min_sightings": 3,
+                    "announce_min_span_s": 0.5,
+                    "announce_min_p_hole": 0.0,
+                },
+            },
+            {"log_dir": tmp_path, "mavlink": f"udpin:127.0.0.1:{port}", "max_frames": 150},
+        )
+        setup = SensorSetup(lambda: ScriptedSource(200), CAM, cfg.mavlink)
+        spoof = threading.Thread(target=spoofer, daemon=True)
+        threading.Timer(2.0, spoof.start).start()
+        report = fly(cfg, setup)
+        done.set()
+        spoof.join(5)
+        signed, received = dict(ap.received_signed), dict(ap.received)
+    assert report.announced, report
+    # the autopilot drops unsigned packets: everything it took was signed with the key
+    assert signed.get("STATUSTEXT", 0) >= len(report.announced)
+    assert signed.get("ENCAPSULATED_DATA", 0) >= 1
+    assert signed == received
+    assert sent[0] >= 3 and answers == []  # the injected unsigned requests: ignored
+    assert report.summary.telemetry["bad_packets"] >= 3  # dropped: bad signature (some sent
+    # after the link closed are not counted)
