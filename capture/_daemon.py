@@ -64,8 +64,7 @@ HoleListener = Callable[[list[Hole], list[Hole], Mapping[int, HoleView], Mapping
 """``on_holes(served, news, views, tiers)``: every announced hole (the waypoints), the
 holes new or changed enough to tell the ground now (announced and for review), the best
 view of each hole in ``news`` whose best view is known (hole id -> :class:`HoleView`), and
-the tier of each hole in ``news`` (``announced`` or ``review``,
-:meth:`geotag.AnnounceGate.tier`)."""
+the tier of each hole in ``news`` (``announced``/``review``, :meth:`geotag.AnnounceGate.tier`)."""
 
 
 class Flight:
