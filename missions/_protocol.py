@@ -270,10 +270,16 @@ def upload_mission(
                 log.debug("resending %s", last.get_type())
                 conn.mav.send(last)
                 continue
-            silent = 0
+            was_silent, silent = silent, 0
             if getattr(msg, "mission_type", 0) != 0:
                 continue
             if msg.get_type() == "MISSION_ACK":
+                if msg.type == mavlink.MAV_MISSION_INVALID_SEQUENCE and highest >= 0:
+                    # Not final: ArduPilot answers an item out of sequence (our resend that
+                    # crossed its next request, on a busy link) so and keeps the transfer open.
+                    log.debug("the autopilot refused an item out of sequence; going on")
+                    silent = was_silent  # no answer to what we wait for: still silence
+                    continue
                 if msg.type != MAV_MISSION_ACCEPTED:
                     raise MissionRejectedError(
                         f"the autopilot rejected the mission: {_result_name(msg.type)}",

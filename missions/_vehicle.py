@@ -184,7 +184,9 @@ class MissionReceiver:
         if rx is None or peer != rx.peer:
             return []
         if int(msg.seq) != len(rx.items):
-            return [self._request(now_ns)]
+            # As ArduPilot: an item out of sequence (a resend that crossed our request) is
+            # answered MISSION_ACK INVALID_SEQUENCE and the transfer goes on (poll re-requests).
+            return [self._ack(peer, mavlink.MAV_MISSION_INVALID_SEQUENCE)]
         try:
             rx.items.append(waypoint_from_message(msg))
         except InputError:
