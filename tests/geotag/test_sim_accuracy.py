@@ -154,5 +154,8 @@ def test_pipeline_geotag_error_and_every_hole_once(
         assert len(matches.get(hole_id, [])) == 1, (hole_id, matches)
     # Placed at the opening's centre (issue 14): before, the box centre put sightings a
     # median 0.11 m and merged holes up to 0.20 m from the truth in this flight.
-    assert statistics.median(to_truth) <= 0.05
+    # Issue 21 keeps views cut by the image border (one opening, one hole): they place
+    # less well, and this flight's sighting median went 0.042 -> 0.045-0.052 m (the merged
+    # holes, what the crew gets, still within 0.10 m below).
+    assert statistics.median(to_truth) <= 0.06
     assert max(hole_err) <= 0.10
