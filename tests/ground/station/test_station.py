@@ -213,6 +213,9 @@ def test_holes_pictures_files_and_cot(rig: dict[str, Any]) -> None:
             first_rev.setdefault(g.id, g.card_rev)
 
     station.state.listeners.append(on_change)
+    # A STATUSTEXT sent before the station hears the vehicle is lost (UDP); the hole then
+    # comes with the cards the station asks for at link-up: wait for the link first.
+    wait_for(lambda: station.link.link_up, 20.0, "the vehicle link")
     announce(server, holes)
     # Liveness only (the latency is benchmarks/bench_station.py's: ~5 ms over loopback):
     # 20 s is far beyond it, and the holes must come from the STATUSTEXTs, ahead of any card.
