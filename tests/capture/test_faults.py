@@ -78,10 +78,9 @@ def posed_times(files: tuple[Path, ...]) -> list[tuple[float, bool]]:
     return out
 
 
-@pytest.mark.slow
-def test_link_gone_10_s_then_a_rebooted_autopilot(tmp_path: Path) -> None:
-    port = free_port()
-    cfg = FlightConfig(log_prefix=tmp_path / "f", max_duration_s=26.0, startup_sync_s=5.0)
+def floor_flight(cfg: FlightConfig, port: int) -> tuple[Flight, list[Telemetry]]:
+    """A flight over :class:`FloorSource` on ``udpin:127.0.0.1:PORT``, and the telemetry
+    links it opens (newest last)."""
     telemetry: list[Telemetry] = []
 
     def factory(conn: str, **kw: object) -> Telemetry:
@@ -92,6 +91,14 @@ def test_link_gone_10_s_then_a_rebooted_autopilot(tmp_path: Path) -> None:
     flight = Flight(
         cfg, FloorSource, CAM, mavlink=f"udpin:127.0.0.1:{port}", telemetry_factory=factory
     )
+    return flight, telemetry
+
+
+@pytest.mark.slow
+def test_link_gone_10_s_then_a_rebooted_autopilot(tmp_path: Path) -> None:
+    port = free_port()
+    cfg = FlightConfig(log_prefix=tmp_path / "f", max_duration_s=26.0, startup_sync_s=5.0)
+    flight, telemetry = floor_flight(cfg, port)
     marks: dict[str, float] = {}
     box: dict[str, object] = {}
     ap = SimAutopilot(f"udpout:127.0.0.1:{port}", PATH).__enter__()

@@ -10,10 +10,21 @@ from pathlib import Path
 
 import pytest
 
-from holescan.capture import FlyReport, SensorSetup, fly, parse_fly_config
+from holescan.capture import FlyConfig, FlyReport, SensorSetup, fly, parse_fly_config
 from holescan.missions import SigningKey, radio_budget
 from holescan.sim import SimAutopilot
 from tests.capture.test_daemon import CAM, ScriptedSource, free_port, hover_path
+
+
+def _scripted_flight(tmp_path: Path, port: int, **top: object) -> tuple[FlyConfig, SensorSetup]:
+    """150 scripted frames over the autopilot on ``port``, announcing after 3 sightings
+    over 0.5 s; ``top``: more top-level fly.toml keys."""
+    holes = {"announce_min_sightings": 3, "announce_min_span_s": 0.5, "announce_min_p_hole": 0.0}
+    cfg = parse_fly_config(
+        {**top, "holes": holes},
+        {"log_dir": tmp_path, "mavlink": f"udpin:127.0.0.1:{port}", "max_frames": 150},
+    )
+    return cfg, SensorSetup(lambda: ScriptedSource(200), CAM, cfg.mavlink)
 
 
 def test_radio_budget_follows_the_radio_buffer() -> None:
@@ -32,17 +43,7 @@ def _fly_one_link(tmp_path: Path, txbuf: int | None) -> tuple[FlyReport, dict[st
     port = free_port()
     with SimAutopilot(f"udpout:127.0.0.1:{port}", hover_path()) as ap:
         ap.radio_txbuf = txbuf
-        cfg = parse_fly_config(
-            {
-                "holes": {
-                    "announce_min_sightings": 3,
-                    "announce_min_span_s": 0.5,
-                    "announce_min_p_hole": 0.0,
-                }
-            },
-            {"log_dir": tmp_path, "mavlink": f"udpin:127.0.0.1:{port}", "max_frames": 150},
-        )
-        setup = SensorSetup(lambda: ScriptedSource(200), CAM, cfg.mavlink)
+        cfg, setup = _scripted_flight(tmp_path, port)
         report = fly(cfg, setup)
         received = dict(ap.received)
     return report, received
@@ -185,18 +186,7 @@ def test_shared_link_is_signed_with_the_fly_key(tmp_path: Path) -> None:
             peer.close()
 
     with SimAutopilot(f"udpout:127.0.0.1:{port}", hover_path(), signing_key=key.key) as ap:
-        cfg = parse_fly_config(
-            {
-                "mavlink_key": key.key.hex(),
-                "holes": {
-                    "announce_min_sightings": 3,
-                    "announce_min_span_s": 0.5,
-                    "announce_min_p_hole": 0.0,
-                },
-            },
-            {"log_dir": tmp_path, "mavlink": f"udpin:127.0.0.1:{port}", "max_frames": 150},
-        )
-        setup = SensorSetup(lambda: ScriptedSource(200), CAM, cfg.mavlink)
+        cfg, setup = _scripted_flight(tmp_path, port, mavlink_key=key.key.hex())
         spoof = threading.Thread(target=spoofer, daemon=True)
         threading.Timer(2.0, spoof.start).start()
         report = fly(cfg, setup)

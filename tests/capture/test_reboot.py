@@ -11,10 +11,10 @@ import threading
 import time
 from pathlib import Path
 
-from holescan.capture import Flight, FlightConfig, LoggedFrame, Telemetry, read_flight_log
+from holescan.capture import FlightConfig, LoggedFrame, read_flight_log
 from holescan.geotag import local_en_m
 from holescan.sim import SimAutopilot, SimPath
-from tests.capture.test_faults import CAM, FloorSource, free_port
+from tests.capture.test_faults import floor_flight, free_port
 
 # 1 m/s: a pose from the wrong side of a 1.5 s reboot is metres off.
 PATH = SimPath(waypoints_enu=((0.0, 0.0, 3.0), (6.0, 0.0, 3.0), (6.0, 6.0, 3.0)), speed_m_s=1.0)
@@ -23,16 +23,7 @@ PATH = SimPath(waypoints_enu=((0.0, 0.0, 3.0), (6.0, 0.0, 3.0), (6.0, 6.0, 3.0))
 def test_autopilot_reboot_in_flight(tmp_path: Path) -> None:
     port = free_port()
     cfg = FlightConfig(log_prefix=tmp_path / "f", max_duration_s=16.0, startup_sync_s=3.0)
-    telemetry: list[Telemetry] = []
-
-    def factory(conn: str, **kw: object) -> Telemetry:
-        tel = Telemetry(conn, **kw)  # type: ignore[arg-type]
-        telemetry.append(tel)
-        return tel
-
-    flight = Flight(
-        cfg, FloorSource, CAM, mavlink=f"udpin:127.0.0.1:{port}", telemetry_factory=factory
-    )
+    flight, telemetry = floor_flight(cfg, port)
     with SimAutopilot(f"udpout:127.0.0.1:{port}", PATH) as ap:
         box: dict[str, object] = {}
         runner = threading.Thread(target=lambda: box.setdefault("s", flight.run()))
