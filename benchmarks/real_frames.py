@@ -24,8 +24,8 @@ import numpy.typing as npt
 # Measure the checkout this script lives in, not whichever copy is installed.
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from holescan.detect import DEFAULT, CameraIntrinsics, detect_holes  # noqa: E402
-from holescan.ground.recordings.depthstats import unread_stats  # noqa: E402
+from holescan.detect import DEFAULT, CameraIntrinsics, detect_holes
+from holescan.ground.recordings.depthstats import unread_stats
 
 Pair = tuple[npt.NDArray[np.uint8], npt.NDArray[np.uint16], CameraIntrinsics]
 KINECT = CameraIntrinsics(640, 480, 525.0, 525.0, 319.5, 239.5)  # TUM's "ROS default"
