@@ -16,18 +16,19 @@ from collections import deque
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Final, Literal
+from typing import TYPE_CHECKING, Any, Final, Literal
 
 import cv2
 import numpy as np
 import numpy.typing as npt
-from rosbags.highlevel import AnyReader
-from rosbags.interfaces import Connection
-from rosbags.typesys import Stores, get_typestore
 
 from holescan.capture import Frame
 from holescan.detect import CameraIntrinsics
 from holescan.errors import InputError
+
+if TYPE_CHECKING:
+    from rosbags.highlevel import AnyReader
+    from rosbags.interfaces import Connection
 
 __all__ = ["BagSource", "BagTopics", "decode_image", "is_ros1_bag", "is_ros2_bag"]
 
@@ -199,15 +200,20 @@ class BagSource:
     def _open(self) -> AnyReader:
         """An open reader of the bag (close it)."""
         try:
+            from rosbags.highlevel import AnyReader
+            from rosbags.typesys import Stores, get_typestore
+        except ImportError as err:
+            raise InputError(
+                "reading ROS bags needs the rosbags package: pip install 'holescan[ground]'"
+            ) from err
+        try:
             reader = AnyReader([self.path], default_typestore=get_typestore(Stores.LATEST))
             reader.open()
         except Exception as err:  # rosbags raises its own error kinds per format
             raise InputError(f"{self.path}: not a readable ROS bag ({err})") from err
         return reader
 
-    def _find_topics(
-        self, reader: AnyReader, colour: str | None, depth: str | None
-    ) -> BagTopics:
+    def _find_topics(self, reader: AnyReader, colour: str | None, depth: str | None) -> BagTopics:
         found: dict[Kind, list[str]] = {"colour": [], "depth": []}
         images = [c for c in reader.connections if c.msgtype in (IMAGE, COMPRESSED)]
         for conn in images:
@@ -217,7 +223,7 @@ class BagSource:
                     found[kind].append(conn.topic)
                 break
         names = sorted({c.topic for c in images})
-        for kind, given in (("colour", colour), ("depth", depth)):
+        for given in (colour, depth):
             if given is not None and given not in names:
                 raise InputError(f"{self.path}: no image topic {given!r} (image topics: {names})")
         colour = colour or min(found["colour"], key=lambda t: _rank(t, "colour"), default=None)
@@ -266,7 +272,9 @@ class BagSource:
         reader = self._reader
         if reader is None:
             raise InputError("use a BagSource as a context manager before iterating it")
-        conns = [c for c in reader.connections if c.topic in (self.topics.colour, self.topics.depth)]
+        conns = [
+            c for c in reader.connections if c.topic in (self.topics.colour, self.topics.depth)
+        ]
         colours: deque[tuple[int, Any, Connection]] = deque()
         depths: deque[tuple[int, Any, Connection]] = deque()
         index = 0
@@ -321,4 +329,3 @@ class BagSource:
                 f": give the depth topic registered to colour"
             )
         return Frame(index, rgb, depth, t_ns, t_ns)
-

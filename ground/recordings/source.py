@@ -73,11 +73,11 @@ def open_recording(
     if kind == "tum":
         from holescan.ground.recordings.tum import TumSource
 
-        source = TumSource(path, camera, max_dt_s)
+        source = TumSource(Path(path), camera, max_dt_s)
     elif kind in ("ros1", "ros2"):
         from holescan.ground.recordings.rosbag import BagSource
 
-        source = BagSource(path, camera=camera, max_dt_s=max_dt_s)
+        source = BagSource(Path(path), camera=camera, max_dt_s=max_dt_s)
     elif kind == "oni":
         source = OniSource(path)
     else:

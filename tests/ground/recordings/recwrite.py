@@ -30,11 +30,15 @@ def write_tum(folder: Path, frames: Sequence[Pair], depth_lag_ns: int = 4_000_00
         t_rgb = (T0_NS + i * PERIOD_NS) / 1e9
         t_d = (T0_NS + i * PERIOD_NS + depth_lag_ns) / 1e9
         cv2.imwrite(str(folder / f"rgb/{t_rgb:.6f}.png"), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
-        cv2.imwrite(str(folder / f"depth/{t_d:.6f}.png"), (mm.astype(np.uint32) * 5).astype(np.uint16))
+        cv2.imwrite(
+            str(folder / f"depth/{t_d:.6f}.png"), (mm.astype(np.uint32) * 5).astype(np.uint16)
+        )
         rgb_lines.append(f"{t_rgb:.6f} rgb/{t_rgb:.6f}.png")
         depth_lines.append(f"{t_d:.6f} depth/{t_d:.6f}.png")
     t_lone = (T0_NS + len(frames) * PERIOD_NS + 500_000_000) / 1e9
-    cv2.imwrite(str(folder / f"rgb/{t_lone:.6f}.png"), cv2.cvtColor(frames[0][0], cv2.COLOR_RGB2BGR))
+    cv2.imwrite(
+        str(folder / f"rgb/{t_lone:.6f}.png"), cv2.cvtColor(frames[0][0], cv2.COLOR_RGB2BGR)
+    )
     rgb_lines.append(f"{t_lone:.6f} rgb/{t_lone:.6f}.png")
     (folder / "rgb.txt").write_text("\n".join(rgb_lines) + "\n")
     (folder / "depth.txt").write_text("\n".join(depth_lines) + "\n")
@@ -57,9 +61,11 @@ def write_bag(
     T = ts.types
     Image, Info = T["sensor_msgs/msg/Image"], T["sensor_msgs/msg/CameraInfo"]
     Compressed = T["sensor_msgs/msg/CompressedImage"]
-    Time, Header, Roi = T["builtin_interfaces/msg/Time"], T["std_msgs/msg/Header"], T[
-        "sensor_msgs/msg/RegionOfInterest"
-    ]
+    Time, Header, Roi = (
+        T["builtin_interfaces/msg/Time"],
+        T["std_msgs/msg/Header"],
+        T["sensor_msgs/msg/RegionOfInterest"],
+    )
 
     def header(t_ns: int, seq: int) -> Any:
         stamp = Time(sec=t_ns // 1_000_000_000, nanosec=t_ns % 1_000_000_000)
@@ -71,8 +77,13 @@ def write_bag(
         h, w = arr.shape[:2]
         data = np.ascontiguousarray(arr).view(np.uint8).reshape(-1)
         return Image(
-            header=header(t_ns, seq), height=h, width=w, encoding=enc, is_bigendian=0,
-            step=data.size // h, data=data,
+            header=header(t_ns, seq),
+            height=h,
+            width=w,
+            encoding=enc,
+            is_bigendian=0,
+            step=data.size // h,
+            data=data,
         )
 
     k = [camera.fx, 0.0, camera.cx, 0.0, camera.fy, camera.cy, 0.0, 0.0, 1.0]
@@ -85,8 +96,14 @@ def write_bag(
 
     def info(t_ns: int, seq: int) -> Any:
         return Info(
-            header=header(t_ns, seq), height=camera.height, width=camera.width,
-            distortion_model="plumb_bob", binning_x=0, binning_y=0, roi=roi, **arrays,
+            header=header(t_ns, seq),
+            height=camera.height,
+            width=camera.width,
+            distortion_model="plumb_bob",
+            binning_x=0,
+            binning_y=0,
+            roi=roi,
+            **arrays,
         )
 
     if version == 1:
@@ -101,7 +118,9 @@ def write_bag(
         serialize = ts.serialize_cdr
     with writer:
         colour_type = Compressed if compressed_colour else Image
-        c_col = writer.add_connection("/camera/rgb/image_color", colour_type.__msgtype__, typestore=ts)
+        c_col = writer.add_connection(
+            "/camera/rgb/image_color", colour_type.__msgtype__, typestore=ts
+        )
         c_reg = writer.add_connection(
             "/camera/depth_registered/image_raw", Image.__msgtype__, typestore=ts
         )
@@ -114,8 +133,9 @@ def write_bag(
             if compressed_colour:
                 ok, png = cv2.imencode(".png", bgr)
                 assert ok
-                col: Any = Compressed(header=header(t, i), format="bgr8; png compressed bgr8",
-                                      data=png.reshape(-1))
+                col: Any = Compressed(
+                    header=header(t, i), format="bgr8; png compressed bgr8", data=png.reshape(-1)
+                )
             else:
                 col = image(t, i, bgr, "bgr8")
             if depth_encoding == "32FC1":
@@ -125,7 +145,11 @@ def write_bag(
             else:
                 reg = image(t_d, i, mm, "16UC1")
             raw = image(t_d, i, mm[::2, ::2].copy(), "16UC1")
-            for conn, msg, when in ((c_info, info(t, i), t), (c_col, col, t), (c_reg, reg, t_d),
-                                    (c_raw, raw, t_d)):
+            for conn, msg, when in (
+                (c_info, info(t, i), t),
+                (c_col, col, t),
+                (c_reg, reg, t_d),
+                (c_raw, raw, t_d),
+            ):
                 writer.write(conn, when, serialize(msg, conn.msgtype))
     return path

@@ -10,7 +10,6 @@ import pytest
 from holescan.capture import Frame
 from holescan.detect import CameraIntrinsics
 from holescan.errors import InputError
-from holescan.ground import load_dataset
 from holescan.ground.recordings import (
     TUM_FR1,
     BagSource,
@@ -18,18 +17,10 @@ from holescan.ground.recordings import (
     open_recording,
     recording_kind,
 )
+from tests.ground.recordings.conftest import Scene
 from tests.ground.recordings.recwrite import Pair, write_bag, write_tum
 
 pytestmark = pytest.mark.xdist_group("recordings")
-
-
-@pytest.fixture(scope="module")
-def scene(tmp_path_factory: pytest.TempPathFactory) -> tuple[list[Pair], CameraIntrinsics]:
-    from holescan.ground.images import read_depth, read_rgb
-    from holescan.sim import synth_dataset
-
-    ds = load_dataset(synth_dataset(tmp_path_factory.mktemp("synth"), 2, seed=1))
-    return [(read_rgb(im.rgb_path), read_depth(im.depth_path)) for im in ds.images], ds.camera
 
 
 def _frames(path: Path) -> tuple[list[Frame], CameraIntrinsics]:
@@ -45,8 +36,8 @@ def _same(frames: list[Frame], pairs: list[Pair]) -> None:
         assert f.depth.dtype == np.uint16 and f.rgb.dtype == np.uint8
 
 
-def test_tum_folder(tmp_path: Path, scene: tuple[list[Pair], CameraIntrinsics]) -> None:
-    pairs, _ = scene
+def test_tum_folder(tmp_path: Path, scene: Scene) -> None:
+    pairs = scene[0]
     folder = write_tum(tmp_path / "rgbd_dataset_test", pairs)
     assert recording_kind(folder) == "tum"
     frames, camera = _frames(folder)
@@ -55,9 +46,9 @@ def test_tum_folder(tmp_path: Path, scene: tuple[list[Pair], CameraIntrinsics]) 
     assert frames[1].t_sensor_ns - frames[0].t_sensor_ns == pytest.approx(33_333_333, abs=1000)
 
 
-def test_tum_tolerance(tmp_path: Path, scene: tuple[list[Pair], CameraIntrinsics]) -> None:
+def test_tum_tolerance(tmp_path: Path, scene: Scene) -> None:
     folder = write_tum(tmp_path / "late", scene[0], depth_lag_ns=12_000_000)
-    with pytest.raises(InputError, match="no colour image has a depth image within 0.01 s"):
+    with pytest.raises(InputError, match=r"no colour image has a depth image within 0\.01 s"):
         TumSource(folder, max_dt_s=0.01)
     pairs = TumSource(folder).pairs  # each depth with the colour 12 ms before, not 21 ms after
     assert [p.t_depth_ns - p.t_rgb_ns for p in pairs] == [pytest.approx(12e6, abs=2e3)] * 2
@@ -69,12 +60,12 @@ def test_tum_tolerance(tmp_path: Path, scene: tuple[list[Pair], CameraIntrinsics
 )
 def test_bags(
     tmp_path: Path,
-    scene: tuple[list[Pair], CameraIntrinsics],
+    scene: Scene,
     version: int,
     encoding: str,
     compressed: bool,
 ) -> None:
-    pairs, camera = scene
+    pairs, camera, _ = scene
     bag = write_bag(
         tmp_path / ("test.bag" if version == 1 else "test_bag"),
         pairs,
@@ -93,8 +84,8 @@ def test_bags(
     assert cam == camera  # from CameraInfo
 
 
-def test_bag_topic_choice(tmp_path: Path, scene: tuple[list[Pair], CameraIntrinsics]) -> None:
-    pairs, camera = scene
+def test_bag_topic_choice(tmp_path: Path, scene: Scene) -> None:
+    pairs, camera, _ = scene
     bag = write_bag(tmp_path / "t.bag", pairs, camera, 1)
     with pytest.raises(InputError, match="no image topic '/nope'"):
         BagSource(bag, depth_topic="/nope")
