@@ -13,8 +13,12 @@ import signal
 import threading
 from pathlib import Path
 from types import FrameType
+from typing import TYPE_CHECKING
 
 from holescan.cli._args import positive_float
+
+if TYPE_CHECKING:
+    from holescan.capture import FlyConfig
 
 log = logging.getLogger("holescan.fly")
 
@@ -27,6 +31,26 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "-> holes served to the ground station. Command-line options override the config file "
         "(deploy/fly.example.toml documents it). Stop with SIGINT or SIGTERM.",
     )
+    add_flight_arguments(p)
+    p.add_argument(
+        "--check",
+        action="store_true",
+        help="run the pre-flight check (as `holescan check`) and exit: 0 GO, 1 NO-GO",
+    )
+    p.add_argument(
+        "--json", action="store_true", help="with --check: the checklist as JSON on stdout"
+    )
+    p.add_argument(
+        "--bench",
+        action="store_true",
+        help="a bench test: fly even without a streaming sensor or an answering autopilot "
+        "(else that is a NO-GO and fly exits 2 before flying)",
+    )
+    p.set_defaults(func=run)
+
+
+def add_flight_arguments(p: argparse.ArgumentParser) -> None:
+    """The options ``fly`` and ``check`` share (what is flown, where it logs)."""
     p.add_argument(
         "--sensor",
         help="openni2 (the Xtion), oni:PATH, mcap:PATH (replays a flight log), or sim "
@@ -48,13 +72,13 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     p.add_argument("--duration", type=positive_float, help="stop after this many seconds")
     p.add_argument("--max-frames", type=int, help="stop after this many frames")
-    p.set_defaults(func=run)
 
 
-def run(args: argparse.Namespace) -> int:
-    from holescan.capture import fly, format_report, load_fly_config
+def fly_config(args: argparse.Namespace) -> FlyConfig:
+    """The flight configuration: the config file with the command line over it."""
+    from holescan.capture import load_fly_config
 
-    cfg = load_fly_config(
+    return load_fly_config(
         args.config,
         {
             "sensor": args.sensor,
@@ -65,6 +89,18 @@ def run(args: argparse.Namespace) -> int:
             "max_frames": args.max_frames,
         },
     )
+
+
+def run(args: argparse.Namespace) -> int:
+    from holescan.capture import fly, format_report, open_sensor, require_go
+
+    if args.check:
+        from holescan.cli._cmd_check import run as check
+
+        return check(args)
+    cfg = fly_config(args)
+    if args.bench:
+        log.warning("bench test: flying without requiring a sensor or an autopilot")
     stop = threading.Event()
 
     def on_signal(signum: int, _frame: FrameType | None) -> None:
@@ -79,9 +115,12 @@ def run(args: argparse.Namespace) -> int:
         if cfg.sensor.kind == "sim":  # the simulator is loaded only when asked for
             from holescan.sim import fly_sim, format_sim_report
 
-            print(format_sim_report(fly_sim(cfg, stop=stop), gate))
+            print(format_sim_report(fly_sim(cfg, stop=stop, bench=args.bench), gate))
         else:
-            print(format_report(fly(cfg, stop=stop), gate))
+            setup = open_sensor(cfg)
+            if not args.bench:
+                require_go(cfg, setup)
+            print(format_report(fly(cfg, setup, stop=stop), gate))
     finally:
         for s, handler in previous.items():
             signal.signal(s, handler)
