@@ -50,15 +50,17 @@ from holescan.capture._posebuffer import (
 from holescan.capture._posevalidity import GpsFix, NavStatus, PoseValidity, PositionSample
 from holescan.capture._preflight import (
     ITEMS,
+    PreflightError,
+    PreflightLimits,
+    preflight,
+    require_go,
+)
+from holescan.capture._preflightitems import (
     RAW_LOG_BYTES_PER_S,
     CheckItem,
     CheckStatus,
-    PreflightError,
-    PreflightLimits,
     PreflightReport,
     disk_item,
-    preflight,
-    require_go,
 )
 from holescan.capture._sensorsetup import PacedReplay, SensorSetup, open_sensor
 from holescan.capture._telemetryreplay import TelemetryReplay

@@ -55,13 +55,7 @@ from scipy.spatial.transform import Rotation
 
 from holescan.geotag import LocalFrame, VehiclePose
 from holescan.missions import MissionReceiver, mavlink, open_link
-from holescan.sim._simcommands import (
-    STREAM_GROUPS,
-    STREAMED,
-    command_result,
-    is_reboot,
-    param_value,
-)
+from holescan.sim._simcommands import STREAMED, command_result, is_reboot, param_value, set_streams
 from holescan.sim._trajectory import SimPath, Trajectory
 
 __all__ = ["SimAutopilot"]
@@ -475,14 +469,7 @@ class SimAutopilot:
         elif mtype == "COMMAND_LONG" and self._for_me(msg):
             self._command(msg)
         elif mtype == "REQUEST_DATA_STREAM" and self._for_me(msg):
-            groups = (
-                list(STREAM_GROUPS)
-                if msg.req_stream_id == mavlink.MAV_DATA_STREAM_ALL
-                else [msg.req_stream_id]
-            )
-            for group in groups:
-                for name in STREAM_GROUPS.get(group, ()):
-                    self.set_rate(name, msg.req_message_rate if msg.start_stop else 0)
+            set_streams(msg, self.set_rate)
 
     def _send_all(self, msgs: list[Any]) -> None:
         if self.silent or not msgs:

@@ -12,7 +12,7 @@ from typing import Any
 
 from holescan.missions import mavlink
 
-__all__ = ["STREAMED", "STREAM_GROUPS", "command_result", "is_reboot", "param_value"]
+__all__ = ["STREAMED", "STREAM_GROUPS", "command_result", "is_reboot", "param_value", "set_streams"]
 
 STREAMED = (
     "HEARTBEAT",
@@ -94,3 +94,16 @@ def param_value(params: Mapping[str, float] | None, msg: Any) -> list[Any]:
             name.encode(), float(params[name]), real32, len(names), index
         )
     ]
+
+
+def set_streams(msg: Any, set_rate: Callable[[str, float], None]) -> None:
+    """Carry out REQUEST_DATA_STREAM ``msg``: start or stop its group's messages (all groups
+    for MAV_DATA_STREAM_ALL) at its rate."""
+    groups = (
+        list(STREAM_GROUPS)
+        if msg.req_stream_id == mavlink.MAV_DATA_STREAM_ALL
+        else [msg.req_stream_id]
+    )
+    for group in groups:
+        for name in STREAM_GROUPS.get(group, ()):
+            set_rate(name, msg.req_message_rate if msg.start_stop else 0)

@@ -6,7 +6,7 @@ import argparse
 import json
 import sys
 
-from holescan.cli._cmd_fly import add_flight_arguments, fly_config
+from holescan.cli._flightargs import add_flight_arguments, fly_config
 
 EXIT_NO_GO = 1
 
