@@ -24,6 +24,7 @@ from holescan.sim._demo import (
     DemoResult,
     FalseHole,
     TruthRow,
+    default_demo_out,
     run_demo,
 )
 from holescan.sim._demo_format import REVIEW_PER_HA_MEASURED, format_result
@@ -86,6 +87,7 @@ __all__ = [
     "camera_pose_in_world",
     "check_sim",
     "count_in_view",
+    "default_demo_out",
     "fly_sim",
     "format_result",
     "format_sim_report",
