@@ -21,6 +21,20 @@ from holescan.capture._flyconfig import (
 )
 from holescan.capture._livemap import LiveMap, LiveMapConfig, LiveMapStats
 from holescan.capture._mavlink import DEFAULT_RATES_HZ, Telemetry, TelemetryStats
+from holescan.capture._preflight import (
+    ITEMS,
+    PreflightError,
+    PreflightLimits,
+    preflight,
+    require_go,
+)
+from holescan.capture._preflightitems import (
+    RAW_LOG_BYTES_PER_S,
+    CheckItem,
+    CheckStatus,
+    PreflightReport,
+    disk_item,
+)
 from holescan.capture._sensorsetup import PacedReplay, SensorSetup, open_sensor
 from holescan.capture._usb import UsbDeviceInfo, find_xtion, reset_xtion
 from holescan.capture._worker import DetectionWorker, WorkerResult
@@ -40,7 +54,11 @@ from holescan.capture.openni import (
 
 __all__ = [
     "DEFAULT_RATES_HZ",
+    "ITEMS",
+    "RAW_LOG_BYTES_PER_S",
     "CaptureError",
+    "CheckItem",
+    "CheckStatus",
     "ClockEstimate",
     "ClockSync",
     "ClockUnavailable",
@@ -60,6 +78,9 @@ __all__ = [
     "OniWriter",
     "OpenNI2Device",
     "PacedReplay",
+    "PreflightError",
+    "PreflightLimits",
+    "PreflightReport",
     "SensorError",
     "SensorSetup",
     "SensorSpec",
@@ -69,6 +90,7 @@ __all__ = [
     "WorkerResult",
     "camera_from_fov",
     "check_table",
+    "disk_item",
     "export_oni",
     "find_xtion",
     "fly",
@@ -78,6 +100,8 @@ __all__ = [
     "open_sensor",
     "openni2_library",
     "parse_fly_config",
+    "preflight",
+    "require_go",
     "reset_xtion",
     "scan_oni",
     "write_oni",

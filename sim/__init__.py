@@ -17,7 +17,14 @@ Beside the flight side, never imported by it: it may import :mod:`capture`,
 
 from holescan.sim._autopilot import SimAutopilot
 from holescan.sim._camera_model import CameraPose, Conditions, random_conditions
-from holescan.sim._fly import SIM_TABLE, SimFlyReport, fly_sim, format_sim_report, sortie_params
+from holescan.sim._fly import (
+    SIM_TABLE,
+    SimFlyReport,
+    check_sim,
+    fly_sim,
+    format_sim_report,
+    sortie_params,
+)
 from holescan.sim._lap import LapReplay, prerender_lap
 from holescan.sim._render import GtBox, hole_boxes, render, render_exact
 from holescan.sim._reported import ReportedPoseCamera, anchor_at_home
@@ -59,6 +66,7 @@ __all__ = [
     "WorldAnchor",
     "anchor_at_home",
     "camera_pose_in_world",
+    "check_sim",
     "fly_sim",
     "format_sim_report",
     "hole_boxes",
