@@ -53,6 +53,7 @@ __all__ = [
     "Surface",
     "incidence_cosine",
     "predicted_shadow_px",
+    "random_motion",
     "structured_light_frame",
 ]
 
@@ -173,6 +174,28 @@ class SensorFrame:
     rgb: U8 | None
     draws: FrameDraws
     flying: npt.NDArray[np.bool_] = field(repr=False)
+
+
+def random_motion(
+    rng: np.random.Generator,
+    fx: float,
+    distance_m: float,
+    max_speed_m_s: float = 1.5,
+    exposure_s: Range = (0.005, 0.02),
+) -> Motion:
+    """A survey drone's image motion: 0-``max_speed_m_s`` across a scene ``distance_m`` away
+    (any direction), colour exposure drawn in ``exposure_s`` (long at dawn).
+
+    >>> m = random_motion(np.random.default_rng(0), 580.0, 2.5)
+    >>> math.hypot(*m.velocity_px_s) <= 1.5 * 580.0 / 2.5
+    True
+    """
+    speed = float(rng.uniform(0.0, max_speed_m_s)) * fx / max(distance_m, 0.1)
+    ang = float(rng.uniform(0.0, 2 * math.pi))
+    return Motion(
+        (round(speed * math.cos(ang), 2), round(speed * math.sin(ang), 2)),
+        round(float(rng.uniform(*exposure_s)), 4),
+    )
 
 
 def predicted_shadow_px(
