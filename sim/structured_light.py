@@ -268,9 +268,7 @@ def _shadow(z: F64, fb_shadow: float) -> npt.NDArray[np.bool_]:
     return (z > 0) & (up > right_min + 0.5)
 
 
-def _flying(
-    z: F64, fraction: float, rng: np.random.Generator
-) -> tuple[F64, npt.NDArray[np.bool_]]:
+def _flying(z: F64, fraction: float, rng: np.random.Generator) -> tuple[F64, npt.NDArray[np.bool_]]:
     """At ``fraction`` of the horizontal edge crossings, the far pixel next to the near one
     takes a value between the two plateaus."""
     out = z.copy()
