@@ -225,7 +225,7 @@ def incidence_cosine(z: F64, fx: float, cx: float, cy: float) -> F64:
     """
     h, w = z.shape
     zz = z.astype(np.float32)
-    gv, gu = np.gradient(zz)
+    gu, gv = _smaller_difference(zz, 1), _smaller_difference(zz, 0)
     xs = ((np.arange(w, dtype=np.float32) - cx) / fx)[None, :]
     ys = ((np.arange(h, dtype=np.float32) - cy) / fx)[:, None]
     zf = zz / np.float32(fx)
@@ -235,6 +235,19 @@ def incidence_cosine(z: F64, fx: float, cx: float, cy: float) -> F64:
     with np.errstate(invalid="ignore", divide="ignore"):
         c = np.abs(zf) / (norm_n * norm_r)
     return np.where((z > 0) & np.isfinite(c), c, 1.0).astype(np.float64)
+
+
+def _smaller_difference(z: F32, axis: int) -> F32:
+    """Per pixel, the forward or backward difference along ``axis``, whichever is smaller:
+    a surface's slope, not the jump to another surface at a depth edge."""
+    d = np.diff(z, axis=axis)
+    pad_lo = [(0, 0), (0, 0)]
+    pad_hi = [(0, 0), (0, 0)]
+    pad_lo[axis] = (1, 0)
+    pad_hi[axis] = (0, 1)
+    back = np.pad(d, pad_lo, mode="edge")
+    fwd = np.pad(d, pad_hi, mode="edge")
+    return np.where(np.abs(back) < np.abs(fwd), back, fwd)
 
 
 def _draw_int(rng: np.random.Generator, r: tuple[int, int], s: float = 1.0) -> int:
@@ -292,8 +305,8 @@ def _blobs(shape: tuple[int, int], corr_px: float, rng: np.random.Generator) -> 
     h, w = shape
     s = max(corr_px, 1.0)
     small = rng.standard_normal((max(2, math.ceil(h / s)), max(2, math.ceil(w / s))))
-    big = cv2.resize(small.astype(np.float32), (w, h), interpolation=cv2.INTER_LINEAR)
-    big += 0.35 * rng.standard_normal((h, w)).astype(np.float32)
+    smooth = cv2.resize(small.astype(np.float32), (w, h), interpolation=cv2.INTER_LINEAR)
+    big = np.asarray(smooth, np.float32) + 0.2 * rng.standard_normal((h, w)).astype(np.float32)
     flat = big.ravel()
     ranks = np.empty(flat.size, np.float64)
     ranks[np.argsort(flat, kind="stable")] = (np.arange(flat.size) + 0.5) / flat.size
