@@ -410,13 +410,16 @@ def structured_light_frame(
     drop |= _shadow(zf, max(fb_shadow, 0.0))
     # Range: nothing nearer than the minimum, readings thinning out toward the maximum.
     span = max(p.max_range_m - p.fade_range_m, 1e-6)
-    fade = np.clip((zf - p.fade_range_m) / span, 0.0, 1.0)
-    drop |= (zf < p.min_range_m) | (zf > p.max_range_m) | (rng.random(z.shape) < fade)
+    drop |= (zf < p.min_range_m) | (zf > p.max_range_m)
+    fading = np.flatnonzero((zf > p.fade_range_m).ravel())
+    if fading.size:
+        f = (zf.ravel()[fading] - p.fade_range_m) / span
+        drop.ravel()[fading[rng.random(fading.size) < f]] = True
     # Noise, then disparity rounded to the step: together noise_frac x 1.425e-3 Z^2.
     q_var = (p.disparity_step_px / fb) ** 2 / 12.0  # rounding variance / Z^4
     coeff2 = (noise_frac * NOISE_COEFF_PER_M) ** 2 - q_var
     coeff = math.sqrt(coeff2) if coeff2 > 0 else 0.0
-    zn = zf + coeff * zf * zf * rng.standard_normal(z.shape)
+    zn = zf + coeff * zf * zf * rng.standard_normal(z.shape, dtype=np.float32)
     with np.errstate(divide="ignore", invalid="ignore"):
         steps = np.round(fb / p.disparity_step_px / zn)
         zq = np.where(steps > 0, fb / p.disparity_step_px / steps, 0.0)
@@ -434,7 +437,11 @@ def structured_light_frame(
         cv2.remap(mm, map_x, map_y, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT),
         np.uint16,
     )
-    fl = cv2.remap(flying.astype(np.uint8), map_x, map_y, cv2.INTER_NEAREST).astype(bool)
+    fl = (
+        cv2.remap(flying.astype(np.uint8), map_x, map_y, cv2.INTER_NEAREST).astype(bool)
+        if flying.any()
+        else flying
+    )
     left, right, top, bottom = bands
     if left:
         mm[:, :left] = 0
