@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 from packaging.requirements import Requirement
 
-from holescan.capture import Frame, write_oni
+from holescan.capture import write_oni
 from holescan.cli import GROUND_ONLY
-from holescan.detect import CameraIntrinsics
+from holescan.detect import CameraIntrinsics, Frame
 
 ROOT = Path(__file__).resolve().parents[1]
 
