@@ -1,11 +1,11 @@
 """RGB-D recordings made elsewhere, read on the ground as frame sources.
 
 * :mod:`.source` - :func:`open_recording`: recognises a recording by its content and
-  returns the :class:`capture.FrameSource` that reads it;
+  returns the :class:`detect.FrameSource` that reads it;
 * :mod:`.tum` - :class:`TumSource`: TUM RGB-D benchmark folders;
 * :mod:`.rosbag` - :class:`BagSource`: ROS 1 and ROS 2 bags (``rosbags``, no ROS needed);
 * OpenNI ``.oni`` files and holescan's own MCAP logs are read by
-  :class:`capture.OniSource` and :class:`capture.McapSource`;
+  :class:`capture.OniSource` and :class:`flightlog.McapSource`;
 * :mod:`.tolog` - :func:`recording_to_log` / :func:`flight_logs_of`: a recording as a
   holescan flight log (frames, camera, and the pose from a bag's NavSatFix + Imu, made into
   MAVLink by :mod:`.bagtelemetry`), so that ``holescan reprocess`` takes it;

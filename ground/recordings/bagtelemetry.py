@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any, Final
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from holescan.missions import mavlink
+from holescan.link import mavlink
 
 if TYPE_CHECKING:
     from rosbags.highlevel import AnyReader

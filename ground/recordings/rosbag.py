@@ -22,8 +22,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from holescan.capture import Frame
-from holescan.detect import CameraIntrinsics
+from holescan.detect import CameraIntrinsics, Frame
 from holescan.errors import InputError
 
 if TYPE_CHECKING:
@@ -162,7 +161,7 @@ def _rank(topic: str, kind: Kind) -> tuple[int, str]:
 
 
 class BagSource:
-    """A :class:`capture.FrameSource` over a ROS 1 ``.bag`` file or a ROS 2 bag folder.
+    """A :class:`detect.FrameSource` over a ROS 1 ``.bag`` file or a ROS 2 bag folder.
 
     Parameters
     ----------

@@ -13,11 +13,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Final
 
-from holescan.capture import FlightLogWriter, TelemetryReplay, log_file_path, read_log_layout
 from holescan.detect import CameraIntrinsics
 from holescan.errors import HolescanError, InputError
+from holescan.flightlog import FlightLogWriter, log_file_path, read_log_layout
 from holescan.ground.recordings.bagtelemetry import BagTelemetry, read_bag_telemetry
 from holescan.ground.recordings.source import open_recording, recording_kind
+from holescan.link import TelemetryReplay
 
 __all__ = ["ConvertedRecording", "flight_logs_of", "recording_to_log"]
 

@@ -12,8 +12,9 @@ from pathlib import Path
 import pymap3d
 import pytest
 
-from holescan.capture import Frame, write_oni
+from holescan.capture import write_oni
 from holescan.cli import main
+from holescan.detect import Frame
 from tests.ground.recordings.conftest import Scene
 from tests.ground.recordings.recwrite import write_bag
 
