@@ -217,3 +217,28 @@ def test_check_of_the_simulated_sortie_is_go(
     assert main(["check", "--sensor", "sim", "--log-dir", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     assert "pre-flight: GO" in out and "NO-GO" not in out
+
+
+def test_the_udev_rule_covers_every_xtion_for_the_service_group() -> None:
+    import configparser
+    import re
+
+    from holescan.capture._usb import XTION_PRODUCTS, XTION_VENDOR_ID
+
+    deploy = Path(__file__).resolve().parents[2] / "deploy"
+    rules = [
+        line
+        for line in (deploy / "99-xtion.rules").read_text().splitlines()
+        if line.strip() and not line.startswith("#")
+    ]
+    products = set()
+    for rule in rules:
+        keys = dict(re.findall(r'(\w+(?:\{[\w/]+\})?)=?="([^"]*)"', rule))
+        assert keys["SUBSYSTEM"] == "usb" and int(keys["ATTR{idVendor}"], 16) == XTION_VENDOR_ID
+        assert keys["MODE"] == "0660" and keys["ATTR{power/control}"] == "on"
+        products.add(int(keys["ATTR{idProduct}"], 16))
+        group = keys["GROUP"]
+    assert products == set(XTION_PRODUCTS)
+    unit = configparser.ConfigParser(strict=True, interpolation=None)
+    unit.read(deploy / "holescan.service")
+    assert group in unit["Service"]["SupplementaryGroups"].split()
