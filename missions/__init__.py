@@ -52,6 +52,20 @@ from holescan.missions._holeserver import (
     radio_budget,
 )
 from holescan.missions._link import MavConnection, mavlink, mavutil, open_link, parser
+from holescan.missions._linkvalues import (
+    HOLE_ID_MAX,
+    CardValues,
+    LinkValueError,
+    card_values,
+    check_hole_id,
+    link_float,
+    link_int,
+    link_lat_lon,
+    link_yaw,
+    optional_float,
+    xml_safe_tree,
+    xml_text,
+)
 from holescan.missions._mapinventory import (
     TYPE_INVENTORY,
     TileInventory,
@@ -88,7 +102,7 @@ from holescan.missions._protocol import (
     waypoint_from_mission_item,
 )
 from holescan.missions._qgcfiles import read_plan, read_wpl, write_plan, write_wpl
-from holescan.missions._signing import SigningKey
+from holescan.missions._signing import SigningKey, verified_signature
 from holescan.missions._sun import (
     SUNRISE_ELEVATION_DEG,
     FlightCheck,
@@ -128,6 +142,7 @@ from holescan.missions.errors import MissionsError
 __all__ = [
     "CARD_PAYLOAD",
     "HOLE_FORMATS",
+    "HOLE_ID_MAX",
     "HOLE_SUFFIXES",
     "HOLE_TIERS",
     "MAP_LAYERS",
@@ -149,10 +164,12 @@ __all__ = [
     "Camera",
     "CardAssembler",
     "CardSender",
+    "CardValues",
     "FlightCheck",
     "HoleFormat",
     "HoleMissionServer",
     "HoleTier",
+    "LinkValueError",
     "MapLayer",
     "MavConnection",
     "MissionError",
@@ -174,7 +191,9 @@ __all__ = [
     "UploadReport",
     "Waypoint",
     "card_facts",
+    "card_values",
     "check_flight",
+    "check_hole_id",
     "connect",
     "coverage_from_levels",
     "coverage_levels",
@@ -191,11 +210,16 @@ __all__ = [
     "hole_statustext",
     "hole_waypoints",
     "is_map_tile",
+    "link_float",
+    "link_int",
+    "link_lat_lon",
+    "link_yaw",
     "local_solar_day",
     "make_card",
     "mavlink",
     "mavutil",
     "open_link",
+    "optional_float",
     "parser",
     "plan_survey",
     "radio_budget",
@@ -219,6 +243,7 @@ __all__ = [
     "tile_facts_of",
     "tiles_per_hectare",
     "upload_mission",
+    "verified_signature",
     "waypoint_from_mission_item",
     "write_geojson",
     "write_gpx",
@@ -227,4 +252,6 @@ __all__ = [
     "write_plan",
     "write_waypoints",
     "write_wpl",
+    "xml_safe_tree",
+    "xml_text",
 ]
