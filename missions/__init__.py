@@ -10,7 +10,6 @@
 * :func:`write_hole_file` - found holes as GPX, KML/KMZ (thumbnails), GeoJSON, .plan, WPL.
 * :class:`HoleMissionServer` - serves found holes live as a mission (component 191) and
   announces them by STATUSTEXT.
-* :class:`SigningKey` - MAVLink 2 signing of the links to and from the ground station.
 """
 
 from holescan.missions._files import read_area, read_waypoints, write_waypoints
@@ -51,21 +50,6 @@ from holescan.missions._holeserver import (
     hole_waypoints,
     radio_budget,
 )
-from holescan.missions._link import MavConnection, mavlink, mavutil, open_link, parser
-from holescan.missions._linkvalues import (
-    HOLE_ID_MAX,
-    CardValues,
-    LinkValueError,
-    card_values,
-    check_hole_id,
-    link_float,
-    link_int,
-    link_lat_lon,
-    link_yaw,
-    optional_float,
-    xml_safe_tree,
-    xml_text,
-)
 from holescan.missions._mapinventory import (
     TYPE_INVENTORY,
     TileInventory,
@@ -105,7 +89,6 @@ from holescan.missions._protocol import (
     waypoint_from_mission_item,
 )
 from holescan.missions._qgcfiles import read_plan, read_wpl, write_plan, write_wpl
-from holescan.missions._signing import SigningKey, verified_signature
 from holescan.missions._sun import (
     SUNRISE_ELEVATION_DEG,
     FlightCheck,
@@ -146,7 +129,6 @@ __all__ = [
     "CARD_PAYLOAD",
     "CELL_M_RANGE",
     "HOLE_FORMATS",
-    "HOLE_ID_MAX",
     "HOLE_SUFFIXES",
     "HOLE_TIERS",
     "MAP_LAYERS",
@@ -170,14 +152,11 @@ __all__ = [
     "Camera",
     "CardAssembler",
     "CardSender",
-    "CardValues",
     "FlightCheck",
     "HoleFormat",
     "HoleMissionServer",
     "HoleTier",
-    "LinkValueError",
     "MapLayer",
-    "MavConnection",
     "MissionError",
     "MissionReceiver",
     "MissionRejectedError",
@@ -185,7 +164,6 @@ __all__ = [
     "MissionServerError",
     "MissionTimeoutError",
     "MissionsError",
-    "SigningKey",
     "SunDay",
     "SunWindow",
     "SunWindowError",
@@ -197,9 +175,7 @@ __all__ = [
     "UploadReport",
     "Waypoint",
     "card_facts",
-    "card_values",
     "check_flight",
-    "check_hole_id",
     "connect",
     "coverage_from_levels",
     "coverage_levels",
@@ -216,17 +192,8 @@ __all__ = [
     "hole_statustext",
     "hole_waypoints",
     "is_map_tile",
-    "link_float",
-    "link_int",
-    "link_lat_lon",
-    "link_yaw",
     "local_solar_day",
     "make_card",
-    "mavlink",
-    "mavutil",
-    "open_link",
-    "optional_float",
-    "parser",
     "plan_survey",
     "radio_budget",
     "rank_holes",
@@ -249,7 +216,6 @@ __all__ = [
     "tile_facts_of",
     "tiles_per_hectare",
     "upload_mission",
-    "verified_signature",
     "waypoint_from_mission_item",
     "write_geojson",
     "write_gpx",
@@ -258,6 +224,4 @@ __all__ = [
     "write_plan",
     "write_waypoints",
     "write_wpl",
-    "xml_safe_tree",
-    "xml_text",
 ]

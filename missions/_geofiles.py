@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from holescan.errors import InputError
-from holescan.missions._linkvalues import xml_safe_tree, xml_text
+from holescan.link import xml_safe_tree, xml_text
 from holescan.missions._waypoint import (
     KML_NS,
     MAV_CMD_NAV_WAYPOINT,

@@ -45,7 +45,7 @@ import xml.etree.ElementTree as ET
 from holescan.geotag import CIRCLE_95_PER_SIGMA
 from holescan.ground.station.files import hole_summary
 from holescan.ground.station.state import TIERS, GroundHole, Tier
-from holescan.missions import xml_safe_tree
+from holescan.link import xml_safe_tree
 
 __all__ = [
     "COT_TYPE",

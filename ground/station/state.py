@@ -1,14 +1,14 @@
 """The ground station's memory: holes, their pictures, the operator's marks, the track.
 
 Everything ``holescan ground`` learns is kept here and written to ``DIR/station.json``
-after every change (through capture's output rule, :func:`capture.atomic_output`: written
+after every change (through the output-path rule, :func:`outputs.atomic_output`: written
 to ``.station.part.json``, flushed, fsynced, renamed: a crash or a power cut leaves the
 previous or the new file, never half of one), pictures to ``DIR/cards/hole-ID.jpg`` the
 same way. Writes are batched under a flood: a few at once, then at most one every
 ``save_every_s`` (the last change always reaches the file; :meth:`StationState.flush`
 at the end); an operator's mark is written at once.
 
-Every value from the link is checked before it is kept (:mod:`missions._linkvalues`:
+Every value from the link is checked before it is kept (:mod:`link._values`:
 finite, in range, ids in the protocol's range, text XML can hold); a refused one is
 counted in ``rejected`` and logged, and nothing of its packet is kept. At most
 ``max_holes`` holes are kept (a flood of forged ids cannot exhaust memory or bury a
@@ -45,11 +45,10 @@ from typing import Any, Literal
 
 import numpy as np
 
-from holescan.capture import atomic_output
 from holescan.errors import InputError
 from holescan.geotag import LocalFrame, nearest_pairs
 from holescan.ground.errors import StationFileError
-from holescan.missions import (
+from holescan.link import (
     HOLE_ID_MAX,
     LinkValueError,
     card_values,
@@ -61,6 +60,7 @@ from holescan.missions import (
     optional_float,
     xml_text,
 )
+from holescan.outputs import atomic_output
 
 __all__ = [
     "FORMAT",
@@ -207,7 +207,7 @@ class GroundHole:
 
     def checked(self) -> list[str]:
         """Check every value in place as one from the link would be
-        (:mod:`missions._linkvalues`): raise :class:`missions.LinkValueError` when the id,
+        (:mod:`link._values`): raise :class:`link.LinkValueError` when the id,
         position or score is bad (the hole cannot be kept); a bad optional fact is set to
         unknown and named in the list returned."""
         self.id = check_hole_id(self.id)

@@ -30,15 +30,8 @@ from holescan.ground.station.files import write_station_files
 from holescan.ground.station.link import VehicleLink
 from holescan.ground.station.maplayers import map_document
 from holescan.ground.station.mapstore import MapStore
-from holescan.missions import (
-    HOLE_ID_MAX,
-    TileFacts,
-    card_facts,
-    encode_coverage_tile,
-    mavlink,
-    open_link,
-    read_tile,
-)
+from holescan.link import HOLE_ID_MAX, mavlink, open_link
+from holescan.missions import TileFacts, card_facts, encode_coverage_tile, read_tile
 
 JPEG = picture(1)
 
