@@ -39,10 +39,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TypeVar
 
 import cv2
 import numpy as np
 import numpy.typing as npt
+from numba import njit
+
+from holescan.sim._sensor import _normal, _normal_table, _state, _uniform
 
 __all__ = [
     "FrameDraws",
@@ -62,6 +66,7 @@ F64 = npt.NDArray[np.float64]
 U8 = npt.NDArray[np.uint8]
 U16 = npt.NDArray[np.uint16]
 Range = tuple[float, float]
+_T = TypeVar("_T", bound=np.generic)
 
 #: sigma_Z = coeff * Z^2 (Z in metres): Khoshelham & Elberink 2012 (1.425e-6 per mm).
 NOISE_COEFF_PER_M = 1.425e-3
@@ -278,7 +283,7 @@ def _smaller_difference(z: F32, axis: int) -> F32:
     return out
 
 
-def _resample_nearest(img: npt.NDArray[np.generic], uu: F64, vv: F64) -> npt.NDArray[np.generic]:
+def _resample_nearest(img: npt.NDArray[_T], uu: F64, vv: F64) -> npt.NDArray[_T]:
     """``out[r, c] = img[round(vv[r]), round(uu[c])]``, 0 where that falls off the image
     (a separable nearest-neighbour warp: shift and scale per axis)."""
     h, w = img.shape[:2]
@@ -312,20 +317,6 @@ def _fatten(z: F32, r: int) -> F32:
     return np.where(grow, near, z)
 
 
-def _shadow(z: F32, fb_shadow: float) -> npt.NDArray[np.bool_]:
-    """Pixels the projector (at +x) cannot light: a pixel to the right maps left of them."""
-    h, w = z.shape
-    read = z > 0
-    with np.errstate(divide="ignore"):
-        up = np.float32(fb_shadow) / np.where(read, z, np.float32(0.0))
-    np.subtract(np.arange(w, dtype=np.float32)[None, :], up, out=up)
-    up[~read] = np.inf
-    right_min = np.empty_like(up)
-    right_min[:, -1] = np.inf
-    np.minimum.accumulate(up[:, :0:-1], axis=1, out=right_min[:, -2::-1])
-    return read & (up > right_min + np.float32(0.5))
-
-
 def _flying(z: F32, fraction: float, rng: np.random.Generator) -> tuple[F32, npt.NDArray[np.bool_]]:
     """At ``fraction`` of the horizontal edge crossings, the far pixel next to the near one
     takes a value between the two plateaus."""
@@ -348,6 +339,55 @@ def _flying(z: F32, fraction: float, rng: np.random.Generator) -> tuple[F32, npt
     out[rows, c] = near + tt * (far - near)
     flying[rows, c] = True
     return out, flying
+
+
+@njit(cache=True)
+def _read(
+    z: F32,
+    drop: npt.NDArray[np.bool_],
+    state: npt.NDArray[np.uint64],
+    table: F64,
+    fb_shadow: float,
+    fb_steps: float,
+    noise_coeff: float,
+    min_m: float,
+    fade_m: float,
+    max_m: float,
+) -> U16:
+    """The readings (mm) of the depth ``z`` (m) in one pass per row, right to left.
+
+    A pixel is unread when ``drop`` says so, when the projector (at +x) cannot light it (a
+    pixel to its right maps more than half a pixel left of it: ``u - fb_shadow / z``), out
+    of range, or fading past ``fade_m``; else it reads ``z`` plus noise ``noise_coeff z^2``,
+    rounded to the disparity step (``fb_steps / z`` steps).
+    """
+    height, width = z.shape
+    out = np.zeros((height, width), dtype=np.uint16)
+    span = max(max_m - fade_m, 1e-6)
+    for v in range(height):
+        run_min = np.inf
+        for u in range(width - 1, -1, -1):
+            zz = z[v, u]
+            if zz <= 0.0:
+                continue
+            up = u - fb_shadow / zz
+            shadowed = up > run_min + 0.5
+            run_min = min(run_min, up)
+            if shadowed or drop[v, u] or zz < min_m or zz > max_m:
+                continue
+            if zz > fade_m and _uniform(state) < (zz - fade_m) / span:
+                continue
+            zn = zz + noise_coeff * zz * zz * _normal(state, table)
+            if zn <= 0.0:
+                continue
+            steps = math.floor(fb_steps / zn + 0.5)
+            if steps <= 0:
+                continue
+            zq = fb_steps / steps
+            if zq < min_m or zq > max_m:
+                continue
+            out[v, u] = np.uint16(int(zq * 1000.0 + 0.5))
+    return out
 
 
 def _blobs(
@@ -460,35 +500,25 @@ def structured_light_frame(
     # The correlation window: the nearer surface fattens, some crossings fly.
     zf = _fatten(z, fat)
     zf, flying = _flying(zf, fly, rng)
-    # The projector's shadow on the fattened surfaces (registered: narrower than raw).
+    # The projector's shadow on the fattened surfaces (registered: narrower than raw), the
+    # range (nothing nearer than the minimum, readings thinning out toward the maximum),
+    # then noise and the disparity rounded to its step: together noise_frac x 1.425e-3 Z^2.
     fb = camera.fx * p.baseline_m
     fb_shadow = camera.fx * (p.shadow_widening * p.baseline_m - p.registration_baseline_m)
-    drop |= _shadow(zf, max(fb_shadow, 0.0))
-    # Range: nothing nearer than the minimum, readings thinning out toward the maximum.
-    span = max(p.max_range_m - p.fade_range_m, 1e-6)
-    drop |= (zf < p.min_range_m) | (zf > p.max_range_m)
-    fading = np.flatnonzero((zf > p.fade_range_m).ravel())
-    if fading.size:
-        f = (zf.ravel()[fading] - p.fade_range_m) / span
-        drop.ravel()[fading[rng.random(fading.size) < f]] = True
-    # Noise, then disparity rounded to the step: together noise_frac x 1.425e-3 Z^2.
     q_var = (p.disparity_step_px / fb) ** 2 / 12.0  # rounding variance / Z^4
     coeff2 = (noise_frac * NOISE_COEFF_PER_M) ** 2 - q_var
-    coeff = math.sqrt(coeff2) if coeff2 > 0 else 0.0
-    zn = rng.standard_normal(z.shape, dtype=np.float32)
-    zn *= zf
-    zn *= zf
-    zn *= np.float32(coeff)
-    zn += zf
-    fbq = np.float32(fb / p.disparity_step_px)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        steps = np.round(fbq / zn)
-        zq = fbq / steps
-    keep = (zf > 0) & ~drop & (steps > 0) & (zq >= p.min_range_m) & (zq <= p.max_range_m)
-    zq *= np.float32(1000.0)
-    np.round(zq, out=zq)
-    zq[~keep] = 0.0  # what is kept lies within max_range_m: fits in uint16
-    mm = zq.astype(np.uint16)
+    mm = _read(
+        np.ascontiguousarray(zf, np.float32),
+        np.ascontiguousarray(drop),
+        _state(rng),
+        _normal_table(),
+        max(fb_shadow, 0.0),
+        fb / p.disparity_step_px,
+        math.sqrt(coeff2) if coeff2 > 0 else 0.0,
+        p.min_range_m,
+        p.fade_range_m,
+        p.max_range_m,
+    )
 
     # Registration onto the colour camera: shift, scale and the time offset under motion.
     sx = draws.shift_px[0] + m.velocity_px_s[0] * dt
