@@ -50,6 +50,7 @@ from holescan.capture.errors import (
     SensorError,
     TelemetryTimeoutError,
 )
+from holescan.capture.flightlog.diskspace import DiskSpace
 from holescan.capture.flightlog.writer import FlightLogWriter
 from holescan.detect import CameraIntrinsics
 from holescan.geotag import Hole, Tier, VehiclePose, local_en_m
@@ -82,8 +83,10 @@ class Flight:
         on_holes: HoleListener | None = None,
         before_close: Callable[[], None] | None = None,
         on_frame: FrameListener | None = None,
+        disk: DiskSpace | None = None,
     ) -> None:
         self.config = config
+        self._disk = disk
         self._on_frame_hook = on_frame
         self.camera = camera
         self._source_factory = source_factory
@@ -430,6 +433,7 @@ class Flight:
             mount=cfg.mount,
             errors=cfg.errors,
             options=cfg.log_options,
+            disk=self._disk,
         )
         self._writer = writer
         deadline: threading.Timer | None = None

@@ -9,6 +9,7 @@
     ├── ClockUnavailable         no clock estimate yet
     ├── PoseUnavailable          no trustworthy pose at that time
     │   └── PoseInvalid              ... the autopilot itself has none (no fix, jump, 0/0)
+    ├── DiskBudgetError          the planned flight does not fit on the log's disk
     ├── OutputPathError          an output that must not or cannot be written (an InputError)
     └── FlightLogError           a flight log cannot be written or read (an InputError)
         ├── TruncatedLogError        ... it was cut off or damaged before its end
@@ -27,6 +28,7 @@ __all__ = [
     "CaptureError",
     "ChunkDamagedError",
     "ClockUnavailable",
+    "DiskBudgetError",
     "FlightLogError",
     "OutputPathError",
     "PoseInvalid",
@@ -48,6 +50,10 @@ class SensorError(CaptureError):
 
     The capture daemon answers it by resetting the sensor on USB and opening it again.
     """
+
+
+class DiskBudgetError(CaptureError):
+    """The planned flight does not fit on the log's disk (``fly`` refuses to take off)."""
 
 
 class TelemetryError(CaptureError):
