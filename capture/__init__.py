@@ -7,6 +7,13 @@ Subpackages: :mod:`capture.flightlog` (the MCAP flight log: writing, reading, re
 
 from holescan.capture._clock import ClockEstimate, ClockSync
 from holescan.capture._daemon import Flight
+from holescan.capture._diskbudget import (
+    DiskBudget,
+    DiskPolicy,
+    disk_budget,
+    expected_bytes_per_s,
+    preflight_disk_budget,
+)
 from holescan.capture._flightrecords import FlightConfig, FlightCounters, FlightSummary
 from holescan.capture._fly import FlyReport, fly, format_report
 from holescan.capture._flyconfig import (
@@ -56,6 +63,7 @@ from holescan.capture.errors import (
     CaptureError,
     ChunkDamagedError,
     ClockUnavailable,
+    DiskBudgetError,
     FlightLogError,
     OutputPathError,
     PoseInvalid,
@@ -66,6 +74,8 @@ from holescan.capture.errors import (
     TruncatedLogError,
 )
 from holescan.capture.flightlog import (
+    DiskSpace,
+    SystemDiskSpace,
     JSON_SCHEMAS,
     TOPIC_CAMERA_INFO,
     TOPIC_COLOR,
@@ -146,6 +156,10 @@ __all__ = [
     "ClockUnavailable",
     "DamagedRegion",
     "DetectionWorker",
+    "DiskBudget",
+    "DiskBudgetError",
+    "DiskPolicy",
+    "DiskSpace",
     "Flight",
     "FlightConfig",
     "FlightCounters",
@@ -195,6 +209,7 @@ __all__ = [
     "SensorError",
     "SensorSetup",
     "SensorSpec",
+    "SystemDiskSpace",
     "Telemetry",
     "TelemetryError",
     "TelemetryReplay",
@@ -219,7 +234,9 @@ __all__ = [
     "decode_detection",
     "decode_messages",
     "detection_json",
+    "disk_budget",
     "errors_from_metadata",
+    "expected_bytes_per_s",
     "export_oni",
     "find_xtion",
     "fly",
@@ -242,6 +259,7 @@ __all__ = [
     "parse_fly_config",
     "part_path",
     "position_from_global_position_int",
+    "preflight_disk_budget",
     "quat_from_euler",
     "read_chunk",
     "read_flight_log",

@@ -6,6 +6,8 @@ Modules, from the bytes up:
   framing, footer, chunk fields, summary section, compression names);
 * :mod:`~capture.flightlog.schemas`: which topic holds what, and the conversions of
   holescan's records to Foxglove protobuf / JSON messages and back;
+  :mod:`~capture.flightlog.images` how the pixels are stored (JPEG/PNG colour, zstd/PNG
+  depth as ``foxglove.CompressedImage``, or raw);
   :mod:`~capture.flightlog.detections` and :mod:`~capture.flightlog.metadata` the same for
   detections and the ``holescan.mount`` record;
 * :mod:`~capture.flightlog.mcapfile`: :class:`McapFile`, the one lifecycle of an MCAP file
@@ -17,6 +19,9 @@ Modules, from the bytes up:
   :class:`McapSource`);
 * :mod:`~capture.flightlog.layout`: a log's chunk index and reading one chunk (for work
   split along chunks);
+* :mod:`~capture.flightlog.diskspace` (:class:`DiskSpace`) and
+  :mod:`~capture.flightlog.storage` (finished logs in a folder, their measured rate, the
+  retention rule);
 * :mod:`~capture.flightlog.info` (:func:`log_info`) and :mod:`~capture.flightlog.recover`
   (:func:`recover_log`): what a log holds, and repairing one.
 """
@@ -26,6 +31,8 @@ from holescan.capture.flightlog.detections import (
     decode_detection,
     detection_json,
 )
+from holescan.capture.flightlog.diskspace import DiskSpace, SystemDiskSpace
+from holescan.capture.flightlog.images import ImageEncoder, decode_compressed
 from holescan.capture.flightlog.info import LogInfo, TopicInfo, log_info
 from holescan.capture.flightlog.layout import (
     ChunkSpan,
@@ -76,6 +83,12 @@ from holescan.capture.flightlog.schemas import (
     jsonable,
     to_json,
 )
+from holescan.capture.flightlog.storage import (
+    FlightLogSet,
+    flight_logs,
+    measured_rate,
+    remove_oldest_finished,
+)
 from holescan.capture.flightlog.writer import FlightLogWriter
 
 __all__ = [
@@ -95,7 +108,10 @@ __all__ = [
     "TOPIC_TF",
     "ChunkSpan",
     "DamagedRegion",
+    "DiskSpace",
+    "FlightLogSet",
     "FlightLogWriter",
+    "ImageEncoder",
     "JsonSchema",
     "LogInfo",
     "LogLayout",
@@ -112,17 +128,21 @@ __all__ = [
     "McapSource",
     "RecoveryReport",
     "ScanState",
+    "SystemDiskSpace",
     "TopicInfo",
     "WriterStats",
     "annotations_message",
+    "decode_compressed",
     "decode_detection",
     "decode_messages",
     "detection_json",
     "errors_from_metadata",
+    "flight_logs",
     "holes_geojson_message",
     "jsonable",
     "log_file_path",
     "log_info",
+    "measured_rate",
     "mount_from_metadata",
     "mount_metadata",
     "open_log",
@@ -131,6 +151,7 @@ __all__ = [
     "read_flight_log",
     "read_log_layout",
     "recover_log",
+    "remove_oldest_finished",
     "scan_records",
     "to_json",
 ]
