@@ -74,8 +74,6 @@ from holescan.capture.errors import (
     TruncatedLogError,
 )
 from holescan.capture.flightlog import (
-    DiskSpace,
-    SystemDiskSpace,
     JSON_SCHEMAS,
     TOPIC_CAMERA_INFO,
     TOPIC_COLOR,
@@ -87,6 +85,7 @@ from holescan.capture.flightlog import (
     TOPIC_POSE,
     ChunkSpan,
     DamagedRegion,
+    DiskSpace,
     FlightLogWriter,
     LoggedCalibration,
     LoggedDetections,
@@ -103,6 +102,7 @@ from holescan.capture.flightlog import (
     McapSource,
     RecoveryReport,
     ScanState,
+    SystemDiskSpace,
     TopicInfo,
     WriterStats,
     annotations_message,

@@ -21,16 +21,15 @@ import dataclasses
 import json
 import logging
 import math
-from typing import TYPE_CHECKING, Final, Literal
+from pathlib import Path
+from typing import Final, Literal, Protocol
 
+from holescan.capture._flightrecords import FlightConfig
 from holescan.capture.errors import DiskBudgetError
 from holescan.capture.flightlog.diskspace import DiskSpace, SystemDiskSpace
 from holescan.capture.flightlog.options import LogOptions
 from holescan.capture.flightlog.storage import measured_rate, remove_oldest_finished
 from holescan.errors import InputError
-
-if TYPE_CHECKING:
-    from holescan.capture._flyconfig import FlyConfig
 
 __all__ = [
     "DiskBudget",
@@ -54,7 +53,10 @@ _JPEG_BYTES: Final = ((50, 18_000), (75, 30_000), (85, 47_200), (90, 69_100), (9
 _COLOR_BYTES: Final = {"png": 632_000, "raw": 921_600}
 _DEPTH_BYTES: Final = {"zstd": 116_000, "png": 166_000, "raw": 614_400}
 #: What chunk compression still takes off raw images (zstd: depth ~3.3x, colour ~1.1x).
-_RAW_CHUNK_RATIO: Final = {"zstd": {"color": 1.1, "depth": 3.3}, "lz4": {"color": 1.0, "depth": 2.0}}
+_RAW_CHUNK_RATIO: Final = {
+    "zstd": {"color": 1.1, "depth": 3.3},
+    "lz4": {"color": 1.0, "depth": 2.0},
+}
 #: Everything but the images (frame info, poses, raw MAVLink, detections, holes, health),
 #: measured over simulated sorties with a simulated autopilot.
 TELEMETRY_BYTES_PER_S: Final = 60_000.0
@@ -86,6 +88,19 @@ class DiskPolicy:
                 raise InputError(f"disk.{name} must be a positive number, got {v!r}")
         if self.when_short not in ("refuse", "warn"):
             raise InputError(f"disk.when_short must be 'refuse' or 'warn', got {self.when_short!r}")
+
+
+class PlannedFlight(Protocol):
+    """What the budget reads of a flight's configuration (a :class:`capture.FlyConfig`)."""
+
+    @property
+    def log_dir(self) -> Path: ...
+    @property
+    def duration_s(self) -> float | None: ...
+    @property
+    def disk(self) -> DiskPolicy: ...
+    @property
+    def flight(self) -> FlightConfig: ...
 
 
 @dataclasses.dataclass(frozen=True)
@@ -180,7 +195,7 @@ def _image_settings(options: LogOptions) -> dict[str, str]:
     return values
 
 
-def disk_budget(cfg: FlyConfig, free_bytes: int, *, measure: bool = True) -> DiskBudget:
+def disk_budget(cfg: PlannedFlight, free_bytes: int, *, measure: bool = True) -> DiskBudget:
     """The disk budget of the flight ``cfg`` describes on a disk with ``free_bytes`` free.
 
     The planned flight is ``cfg.duration_s`` (``--duration``), else ``[disk]
@@ -204,7 +219,7 @@ def disk_budget(cfg: FlyConfig, free_bytes: int, *, measure: bool = True) -> Dis
     return DiskBudget(int(free_bytes), options.image_reserve_bytes, rate, source, plan)
 
 
-def preflight_disk_budget(cfg: FlyConfig, disk: DiskSpace | None = None) -> DiskBudget:
+def preflight_disk_budget(cfg: PlannedFlight, disk: DiskSpace | None = None) -> DiskBudget:
     """The budget of the log folder's disk before take-off, said in the log.
 
     With ``[disk] remove_oldest_finished`` the oldest finished flight logs are removed
@@ -220,9 +235,9 @@ def preflight_disk_budget(cfg: FlyConfig, disk: DiskSpace | None = None) -> Disk
         raise InputError(f"cannot read the free space of the log folder {log_dir}: {err}") from err
     budget = disk_budget(cfg, free)
     need = budget.needed_bytes
-    if budget.fits is False and cfg.disk.remove_oldest_finished and need is not None:
-        if remove_oldest_finished(log_dir, need + budget.reserve_bytes, disk):
-            budget = dataclasses.replace(budget, free_bytes=disk.free_bytes(log_dir))
+    retention = budget.fits is False and cfg.disk.remove_oldest_finished and need is not None
+    if retention and remove_oldest_finished(log_dir, (need or 0) + budget.reserve_bytes, disk):
+        budget = dataclasses.replace(budget, free_bytes=disk.free_bytes(log_dir))
     if budget.fits is False:
         if cfg.disk.when_short == "refuse":
             raise DiskBudgetError(

@@ -387,7 +387,9 @@ def parse_fly_config(
             image_reserve_bytes=dk["image_reserve_bytes"],
         )
         disk = DiskPolicy(
-            planned_flight_s=None if dk["planned_flight_s"] is None else float(dk["planned_flight_s"]),
+            planned_flight_s=None
+            if dk["planned_flight_s"] is None
+            else float(dk["planned_flight_s"]),
             expected_bytes_per_s=(
                 None if dk["expected_bytes_per_s"] is None else float(dk["expected_bytes_per_s"])
             ),

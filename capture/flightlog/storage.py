@@ -95,14 +95,17 @@ def flight_logs(folder: str | os.PathLike[str]) -> list[FlightLogSet]:
 
 
 def measured_rate(
-    folder: str | os.PathLike[str], config: dict[str, str] | None = None
+    folder: str | os.PathLike[str],
+    config: dict[str, str] | None = None,
+    *,
+    min_span_s: float = MIN_MEASURED_S,
 ) -> tuple[float, FlightLogSet] | None:
     """Bytes per second the newest finished flight log in ``folder`` was written at.
 
     config : ``holescan.config`` entries the log must have been written with (e.g. its
     ``log.color``, ``log.depth``, ``log.jpeg_quality`` as logged: JSON text), so a log of
     other image settings is not taken as the rate of this one. Logs shorter than
-    ``MIN_MEASURED_S`` or unreadable are passed over. None when no log qualifies.
+    ``min_span_s`` or unreadable are passed over. None when no log qualifies.
     """
     for log_set in reversed(flight_logs(folder)):
         if not log_set.finished:
@@ -119,7 +122,7 @@ def measured_rate(
         if not starts:
             continue
         span_s = (max(ends) - min(starts)) / 1e9
-        if span_s >= MIN_MEASURED_S:
+        if span_s >= min_span_s:
             return log_set.bytes / span_s, log_set
     return None
 

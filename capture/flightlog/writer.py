@@ -67,9 +67,9 @@ class FlightLogWriter:
 
     Every ``write_*`` returns at once: True when queued, False when dropped (queue full
     or writer failed); ``write_frame`` also returns True for a frame deliberately not
-    logged after images were stopped (counted apart, never as a drop). ``t_unix_ns`` arguments are when the thing happened (capture or
-    receive time, Unix clock) and become the MCAP ``publish_time``; ``log_time`` is
-    ``time.time_ns()`` at the call.
+    logged after images were stopped (counted apart, never as a drop). ``t_unix_ns``
+    arguments are when the thing happened (capture or receive time, Unix clock) and become
+    the MCAP ``publish_time``; ``log_time`` is ``time.time_ns()`` at the call.
     """
 
     def __init__(

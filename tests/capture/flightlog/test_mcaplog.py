@@ -812,7 +812,8 @@ _DISK_FULL_CHILD = textwrap.dedent(
 
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # writes past the limit fail with EFBIG
     resource.setrlimit(resource.RLIMIT_FSIZE, (300_000, 300_000))
-    w = FlightLogWriter(sys.argv[1], SMALL, options=LogOptions(chunk_size=50_000, color="raw", depth="raw"))
+    options = LogOptions(chunk_size=50_000, color="raw", depth="raw")
+    w = FlightLogWriter(sys.argv[1], SMALL, options=options)
     accepted = []
     for i in range(200):
         accepted.append(w.write_frame(make_frame(i), i))
