@@ -40,8 +40,8 @@ import zstandard
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # this checkout
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from holescan.capture import FlightLogWriter, Frame, LogOptions
-from holescan.detect import CameraIntrinsics
+from holescan.detect import CameraIntrinsics, Frame
+from holescan.flightlog import FlightLogWriter, LogOptions
 
 VGA = CameraIntrinsics.xtion()
 

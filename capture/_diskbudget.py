@@ -3,13 +3,13 @@ the planned flight fits.
 
 :func:`disk_budget` is the pure arithmetic (a configuration and a free-space figure in, a
 :class:`DiskBudget` out); :func:`preflight_disk_budget` reads the free space through a
-:class:`~capture.flightlog.diskspace.DiskSpace`, applies the optional retention rule
+:class:`~flightlog.diskspace.DiskSpace`, applies the optional retention rule
 (removing the oldest *finished* flight logs when the configuration asks for it) and
 refuses, or warns, as configured.
 
 The rate is, in this order: ``[disk] expected_bytes_per_s`` when configured; else the
 rate measured on the newest finished flight log in the log folder written with the same
-image settings (:func:`capture.flightlog.storage.measured_rate`); else the expected rate
+image settings (:func:`flightlog.storage.measured_rate`); else the expected rate
 of the image settings (:func:`expected_bytes_per_s`, measured with
 ``benchmarks/bench_log_writer.py``; docs/flight-log.md).
 """
@@ -26,10 +26,10 @@ from typing import Final, Literal, Protocol
 
 from holescan.capture._flightrecords import FlightConfig
 from holescan.capture.errors import DiskBudgetError
-from holescan.capture.flightlog.diskspace import DiskSpace, SystemDiskSpace
-from holescan.capture.flightlog.options import LogOptions
-from holescan.capture.flightlog.storage import measured_rate, remove_oldest_finished
 from holescan.errors import InputError
+from holescan.flightlog.diskspace import DiskSpace, SystemDiskSpace
+from holescan.flightlog.options import LogOptions
+from holescan.flightlog.storage import measured_rate, remove_oldest_finished
 
 __all__ = [
     "DiskBudget",

@@ -32,8 +32,8 @@ from holescan.capture import (
     preflight_disk_budget,
     read_flight_log,
 )
-from holescan.capture.flightlog import flight_logs, measured_rate, remove_oldest_finished
 from holescan.detect import CameraIntrinsics
+from holescan.flightlog import flight_logs, measured_rate, remove_oldest_finished
 from holescan.geotag import VehiclePose
 
 REPO = Path(__file__).resolve().parents[2]

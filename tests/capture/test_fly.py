@@ -23,23 +23,18 @@ from holescan.capture import (
     Flight,
     FlightConfig,
     FlyConfig,
-    Frame,
-    LoggedFrame,
-    LoggedHealth,
-    LoggedHoles,
     SensorSpec,
     load_fly_config,
-    log_info,
     parse_fly_config,
-    read_flight_log,
     write_oni,
 )
-from holescan.detect import CameraIntrinsics
+from holescan.detect import CameraIntrinsics, Frame
 from holescan.errors import InputError
+from holescan.flightlog import LoggedFrame, LoggedHealth, LoggedHoles, log_info, read_flight_log
 from holescan.sim import SimAutopilot, SimPath, sortie_params
 
 os.environ.setdefault("MAVLINK20", "1")
-from holescan.missions import mavutil
+from holescan.link import mavutil
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "deploy" / "fly.example.toml"
@@ -317,6 +312,7 @@ def test_fly_replays_oni_then_its_own_log_and_stops_cleanly_on_sigterm(tmp_path:
     code, out, err = finish(
         holescan(
             "fly",
+            "--bench",
             "--sensor",
             f"oni:{tmp_path / 'in.oni'}",
             "--log-dir",
@@ -338,7 +334,7 @@ def test_fly_replays_oni_then_its_own_log_and_stops_cleanly_on_sigterm(tmp_path:
         assert np.array_equal(a.rgb, b.rgb) and np.array_equal(a.depth, b.depth)
 
     proc = holescan(
-        "fly", "--sensor", f"mcap:{first[0]}", "--log-dir", str(tmp_path / "b"),
+        "fly", "--bench", "--sensor", f"mcap:{first[0]}", "--log-dir", str(tmp_path / "b"),
         "--config", str(raw),
     )  # fmt: skip
     deadline = time.monotonic() + 60.0

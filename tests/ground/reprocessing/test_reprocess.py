@@ -27,18 +27,21 @@ from mcap.records import Channel, Message, Metadata, Schema
 from rasterio.warp import transform as warp_transform
 
 from holescan import cli
-from holescan.capture import FlightSummary, LoggedFrame, log_info, read_flight_log
-from holescan.capture.flightlog import (
+from holescan.capture import FlightSummary
+from holescan.detect import DetectParams
+from holescan.errors import InputError
+from holescan.flightlog import (
     TOPIC_COLOR,
     TOPIC_DEPTH,
     ImageEncoder,
+    LoggedFrame,
     McapFile,
     ScanState,
     decode_compressed,
+    log_info,
+    read_flight_log,
     scan_records,
 )
-from holescan.detect import DetectParams
-from holescan.errors import InputError
 from holescan.geotag import AnnounceGate, Hole
 from holescan.ground import (
     Progress,
@@ -303,8 +306,9 @@ def test_two_worker_processes_give_what_one_process_gives(
 def test_a_worker_killed_mid_run_loses_nothing(
     flight: Flown, reference: ReprocessResult, tmp_path: Path
 ) -> None:
-    """A cluster started as docs/reprocessing.md says (``dask scheduler``, ``dask worker``), used with
-    ``--scheduler``; one worker process is SIGKILLed mid-run (its nanny starts another)."""
+    """A cluster started as docs/reprocessing.md says (``dask scheduler``, ``dask worker``),
+    used with ``--scheduler``; one worker process is SIGKILLed mid-run (its nanny starts
+    another)."""
     import psutil
 
     files, _ = flight
@@ -453,7 +457,7 @@ def test_log_cut_right_after_its_header_is_an_empty_result(flight: Flown, tmp_pa
 
 def test_a_damaged_chunk_is_reported_and_the_rest_read(flight: Flown, tmp_path: Path) -> None:
     files, _summary = flight
-    from holescan.capture import read_log_layout
+    from holescan.flightlog import read_log_layout
 
     src = max(files, key=lambda p: p.stat().st_size)
     layout = read_log_layout(src)
