@@ -16,24 +16,27 @@ import pytest
 
 from holescan.capture import (
     DiskBudgetError,
+    disk_budget,
+    expected_bytes_per_s,
+    parse_fly_config,
+    preflight_disk_budget,
+)
+from holescan.detect import CameraIntrinsics, Frame
+from holescan.flightlog import (
     DiskSpace,
     FlightLogWriter,
-    Frame,
     LoggedDetections,
     LoggedFrame,
     LoggedHealth,
     LoggedHoles,
     LoggedPose,
     LogOptions,
-    disk_budget,
-    expected_bytes_per_s,
+    flight_logs,
     log_info,
-    parse_fly_config,
-    preflight_disk_budget,
+    measured_rate,
     read_flight_log,
+    remove_oldest_finished,
 )
-from holescan.detect import CameraIntrinsics
-from holescan.flightlog import flight_logs, measured_rate, remove_oldest_finished
 from holescan.geotag import VehiclePose
 
 REPO = Path(__file__).resolve().parents[2]
