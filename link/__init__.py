@@ -37,6 +37,7 @@ from holescan.link._connection import (
     open_link,
     parser,
 )
+from holescan.link._holetext import STATUSTEXT_MAX, HoleText, hole_text, read_hole_text
 from holescan.link._posebuffer import (
     AttitudeSample,
     PoseBuffer,
@@ -72,8 +73,10 @@ from holescan.link.errors import (
 )
 
 __all__ = [
+    "STATUSTEXT_MAX",
     "AttitudeSample",
     "GpsFix",
+    "HoleText",
     "LinkError",
     "MavConnection",
     "MavlinkStream",
@@ -93,6 +96,7 @@ __all__ = [
     "attitude_from_attitude",
     "attitude_from_quaternion",
     "gps_from_gps_raw_int",
+    "hole_text",
     "home_from_home_position",
     "is_autopilot_heartbeat",
     "is_null_island",
@@ -103,6 +107,7 @@ __all__ = [
     "parser",
     "position_from_global_position_int",
     "quat_from_euler",
+    "read_hole_text",
     "read_signing_key",
     "telemetry_sample",
 ]

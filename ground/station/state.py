@@ -22,7 +22,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
-import re
 import threading
 import time
 from collections.abc import Callable, Mapping
@@ -33,8 +32,16 @@ from typing import Any, Literal
 import numpy as np
 
 from holescan.errors import InputError
-from holescan.geotag import LocalFrame, nearest_pairs
+from holescan.geotag import (
+    HOLE_TIERS,
+    VEHICLE_TIERS,
+    HoleTier,
+    LocalFrame,
+    VehicleTier,
+    nearest_pairs,
+)
 from holescan.ground.errors import StationFileError
+from holescan.link import read_hole_text
 from holescan.outputs import atomic_output
 
 __all__ = [
@@ -55,14 +62,12 @@ _log = logging.getLogger(__name__)
 
 Mark = Literal["new", "confirmed", "rejected", "visited"]
 MARKS: tuple[Mark, ...] = ("new", "confirmed", "rejected", "visited")
-VehicleTier = Literal["announced", "review"]
-VEHICLE_TIERS: tuple[VehicleTier, ...] = ("announced", "review")
-Tier = Literal["announced", "review", "confirmed", "rejected"]
-TIERS: tuple[Tier, ...] = ("announced", "review", "confirmed", "rejected")
+Tier = HoleTier
+"""What a hole is for the crews (:data:`geotag.HoleTier`, defined once there)."""
+TIERS = HOLE_TIERS
 FORMAT = "holescan-ground-2"
 """The state file's ``format``; ``holescan-ground-1`` files (older stations) are read too."""
 _FORMAT_1 = "holescan-ground-1"
-_STATUSTEXT = re.compile(r"(?:HOLE|REVIEW) (\d+) ([\d.]+) (-?[\d.]+) (-?[\d.]+)")
 _TRACK_MAX = 20_000
 _TRACK_SAVE_NS = 10 * 10**9
 _NS_PER_S = 1_000_000_000
@@ -73,7 +78,8 @@ _OLD_SECONDS = {"first_unix": "t_first_unix_ns", "updated_unix": "t_updated_unix
 
 def parse_hole_statustext(text: str) -> tuple[int, float, float, float] | None:
     """``HOLE <id> <score> <lat> <lon>`` (an announced hole) or ``REVIEW <id> ...`` (a hole
-    for review) -> (id, score, lat_deg, lon_deg); None for other texts.
+    for review) -> (id, score, lat_deg, lon_deg); None for other texts. The link's one codec
+    (:func:`link.read_hole_text`, which also gives the tier).
 
     >>> parse_hole_statustext("HOLE 3 0.88 43.6533100 -79.3831200")
     (3, 0.88, 43.65331, -79.38312)
@@ -82,13 +88,8 @@ def parse_hole_statustext(text: str) -> tuple[int, float, float, float] | None:
     >>> parse_hole_statustext("PreArm: GPS") is None
     True
     """
-    m = _STATUSTEXT.fullmatch(text.strip().rstrip("\x00"))
-    if m is None:
-        return None
-    hid, score, lat, lon = int(m[1]), float(m[2]), float(m[3]), float(m[4])
-    if not (-90 <= lat <= 90 and -180 <= lon <= 180 and 0 <= score <= 1):
-        return None
-    return hid, score, lat, lon
+    said = read_hole_text(text)
+    return None if said is None else (said.hole_id, said.score, said.lat_deg, said.lon_deg)
 
 
 @dataclass
@@ -289,11 +290,12 @@ class StationState:
 
     def on_statustext(self, text: str) -> GroundHole | None:
         """Take a ``HOLE ...`` STATUSTEXT; return the hole when it was one."""
-        parsed = parse_hole_statustext(text)
-        if parsed is None:
+        said = read_hole_text(text)
+        if said is None:
             return None
-        hid, score, lat, lon = parsed
-        tier: VehicleTier = "review" if text.strip().startswith("REVIEW") else "announced"
+        hid, score, lat, lon, tier = (
+            said.hole_id, said.score, said.lat_deg, said.lon_deg, said.tier,
+        )  # fmt: skip
         with self._lock:
             h = self.holes.get(hid)
             if h is not None and (h.lat_deg, h.lon_deg, h.score, h.vehicle_tier) == (
