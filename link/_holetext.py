@@ -14,6 +14,8 @@ from typing import Final
 
 from holescan.errors import InputError
 from holescan.geotag import VEHICLE_TIERS, VehicleTier
+from holescan.link._values import HOLE_ID_MAX, check_hole_id, link_float, link_lat_lon
+from holescan.link.errors import LinkValueError
 
 __all__ = ["STATUSTEXT_MAX", "HoleText", "hole_text", "read_hole_text"]
 
@@ -59,7 +61,9 @@ def hole_text(
 
 
 def read_hole_text(text: str) -> HoleText | None:
-    """The hole a STATUSTEXT tells of; None for any other text, or values out of range.
+    """The hole a STATUSTEXT tells of; None for any other text, or values out of range
+    (every value checked as the link's values are: an id up to ``HOLE_ID_MAX``, a finite
+    score in [0, 1], a position on the Earth).
 
     >>> read_hole_text("HOLE 3 0.88 43.6533100 -79.3831200")
     HoleText(hole_id=3, tier='announced', score=0.88, lat_deg=43.65331, lon_deg=-79.38312)
@@ -69,9 +73,12 @@ def read_hole_text(text: str) -> HoleText | None:
     True
     """
     m = _TEXT.fullmatch(text.strip().rstrip("\x00"))
-    if m is None:
+    if m is None or len(m[2]) > len(str(HOLE_ID_MAX)):
         return None
-    hid, score, lat, lon = int(m[2]), float(m[3]), float(m[4]), float(m[5])
-    if not (-90 <= lat <= 90 and -180 <= lon <= 180 and 0 <= score <= 1):
+    try:
+        hid = check_hole_id(int(m[2]))
+        score = link_float(m[3], 0.0, 1.0, "score")
+        lat, lon = link_lat_lon(m[4], m[5])
+    except LinkValueError:
         return None
     return HoleText(hid, _TIERS[m[1]], score, lat, lon)
