@@ -8,11 +8,11 @@ from hypothesis import strategies as st
 
 from holescan.errors import InputError
 from holescan.geotag import VEHICLE_TIERS
-from holescan.link import STATUSTEXT_MAX, HoleText, hole_text, read_hole_text
+from holescan.link import HOLE_ID_MAX, STATUSTEXT_MAX, HoleText, hole_text, read_hole_text
 
 
 @given(
-    hole_id=st.integers(0, 10**12),
+    hole_id=st.integers(0, HOLE_ID_MAX),
     score=st.floats(0.0, 1.0),
     lat=st.floats(-90.0, 90.0),
     lon=st.floats(-180.0, 180.0),
@@ -27,7 +27,7 @@ def test_every_hole_text_reads_back_with_its_tier(
     assert said is not None
     assert (said.hole_id, said.tier) == (hole_id, tier)
     assert said.score == pytest.approx(score, abs=0.005)
-    # 7 decimals (1 cm) while they fit; a 12-digit id still keeps 4 (11 m at worst)
+    # 7 decimals (1 cm) for every id up to HOLE_ID_MAX (fewer only when they do not fit)
     decimals = len(text.split()[-1].split(".")[1])
     assert said.lat_deg == pytest.approx(lat, abs=0.51 * 10**-decimals)
     assert said.lon_deg == pytest.approx(lon, abs=0.51 * 10**-decimals)
@@ -49,6 +49,7 @@ def test_known_texts_both_ways() -> None:
         "REVIEW 3 0.88 43.6533100 -189.3831200",  # longitude out of range
         "CANDIDATE 3 0.88 43.6533100 -79.3831200",  # a tier that never leaves the vehicle
         "HOLE -3 0.88 43.6533100 -79.3831200",
+        "HOLE 1000000000 0.88 43.6533100 -79.3831200",  # an id above HOLE_ID_MAX
     ],
 )
 def test_other_or_bad_texts_are_not_holes(text: str) -> None:
