@@ -18,6 +18,15 @@ from holescan.geotag._confidence import (
 from holescan.geotag._local import LocalFrame, local_en_m
 from holescan.geotag._matching import nearest_pairs
 from holescan.geotag._merge import Hole, HoleTracker, MergeParams
+from holescan.geotag._pipeline import (
+    BestViews,
+    FrameHoles,
+    HolePipeline,
+    HoleView,
+    PoseOf,
+    crop_view,
+    view_jpeg,
+)
 from holescan.geotag._project import (
     CIRCLE_95_PER_SIGMA,
     ErrorModel,
@@ -27,30 +36,48 @@ from holescan.geotag._project import (
     geotag_frame,
     project_to_pixel,
 )
-from holescan.geotag._tiers import TIERS, AnnounceGate, Tier
+from holescan.geotag._tiers import (
+    HOLE_TIERS,
+    TIERS,
+    VEHICLE_TIERS,
+    AnnounceGate,
+    HoleTier,
+    Tier,
+    VehicleTier,
+)
 from holescan.geotag._types import VehiclePose
 
 __all__ = [
     "CIRCLE_95_PER_SIGMA",
     "DEFAULT_CONFIDENCE",
+    "HOLE_TIERS",
     "R_ENU_NED",
     "TIERS",
+    "VEHICLE_TIERS",
     "AnnounceGate",
+    "BestViews",
     "CameraMount",
     "ConfidenceModel",
     "ErrorModel",
+    "FrameHoles",
     "GimbalAttitude",
     "Hole",
     "HoleEvidence",
+    "HolePipeline",
     "HoleSighting",
+    "HoleTier",
     "HoleTracker",
+    "HoleView",
     "LocalCameraPose",
     "LocalFrame",
     "MergeParams",
+    "PoseOf",
     "Tier",
     "VehiclePose",
+    "VehicleTier",
     "box_cut_by_border",
     "camera_pose_local",
+    "crop_view",
     "dcm_from_euler",
     "dcm_from_quaternion",
     "evidence_of",
@@ -60,5 +87,6 @@ __all__ = [
     "nearest_pairs",
     "project_to_pixel",
     "rotation_ned_from_optical",
+    "view_jpeg",
     "viewpoint_of",
 ]
