@@ -140,7 +140,7 @@ def test_a_silent_autopilot_a_bad_mount_and_a_full_plan_are_no_go(tmp_path: Path
     assert "no autopilot heartbeat" in report.item("autopilot").detail
     assert report.item("mount and camera").status == "NO-GO"
     assert "90 deg from straight down" in report.item("mount and camera").detail
-    assert report.item("disk").status == "NO-GO" and "do not fit" in report.item("disk").detail
+    assert report.item("disk").status == "NO-GO" and "does NOT fit" in report.item("disk").detail
 
 
 def test_require_go_passes_a_flight_with_both_and_names_the_missing_one(tmp_path: Path) -> None:
