@@ -15,6 +15,7 @@ from holescan.geotag._confidence import (
     evidence_of,
     viewpoint_of,
 )
+from holescan.geotag._ids import IdMap, carry_ids, same_opening_gate_m
 from holescan.geotag._local import LocalFrame, local_en_m
 from holescan.geotag._matching import nearest_pairs
 from holescan.geotag._merge import Hole, HoleTracker, MergeParams
@@ -27,12 +28,13 @@ from holescan.geotag._project import (
     geotag_frame,
     project_to_pixel,
 )
-from holescan.geotag._tiers import TIERS, AnnounceGate, Tier
+from holescan.geotag._tiers import FOUND_TIERS, TIERS, AnnounceGate, Tier, holes_found
 from holescan.geotag._types import VehiclePose
 
 __all__ = [
     "CIRCLE_95_PER_SIGMA",
     "DEFAULT_CONFIDENCE",
+    "FOUND_TIERS",
     "R_ENU_NED",
     "TIERS",
     "AnnounceGate",
@@ -44,6 +46,7 @@ __all__ = [
     "HoleEvidence",
     "HoleSighting",
     "HoleTracker",
+    "IdMap",
     "LocalCameraPose",
     "LocalFrame",
     "MergeParams",
@@ -51,14 +54,17 @@ __all__ = [
     "VehiclePose",
     "box_cut_by_border",
     "camera_pose_local",
+    "carry_ids",
     "dcm_from_euler",
     "dcm_from_quaternion",
     "evidence_of",
     "geotag_detection",
     "geotag_frame",
+    "holes_found",
     "local_en_m",
     "nearest_pairs",
     "project_to_pixel",
     "rotation_ned_from_optical",
+    "same_opening_gate_m",
     "viewpoint_of",
 ]

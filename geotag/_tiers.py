@@ -16,12 +16,27 @@ from holescan.detect import p_hole_of_score
 from holescan.errors import InputError
 from holescan.geotag._merge import Hole
 
-__all__ = ["TIERS", "AnnounceGate", "Tier"]
+__all__ = ["FOUND_TIERS", "TIERS", "AnnounceGate", "Tier", "holes_found"]
 
 _P_HOLE_MAX = 0.99  # p_hole is kept within [0.01, 0.99]
 
 Tier = Literal["announced", "review", "candidate"]
 TIERS: tuple[Tier, ...] = ("announced", "review", "candidate")
+
+FOUND_TIERS: tuple[str, ...] = ("announced", "review", "confirmed")
+"""What "holes found" counts, everywhere (console, report, ``demo.json``, reprocessing's
+summaries): the holes that reach a person: *announced*, *for review*, and those an operator
+*confirmed* (or visited). Candidates (logged only) and holes an operator *rejected* are not
+found holes."""
+
+
+def holes_found(tiers: Iterable[str]) -> int:
+    """How many of ``tiers`` (one per hole) are found holes (:data:`FOUND_TIERS`).
+
+    >>> holes_found(["announced", "review", "candidate", "rejected", "confirmed"])
+    3
+    """
+    return sum(t in FOUND_TIERS for t in tiers)
 
 
 @dataclass(frozen=True)
@@ -100,6 +115,20 @@ class AnnounceGate:
         if self.passes(hole):
             return "announced"
         return "review" if self.p_hole(hole) >= self.review_min_p_hole else "candidate"
+
+    def tiers(self, holes: Sequence[Hole], announced: Iterable[int] = ()) -> dict[int, Tier]:
+        """Every hole's tier, as the vehicle gives it: :meth:`select` (announced, less
+        duplicates), :meth:`review` (for review, not at an announced hole's place), the
+        rest candidates (a hole that passes but duplicates a kept one is a candidate).
+        ``announced`` : ids the ground already has as announced (they stay announced while
+        they pass). The one rule for tiers: in flight, in the demo, in reprocessing and
+        campaigns.
+        """
+        announced = tuple(announced)
+        out: dict[int, Tier] = {h.id: "candidate" for h in holes}
+        out.update({h.id: "review" for h in self.review(holes, announced)})
+        out.update({h.id: "announced" for h in self.select(holes, announced)})
+        return out
 
     def review(self, holes: Sequence[Hole], announced: Iterable[int] = ()) -> list[Hole]:
         """The holes for review: in the review tier, not at the place of an announced one

@@ -79,7 +79,9 @@ def test_printed_score_is_the_truth(demo: tuple[Path, str]) -> None:
         t = truth[int(tid)]
         assert (float(x), float(y)) == (round(t.x_m, 1), round(t.y_m, 1))
         if status == "FOUND":
-            m = re.search(r"as hole (\d+) \(p_hole [\d.]+, score [\d.]+\), (\d+) cm off", rest)
+            m = re.search(
+                r"as hole (\d+) \(p_hole [\d.]+, best frame's score [\d.]+\), (\d+) cm off", rest
+            )
             assert m is not None
             h = confirmed[int(m[1])]  # a confirmed hole of the logged flight
             assert finds(h, t) and abs(100 * centre_m(h, t) - int(m[2])) <= 1
@@ -92,13 +94,18 @@ def test_printed_score_is_the_truth(demo: tuple[Path, str]) -> None:
             assert not any(finds(h, t) for h in confirmed.values() if h.id not in found_ids)
     false_ids = [int(i) for i in re.findall(r"hole (\d+): FALSE", text)]
     assert sorted(found_ids + false_ids) == sorted(confirmed)  # each confirmed hole scored once
-    m = re.search(r"=> found (\d+) of (\d+) in view, missed (\d+), false (\d+)", text)
+    m = re.search(
+        r"=> holes found \(announced \+ for review\): (\d+); true holes found (\d+) of (\d+) "
+        r"in view, missed (\d+), announced false (\d+)",
+        text,
+    )
     assert m is not None
-    found, in_view, missed, false = (int(v) for v in m.groups())
+    n_found, found, in_view, missed, false = (int(v) for v in m.groups())
     assert (found, missed, false) == (len(found_ids), in_view - found, len(false_ids))
     assert found >= 1  # the demo's short run over the small field finds holes
     doc = json.loads((out / "demo.json").read_text())
     assert (doc["found"], doc["missed"], doc["false"]) == (found, missed, false)
+    assert doc["holes_found"] == n_found == len(confirmed) + len(doc["review"])
     # The search map: the searched fraction, and why each true hole not found was missed.
     m = re.search(r"search map: ([\d.]+)% of the planned (\d+) m2 searched", text)
     assert m is not None and abs(float(m[1]) / 100 - doc["searched_fraction"]) < 1e-3
