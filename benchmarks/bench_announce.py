@@ -32,7 +32,7 @@ replays the histories of an earlier ``--json`` run.
 Usage::
 
     nice python benchmarks/bench_announce.py --seeds 1-8 --fps 10 --jobs 2 --json out.json \
-        --alien DATASET   # README figures: these settings, alien seed 7 (100 scenes)
+        --alien DATASET   # docs/tiers.md figures: these settings, alien seed 7 (100 scenes)
 """
 
 from __future__ import annotations

@@ -48,6 +48,20 @@ from holescan.capture._posebuffer import (
     quat_from_euler,
 )
 from holescan.capture._posevalidity import GpsFix, NavStatus, PoseValidity, PositionSample
+from holescan.capture._preflight import (
+    ITEMS,
+    PreflightError,
+    PreflightLimits,
+    preflight,
+    require_go,
+)
+from holescan.capture._preflightitems import (
+    RAW_LOG_BYTES_PER_S,
+    CheckItem,
+    CheckStatus,
+    PreflightReport,
+    disk_item,
+)
 from holescan.capture._sensorsetup import PacedReplay, SensorSetup, open_sensor
 from holescan.capture._telemetryreplay import TelemetryReplay
 from holescan.capture._usb import UsbDeviceInfo, find_xtion, reset_xtion
@@ -128,7 +142,9 @@ from holescan.capture.openni import (
 
 __all__ = [
     "DEFAULT_RATES_HZ",
+    "ITEMS",
     "JSON_SCHEMAS",
+    "RAW_LOG_BYTES_PER_S",
     "TOPIC_CAMERA_INFO",
     "TOPIC_COLOR",
     "TOPIC_DEPTH",
@@ -139,6 +155,8 @@ __all__ = [
     "TOPIC_POSE",
     "AttitudeSample",
     "CaptureError",
+    "CheckItem",
+    "CheckStatus",
     "ChunkDamagedError",
     "ChunkSpan",
     "ClockEstimate",
@@ -190,6 +208,9 @@ __all__ = [
     "PoseUnavailable",
     "PoseValidity",
     "PositionSample",
+    "PreflightError",
+    "PreflightLimits",
+    "PreflightReport",
     "RecoveryReport",
     "ScanState",
     "SensorError",
@@ -219,6 +240,7 @@ __all__ = [
     "decode_detection",
     "decode_messages",
     "detection_json",
+    "disk_item",
     "errors_from_metadata",
     "export_oni",
     "find_xtion",
@@ -242,12 +264,14 @@ __all__ = [
     "parse_fly_config",
     "part_path",
     "position_from_global_position_int",
+    "preflight",
     "quat_from_euler",
     "read_chunk",
     "read_flight_log",
     "read_log_layout",
     "read_signing_key",
     "recover_log",
+    "require_go",
     "reset_xtion",
     "scan_oni",
     "scan_records",

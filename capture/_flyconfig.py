@@ -160,7 +160,7 @@ class FlyConfig:
 _NUM = (int, float)
 _RENAMED = {
     "announce_min_score": "the gate now takes a probability, announce_min_p_hole "
-    "(README, 'What is announced'; p_hole 0.5 is a best score of 0.37)",
+    "(docs/tiers.md, 'What is announced'; p_hole 0.5 is a best score of 0.37)",
 }
 
 

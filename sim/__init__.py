@@ -27,7 +27,14 @@ from holescan.sim._demo import (
     run_demo,
 )
 from holescan.sim._demo_format import REVIEW_PER_HA_MEASURED, format_result
-from holescan.sim._fly import SIM_TABLE, SimFlyReport, fly_sim, format_sim_report, sortie_params
+from holescan.sim._fly import (
+    SIM_TABLE,
+    SimFlyReport,
+    check_sim,
+    fly_sim,
+    format_sim_report,
+    sortie_params,
+)
 from holescan.sim._lap import LapReplay, prerender_lap
 from holescan.sim._render import GtBox, hole_boxes, render, render_exact
 from holescan.sim._reported import ReportedPoseCamera, anchor_at_home
@@ -77,6 +84,7 @@ __all__ = [
     "WorldAnchor",
     "anchor_at_home",
     "camera_pose_in_world",
+    "check_sim",
     "count_in_view",
     "fly_sim",
     "format_result",

@@ -14,7 +14,7 @@ __all__ = ["REVIEW_PER_HA_MEASURED", "format_result"]
 REVIEW_PER_HA_MEASURED = 70
 """For-review items per hectare surveyed at the default gate (announced p_hole >= 0.9,
 review >= 0.1), as measured: ``benchmarks/bench_tiers.py CACHE --seeds 17-29``, 75 held-out
-simulated flights (13 surveys, 39 hovers, 23 passes), 15 review items in 0.21 ha (README,
+simulated flights (13 surveys, 39 hovers, 23 passes), 15 review items in 0.21 ha (docs/tiers.md,
 "Tiers"). The demo states it next to what its own flight gave."""
 
 

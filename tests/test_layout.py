@@ -1,4 +1,4 @@
-"""The architecture the README describes is the one the code has."""
+"""The architecture docs/architecture.md describes is the one the code has."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """Fault injection in a flight: the MAVLink link gone for 10 s then the autopilot back
 rebooted (boot clock from 0, stream settings forgotten), the sensor stopping and coming
 back, the disk filling up while logging, and SIGKILL of the daemon. Each prints the figures
-the README quotes (run with ``-s``)."""
+docs/measurements.md quotes (run with ``-s``)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """Issue 20: mode changes during a survey (AUTO -> RTL, LAND, LOITER, GUIDED, back to AUTO)
 and disarming / arming break nothing: capture, poses, detection and announcements go on
-in every mode (decided: nothing depends on the mode or on arming, see the README), and
+in every mode (decided: nothing depends on the mode or on arming, see docs/sitl.md), and
 the health records say which mode and arming state the autopilot reported."""
 
 from __future__ import annotations

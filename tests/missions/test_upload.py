@@ -133,7 +133,7 @@ def test_rejected_missions_raise_with_the_reason() -> None:
         MissionServer(f"udpin:127.0.0.1:{port}", MissionReceiver(capacity=5)),
         pytest.raises(MissionRejectedError, match="MAV_MISSION_NO_SPACE") as err,
     ):
-        upload_mission(f"udpout:127.0.0.1:{port}", _items(), HOME)
+        upload_mission(f"udpout:127.0.0.1:{port}", _items(), HOME, no_space_wait_s=0)
     assert err.value.result == 4
 
     def altitude_fence(items: Sequence[Waypoint]) -> int:
