@@ -231,8 +231,8 @@ def test_two_worker_processes_give_what_one_process_gives(
 def test_a_worker_killed_mid_run_loses_nothing(
     flight: Flown, reference: ReprocessResult, tmp_path: Path
 ) -> None:
-    """A cluster started as docs/reprocessing.md says (``dask scheduler``, ``dask worker``), used with
-    ``--scheduler``; one worker process is SIGKILLed mid-run (its nanny starts another)."""
+    """A cluster started as docs/reprocessing.md says (``dask scheduler``, ``dask worker``),
+    used with ``--scheduler``; one worker process is SIGKILLed mid-run (its nanny starts another)."""
     import psutil
 
     files, _ = flight
