@@ -232,7 +232,8 @@ def test_a_worker_killed_mid_run_loses_nothing(
     flight: Flown, reference: ReprocessResult, tmp_path: Path
 ) -> None:
     """A cluster started as docs/reprocessing.md says (``dask scheduler``, ``dask worker``),
-    used with ``--scheduler``; one worker process is SIGKILLed mid-run (its nanny starts another)."""
+    used with ``--scheduler``; one worker process is SIGKILLed mid-run (its nanny starts
+    another)."""
     import psutil
 
     files, _ = flight
