@@ -26,6 +26,7 @@ from holescan.sim._demo import DEMO_SORTIE
 from holescan.sim._sortie import TrueHole, make_sortie_world, true_holes
 
 CHROMIUM = Path("/usr/bin/chromium")
+R95 = math.sqrt(math.log(0.05) / math.log(0.32))  # the 95 % circle per sigma (Rayleigh)
 SIZE = (6.0, 6.0)
 
 
@@ -216,7 +217,7 @@ def test_every_output_agrees_on_ids_tiers_positions_and_sigma(demo: tuple[Path, 
         p = f["properties"]
         lon, lat = f["geometry"]["coordinates"][:2]
         ref[p["hole_id"]] = (p["tier"], lat, lon, p["sigma_h_m"])
-        assert p["r95_m"] == pytest.approx(p["sigma_h_m"] * 1.6205, abs=2e-3)
+        assert p["r95_m"] == pytest.approx(p["sigma_h_m"] * R95, abs=2e-3)
     assert {i: v[0] for i, v in ref.items()} == tiers  # no candidate, every tier the same
 
     def same_place(hid: int, lat: float, lon: float, tol_m: float = 0.01) -> None:
@@ -259,7 +260,7 @@ def test_every_output_agrees_on_ids_tiers_positions_and_sigma(demo: tuple[Path, 
         pt = ev.find("point")
         assert pt is not None
         same_place(hid, float(pt.get("lat", "nan")), float(pt.get("lon", "nan")))
-        assert float(pt.get("ce", "nan")) == pytest.approx(1.6205 * ref[hid][3], abs=0.01)
+        assert float(pt.get("ce", "nan")) == pytest.approx(R95 * ref[hid][3], abs=0.01)
         on_tak[hid] = ev.find("detail/holescan").get("tier")  # type: ignore[union-attr]
     assert on_tak == {i: t for i, t in tiers.items() if t == "announced"}
 
