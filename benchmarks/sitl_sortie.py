@@ -45,7 +45,7 @@ sys.path.insert(0, str(REPO))
 
 from sitl_report import Truth, reboot_report, report  # noqa: E402
 
-from holescan.missions import mavlink, mavutil  # noqa: E402
+from holescan.link import mavlink, mavutil  # noqa: E402
 from holescan.sim import (  # noqa: E402
     DEFAULT_ANCHOR,
     SortieParams,

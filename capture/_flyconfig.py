@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import dataclasses
 import datetime as dt
+import importlib.util
 import logging
 import math
 import time
@@ -42,11 +43,11 @@ from typing import Any, Literal
 from holescan.capture._flightrecords import FlightConfig
 from holescan.capture._livemap import LiveMapConfig
 from holescan.capture._mavlink import DEFAULT_BAUD
-from holescan.capture.flightlog.options import LogOptions
 from holescan.detect import DEFAULT, PAPER, SEARCHERS, DetectParams
 from holescan.errors import InputError
+from holescan.flightlog.options import LogOptions
 from holescan.geotag import AnnounceGate, CameraMount, ErrorModel
-from holescan.missions import SigningKey
+from holescan.link import SigningKey
 
 __all__ = [
     "FlyConfig",
@@ -96,7 +97,7 @@ class FlyConfig:
     MAVLink 2 signing key of the hole server's link to the ground station, or, without
     ``gcs``, of the one link to the autopilot that the holes share (None: unsigned;
     fly.toml ``mavlink_key`` = 64 hex digits or ``mavlink_key_file`` = a file of the key or
-    a passphrase, :class:`missions.SigningKey`; never in ``record`` or a log).
+    a passphrase, :class:`link.SigningKey`; never in ``record`` or a log).
     duration_s, max_frames : stop after this long / this many frames (None: until stopped).
     usb_reset : reset the Xtion on USB after a sensor failure (``openni2`` only).
     openni_uri : OpenNI2 device URI (None: the first Xtion).
@@ -330,6 +331,11 @@ def parse_fly_config(
     det = tables["detect"]
     if det["mode"] not in ("default", "paper"):
         raise InputError(f"{where}: detect.mode must be 'default' or 'paper', got {det['mode']!r}")
+    if det["mode"] == "paper" and importlib.util.find_spec("numba") is None:
+        raise InputError(
+            f"{where}: detect.mode = 'paper' needs numba, which the flight install leaves out "
+            "(pip install 'holescan[ground]'; the default mode does not need it)"
+        )
     if det["searcher"] not in SEARCHERS:
         raise InputError(f"{where}: detect.searcher must be one of {sorted(SEARCHERS)}")
     params: DetectParams = (PAPER if det["mode"] == "paper" else DEFAULT).with_searcher(

@@ -57,9 +57,9 @@ from holescan.capture._preflightitems import (
     signing_item,
 )
 from holescan.capture._sensorsetup import SensorSetup, open_sensor
-from holescan.capture.errors import CaptureError, SensorError, TelemetryError
+from holescan.capture.errors import CaptureError, SensorError
 from holescan.errors import HolescanError
-from holescan.missions import mavlink, open_link
+from holescan.link import TelemetryError, mavlink, open_link
 
 __all__ = [
     "ITEMS",

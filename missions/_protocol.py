@@ -18,8 +18,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from holescan.missions._link import mavlink, open_link
-from holescan.missions._signing import SigningKey
+from holescan.link import SigningKey, mavlink, open_link
 from holescan.missions._waypoint import (
     MAV_CMD_NAV_WAYPOINT,
     MAV_FRAME_GLOBAL,

@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from typing import Any
 
-from holescan.missions import mavlink
+from holescan.link import mavlink
 
 __all__ = ["STREAMED", "STREAM_GROUPS", "command_result", "is_reboot", "param_value", "set_streams"]
 

@@ -17,8 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from holescan.capture import Frame
-from holescan.detect import CameraIntrinsics
+from holescan.detect import CameraIntrinsics, Frame
 from holescan.geotag import (
     CameraMount,
     LocalFrame,
@@ -82,7 +81,7 @@ def image_motion(
 
 
 class SimSource:
-    """A :class:`capture.FrameSource` rendering ``world`` from ``pose_at_mono(t)``.
+    """A :class:`detect.FrameSource` rendering ``world`` from ``pose_at_mono(t)``.
 
     Parameters
     ----------

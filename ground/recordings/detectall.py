@@ -5,8 +5,7 @@ from __future__ import annotations
 from collections.abc import Iterator
 from dataclasses import dataclass
 
-from holescan.capture import FrameSource
-from holescan.detect import Detection, DetectParams, detect_holes
+from holescan.detect import Detection, DetectParams, FrameSource, detect_holes
 from holescan.errors import InputError
 
 __all__ = ["FrameDetections", "detect_recording"]

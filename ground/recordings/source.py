@@ -7,9 +7,10 @@ import os
 from pathlib import Path
 from typing import Final
 
-from holescan.capture import FrameSource, McapSource, OniSource
-from holescan.detect import CameraIntrinsics
+from holescan.capture import OniSource
+from holescan.detect import CameraIntrinsics, FrameSource
 from holescan.errors import InputError
+from holescan.flightlog import McapSource
 
 __all__ = ["RECORDING_KINDS", "open_recording", "recording_kind"]
 
@@ -59,10 +60,10 @@ def open_recording(
     camera: CameraIntrinsics | None = None,
     max_dt_s: float = 0.02,
 ) -> FrameSource:
-    """The :class:`capture.FrameSource` that reads ``path``: a TUM RGB-D folder
+    """The :class:`detect.FrameSource` that reads ``path``: a TUM RGB-D folder
     (:class:`TumSource`), a ROS 1 bag or ROS 2 bag folder (:class:`BagSource`), an
     OpenNI ``.oni`` file (:class:`capture.OniSource`) or a holescan flight log
-    (:class:`capture.McapSource`).
+    (:class:`flightlog.McapSource`).
 
     camera : intrinsics to use instead of the recording's own (TUM folders carry none).
     max_dt_s : largest colour-depth time difference of a pair (TUM folders, bags).

@@ -17,8 +17,7 @@ from typing import Final
 
 import numpy as np
 
-from holescan.capture import Frame
-from holescan.detect import CameraIntrinsics
+from holescan.detect import CameraIntrinsics, Frame
 from holescan.errors import InputError
 from holescan.ground.images import read_depth, read_rgb
 
@@ -103,7 +102,7 @@ def associate(
 
 
 class TumSource:
-    """A :class:`capture.FrameSource` over a TUM RGB-D folder.
+    """A :class:`detect.FrameSource` over a TUM RGB-D folder.
 
     Parameters
     ----------

@@ -28,7 +28,6 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from holescan.capture import OutputPathError
 from holescan.errors import InputError
 from holescan.ground.station.cot import hole_cot, hole_tier, on_tak, withdraw_cot
 from holescan.ground.station.datapackage import DATAPACKAGE_NAME, write_datapackage
@@ -38,7 +37,8 @@ from holescan.ground.station.mapstore import MapStore
 from holescan.ground.station.state import GroundHole, StationState
 from holescan.ground.station.tak import DEFAULT_COT_URL, CotPublisher, TakTls, tak_settings
 from holescan.ground.station.web import StationWeb
-from holescan.missions import SigningKey
+from holescan.link import SigningKey
+from holescan.outputs import OutputPathError
 
 __all__ = ["GroundOptions", "GroundStation", "run_ground"]
 
@@ -160,6 +160,7 @@ class GroundStation:
         self._stop.set()
         self._dirty.set()
         self._worker.join(timeout=5.0)
+        self.state.flush()  # a batched save still held
         self._flush()
 
     def mark(self, hole_id: int, mark: str) -> GroundHole:

@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from holescan.capture import check_folder
 from holescan.cli._args import Progress
 from holescan.ground import import_csv_dataset, load_dataset, read_camera
+from holescan.outputs import check_folder
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:

@@ -8,10 +8,10 @@ import json
 from dataclasses import asdict, replace
 from pathlib import Path
 
-from holescan.capture import atomic_output, check_output, output_via_part
 from holescan.detect import DEFAULT, PAPER, SEARCHERS, CameraIntrinsics, DetectParams, detect_holes
 from holescan.errors import InputError
 from holescan.ground import draw_detections, read_camera, read_depth, read_rgb
+from holescan.outputs import atomic_output, check_output, output_via_part
 
 
 def add_detector_options(p: argparse.ArgumentParser) -> None:

@@ -17,17 +17,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from holescan.capture import (
-    Flight,
-    FlightConfig,
-    Frame,
-    LoggedFrame,
-    Telemetry,
-    log_info,
-    read_flight_log,
-    recover_log,
-)
-from holescan.detect import CameraIntrinsics
+from holescan.capture import Flight, FlightConfig, Telemetry
+from holescan.detect import CameraIntrinsics, Frame
+from holescan.flightlog import LoggedFrame, log_info, read_flight_log, recover_log
 from holescan.sim import SimAutopilot, SimPath
 from tests.capture.test_shutdown import group_members, start_sim_flight
 

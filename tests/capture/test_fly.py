@@ -23,23 +23,18 @@ from holescan.capture import (
     Flight,
     FlightConfig,
     FlyConfig,
-    Frame,
-    LoggedFrame,
-    LoggedHealth,
-    LoggedHoles,
     SensorSpec,
     load_fly_config,
-    log_info,
     parse_fly_config,
-    read_flight_log,
     write_oni,
 )
-from holescan.detect import CameraIntrinsics
+from holescan.detect import CameraIntrinsics, Frame
 from holescan.errors import InputError
+from holescan.flightlog import LoggedFrame, LoggedHealth, LoggedHoles, log_info, read_flight_log
 from holescan.sim import SimAutopilot, SimPath, sortie_params
 
 os.environ.setdefault("MAVLINK20", "1")
-from holescan.missions import mavutil
+from holescan.link import mavutil
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "deploy" / "fly.example.toml"

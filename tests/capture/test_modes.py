@@ -9,14 +9,8 @@ import threading
 import time
 from pathlib import Path
 
-from holescan.capture import (
-    Flight,
-    FlightConfig,
-    LoggedFrame,
-    LoggedHealth,
-    Telemetry,
-    read_flight_log,
-)
+from holescan.capture import Flight, FlightConfig, Telemetry
+from holescan.flightlog import LoggedFrame, LoggedHealth, read_flight_log
 from holescan.sim import SimAutopilot
 from tests.capture.test_daemon import CAM, ScriptedSource, free_port, hover_path
 

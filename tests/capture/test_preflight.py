@@ -17,7 +17,6 @@ import pytest
 from holescan.capture import (
     ITEMS,
     FlyConfig,
-    Frame,
     PreflightError,
     PreflightLimits,
     SensorSetup,
@@ -27,8 +26,9 @@ from holescan.capture import (
     require_go,
 )
 from holescan.cli import main
-from holescan.detect import CameraIntrinsics
-from holescan.missions import MissionReceiver, SigningKey, Waypoint, upload_mission
+from holescan.detect import CameraIntrinsics, Frame
+from holescan.link import SigningKey
+from holescan.missions import MissionReceiver, Waypoint, upload_mission
 from holescan.sim import SimAutopilot, SimPath
 
 CAM = CameraIntrinsics.xtion()
@@ -162,7 +162,7 @@ def test_require_go_passes_a_flight_with_both_and_names_the_missing_one(tmp_path
 
 
 def test_the_ground_station_is_checked_on_its_own_signed_link(tmp_path: Path) -> None:
-    from holescan.missions import mavlink, open_link
+    from holescan.link import mavlink, open_link
 
     key = SigningKey.from_passphrase("rubble")
     port = free_port()

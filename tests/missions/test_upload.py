@@ -17,6 +17,7 @@ from typing import Any
 import pytest
 
 from holescan import cli
+from holescan.link import mavlink
 from holescan.missions import (
     MAV_FRAME_GLOBAL,
     Area,
@@ -26,7 +27,6 @@ from holescan.missions import (
     MissionTimeoutError,
     Waypoint,
     download_mission,
-    mavlink,
     plan_survey,
     read_wpl,
     upload_mission,

@@ -7,8 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from holescan.capture import Frame
-from holescan.detect import CameraIntrinsics
+from holescan.detect import CameraIntrinsics, Frame
 from holescan.errors import InputError
 from holescan.ground.recordings import (
     TUM_FR1,
