@@ -37,15 +37,27 @@ from holescan.geotag._project import (
     geotag_frame,
     project_to_pixel,
 )
-from holescan.geotag._tiers import FOUND_TIERS, TIERS, AnnounceGate, Tier, holes_found
+from holescan.geotag._tiers import (
+    FOUND_TIERS,
+    HOLE_TIERS,
+    TIERS,
+    VEHICLE_TIERS,
+    AnnounceGate,
+    HoleTier,
+    Tier,
+    VehicleTier,
+    holes_found,
+)
 from holescan.geotag._types import VehiclePose
 
 __all__ = [
     "CIRCLE_95_PER_SIGMA",
     "DEFAULT_CONFIDENCE",
     "FOUND_TIERS",
+    "HOLE_TIERS",
     "R_ENU_NED",
     "TIERS",
+    "VEHICLE_TIERS",
     "AnnounceGate",
     "BestViews",
     "CameraMount",
@@ -57,6 +69,7 @@ __all__ = [
     "HoleEvidence",
     "HolePipeline",
     "HoleSighting",
+    "HoleTier",
     "HoleTracker",
     "HoleView",
     "IdMap",
@@ -66,6 +79,7 @@ __all__ = [
     "PoseOf",
     "Tier",
     "VehiclePose",
+    "VehicleTier",
     "box_cut_by_border",
     "camera_pose_local",
     "carry_ids",

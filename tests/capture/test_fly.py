@@ -7,7 +7,6 @@ import os
 import re
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -35,16 +34,11 @@ from holescan.sim import SimAutopilot, SimPath, sortie_params
 
 os.environ.setdefault("MAVLINK20", "1")
 from holescan.link import mavutil
+from tests._support import free_udp_port
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "deploy" / "fly.example.toml"
 UNIT = ROOT / "deploy" / "holescan.service"
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def holescan(*args: str, **kw: Any) -> subprocess.Popen[str]:
@@ -233,7 +227,7 @@ def test_fly_sim_serves_holes_to_the_gcs_and_stops_cleanly_on_sigint(tmp_path: P
     """The simulated sortie through the CLI: a ground station hears the holes; Ctrl-C."""
     cfg = tmp_path / "fly.toml"
     cfg.write_text(SIM_TOML)
-    port = free_port()
+    port = free_udp_port()
     gcs = mavutil.mavlink_connection(
         f"udpin:127.0.0.1:{port}", source_system=255, source_component=190
     )
@@ -384,7 +378,7 @@ class FloorSource:
 
 def test_garbage_on_the_mavlink_link_is_ignored_and_counted(tmp_path: Path) -> None:
     cam = CameraIntrinsics.xtion(320, 240)
-    port = free_port()
+    port = free_udp_port()
     path = SimPath(waypoints_enu=((0.0, 0.0, 2.5), (0.3, 0.0, 2.5), (0.3, 0.3, 2.5)), speed_m_s=0.2)
     junk = b"not mavlink at all; " * 3  # no 0xFD/0xFE: every byte is a bad prefix byte
     bad_crc = bytes([0xFD, 9, 0, 0, 7, 1, 1, 0, 0, 0]) + bytes(9) + b"\x12\x34"

@@ -39,6 +39,7 @@ from holescan.ground import (
     read_flight_holes,
 )
 from holescan.ground import reprocess as _reprocess
+from tests._support import free_tcp_port
 
 Flown = tuple[list[Path], FlightSummary]
 GATE = AnnounceGate(min_p_hole=0.5, review_min_p_hole=0.05)  # conftest's sorties fly with it
@@ -238,7 +239,7 @@ def test_a_worker_killed_mid_run_loses_nothing(
     import psutil
 
     files, _ = flight
-    port = free_port()
+    port = free_tcp_port()
     bin_dir = Path(sys.executable).parent
     dask = (
         [str(bin_dir / "dask")] if (bin_dir / "dask").exists() else [sys.executable, "-m", "dask"]
@@ -294,14 +295,6 @@ def test_a_worker_killed_mid_run_loses_nothing(
     assert res.engine.computed == a.partitions  # each partition used once
     assert a.frames_read == b.frames_read and a.holes == b.holes
     assert sidecar(a.outputs[0]) == sidecar(b.outputs[0])
-
-
-def free_port() -> int:
-    import socket
-
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def test_stopped_run_resumes_from_the_cache(
