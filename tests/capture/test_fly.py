@@ -301,6 +301,8 @@ def test_fly_replays_oni_then_its_own_log_and_stops_cleanly_on_sigterm(tmp_path:
     cam = CameraIntrinsics.xtion(320, 240)
     frames = floor_frames(n, cam)
     write_oni(tmp_path / "in.oni", frames, cam)
+    raw = tmp_path / "raw.toml"  # the raw image layout: exact pixels through both legs
+    raw.write_text('[log]\ncolor = "raw"\ndepth = "raw"\n')
     code, out, err = finish(
         holescan(
             "fly",
@@ -309,6 +311,8 @@ def test_fly_replays_oni_then_its_own_log_and_stops_cleanly_on_sigterm(tmp_path:
             f"oni:{tmp_path / 'in.oni'}",
             "--log-dir",
             str(tmp_path / "a"),
+            "--config",
+            str(raw),
         )
     )
     assert code == 0, err[-3000:]
@@ -324,8 +328,9 @@ def test_fly_replays_oni_then_its_own_log_and_stops_cleanly_on_sigterm(tmp_path:
         assert np.array_equal(a.rgb, b.rgb) and np.array_equal(a.depth, b.depth)
 
     proc = holescan(
-        "fly", "--bench", "--sensor", f"mcap:{first[0]}", "--log-dir", str(tmp_path / "b")
-    )
+        "fly", "--bench", "--sensor", f"mcap:{first[0]}", "--log-dir", str(tmp_path / "b"),
+        "--config", str(raw),
+    )  # fmt: skip
     deadline = time.monotonic() + 60.0
     while time.monotonic() < deadline and proc.poll() is None:
         logs = list((tmp_path / "b").glob("*.mcap"))

@@ -64,7 +64,9 @@ def fly(world: RubbleWorld, out: Path, name: str, reverse: bool, uptime_s: float
         cfg = FlightConfig(
             log_prefix=out / name,
             max_frames=40,
-            log_options=LogOptions(max_file_s=3.0),
+            # Lossless colour (depth is always lossless): reprocessing sees the pixels the
+            # flight detected on, and must find exactly its holes.
+            log_options=LogOptions(max_file_s=3.0, color="png"),
             pose_wait_s=1.0,  # a loaded test machine can delay telemetry; the flight waits
             # Not the default gate: the log records it, reprocessing gives its tiers with it.
             announce_min_p_hole=GATE.min_p_hole,
