@@ -90,6 +90,8 @@ class EventStream:
         self._open: dict[str, int] = {}
         self.refused = 0
         """Streams refused (503) so far."""
+        self.served = 0
+        """Streams opened so far."""
 
     @property
     def open(self) -> int:
@@ -103,6 +105,7 @@ class EventStream:
         ):
             return False
         self._open[client] = self._open.get(client, 0) + 1
+        self.served += 1
         return True
 
     def _give(self, client: str) -> None:

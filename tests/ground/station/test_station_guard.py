@@ -255,7 +255,12 @@ def test_a_mark_needs_a_pairing_a_known_hole_and_json(station: Station) -> None:
     hdrs = {**json_only, **station.auth}
     cases = [
         ("/holes/1/mark", {**hdrs, "Authorization": "Bearer " + "x" * 43}, mark_body(), 401),
-        ("/holes/1/mark", {**json_only, "Cookie": "holescan_pairing=" + "x" * 43}, mark_body(), 401),
+        (
+            "/holes/1/mark",
+            {**json_only, "Cookie": "holescan_pairing=" + "x" * 43},
+            mark_body(),
+            401,
+        ),
         ("/holes/1/mark", hdrs, mark_body(mark="deleted"), 400),
         ("/holes/1/mark", hdrs, b'{"operator": "Ana"}', 400),
         ("/holes/1/mark", hdrs, b"[1, 2]", 400),
