@@ -43,7 +43,7 @@ from holescan.ground.station.webapp import make_app
 from holescan.ground.station.webserver import WebServer
 from holescan.missions import XTION, Camera
 
-__all__ = ["StationWeb", "state_document"]
+__all__ = ["StationWeb", "state_document", "station_url"]
 
 _log = logging.getLogger(__name__)
 
@@ -116,6 +116,15 @@ def state_document(
             fps.append(_footprint(x, y, p.rel_alt_m, p.yaw))
     doc["footprints"] = fps[-400:]
     return doc
+
+
+def station_url(host: str, port: int) -> str:
+    """The page's address for a server bound to ``host:port``, as a browser opens it.
+
+    >>> station_url("127.0.0.1", 8080)
+    'http://127.0.0.1:8080/'
+    """
+    return f"http://{_shown_host(host)}:{port}/"
 
 
 def _shown_host(host: str) -> str:
@@ -203,7 +212,7 @@ class StationWeb:
     @property
     def url(self) -> str:
         """The page, read-only (no pairing)."""
-        return f"http://{_shown_host(str(self.server.address[0]))}:{self.port}/"
+        return station_url(str(self.server.address[0]), self.port)
 
     def pair_url(self, token: str) -> str:
         """The pairing link of ``token`` (:meth:`Pairings.issue`): opened once in an

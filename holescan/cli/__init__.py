@@ -33,6 +33,7 @@ _COMMAND_MODULES = (
     "holescan.cli._cmd_campaign",
     "holescan.cli._cmd_demo",
     "holescan.cli._cmd_ground",
+    "holescan.cli._cmd_pair",
 )
 
 
