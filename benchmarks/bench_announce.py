@@ -6,9 +6,9 @@ For each simulated world (``SortieParams(world_seed=S)``, the demo's 10 x 10 m s
 one lap of the survey is rendered from the simulated autopilot's true pose at ``--fps``
 frames per second (the flight's detector keeps up with ~18 of the camera's 30 fps), each
 frame is detected and the detections merged into holes by the flight's own
-:class:`capture.HolePipeline` (GPS accuracy reported as in the demo, 1.2 m). Every change
+:class:`geotag.HolePipeline` (GPS accuracy reported as in the demo, 1.2 m). Every change
 of every hole is recorded (time, best score, sightings, time span of its sightings). The
-final holes are scored against the world's truth (:func:`sim.score_holes`: a hole within
+final holes are scored against the world's truth (:func:`demo.score_holes`: a hole within
 0.5 m of a true access hole's centre, or inside its opening, is true).
 
 A hole's ``p_hole`` is its hole-level confidence (:attr:`geotag.Hole.p_hole`, the
@@ -32,7 +32,7 @@ replays the histories of an earlier ``--json`` run.
 Usage::
 
     nice python benchmarks/bench_announce.py --seeds 1-8 --fps 10 --jobs 2 --json out.json \
-        --alien DATASET   # README figures: these settings, alien seed 7 (100 scenes)
+        --alien DATASET   # docs/tiers.md figures: these settings, alien seed 7 (100 scenes)
 """
 
 from __future__ import annotations
@@ -49,20 +49,18 @@ from typing import Any
 
 import numpy as np
 
-from holescan.capture import HolePipeline
+from holescan.demo import count_in_view, score_holes
 from holescan.detect import CameraIntrinsics, detect_holes, p_hole_of_score
-from holescan.geotag import AnnounceGate, CameraMount, Hole, Tier, VehiclePose
+from holescan.geotag import AnnounceGate, CameraMount, Hole, HolePipeline, Tier, VehiclePose
 from holescan.sim import (
     Conditions,
     SimAutopilot,
     SortieParams,
     camera_pose_in_world,
-    count_in_view,
     loop_length_m,
     make_sortie_world,
     random_conditions,
     render,
-    score_holes,
     survey_path,
     true_holes,
 )

@@ -45,7 +45,7 @@ def load() -> float:
 
 
 def fly(work: Path, duration_s: float) -> list[list[Path]]:
-    from holescan.sim import DEMO_SORTIE, DemoOptions, run_demo
+    from holescan.demo import DEMO_SORTIE, DemoOptions, run_demo
 
     flights = []
     for name, heading in (("a", 0.0), ("b", 90.0)):

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """What reaches the rescuers, measured through the whole system over several worlds.
 
-Runs :func:`sim.run_demo` (simulated autopilot over loopback MAVLink, simulated Xtion,
+Runs :func:`demo.run_demo` (simulated autopilot over loopback MAVLink, simulated Xtion,
 capture daemon with the announce gate, hole server with pictures under the byte budget,
 the ground station app in-process) for each world seed, and sums up against the
 simulator's truth, which the code under test never sees:
@@ -31,8 +31,8 @@ import statistics
 import sys
 from pathlib import Path
 
+from holescan.demo import DEMO_SORTIE, DemoOptions, run_demo
 from holescan.geotag import AnnounceGate
-from holescan.sim import DEMO_SORTIE, DemoOptions, run_demo
 
 
 def main(argv: list[str] | None = None) -> int:

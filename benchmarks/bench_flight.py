@@ -48,15 +48,9 @@ from typing import Any
 import numpy as np
 import pymap3d
 
-from holescan.capture import (
-    Flight,
-    FlightConfig,
-    LoggedDetections,
-    LogOptions,
-    log_info,
-    read_flight_log,
-)
+from holescan.capture import Flight, FlightConfig
 from holescan.detect import Detection
+from holescan.flightlog import LoggedDetections, LogOptions, log_info, read_flight_log
 from holescan.geotag import ErrorModel, HoleSighting, geotag_detection
 from holescan.sim import (
     LapReplay,

@@ -32,8 +32,8 @@ from collections.abc import Collection
 
 import numpy as np
 
-from holescan.capture import DetectionWorker, Frame, LiveMap, LiveMapConfig
-from holescan.detect import DEFAULT, CameraIntrinsics
+from holescan.capture import DetectionWorker, LiveMap, LiveMapConfig
+from holescan.detect import DEFAULT, CameraIntrinsics, Frame
 from holescan.geotag import CameraMount, VehiclePose
 from holescan.missions import CARD_PAYLOAD
 from holescan.sim import (

@@ -1,5 +1,5 @@
 """The MCAP flight log writer at 30 fps: VGA RGB-D frames paced like the Xtion's, written by
-:class:`capture.FlightLogWriter` (zstd, 1 MiB chunks), medians over repeated runs.
+:class:`flightlog.FlightLogWriter` (zstd, 1 MiB chunks), medians over repeated runs.
 
 Per run: the writer thread's time per frame (encode + write, amortising the chunk
 compression; it keeps up at 30 fps while its mean stays under 33.3 ms), the longest
@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from holescan.capture import FlightLogWriter, Frame, LogOptions
-from holescan.detect import CameraIntrinsics
+from holescan.detect import CameraIntrinsics, Frame
+from holescan.flightlog import FlightLogWriter, LogOptions
 
 VGA = CameraIntrinsics.xtion()
 

@@ -13,7 +13,8 @@ import time
 
 import numpy as np
 
-from holescan.capture import PoseUnavailable, Telemetry
+from holescan.capture import Telemetry
+from holescan.link import PoseUnavailable
 from holescan.sim import SimAutopilot, SimPath
 
 

@@ -48,9 +48,9 @@ def main() -> int:
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     logging.getLogger("distributed").setLevel(logging.ERROR)
 
+    from holescan.demo import DemoOptions, run_demo
     from holescan.detect import DEFAULT, PAPER
     from holescan.ground import ReprocessOptions, reprocess
-    from holescan.sim import DemoOptions, run_demo
 
     work = Path(tempfile.mkdtemp(prefix="bench-reprocess-"))
     logs = list(args.logs)

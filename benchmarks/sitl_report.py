@@ -17,7 +17,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from holescan.geotag import local_en_m  # noqa: E402
-from holescan.missions import mavutil  # noqa: E402
+from holescan.link import mavutil  # noqa: E402
 
 RADIO_BYTES_PER_S = 57_600 / 10  # 8N1: 10 bits a byte
 
@@ -76,7 +76,7 @@ def read_wpl(path: Path) -> list[tuple[float, float]]:
 def reboot_report(out: Path, t_reboot_mono_ns: int) -> None:
     """What the companion saw of ArduPilot's reboot: from its log and its flight log."""
     sys.path.insert(0, str(REPO))
-    from holescan.capture import LoggedFrame, LoggedHealth, read_flight_log
+    from holescan.flightlog import LoggedFrame, LoggedHealth, read_flight_log
 
     text = (out / "companion.log").read_text(errors="replace")
     for line in text.splitlines():
@@ -107,7 +107,7 @@ def reboot_report(out: Path, t_reboot_mono_ns: int) -> None:
 
 def report(out: Path, truth: Any) -> None:
     """Print the figures of a finished run in ``out`` (its logs, tlog, controller.json)."""
-    from holescan.capture import LoggedFrame, LoggedHealth, LoggedHoles, read_flight_log
+    from holescan.flightlog import LoggedFrame, LoggedHealth, LoggedHoles, read_flight_log
 
     saved = json.loads((out / "controller.json").read_text())
     rows, t_survey = saved["truth"], saved["t_survey"]

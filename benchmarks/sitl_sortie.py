@@ -3,7 +3,7 @@
     python benchmarks/sitl_sortie.py --arducopter PATH/build/sitl/bin/arducopter [--out DIR]
 
 Integration run and benchmark (never in CI: it needs an ``arducopter`` built from
-ArduPilot's sources, which this repository neither holds nor builds; see README "ArduPilot
+ArduPilot's sources, which this repository neither holds nor builds; see docs/sitl.md "ArduPilot
 SITL"). The real topology of issue 20, all on loopback:
 
 * ``arducopter`` (copter, ``+`` frame, speedup 1) boots at the simulated world's home with
@@ -45,7 +45,7 @@ sys.path.insert(0, str(REPO))
 
 from sitl_report import Truth, reboot_report, report  # noqa: E402
 
-from holescan.missions import mavlink, mavutil  # noqa: E402
+from holescan.link import mavlink, mavutil  # noqa: E402
 from holescan.sim import (  # noqa: E402
     DEFAULT_ANCHOR,
     SortieParams,

@@ -18,7 +18,7 @@ Flights, over :func:`sim.make_sortie_world` worlds (world seed ``S``, all distra
   "moving line over one opening" case).
 
 Truth: a hole is true when its position lies within 0.5 m of an access hole's centre or
-inside its opening (:func:`sim.score_holes`' rule); the opening it lies in is its
+inside its opening (:func:`demo.score_holes`' rule); the opening it lies in is its
 ``truth_id`` (two holes with one ``truth_id`` are a duplicate).
 """
 
@@ -90,7 +90,7 @@ def _path(p: SortieParams, xy: list[tuple[float, float]], speed: float, h: float
 def _fly(
     world: Any, p: SortieParams, path: SimPath, seconds: float, fps: float, tag: int
 ) -> tuple[list[list[HoleSighting]], dict[int, int]]:
-    from holescan.capture import HolePipeline
+    from holescan.geotag import HolePipeline
 
     ap = SimAutopilot("udpout:127.0.0.1:9", path, uptime_at_start_s=p.clock_offset_s)
     camera = CameraIntrinsics.xtion()

@@ -5,7 +5,7 @@ Threads and processes of one flight:
 - **capture** (the caller's thread): reads frames from the source through a pump thread
   with a timeout, stamps each on the autopilot's clock, queues it to the log writer and
   offers it to the detection worker. Neither ever makes it wait.
-- **log writer** thread (:class:`capture.flightlog.FlightLogWriter`); **detection worker**
+- **log writer** thread (:class:`flightlog.FlightLogWriter`); **detection worker**
   process (:class:`capture._worker.DetectionWorker`); **telemetry** receiver thread
   (:class:`capture._mavlink.Telemetry`): each message logged raw, each position also as a pose.
 - **results** thread: logs detections, poses the frame they came from (interpolated, once
@@ -38,21 +38,14 @@ from holescan.capture._flightrecords import (
     close_quietly,
     frames_with_timeout,
 )
-from holescan.capture._frame import Frame, FrameSource
-from holescan.capture._holepipeline import BestViews, HolePipeline, HoleView
 from holescan.capture._mavlink import Telemetry
 from holescan.capture._worker import DetectionWorker, WorkerResult
-from holescan.capture.errors import (
-    ClockUnavailable,
-    FlightLogError,
-    PoseInvalid,
-    PoseUnavailable,
-    SensorError,
-    TelemetryTimeoutError,
-)
-from holescan.capture.flightlog.writer import FlightLogWriter
-from holescan.detect import CameraIntrinsics
-from holescan.geotag import Hole, Tier, VehiclePose, local_en_m
+from holescan.capture.errors import ClockUnavailable, SensorError
+from holescan.detect import CameraIntrinsics, Frame, FrameSource
+from holescan.flightlog import FlightLogError
+from holescan.flightlog.writer import FlightLogWriter
+from holescan.geotag import BestViews, Hole, HolePipeline, HoleView, Tier, VehiclePose, local_en_m
+from holescan.link import PoseInvalid, PoseUnavailable, TelemetryTimeoutError
 
 log = logging.getLogger(__name__)
 

@@ -13,10 +13,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from holescan.capture._frame import Frame, FrameSource
 from holescan.capture.errors import SensorError
-from holescan.capture.flightlog.options import LogOptions, WriterStats
-from holescan.detect import DEFAULT, DetectParams
+from holescan.detect import DEFAULT, DetectParams, Frame, FrameSource
+from holescan.flightlog.options import LogOptions, WriterStats
 from holescan.geotag import AnnounceGate, CameraMount, ErrorModel, Hole
 
 log = logging.getLogger(__name__)

@@ -23,12 +23,11 @@ from typing import Any
 from holescan.capture._daemon import Flight
 from holescan.capture._flightrecords import FlightSummary
 from holescan.capture._flyconfig import FlyConfig
-from holescan.capture._holepipeline import HoleView
 from holescan.capture._livemap import LiveMap, LiveMapStats
 from holescan.capture._mavlink import Telemetry
 from holescan.capture._sensorsetup import SensorSetup, open_sensor
-from holescan.capture.errors import TelemetryError
-from holescan.geotag import AnnounceGate, Hole, Tier
+from holescan.geotag import AnnounceGate, Hole, HoleView, Tier
+from holescan.link import TelemetryError
 from holescan.missions import HoleMissionServer, MapLayer
 
 __all__ = ["FlyReport", "fly", "format_report"]

@@ -42,11 +42,11 @@ from typing import Any, Literal
 from holescan.capture._flightrecords import FlightConfig
 from holescan.capture._livemap import LiveMapConfig
 from holescan.capture._mavlink import DEFAULT_BAUD
-from holescan.capture.flightlog.options import LogOptions
 from holescan.detect import DEFAULT, PAPER, SEARCHERS, DetectParams
 from holescan.errors import InputError
+from holescan.flightlog.options import LogOptions
 from holescan.geotag import AnnounceGate, CameraMount, ErrorModel
-from holescan.missions import SigningKey
+from holescan.link import SigningKey
 
 __all__ = [
     "FlyConfig",
@@ -96,7 +96,7 @@ class FlyConfig:
     MAVLink 2 signing key of the hole server's link to the ground station, or, without
     ``gcs``, of the one link to the autopilot that the holes share (None: unsigned;
     fly.toml ``mavlink_key`` = 64 hex digits or ``mavlink_key_file`` = a file of the key or
-    a passphrase, :class:`missions.SigningKey`; never in ``record`` or a log).
+    a passphrase, :class:`link.SigningKey`; never in ``record`` or a log).
     duration_s, max_frames : stop after this long / this many frames (None: until stopped).
     usb_reset : reset the Xtion on USB after a sensor failure (``openni2`` only).
     openni_uri : OpenNI2 device URI (None: the first Xtion).
@@ -160,7 +160,7 @@ class FlyConfig:
 _NUM = (int, float)
 _RENAMED = {
     "announce_min_score": "the gate now takes a probability, announce_min_p_hole "
-    "(README, 'What is announced'; p_hole 0.5 is a best score of 0.37)",
+    "(docs/tiers.md, 'What is announced'; p_hole 0.5 is a best score of 0.37)",
 }
 
 

@@ -37,8 +37,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from holescan.capture._frame import Frame
-from holescan.detect import CameraIntrinsics
+from holescan.detect import CameraIntrinsics, Frame
 from holescan.errors import InputError
 from holescan.geotag import CameraMount, LocalFrame, VehiclePose, camera_pose_local
 from holescan.mapping import FuseParams, MapGrid, SearchMap

@@ -2,7 +2,7 @@
 
 :class:`VehicleState` is the receive side of :class:`capture._mavlink.Telemetry`: the
 receiver thread hands it each message from the autopilot, and it converts units once
-(:func:`capture._mavadapt.telemetry_sample`) into the :class:`~capture._posebuffer.PoseBuffer`
+(:func:`link._adapt.telemetry_sample`) into the :class:`~link._posebuffer.PoseBuffer`
 and keeps the :class:`~capture._clock.ClockSync` up to date: the arrival times of stamped
 messages, SYSTEM_TIME for UTC, and our TIMESYNC round trips. A boot clock that goes back is
 an autopilot reboot: the clock sync is reset and ``on_reboot`` called (the rates must be
@@ -17,11 +17,17 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from holescan.capture._clock import ClockSync
-from holescan.capture._mavadapt import telemetry_sample
-from holescan.capture._posebuffer import AttitudeSample, PoseBuffer
-from holescan.capture._posevalidity import GpsFix, NavStatus, PositionSample
 from holescan.capture.errors import ClockUnavailable
-from holescan.missions import mavlink, mavutil
+from holescan.link import (
+    AttitudeSample,
+    GpsFix,
+    NavStatus,
+    PoseBuffer,
+    PositionSample,
+    mavlink,
+    mavutil,
+    telemetry_sample,
+)
 
 _log = logging.getLogger("holescan.capture._mavlink")
 

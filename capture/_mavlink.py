@@ -8,16 +8,16 @@ REQUEST_DATA_STREAM when that is not acknowledged), and runs a receiver thread t
 hands the autopilot's messages to a :class:`~capture._mavingest.VehicleState`, which
 
 * converts units once (``time_boot_ms`` -> ns, degE7 -> deg, mm -> m, cm/s -> m/s,
-  cdeg -> rad) into :class:`~capture._posebuffer.PositionSample`,
-  :class:`~capture._posebuffer.AttitudeSample` and :class:`~capture._posebuffer.GpsFix`
-  records that fill a :class:`~capture._posebuffer.PoseBuffer`;
+  cdeg -> rad) into :class:`~link._posebuffer.PositionSample`,
+  :class:`~link._posebuffer.AttitudeSample` and :class:`~link._posebuffer.GpsFix`
+  records that fill a :class:`~link._posebuffer.PoseBuffer`;
 * keeps a :class:`~capture._clock.ClockSync` up to date (TIMESYNC round trips at
   ``timesync_hz``, arrival times of stamped messages, SYSTEM_TIME for UTC), notices
   reboots and follows the flight mode and arming (heartbeats);
 and itself counts (and logs) garbage bytes and packets that fail to parse (otherwise
 ignored) and hands every parsed message with its arrival time to ``on_message``.
 
-MAVLink 2 through :func:`missions.open_link` (TIMESYNC and MAVProxy's wp module need it).
+MAVLink 2 through :func:`link.open_link` (TIMESYNC and MAVProxy's wp module need it).
 """
 
 from __future__ import annotations
@@ -32,20 +32,23 @@ from dataclasses import dataclass
 from typing import Any, Final
 
 from holescan.capture._clock import ClockSync
-from holescan.capture._mavadapt import is_autopilot_heartbeat
 from holescan.capture._mavingest import VehicleState
-from holescan.capture._mavrates import RateMethod, RateRequests
-from holescan.capture._mavstream import MavlinkStream
-from holescan.capture._posebuffer import PoseBuffer
-from holescan.capture._posevalidity import GpsFix
-from holescan.capture.errors import (
-    ClockUnavailable,
+from holescan.capture.errors import ClockUnavailable
+from holescan.geotag import VehiclePose
+from holescan.link import (
+    GpsFix,
+    MavConnection,
+    MavlinkStream,
+    PoseBuffer,
     PoseUnavailable,
+    RateMethod,
+    RateRequests,
     TelemetryError,
     TelemetryTimeoutError,
+    is_autopilot_heartbeat,
+    mavlink,
+    open_link,
 )
-from holescan.geotag import VehiclePose
-from holescan.missions import MavConnection, mavlink, open_link
 
 __all__ = [
     "COMPANION_COMPONENT",

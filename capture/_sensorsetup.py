@@ -10,10 +10,9 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 from holescan.capture._flyconfig import FlyConfig
-from holescan.capture._frame import Frame, FrameSource
 from holescan.capture._mavlink import Telemetry
 from holescan.capture.errors import SensorError
-from holescan.detect import CameraIntrinsics
+from holescan.detect import CameraIntrinsics, Frame, FrameSource
 from holescan.errors import InputError
 
 __all__ = ["PacedReplay", "SensorSetup", "open_sensor"]
@@ -22,7 +21,7 @@ __all__ = ["PacedReplay", "SensorSetup", "open_sensor"]
 class PacedReplay:
     """Replay a recording's frames at their recorded pace, stamped with the time they are due.
 
-    A :class:`capture.FrameSource` wrapping another (e.g. :class:`capture.McapSource`, which
+    A :class:`detect.FrameSource` wrapping another (e.g. :class:`flightlog.McapSource`, which
     reads as fast as it can and keeps the recording's old ``t_mono_ns``): frame ``i`` is
     delivered ``t_mono_ns[i] - t_mono_ns[0]`` after the first and re-stamped with that
     instant, as if the sensor delivered it now. Nothing is skipped.
@@ -105,7 +104,7 @@ def open_sensor(cfg: FlyConfig) -> SensorSetup:
         oni = OniSource(path)  # checks the file now
         return SensorSetup(lambda: OniSource(path, realtime=cfg.realtime), oni.camera, cfg.mavlink)
     if spec.kind == "mcap":
-        from holescan.capture.flightlog.reader import McapSource
+        from holescan.flightlog.reader import McapSource
 
         assert spec.path is not None
         if not spec.path.is_file():

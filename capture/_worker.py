@@ -33,9 +33,8 @@ from typing import Any, cast
 
 import numpy as np
 
-from holescan.capture._frame import Frame
 from holescan.capture.errors import CaptureError
-from holescan.detect import CameraIntrinsics, Detection, DetectParams
+from holescan.detect import CameraIntrinsics, Detection, DetectParams, Frame
 
 log = logging.getLogger(__name__)
 

@@ -17,6 +17,7 @@ from holescan.detect._evaluate import (
     evaluate_detections,
     match_image,
 )
+from holescan.detect._frame import Frame, FrameSource
 from holescan.detect._paper import detect_paper, paper_superpixels
 from holescan.detect._scores import luminance, ramp
 from holescan.detect._types import (
@@ -45,6 +46,8 @@ __all__ = [
     "DetectParams",
     "Detection",
     "FeatureScores",
+    "Frame",
+    "FrameSource",
     "GroundTruthBox",
     "Mode",
     "PRResult",

@@ -2,7 +2,7 @@
 
 Pixels deeper than the median depth by ``offset_m`` (or with no reading) form connected
 components; each component larger than ``min_px`` is a detection scored by its mean
-relative depth. No size, shape or brightness reasoning: it is the yardstick the README
+relative depth. No size, shape or brightness reasoning: it is the yardstick docs/detector.md
 compares the paper's method and the default detector against.
 """
 

@@ -18,6 +18,15 @@ from holescan.geotag._confidence import (
 from holescan.geotag._local import LocalFrame, local_en_m
 from holescan.geotag._matching import nearest_pairs
 from holescan.geotag._merge import Hole, HoleTracker, MergeParams
+from holescan.geotag._pipeline import (
+    BestViews,
+    FrameHoles,
+    HolePipeline,
+    HoleView,
+    PoseOf,
+    crop_view,
+    view_jpeg,
+)
 from holescan.geotag._project import (
     CIRCLE_95_PER_SIGMA,
     ErrorModel,
@@ -36,21 +45,27 @@ __all__ = [
     "R_ENU_NED",
     "TIERS",
     "AnnounceGate",
+    "BestViews",
     "CameraMount",
     "ConfidenceModel",
     "ErrorModel",
+    "FrameHoles",
     "GimbalAttitude",
     "Hole",
     "HoleEvidence",
+    "HolePipeline",
     "HoleSighting",
     "HoleTracker",
+    "HoleView",
     "LocalCameraPose",
     "LocalFrame",
     "MergeParams",
+    "PoseOf",
     "Tier",
     "VehiclePose",
     "box_cut_by_border",
     "camera_pose_local",
+    "crop_view",
     "dcm_from_euler",
     "dcm_from_quaternion",
     "evidence_of",
@@ -60,5 +75,6 @@ __all__ = [
     "nearest_pairs",
     "project_to_pixel",
     "rotation_ned_from_optical",
+    "view_jpeg",
     "viewpoint_of",
 ]

@@ -49,7 +49,7 @@ class AnnounceGate:
         openings, this is a last guard).
 
     The defaults were chosen from measured curves (``benchmarks/bench_tiers.py``, flights
-    over worlds and seeds not used to fit the confidence; README, "Tiers"): announced
+    over worlds and seeds not used to fit the confidence; docs/tiers.md): announced
     precision >= 0.9 and announced + review recall >= 0.99 of the holes in view.
 
     Examples

@@ -10,7 +10,6 @@
 * :func:`write_hole_file` - found holes as GPX, KML/KMZ (thumbnails), GeoJSON, .plan, WPL.
 * :class:`HoleMissionServer` - serves found holes live as a mission (component 191) and
   announces them by STATUSTEXT.
-* :class:`SigningKey` - MAVLink 2 signing of the links to and from the ground station.
 """
 
 from holescan.missions._files import read_area, read_waypoints, write_waypoints
@@ -51,7 +50,6 @@ from holescan.missions._holeserver import (
     hole_waypoints,
     radio_budget,
 )
-from holescan.missions._link import MavConnection, mavlink, mavutil, open_link, parser
 from holescan.missions._mapinventory import (
     TYPE_INVENTORY,
     TileInventory,
@@ -88,7 +86,6 @@ from holescan.missions._protocol import (
     waypoint_from_mission_item,
 )
 from holescan.missions._qgcfiles import read_plan, read_wpl, write_plan, write_wpl
-from holescan.missions._signing import SigningKey
 from holescan.missions._sun import (
     SUNRISE_ELEVATION_DEG,
     FlightCheck,
@@ -154,7 +151,6 @@ __all__ = [
     "HoleMissionServer",
     "HoleTier",
     "MapLayer",
-    "MavConnection",
     "MissionError",
     "MissionReceiver",
     "MissionRejectedError",
@@ -162,7 +158,6 @@ __all__ = [
     "MissionServerError",
     "MissionTimeoutError",
     "MissionsError",
-    "SigningKey",
     "SunDay",
     "SunWindow",
     "SunWindowError",
@@ -193,10 +188,6 @@ __all__ = [
     "is_map_tile",
     "local_solar_day",
     "make_card",
-    "mavlink",
-    "mavutil",
-    "open_link",
-    "parser",
     "plan_survey",
     "radio_budget",
     "rank_holes",

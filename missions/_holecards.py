@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from holescan.errors import InputError
-from holescan.missions._link import mavlink
+from holescan.link import mavlink
 
 __all__ = [
     "CARD_PAYLOAD",

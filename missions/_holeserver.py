@@ -35,7 +35,7 @@ The mission (decided after reading MAVProxy's ``wp save`` and the QGC WPL 110 fo
 * Each announced hole's card (best view + facts, :mod:`missions._holecards`) goes out on
   the same link under its byte budget.
 
-The link speaks MAVLink 2 (:func:`missions.open_link`): MISSION_ITEM_INT's
+The link speaks MAVLink 2 (:func:`link.open_link`): MISSION_ITEM_INT's
 ``mission_type`` and MAVProxy's wp module need it.
 """
 
@@ -49,6 +49,7 @@ from typing import Any
 
 from holescan.errors import InputError
 from holescan.geotag import Hole
+from holescan.link import SigningKey, mavlink
 from holescan.missions._holecards import (
     CardAssembler,
     CardSender,
@@ -56,7 +57,6 @@ from holescan.missions._holecards import (
     card_facts,
     make_card,
 )
-from holescan.missions._link import mavlink
 from holescan.missions._mapinventory import (
     TYPE_INVENTORY,
     TileInventory,
@@ -64,7 +64,6 @@ from holescan.missions._mapinventory import (
     read_inventory,
 )
 from holescan.missions._protocol import MissionError
-from holescan.missions._signing import SigningKey
 from holescan.missions._vehicle import MissionReceiver, MissionServer
 from holescan.missions._waypoint import MAV_FRAME_GLOBAL, MAV_FRAME_GLOBAL_RELATIVE_ALT, Waypoint
 from holescan.missions.errors import MissionServerError

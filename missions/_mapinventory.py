@@ -22,8 +22,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from holescan.link import mavlink
 from holescan.missions._holecards import CARD_PAYLOAD as PAYLOAD_BYTES
-from holescan.missions._link import mavlink
 from holescan.missions._maptiles import MAP_LAYERS, MapLayer, tile_facts
 
 __all__ = [

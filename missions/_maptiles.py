@@ -37,8 +37,8 @@ import numpy as np
 import numpy.typing as npt
 
 from holescan.errors import InputError
+from holescan.link import mavlink
 from holescan.missions._holecards import make_card, read_card
-from holescan.missions._link import mavlink
 
 __all__ = [
     "MAP_LAYERS",

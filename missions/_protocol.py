@@ -18,8 +18,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from holescan.missions._link import mavlink, open_link
-from holescan.missions._signing import SigningKey
+from holescan.link import SigningKey, mavlink, open_link
 from holescan.missions._waypoint import (
     MAV_CMD_NAV_WAYPOINT,
     MAV_FRAME_GLOBAL,
@@ -212,6 +211,7 @@ def upload_mission(
     heartbeat_timeout_s: float = 5.0,
     item_timeout_s: float = 1.0,
     retries: int = 5,
+    no_space_wait_s: float = 10.0,
 ) -> UploadReport:
     """Upload ``items`` with the MAVLink mission protocol.
 
@@ -224,6 +224,9 @@ def upload_mission(
         sends ``items`` from seq 0 (PX4 convention).
     item_timeout_s, retries : resend MISSION_COUNT or the last item after this much
         silence, up to ``retries`` times in a row.
+    no_space_wait_s : an autopilot just after boot answers MISSION_COUNT with
+        MAV_MISSION_NO_SPACE until its mission storage is sized (ArduPilot SITL did, seconds
+        after boot): ask again each second for this long before giving up (0: at once).
 
     Raises
     ------
@@ -280,9 +283,21 @@ def upload_mission(
                     log.debug("the autopilot refused an item out of sequence; going on")
                     silent = was_silent  # no answer to what we wait for: still silence
                     continue
+                waited = time.monotonic() - t0
+                no_space = msg.type == mavlink.MAV_MISSION_NO_SPACE
+                if no_space and highest < 0 and waited < no_space_wait_s:
+                    log.info("MAV_MISSION_NO_SPACE: the autopilot is still initialising?")
+                    time.sleep(min(1.0, no_space_wait_s - waited))
+                    conn.mav.send(last)  # MISSION_COUNT again
+                    continue
                 if msg.type != MAV_MISSION_ACCEPTED:
+                    still = (
+                        f" (still after {waited:.0f} s: {len(rows)} items, more than it stores?)"
+                        if no_space and no_space_wait_s > 0
+                        else ""
+                    )
                     raise MissionRejectedError(
-                        f"the autopilot rejected the mission: {_result_name(msg.type)}",
+                        f"the autopilot rejected the mission: {_result_name(msg.type)}{still}",
                         int(msg.type),
                     )
                 if highest == len(rows) - 1 or not rows:

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from holescan.errors import InputError
-from holescan.missions._link import mavlink
+from holescan.link import SigningKey, mavlink
 from holescan.missions._protocol import (
     MAV_MISSION_ACCEPTED,
     MissionError,
@@ -33,7 +33,6 @@ from holescan.missions._protocol import (
     item_message,
     waypoint_from_message,
 )
-from holescan.missions._signing import SigningKey
 from holescan.missions._waypoint import Waypoint
 
 __all__ = ["MissionReceiver", "MissionServer"]
@@ -237,7 +236,7 @@ class MissionServer:
         owner's MAVLink sender under its lock; the owner hands every message it receives
         to :meth:`feed` and sends the heartbeats (none are sent here).
     signing : MAVLink 2 signing key (None: unsigned); with one, unsigned or badly signed
-        requests are dropped unanswered (:class:`missions.SigningKey`).
+        requests are dropped unanswered (:class:`link.SigningKey`).
 
     Subclasses hook in with :meth:`on_message` (every other message) and :meth:`tick`
     (each turn of the loop, about every ``tick_s``).

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from holescan.errors import InputError
-from holescan.missions._link import mavlink
+from holescan.link import mavlink
 
 __all__ = [
     "MAV_CMD_DO_CHANGE_SPEED",

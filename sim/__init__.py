@@ -1,37 +1,33 @@
 """The simulated world, Xtion and autopilot: everything the flight side can be tested against.
 
 Beside the flight side, never imported by it: it may import :mod:`capture`,
-:mod:`missions` and :mod:`ground`.
+:mod:`missions` and :mod:`ground`. The demo application (``holescan demo``) is
+:mod:`holescan.demo`, above it.
 
 * :func:`make_world` builds a seeded metric height field of rubble (slabs, debris, cracks,
   human-size access holes and distractors) with its ground truth; :func:`render` draws one
   registered RGB-D frame from any 6-DoF :class:`CameraPose` with the Xtion's artefacts and
   returns the access holes' boxes (pure numpy/numba).
 * :class:`SimAutopilot` - a MAVLink autopilot over loopback flying a :class:`SimPath`.
-* :class:`SimSource` - the simulated Xtion as a :class:`capture.FrameSource`.
+* :class:`SimSource` - the simulated Xtion as a :class:`detect.FrameSource`.
 * :class:`SimSortie` - world + autopilot + camera for one survey; :func:`fly_sim` flies it
   through :func:`capture.fly` (``holescan fly --sensor sim``).
-* :func:`run_demo` - ``holescan demo``: a whole simulated sortie scored against the truth.
 * :func:`synth_dataset` - a synthetic annotated RGB-D dataset.
 """
 
 from holescan.sim._autopilot import SimAutopilot
 from holescan.sim._camera_model import CameraPose, Conditions, random_conditions
-from holescan.sim._demo import (
-    DEMO_SORTIE,
-    DemoOptions,
-    DemoProgress,
-    DemoResult,
-    FalseHole,
-    TruthRow,
-    run_demo,
+from holescan.sim._fly import (
+    SIM_TABLE,
+    SimFlyReport,
+    check_sim,
+    fly_sim,
+    format_sim_report,
+    sortie_params,
 )
-from holescan.sim._demo_format import REVIEW_PER_HA_MEASURED, format_result
-from holescan.sim._fly import SIM_TABLE, SimFlyReport, fly_sim, format_sim_report, sortie_params
 from holescan.sim._lap import LapReplay, prerender_lap
 from holescan.sim._render import GtBox, hole_boxes, render, render_exact
 from holescan.sim._reported import ReportedPoseCamera, anchor_at_home
-from holescan.sim._scoring import count_in_view, frames_in_view, score_holes
 from holescan.sim._sortie import (
     DEFAULT_ANCHOR,
     SimSortie,
@@ -51,16 +47,10 @@ from holescan.sim._world import AccessHole, HoleKind, RubbleWorld, make_world, r
 
 __all__ = [
     "DEFAULT_ANCHOR",
-    "DEMO_SORTIE",
-    "REVIEW_PER_HA_MEASURED",
     "SIM_TABLE",
     "AccessHole",
     "CameraPose",
     "Conditions",
-    "DemoOptions",
-    "DemoProgress",
-    "DemoResult",
-    "FalseHole",
     "GtBox",
     "HoleKind",
     "LapReplay",
@@ -73,15 +63,12 @@ __all__ = [
     "SimSource",
     "SortieParams",
     "TrueHole",
-    "TruthRow",
     "WorldAnchor",
     "anchor_at_home",
     "camera_pose_in_world",
-    "count_in_view",
+    "check_sim",
     "fly_sim",
-    "format_result",
     "format_sim_report",
-    "frames_in_view",
     "hole_boxes",
     "lap_frames",
     "loop_length_m",
@@ -92,9 +79,7 @@ __all__ = [
     "relight",
     "render",
     "render_exact",
-    "run_demo",
     "sample_pose",
-    "score_holes",
     "sortie_params",
     "survey_path",
     "synth_dataset",

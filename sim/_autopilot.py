@@ -37,7 +37,7 @@ acceleration, plus a small oscillation. Messages carry the exact state at their
 ``time_boot_ms``; :meth:`SimAutopilot.truth_pose` and :meth:`SimAutopilot.boot_ns_at_mono`
 give that truth to tests.
 
-MAVLink 2, through :func:`missions.open_link`.
+MAVLink 2, through :func:`link.open_link`.
 """
 
 from __future__ import annotations
@@ -54,8 +54,9 @@ from typing import Any
 from scipy.spatial.transform import Rotation
 
 from holescan.geotag import LocalFrame, VehiclePose
-from holescan.missions import MissionReceiver, mavlink, open_link
-from holescan.sim._simcommands import STREAM_GROUPS, STREAMED, command_result, is_reboot
+from holescan.link import mavlink, open_link
+from holescan.missions import MissionReceiver
+from holescan.sim._simcommands import STREAMED, command_result, is_reboot, param_value, set_streams
 from holescan.sim._trajectory import SimPath, Trajectory
 
 __all__ = ["SimAutopilot"]
@@ -105,6 +106,7 @@ class SimAutopilot:
         :class:`~missions._protocol.MissionReceiver` for ``sysid``/``compid``).
     signing_key : MAVLink 2 signing key (32 bytes): sign everything sent, drop every
         unsigned or wrongly signed packet (``received_signed`` counts the good ones).
+    :attr:`params` answer PARAM_REQUEST_READ (None: still initialising, no answer).
     """
 
     def __init__(
@@ -156,6 +158,7 @@ class SimAutopilot:
         self.mode = 3  # ArduCopter custom mode in the heartbeat: AUTO (6 RTL, 9 LAND ...)
         self.armed = True
         self.radio_txbuf: int | None = None
+        self.params: dict[str, float] | None = {"SYSID_THISMAV": sysid, "MIS_TOTAL": 0}
         self.mission = (
             mission
             if mission is not None
@@ -462,17 +465,12 @@ class SimAutopilot:
                     self._conn.mav.timesync_send(self._read_boot_ns(), msg.ts1)
         elif mtype.startswith("MISSION_"):
             self._send_all(self.mission.handle(msg, time.monotonic_ns()))
+        elif mtype == "PARAM_REQUEST_READ" and self._for_me(msg):
+            self._send_all(param_value(self.params, msg))
         elif mtype == "COMMAND_LONG" and self._for_me(msg):
             self._command(msg)
         elif mtype == "REQUEST_DATA_STREAM" and self._for_me(msg):
-            groups = (
-                list(STREAM_GROUPS)
-                if msg.req_stream_id == mavlink.MAV_DATA_STREAM_ALL
-                else [msg.req_stream_id]
-            )
-            for group in groups:
-                for name in STREAM_GROUPS.get(group, ()):
-                    self.set_rate(name, msg.req_message_rate if msg.start_stop else 0)
+            set_streams(msg, self.set_rate)
 
     def _send_all(self, msgs: list[Any]) -> None:
         if self.silent or not msgs:

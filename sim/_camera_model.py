@@ -149,7 +149,10 @@ class Conditions:
     quantised in steps of ``disparity_step_px``, no reading outside
     [``min_range_m``, ``max_range_m``] (readings fade out increasingly from ``fade_range_m``),
     projector shadows (projector ``baseline_m`` to the camera's right), and a fraction
-    ``dropout_fraction`` of random missing pixels.
+    ``dropout_fraction`` of random missing pixels. With ``structured_light`` (the default)
+    the depth goes through :mod:`sim.structured_light` instead (the ranges above still
+    apply; noise, shadows, bands and dropouts are that model's); ``False`` keeps this basic
+    model, for comparison.
     """
 
     exposure: float = 0.35
@@ -164,6 +167,7 @@ class Conditions:
     baseline_m: float = XTION_BASELINE_M
     disparity_step_px: float = XTION_DISPARITY_STEP_PX
     dropout_fraction: float = 0.002
+    structured_light: bool = True
 
     def __post_init__(self) -> None:
         if self.exposure <= 0:
@@ -187,6 +191,7 @@ class Conditions:
             baseline_m=0.0,
             disparity_step_px=0.0,
             dropout_fraction=0.0,
+            structured_light=False,
         )
 
 
@@ -207,4 +212,5 @@ def random_conditions(rng: np.random.Generator, base: Conditions | None = None) 
         baseline_m=b.baseline_m,
         disparity_step_px=b.disparity_step_px,
         dropout_fraction=b.dropout_fraction * float(rng.uniform(0.5, 2.0)),
+        structured_light=b.structured_light,
     )

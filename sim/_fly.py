@@ -19,13 +19,17 @@ from dataclasses import dataclass
 from typing import Any
 
 from holescan.capture import (
+    ITEMS,
     FlyConfig,
     FlyReport,
+    PreflightReport,
     SensorSetup,
     check_table,
     fly,
     format_report,
     numbers,
+    preflight,
+    require_go,
 )
 from holescan.detect import CameraIntrinsics
 from holescan.geotag import AnnounceGate, local_en_m
@@ -33,7 +37,14 @@ from holescan.sim._reported import ReportedPoseCamera
 from holescan.sim._sortie import DEFAULT_ANCHOR, SimSortie, SortieParams, TrueHole
 from holescan.sim._source import SimSource, WorldAnchor
 
-__all__ = ["SIM_TABLE", "SimFlyReport", "fly_sim", "format_sim_report", "sortie_params"]
+__all__ = [
+    "SIM_TABLE",
+    "SimFlyReport",
+    "check_sim",
+    "fly_sim",
+    "format_sim_report",
+    "sortie_params",
+]
 
 _NUM = (int, float)
 SIM_TABLE: Mapping[str, tuple[tuple[type, ...], Any]] = {
@@ -104,6 +115,7 @@ def fly_sim(
     *,
     stop: threading.Event | None = None,
     home: tuple[float, float, float] | None = None,
+    bench: bool = True,
 ) -> SimFlyReport:
     """Fly ``cfg`` over the simulated world its ``[sim]`` table describes.
 
@@ -111,19 +123,45 @@ def fly_sim(
     free loopback port). With it: the autopilot there flies, and the simulated Xtion renders
     each frame from the pose it reports, the world placed at its home (``home``, lat/lon/MSL,
     places it at once; see :mod:`sim._reported`). Everything else is :func:`capture.fly`'s.
+    ``bench=False``: the simulated sensor and the autopilot must pass
+    :func:`capture.require_go` first (``holescan fly`` without ``--bench``).
     """
     params, record = sortie_params(cfg.sim_table)
     cfg = dataclasses.replace(cfg, record={**cfg.record, **record})
     if cfg.mavlink is not None:
         cam = ReportedPoseCamera(params, CameraIntrinsics.xtion(), cfg.flight.mount, home=home)
         setup = SensorSetup(cam.source, cam.camera, cfg.mavlink, on_telemetry=cam.attach)
+        if not bench:
+            require_go(cfg, setup)
         report = fly(cfg, setup, stop=stop)
         return _report(report, cam.sources, cam.truth)
     key = cfg.signing.key if cfg.signing is not None else None  # the autopilot holds it
     with SimSortie(params, mount=cfg.flight.mount, mavlink=cfg.mavlink, signing_key=key) as sortie:
         setup = SensorSetup(sortie.source, sortie.camera, sortie.mavlink)
+        if not bench:
+            require_go(cfg, setup)
         report = fly(cfg, setup, stop=stop)
     return _report(report, sortie.sources, sortie.truth)
+
+
+def check_sim(
+    cfg: FlyConfig,
+    *,
+    items: Sequence[str] = ITEMS,
+    home: tuple[float, float, float] | None = None,
+) -> PreflightReport:
+    """``holescan check --sensor sim``: :func:`capture.preflight` of the simulated Xtion and
+    autopilot that :func:`fly_sim` would fly with (``cfg.mavlink``: that autopilot, the
+    simulated Xtion rendering from the pose it reports)."""
+    params, _record = sortie_params(cfg.sim_table)
+    if cfg.mavlink is not None:
+        cam = ReportedPoseCamera(params, CameraIntrinsics.xtion(), cfg.flight.mount, home=home)
+        setup = SensorSetup(cam.source, cam.camera, cfg.mavlink, on_telemetry=cam.attach)
+        return preflight(cfg, setup, items=items)
+    key = cfg.signing.key if cfg.signing is not None else None
+    with SimSortie(params, mount=cfg.flight.mount, mavlink=cfg.mavlink, signing_key=key) as sortie:
+        setup = SensorSetup(sortie.source, sortie.camera, sortie.mavlink)
+        return preflight(cfg, setup, items=items)
 
 
 def _report(

@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from holescan.capture import Frame, OniSource, OniWriter, openni2_library
-from holescan.detect import CameraIntrinsics
+from holescan.capture import OniSource, OniWriter, openni2_library
+from holescan.detect import CameraIntrinsics, Frame
 from holescan.geotag import CameraMount
 from holescan.sim._autopilot import SimAutopilot
 from holescan.sim._camera_model import Conditions, random_conditions

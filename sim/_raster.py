@@ -158,7 +158,7 @@ def _triangle(
                 k0 = b0 * w0 * z
                 k1 = b1 * w1 * z
                 k2 = b2 * w2 * z
-                for c in range(3):
+                for c in range(rad.shape[2]):
                     rgb[y, x, c] = k0 * rad[j0, i0, c] + k1 * rad[j1, i1, c] + k2 * rad[j2, i2, c]
 
 
@@ -252,7 +252,8 @@ def rasterise_view(
     Returns
     -------
     depth : (height_px, width) float32, metres along the optical axis, 0 = no surface.
-    radiance : (height_px, width, 3) float32, linear radiance of the surface seen (0 if none).
+    radiance : (height_px, width, C) float32, the input's C channels (linear radiance, and
+        any further surface property) of the surface seen (0 if none).
     """
     us = np.array([-0.5, (width - 1) / 2.0, width - 0.5])
     vs = np.array([-0.5, (height_px - 1) / 2.0, height_px - 0.5])
@@ -261,7 +262,7 @@ def rasterise_view(
     pos = np.ascontiguousarray(position, dtype=np.float64)
     j_lo, lo, hi = footprint_rows(height.shape, cell_m, zmin, zmax, rot, pos, dirs)
     zbuf = np.full((height_px, width), np.inf, dtype=np.float32)
-    rgb = np.zeros((height_px, width, 3), dtype=np.float32)
+    rgb = np.zeros((height_px, width, radiance.shape[2]), dtype=np.float32)
     if len(lo):
         _draw(height, radiance, float(cell_m), j_lo, lo, hi, rot, pos, fx, fy, cx, cy, zbuf, rgb)
     zbuf[~np.isfinite(zbuf)] = 0.0

@@ -13,6 +13,13 @@ from holescan.sim._raster import rasterise_view
 from holescan.sim._raycast import cast_rays
 from holescan.sim._sensor import colour_image, depth_image
 from holescan.sim._world import AccessHole, RubbleWorld
+from holescan.sim.structured_light import (
+    Motion,
+    SensorCamera,
+    StructuredLight,
+    Surface,
+    structured_light_frame,
+)
 
 __all__ = ["GtBox", "hole_boxes", "raycast_view", "render", "render_exact"]
 
@@ -37,18 +44,22 @@ class GtBox:
     iscrowd: bool
 
 
-def render_exact(world: RubbleWorld, pose: CameraPose, camera: CameraIntrinsics) -> tuple[F32, F32]:
+def render_exact(
+    world: RubbleWorld, pose: CameraPose, camera: CameraIntrinsics, *, surface: bool = False
+) -> tuple[F32, F32]:
     """Noise-free view: exact axial depth and linear radiance at every pixel centre.
 
     Returns
     -------
     depth : (H, W) float32, metres along the optical axis, 0 = no surface (off the field).
-    radiance : (H, W, 3) float32, linear RGB radiance (before exposure), 0 = no surface.
+    radiance : (H, W, 3) float32, linear RGB radiance (before exposure), 0 = no surface;
+        with ``surface``, (H, W, 4): the fourth channel is the surface's infrared unread
+        fraction (:attr:`RubbleWorld.ir_unread`).
     """
     p = world.pyramid
     return rasterise_view(
         world.height,
-        world.radiance,
+        world.surface if surface else world.radiance,
         world.cell_m,
         p.zmin,
         p.zmax,
@@ -85,6 +96,7 @@ def render(
     camera: CameraIntrinsics,
     rng: np.random.Generator,
     conditions: Conditions | None = None,
+    motion: Motion | None = None,
 ) -> tuple[npt.NDArray[np.uint8], npt.NDArray[np.uint16], tuple[GtBox, ...]]:
     """One registered RGB-D frame as the Xtion would deliver it, and its true access holes.
 
@@ -94,7 +106,13 @@ def render(
     pose : camera position (world metres) and rotation (world <- optical frame).
     camera : intrinsics, e.g. ``CameraIntrinsics.xtion()``.
     rng : source of the frame's noise (the same generator state gives the same frame).
-    conditions : exposure and sensor artefacts; ``Conditions()`` when None.
+    conditions : exposure and sensor artefacts; ``Conditions()`` when None. With
+        ``conditions.structured_light`` (the default) the depth goes through the
+        structured-light model (:mod:`sim.structured_light`: border bands, projector shadow,
+        quantisation, fattening, flying pixels, IR dropouts, misregistration); without it,
+        through the basic model of :func:`sim._sensor.depth_image`.
+    motion : the camera's image motion during the frame (blur, depth/colour time offset);
+        still when None.
 
     Returns
     -------
@@ -103,10 +121,29 @@ def render(
     boxes : the access holes in view (see :func:`hole_boxes`).
     """
     cond = conditions if conditions is not None else Conditions()
-    depth_m, radiance = render_exact(world, pose, camera)
-    depth = depth_image(depth_m, camera.fx, cond, rng)
-    rgb = colour_image(radiance, camera.cx, camera.cy, cond, rng)
-    return rgb, depth, hole_boxes(world, pose, camera)
+    if not cond.structured_light:
+        depth_m, radiance = render_exact(world, pose, camera)
+        depth = depth_image(depth_m, camera.fx, cond, rng)
+        rgb = colour_image(radiance, camera.cx, camera.cy, cond, rng)
+        return rgb, depth, hole_boxes(world, pose, camera)
+    depth_m, surf = render_exact(world, pose, camera, surface=True)
+    rgb = colour_image(surf[..., :3], camera.cx, camera.cy, cond, rng)
+    params = StructuredLight(
+        min_range_m=cond.min_range_m,
+        max_range_m=cond.max_range_m,
+        fade_range_m=min(cond.fade_range_m, cond.max_range_m),
+    )
+    frame = structured_light_frame(
+        depth_m,
+        rgb,
+        SensorCamera(camera.fx, camera.cx, camera.cy),
+        seed=rng,
+        surface=Surface(ir_unread=surf[..., 3]),
+        motion=motion,
+        params=params,
+    )
+    assert frame.rgb is not None
+    return frame.rgb, frame.depth_mm, hole_boxes(world, pose, camera)
 
 
 def hole_boxes(

@@ -21,9 +21,10 @@ import logging
 import threading
 import time
 
-from holescan.capture import PoseUnavailable, SensorError, Telemetry
+from holescan.capture import SensorError, Telemetry
 from holescan.detect import CameraIntrinsics
 from holescan.geotag import CameraMount, LocalFrame, VehiclePose
+from holescan.link import PoseUnavailable
 from holescan.sim._sortie import SortieParams, TrueHole, make_sortie_world, true_holes
 from holescan.sim._source import SimSource, WorldAnchor
 from holescan.sim._world import RubbleWorld

@@ -10,9 +10,9 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from typing import Any
 
-from holescan.missions import mavlink
+from holescan.link import mavlink
 
-__all__ = ["STREAMED", "STREAM_GROUPS", "command_result", "is_reboot"]
+__all__ = ["STREAMED", "STREAM_GROUPS", "command_result", "is_reboot", "param_value", "set_streams"]
 
 STREAMED = (
     "HEARTBEAT",
@@ -68,3 +68,42 @@ def command_result(
         send(name)
         return int(mavlink.MAV_RESULT_ACCEPTED)
     return int(mavlink.MAV_RESULT_UNSUPPORTED)
+
+
+def param_value(params: Mapping[str, float] | None, msg: Any) -> list[Any]:
+    """PARAM_VALUE answering PARAM_REQUEST_READ ``msg`` (by name, or by index when
+    ``param_index`` >= 0), as ArduPilot does; nothing while initialising (``params`` None)
+    or for a name it does not have."""
+    if params is None:
+        return []
+    names = sorted(params)
+    index = int(msg.param_index)
+    if index >= 0:
+        if index >= len(names):
+            return []
+        name = names[index]
+    else:
+        raw = msg.param_id
+        name = (raw.decode(errors="replace") if isinstance(raw, bytes) else str(raw)).rstrip("\0")
+        if name not in params:
+            return []
+        index = names.index(name)
+    real32 = mavlink.MAV_PARAM_TYPE_REAL32
+    return [
+        mavlink.MAVLink_param_value_message(
+            name.encode(), float(params[name]), real32, len(names), index
+        )
+    ]
+
+
+def set_streams(msg: Any, set_rate: Callable[[str, float], None]) -> None:
+    """Carry out REQUEST_DATA_STREAM ``msg``: start or stop its group's messages (all groups
+    for MAV_DATA_STREAM_ALL) at its rate."""
+    groups = (
+        list(STREAM_GROUPS)
+        if msg.req_stream_id == mavlink.MAV_DATA_STREAM_ALL
+        else [msg.req_stream_id]
+    )
+    for group in groups:
+        for name in STREAM_GROUPS.get(group, ()):
+            set_rate(name, msg.req_message_rate if msg.start_stop else 0)

@@ -17,17 +17,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from holescan.capture import Frame
-from holescan.detect import CameraIntrinsics
+from holescan.detect import CameraIntrinsics, Frame
 from holescan.geotag import (
     CameraMount,
     LocalFrame,
     VehiclePose,
     camera_pose_local,
 )
-from holescan.sim._camera_model import CameraPose, Conditions, random_conditions
+from holescan.sim._camera_model import CameraPose, Conditions, project_points, random_conditions
 from holescan.sim._render import GtBox, render
 from holescan.sim._world import RubbleWorld
+from holescan.sim.structured_light import Motion
 
 PoseAtMono = Callable[[int], VehiclePose]
 
@@ -60,8 +60,28 @@ def camera_pose_in_world(pose: VehiclePose, mount: CameraMount, anchor: WorldAnc
     return CameraPose(local.position_m, local.rotation)
 
 
+#: Time step over which the camera's image motion is measured.
+_MOTION_DT_NS = 10_000_000
+#: Colour exposure at dawn (s): what the motion blurs over.
+_EXPOSURE_S = 0.012
+
+
+def image_motion(
+    pose: CameraPose, later: CameraPose, camera: CameraIntrinsics, dt_s: float
+) -> Motion:
+    """Image motion (px/s) of the scene point on the optical axis, 2.5 m ahead, between two
+    camera poses ``dt_s`` apart."""
+    point = pose.position + pose.rotation[:, 2] * 2.5
+    uv, z = project_points(camera, later, point[None, :])
+    if not np.isfinite(uv).all() or z[0] <= 0:
+        return Motion((0.0, 0.0), _EXPOSURE_S)
+    du = (float(uv[0, 0]) - camera.cx) / dt_s
+    dv = (float(uv[0, 1]) - camera.cy) / dt_s
+    return Motion((du, dv), _EXPOSURE_S)
+
+
 class SimSource:
-    """A :class:`capture.FrameSource` rendering ``world`` from ``pose_at_mono(t)``.
+    """A :class:`detect.FrameSource` rendering ``world`` from ``pose_at_mono(t)``.
 
     Parameters
     ----------
@@ -113,7 +133,11 @@ class SimSource:
         pose = self._pose_at_mono(t_mono_ns)
         cam_pose = camera_pose_in_world(pose, self.mount, self.anchor)
         cond = random_conditions(self._rng, self._conditions)
-        rgb, depth, boxes = render(self.world, cam_pose, self.camera, self._rng, cond)
+        later = camera_pose_in_world(
+            self._pose_at_mono(t_mono_ns + _MOTION_DT_NS), self.mount, self.anchor
+        )
+        motion = image_motion(cam_pose, later, self.camera, _MOTION_DT_NS * 1e-9)
+        rgb, depth, boxes = render(self.world, cam_pose, self.camera, self._rng, cond, motion)
         return rgb, depth, pose, boxes
 
     def __iter__(self) -> Iterator[Frame]:

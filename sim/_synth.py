@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Callable, Iterator
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +23,7 @@ from holescan.ground import Sample, write_dataset
 from holescan.sim._camera_model import CameraPose, random_conditions
 from holescan.sim._render import render
 from holescan.sim._world import RubbleWorld, make_world
+from holescan.sim.structured_light import random_motion
 
 log = logging.getLogger(__name__)
 
@@ -61,9 +63,18 @@ def sample_pose(world: RubbleWorld, rng: np.random.Generator) -> CameraPose:
 
 
 def synth_samples(
-    n: int, seed: int, camera: CameraIntrinsics, images_per_world: int = 20
+    n: int,
+    seed: int,
+    camera: CameraIntrinsics,
+    images_per_world: int = 20,
+    *,
+    structured_light: bool = True,
 ) -> Iterator[Sample]:
-    """``n`` rendered frames with their ground-truth boxes (a new world every few frames)."""
+    """``n`` rendered frames with their ground-truth boxes (a new world every few frames).
+
+    ``structured_light``: depth through :mod:`sim.structured_light` (the default) with the
+    drone's motion (0-1.5 m/s, 5-20 ms exposures); else the basic depth model, still.
+    """
     if n < 1:
         raise InputError(f"--n must be at least 1, got {n}")
     rng = np.random.default_rng(seed)
@@ -73,7 +84,12 @@ def synth_samples(
             world = make_world(int(rng.integers(2**31)), (16.0, 16.0))
         assert world is not None
         pose = sample_pose(world, rng)
-        rgb, depth, boxes = render(world, pose, camera, rng, random_conditions(rng))
+        cond = replace(random_conditions(rng), structured_light=structured_light)
+        motion = None
+        if structured_light:  # its own stream: the same poses and worlds either way
+            r_m = np.random.default_rng([seed, i, 0x30])
+            motion = random_motion(r_m, camera.fx, float(pose.position[2] - world.height.mean()))
+        rgb, depth, boxes = render(world, pose, camera, rng, cond, motion)
         yield Sample(
             name=f"s{seed}_{i:05d}",
             rgb=rgb,
@@ -84,13 +100,19 @@ def synth_samples(
 
 
 def synth_dataset(
-    out: Path, n: int, seed: int, progress: Callable[[int, int], None] | None = None
+    out: Path,
+    n: int,
+    seed: int,
+    progress: Callable[[int, int], None] | None = None,
+    *,
+    structured_light: bool = True,
 ) -> Path:
-    """Write ``n`` synthetic frames as a dataset folder at ``out``."""
+    """Write ``n`` synthetic frames as a dataset folder at ``out`` (see :func:`synth_samples`)."""
     camera = CameraIntrinsics.xtion()
 
     def counted() -> Iterator[Sample]:
-        for i, s in enumerate(synth_samples(n, seed, camera)):
+        samples = synth_samples(n, seed, camera, structured_light=structured_light)
+        for i, s in enumerate(samples):
             if progress:
                 progress(i + 1, n)
             yield s

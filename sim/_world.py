@@ -79,6 +79,9 @@ class RubbleWorld:
     radiance : (ny, nx, 3) float32 ndarray, linear RGB radiance under the world's light.
     holes : the true access holes and the distractors.
     sun_azimuth : rad clockwise from north; sun_elevation : rad above the horizon.
+    ir_unread : (ny, nx) float32 ndarray, fraction of the infrared pattern each cell's surface
+        returns nothing for (soot, char and wet stains: 0.55-0.76); None = 0 everywhere.
+    surface : (ny, nx, 4) float32, radiance and ``ir_unread`` stacked (what is rendered).
     """
 
     seed: int
@@ -89,7 +92,9 @@ class RubbleWorld:
     holes: tuple[AccessHole, ...]
     sun_azimuth: float
     sun_elevation: float
+    ir_unread: F32 | None = None
     pyramid: MaxPyramid = field(init=False, repr=False)
+    surface: F32 = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         h = self.height
@@ -99,7 +104,12 @@ class RubbleWorld:
             a = getattr(self, name)
             if a.shape != (*h.shape, 3) or a.dtype != np.float32:
                 raise InputError(f"{name} must be (ny, nx, 3) float32 like height")
+        if self.ir_unread is not None and self.ir_unread.shape != h.shape:
+            raise InputError("ir_unread must be (ny, nx) like height")
         object.__setattr__(self, "pyramid", build_pyramid(h))
+        ir = self.ir_unread if self.ir_unread is not None else np.zeros(h.shape, np.float32)
+        stack = np.concatenate([self.radiance, ir.astype(np.float32)[..., None]], axis=-1)
+        object.__setattr__(self, "surface", np.ascontiguousarray(stack))
 
     @property
     def size_m(self) -> tuple[float, float]:
@@ -142,6 +152,10 @@ class _Builder:
     height: F32
     colour: F32
     shade: F32  # multiplicative albedo factor (stains, shadows, dust)
+    # Fraction of the infrared pattern a cell's surface swallows (soot, char, wet patches),
+    # and the generator of those draws (apart, so the rest of the world is unchanged).
+    ir_unread: F32
+    ir_rng: np.random.Generator
     # Slabs as (centre, length, width, yaw), for the shadow distractors.
     slabs: list[tuple[tuple[float, float], float, float, float]] = field(default_factory=list)
     occupied: list[tuple[float, float, float]] = field(default_factory=list)
@@ -299,19 +313,24 @@ class _Builder:
             s = np.clip(dist / b, 0.0, 1.0)
             self.height[rows, cols] -= (depth * s * s * (3 - 2 * s)).astype(np.float32)
 
-    def darken(self, kind: HoleKind, poly: F64, factor: float) -> None:
+    def darken(self, kind: HoleKind, poly: F64, factor: float, ir_unread: float = 0.0) -> None:
         self.add(kind, poly, 0.0)
         win = shp.rasterise(poly, self.cell, self.height.shape, pad=8)
         if win is not None:
             rows, cols, mask = win
             soft = cv2.GaussianBlur(mask.astype(np.float32), (0, 0), 2.5)
             self.shade[rows, cols] *= 1.0 - (1.0 - factor) * soft
+            if ir_unread > 0:
+                cur = self.ir_unread[rows, cols]
+                self.ir_unread[rows, cols] = np.maximum(cur, ir_unread * (soft > 0.5))
 
     def stain(self) -> None:
         a = self.rng.uniform(0.2, 0.75)
         b = a * self.rng.uniform(0.5, 1.0)
         centre = self.place(a * 1.15)
-        self.darken("stain", self.outline(a, b, centre), self.rng.uniform(0.25, 0.55))
+        # Two stains in three are soot, char or wet: they swallow 55-76 % of the pattern.
+        ir = float(self.ir_rng.uniform(0.55, 0.76)) if self.ir_rng.random() < 2 / 3 else 0.0
+        self.darken("stain", self.outline(a, b, centre), self.rng.uniform(0.25, 0.55), ir)
 
     def shadow(self) -> None:
         rng = self.rng
@@ -389,7 +408,9 @@ def make_world(
     colour = np.empty((ny, nx, 3), dtype=np.float32)
     for ch, (g_tint, b_tint) in enumerate(((1.0, 1.16), (1.0, 0.95), (1.02, 0.72))):
         colour[..., ch] = grey * ((1 - dirt) * g_tint + dirt * b_tint)
-    b = _Builder(rng, cell_m, height, colour, np.ones(shape, dtype=np.float32))
+    ir_unread = np.zeros(shape, dtype=np.float32)
+    ir_rng = np.random.default_rng([seed, 0x1F])
+    b = _Builder(rng, cell_m, height, colour, np.ones(shape, dtype=np.float32), ir_unread, ir_rng)
 
     area = sx * sy
     for _ in range(round(slabs_per_m2 * area)):
@@ -434,4 +455,4 @@ def make_world(
         sun_elevation_deg = float(rng.uniform(3.0, 15.0))
     az, el = math.radians(sun_azimuth_deg), math.radians(sun_elevation_deg)
     rad = radiance_map(height, albedo, cell_m, az, el)
-    return RubbleWorld(seed, cell_m, height, albedo, rad, tuple(b.holes), az, el)
+    return RubbleWorld(seed, cell_m, height, albedo, rad, tuple(b.holes), az, el, ir_unread)

@@ -23,26 +23,21 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from holescan.capture import (
-    FlightLogWriter,
-    Frame,
-    LoggedFrame,
+from holescan.capture import parse_fly_config, scan_oni, write_oni
+from holescan.detect import CameraIntrinsics, Frame
+from holescan.errors import HolescanError
+from holescan.flightlog import FlightLogWriter, LoggedFrame, log_info, read_flight_log, recover_log
+from holescan.ground import load_dataset, read_camera
+from holescan.link import (
     MavlinkStream,
     attitude_from_attitude,
     attitude_from_quaternion,
     gps_from_gps_raw_int,
-    log_info,
-    parse_fly_config,
+    mavlink,
+    parser,
     position_from_global_position_int,
-    read_flight_log,
-    recover_log,
-    scan_oni,
-    write_oni,
 )
-from holescan.detect import CameraIntrinsics
-from holescan.errors import HolescanError
-from holescan.ground import load_dataset, read_camera
-from holescan.missions import mavlink, parser, read_area
+from holescan.missions import read_area
 
 CAM = CameraIntrinsics(32, 24, 30.0, 30.0, 15.5, 11.5)
 #: Extra address space a parser may take while fuzzed (a corrupt length once asked 5 GB).
@@ -90,7 +85,7 @@ def mcap_bytes(tmp_path_factory: pytest.TempPathFactory) -> bytes:
     d = tmp_path_factory.mktemp("fuzzlog")
     rng = np.random.default_rng(0)
     opts_kw: dict[str, Any] = {}
-    from holescan.capture import LogOptions
+    from holescan.flightlog import LogOptions
 
     with FlightLogWriter(d / "f", CAM, options=LogOptions(chunk_size=4000, **opts_kw)) as w:
         for i in range(12):

@@ -16,7 +16,13 @@ from alien_scenes.common import F64, CameraModel, Textures, make_textures
 from alien_scenes.raycast import PerspectiveView
 from alien_scenes.sampling import polygon_area
 from alien_scenes.scene import sample_scene
-from alien_scenes.shading import Surface, depth_sensor, rgb_sensor, shade
+from alien_scenes.shading import (
+    Surface,
+    depth_sensor,
+    rgb_sensor,
+    shade,
+    structured_light_sensor,
+)
 from alien_scenes.shapes import Scene, Shape, make_library
 
 # --------------------------------------------------------------------------- ground truth
@@ -91,6 +97,7 @@ class _Job:
     seed: int
     cam: CameraModel
     out: Path
+    sensor: str = "structured-light"
 
 
 def _assets(seed: int) -> tuple[list[Shape], Textures]:
@@ -106,7 +113,11 @@ def _render_image(
     view = PerspectiveView(job.cam, sc.C, sc.R)
     surf = shade(rng, sc, view, tex)
     rgb = rgb_sensor(rng, sc, surf.radiance)
-    depth = depth_sensor(rng, sc, job.cam, surf)
+    if job.sensor == "structured-light":
+        rng_sl = np.random.default_rng([job.seed, job.index, 2])
+        depth, rgb, sensor = structured_light_sensor(rng_sl, sc, job.cam, surf, rgb)
+    else:
+        depth, sensor = depth_sensor(rng, sc, job.cam, surf), {}
     anns = _annotate(sc, job.cam, surf)
     name = f"alien_{job.index:05d}.png"
     if not cv2.imwrite(str(job.out / "rgb" / name), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)):
@@ -123,6 +134,8 @@ def _render_image(
         | {
             "max_range_m": round(sc.zmax, 3),
             "valid_depth_fraction": round(float((depth > 0).mean()), 3),
+            "sensor_model": job.sensor,
+            "sensor": sensor,
         },
     }
     return image, anns
@@ -138,7 +151,9 @@ def _worker(job: _Job) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     return _render_image(job, lib, tex)
 
 
-def generate_dataset(out: Path, n: int, seed: int, jobs: int = 1) -> dict[str, Any]:
+def generate_dataset(
+    out: Path, n: int, seed: int, jobs: int = 1, sensor: str = "structured-light"
+) -> dict[str, Any]:
     """Write ``n`` scenes to ``out`` (annotations.json, camera.json, rgb/, depth/).
 
     Deterministic for (n, seed) whatever ``jobs`` is. Returns a summary: images, holes,
@@ -151,7 +166,7 @@ def generate_dataset(out: Path, n: int, seed: int, jobs: int = 1) -> dict[str, A
     (out / "rgb").mkdir(parents=True, exist_ok=True)
     (out / "depth").mkdir(parents=True, exist_ok=True)
     cam = CameraModel.sample(np.random.default_rng([seed, 0xCA]))
-    work = [_Job(i, seed, cam, out) for i in range(n)]
+    work = [_Job(i, seed, cam, out, sensor) for i in range(n)]
     if jobs > 1:
         ctx = multiprocessing.get_context("fork")
         with ctx.Pool(jobs) as pool:
@@ -169,6 +184,7 @@ def generate_dataset(out: Path, n: int, seed: int, jobs: int = 1) -> dict[str, A
             "description": "alien synthetic rubble scenes (benchmarks/alien_scenes.py)",
             "seed": seed,
             "version": "1",
+            "sensor": sensor,
         },
         "images": images,
         "annotations": annotations,

@@ -28,8 +28,8 @@ def _init() -> None:
 
 
 def _work(task: tuple) -> dict:
-    seed, index, intr, scale, out = task
-    fr = render_frame(seed, index, intr, scale)
+    seed, index, intr, scale, out, sensor = task
+    fr = render_frame(seed, index, intr, scale, sensor)
     name = f"hs{seed}_{index:04d}"
     cv2.imwrite(str(Path(out) / "rgb" / f"{name}.png"), cv2.cvtColor(fr["rgb"], cv2.COLOR_RGB2BGR))
     cv2.imwrite(str(Path(out) / "depth" / f"{name}.png"), fr["depth"])
@@ -41,13 +41,20 @@ def _work(task: tuple) -> dict:
     }
 
 
-def generate(out: Path, n: int, seed: int, jobs: int = 1, scale: float = 1.0) -> dict:
+def generate(
+    out: Path,
+    n: int,
+    seed: int,
+    jobs: int = 1,
+    scale: float = 1.0,
+    sensor: str = "structured-light",
+) -> dict:
     out = Path(out)
     (out / "rgb").mkdir(parents=True, exist_ok=True)
     (out / "depth").mkdir(parents=True, exist_ok=True)
     intr = dataset_intrinsics(seed)
     cam = intr.scaled(scale)
-    tasks = [(seed, i, intr, scale, str(out)) for i in range(n)]
+    tasks = [(seed, i, intr, scale, str(out), sensor) for i in range(n)]
     if jobs > 1:
         with multiprocessing.Pool(jobs, initializer=_init) as pool:
             results = list(pool.imap(_work, tasks, chunksize=1))
@@ -81,7 +88,13 @@ def generate(out: Path, n: int, seed: int, jobs: int = 1, scale: float = 1.0) ->
                 }
             )
     coco = {
-        "info": {"generator": "benchmarks/hard_scenes", "seed": seed, "n": n, "scale": scale},
+        "info": {
+            "generator": "benchmarks/hard_scenes",
+            "seed": seed,
+            "n": n,
+            "scale": scale,
+            "sensor": sensor,
+        },
         "images": images,
         "annotations": anns,
         "categories": [{"id": 1, "name": "access_hole"}],
@@ -124,11 +137,18 @@ def main(argv: list[str] | None = None) -> int:
         default=1.0,
         help="render at this fraction of 640x480 (for quick tests)",
     )
+    ap.add_argument(
+        "--sensor",
+        choices=("structured-light", "basic"),
+        default="structured-light",
+        help="depth model: the measured structured-light model (default) or this generator's "
+        "own earlier one, for comparison",
+    )
     args = ap.parse_args(argv)
     if args.n < 1 or args.jobs < 1 or not 0.1 <= args.scale <= 1.0:
         ap.error("--n and --jobs must be >= 1, --scale in [0.1, 1]")
     t0 = time.perf_counter()
-    coco = generate(args.out, args.n, args.seed, args.jobs, args.scale)
+    coco = generate(args.out, args.n, args.seed, args.jobs, args.scale, args.sensor)
     print(summary(coco))
     print(f"wrote {args.out} in {time.perf_counter() - t0:.1f} s")
     return 0

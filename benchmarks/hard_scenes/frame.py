@@ -8,7 +8,7 @@ from features import OPENINGS, apply_features
 from labels import hole_annotation, opening_view, pixel_objects, region_entry, shadow_entries
 from plan import sample_plan
 from raycast import SURF_NONE, cast
-from sensor import xtion_depth
+from sensor import structured_light, xtion_depth
 from shade import develop, radiance
 from terrain import build_terrain
 from world import NO_RETURN, Grid, caster_field, horizon_field
@@ -42,9 +42,17 @@ def _r(v, nd=3):
     return round(float(v), nd)
 
 
-def render_frame(seed: int, index: int, intr_full: Intrinsics, scale: float = 1.0) -> dict:
+def render_frame(
+    seed: int,
+    index: int,
+    intr_full: Intrinsics,
+    scale: float = 1.0,
+    sensor_model: str = "structured-light",
+) -> dict:
     ss = np.random.SeedSequence([seed, index])
     r_plan, r_world, r_light, r_sensor = (np.random.default_rng(s) for s in ss.spawn(4))
+    # Its own stream, so that the scenes are the same whichever sensor model renders them.
+    r_sl = np.random.default_rng(np.random.SeedSequence([seed, index, 0x5E]))
     intr = intr_full.scaled(scale)
     W, H = intr.width, intr.height
     plan = sample_plan(r_plan, intr)
@@ -77,7 +85,12 @@ def render_frame(seed: int, index: int, intr_full: Intrinsics, scale: float = 1.
         mats[bx] = np.array([b.material for b in boxes])[hits.box[bx]]
     no_ret = np.isin(mats, NO_RETURN).reshape(H, W)
     cos_inc = np.abs(np.sum(hits.normal * D, 1)).reshape(H, W)
-    depth, sensor = xtion_depth(r_sensor, intr, Z, no_ret, cos_inc, plan.max_range)
+    if sensor_model == "structured-light":
+        depth, rgb, sensor = structured_light(
+            r_sl, intr, Z, rgb, no_ret, stain.reshape(H, W), plan.max_range
+        )
+    else:
+        depth, sensor = xtion_depth(r_sensor, intr, Z, no_ret, cos_inc, plan.max_range)
 
     beyond = np.isfinite(Z) & (plan.max_range < Z)
     anns, distractors = [], []
@@ -121,6 +134,10 @@ def render_frame(seed: int, index: int, intr_full: Intrinsics, scale: float = 1.
         deep &= ~hole_full & ~no_ret.ravel()
         distractors += shadow_entries(deep.reshape(H, W), depth, int(0.01 * H * W))
 
+    absorbing = sensor.get("absorbing_stains", {})
+    for e in distractors:
+        if e["kind"] == "stain" and e.get("feature_id") in absorbing:
+            e["ir_unread"] = absorbing[e["feature_id"]]  # soot, char, wet: few readings
     cam = {k: (_r(v) if isinstance(v, float) else v) for k, v in plan.camera.items()}
     scene = {
         "seed": seed,
@@ -143,6 +160,7 @@ def render_frame(seed: int, index: int, intr_full: Intrinsics, scale: float = 1.
         "rgb_mean": _r(rgb.mean(), 2),
         "terrain": terrain,
         "sensor": sensor,
+        "sensor_model": sensor_model,
         "planned": [f["kind"] + ("+occluder" if f.get("occluder") else "") for f in plan.features],
     }
     return {

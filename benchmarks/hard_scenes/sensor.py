@@ -1,5 +1,11 @@
 """Asus Xtion Pro depth: what the structured-light sensor would report for the true Z.
 
+Two models. :func:`structured_light` (the default) is the project's measured model
+(``holescan.sim.structured_light``, validated against real Kinect-v1 frames in
+``docs/sensor-model.md``), fed with this generator's surfaces: no return from water, metal
+and plastic, and soot/char/wet stains that swallow 55-76 % of the pattern.
+:func:`xtion_depth` (``--sensor basic``) is this generator's own earlier model:
+
 - no reading beyond the scene's range cut-off (3.5-4.5 m) or nearer than 0.5 m, nor from
   sheet metal, water or glossy plastic (no infrared return; a few speckles do return);
 - axial noise sigma = 1.425e-6 Z^2 (Z in mm; Khoshelham & Elberink 2012), a weak
@@ -14,6 +20,65 @@ import cv2
 import numpy as np
 from camera import BASELINE_M, MIN_RANGE_M, Intrinsics
 from shapes import smooth_noise
+
+from holescan.sim.structured_light import (
+    SensorCamera,
+    StructuredLight,
+    Surface,
+    random_motion,
+    structured_light_frame,
+)
+
+#: Fraction of stains that are soot, char or wet (no infrared return over most of them).
+ABSORBING_STAIN_P = 0.7
+
+
+def structured_light(
+    rng: np.random.Generator,
+    intr: Intrinsics,
+    Z: np.ndarray,
+    rgb: np.ndarray,
+    no_return: np.ndarray,
+    stain: np.ndarray,
+    max_range: float,
+) -> tuple[np.ndarray, np.ndarray, dict]:
+    """True Z (H, W; inf = nothing) -> (uint16 mm depth, motion-blurred RGB, settings)."""
+    unread = np.where(no_return, 0.97, 0.0).astype(np.float32)
+    absorbing = {}
+    for sid in np.unique(stain[stain > 0]) if np.any(stain > 0) else ():
+        if rng.random() < ABSORBING_STAIN_P:
+            frac = float(rng.uniform(0.55, 0.76))
+            unread[stain == sid] = np.maximum(unread[stain == sid], frac)
+            absorbing[int(sid)] = round(frac, 3)
+    finite = np.isfinite(Z)
+    centre = float(np.median(Z[finite])) if finite.any() else 2.5
+    motion = random_motion(rng, intr.fx, centre)
+    params = StructuredLight(max_range_m=max_range, fade_range_m=max_range - 0.3)
+    cam = SensorCamera(intr.fx, intr.cx, intr.cy)
+    fr = structured_light_frame(
+        np.where(finite, Z, 0.0),
+        rgb,
+        cam,
+        seed=rng,
+        surface=Surface(ir_unread=unread),
+        motion=motion,
+        params=params,
+    )
+    d = fr.draws
+    return (
+        fr.depth_mm,
+        fr.rgb,
+        {
+            "bands_ltrb_px": [d.band_left, d.band_top, d.band_right, d.band_bottom],
+            "fattening_px": d.fattening_px,
+            "flying_fraction": d.flying_fraction,
+            "misregistration_px": list(d.shift_px),
+            "time_offset_s": d.time_offset_s,
+            "velocity_px_s": list(motion.velocity_px_s),
+            "exposure_s": motion.exposure_s,
+            "absorbing_stains": absorbing,
+        },
+    )
 
 
 def projector_shadow(Z: np.ndarray, fb: float) -> np.ndarray:

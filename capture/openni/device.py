@@ -2,7 +2,7 @@
 
 Both open a depth (DEPTH_1_MM) and a colour (RGB888) stream on one OpenNI2 device, copy
 each frame out of the library's buffer, and pair depth with colour by timestamp (within
-half a frame period) into :class:`capture.Frame` records.
+half a frame period) into :class:`detect.Frame` records.
 
 The library's pitfalls (FIELD-NOTES.md, Debian libopenni2-0 2.2.0.33) shape this module:
 ``seek()`` never returns (never called here); ``read_frame()`` blocks forever at the end of
@@ -26,7 +26,6 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from holescan.capture._frame import Frame
 from holescan.capture._usb import XTION_VENDOR_ID, find_xtion
 from holescan.capture.errors import SensorError
 from holescan.capture.openni.library import (
@@ -39,7 +38,7 @@ from holescan.capture.openni.library import (
 )
 from holescan.capture.openni.oniformat import ONI_PIXEL_FORMAT_DEPTH_1_MM, ONI_PIXEL_FORMAT_RGB888
 from holescan.capture.openni.oniscan import OniInfo, scan_oni
-from holescan.detect import CameraIntrinsics
+from holescan.detect import CameraIntrinsics, Frame
 from holescan.errors import HolescanError, InputError
 
 __all__ = ["OniSource", "OpenNI2Device"]
@@ -229,7 +228,7 @@ class _OpenNISource(abc.ABC):
 class OniSource(_OpenNISource):
     """Play an ``.oni`` recording through libOpenNI2, every frame in order.
 
-    A :class:`capture.FrameSource`: use as a context manager and iterate; iteration ends
+    A :class:`detect.FrameSource`: use as a context manager and iterate; iteration ends
     after the last frame. The file is checked first (:func:`capture.scan_oni`), so a
     missing, truncated or corrupt file raises :class:`InputError` before the library sees
     it.
@@ -313,7 +312,7 @@ def _scan_fov_camera(info: OniInfo) -> CameraIntrinsics:
 class OpenNI2Device(_OpenNISource):
     """The live Asus Xtion through OpenNI2: depth registered to colour, frame sync on.
 
-    A :class:`capture.FrameSource`: use as a context manager and iterate; iteration runs
+    A :class:`detect.FrameSource`: use as a context manager and iterate; iteration runs
     until the source is closed.
 
     Parameters

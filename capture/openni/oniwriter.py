@@ -31,8 +31,6 @@ from typing import BinaryIO
 
 import numpy as np
 
-from holescan.capture._frame import Frame
-from holescan.capture._outpath import check_output, commit_part, part_path
 from holescan.capture.openni.oniformat import (
     FILE_HEADER,
     FILE_MAGIC,
@@ -48,8 +46,9 @@ from holescan.capture.openni.oniformat import (
     node_added_record,
     node_property_records,
 )
-from holescan.detect import CameraIntrinsics
+from holescan.detect import CameraIntrinsics, Frame
 from holescan.errors import InputError
+from holescan.outputs import check_output, commit_part, part_path
 
 __all__ = ["OniWriter", "export_oni", "write_oni"]
 
@@ -71,13 +70,13 @@ class OniWriter:
 
     Use as a context manager; the file appears under ``path`` when the writer is closed,
     also when the ``with`` block ends with an exception (the frames written so far are
-    kept). Until then it is ``.STEM.part.oni`` beside it (:func:`capture.part_path`).
+    kept). Until then it is ``.STEM.part.oni`` beside it (:func:`outputs.part_path`).
 
     Parameters
     ----------
     path : str or Path
         Output file; must not exist (unless ``force``), never a ``.mcap`` or one of
-        ``inputs`` (:func:`capture.check_output`).
+        ``inputs`` (:func:`outputs.check_output`).
     camera : CameraIntrinsics
         Size and intrinsics of the frames. Stored as the streams' field of view (OpenNI
         keeps nothing else) plus a private property holding fx, fy, cx, cy exactly.
@@ -337,7 +336,7 @@ def export_oni(
     Sensor timestamps that jump back (the Xtion's clock restarts after a USB reset) are
     shifted to continue after the previous frame, by the companion clock's interval.
     """
-    from holescan.capture.flightlog.reader import McapSource  # the MCAP stack, when exporting
+    from holescan.flightlog.reader import McapSource
 
     inputs = [logs] if isinstance(logs, str | os.PathLike) else list(logs)
     check_output(path, inputs=inputs, suffixes={".oni"}, force=force)

@@ -24,7 +24,7 @@ outside the image, a zero, negative or non-numeric size raises :class:`InputErro
 its line number.
 
 The output folder must not exist: the dataset is written to ``.OUT.part`` and renamed when
-complete (:func:`capture.folder_via_part`, the project's output rule for folders), so an
+complete (:func:`outputs.folder_via_part`, the project's output rule for folders), so an
 interrupted import never leaves a half dataset under the final name.
 """
 
@@ -38,11 +38,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from holescan.capture import folder_via_part
 from holescan.detect import CameraIntrinsics
 from holescan.errors import InputError
 from holescan.ground.datasets.coco import CATEGORY, CATEGORY_ID, Box, load_dataset
 from holescan.ground.images.files import read_depth, read_rgb
+from holescan.outputs import folder_via_part
 
 __all__ = ["CsvBox", "FramePair", "find_pairs", "import_csv_dataset", "read_box_csv"]
 
@@ -198,7 +198,7 @@ def import_csv_dataset(
     ``camera`` defaults to the Xtion's intrinsics at the images' size. Every image is read
     (8-bit colour, 16-bit depth, one size for all) before anything is written. Refuses an
     existing ``out`` (at once, before reading); writes ``.OUT.part`` and renames it
-    (:func:`capture.folder_via_part`). Returns ``out``.
+    (:func:`outputs.folder_via_part`). Returns ``out``.
     """
     out = Path(out)
     with folder_via_part(out, inputs=[folder, csv_path]) as part:

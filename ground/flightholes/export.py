@@ -2,7 +2,7 @@
 
 :func:`export_flight_holes` reads a flight log once (:func:`read_flight_holes`) and writes
 GPX/KML/KMZ/GeoJSON/.plan/WPL files with :func:`missions.write_hole_file`, each through
-capture's output rule (:func:`capture.output_via_part`).
+the output-path rule (:func:`outputs.output_via_part`).
 """
 
 from __future__ import annotations
@@ -12,7 +12,6 @@ import os
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
-from holescan.capture import check_output, output_via_part
 from holescan.errors import InputError
 from holescan.geotag import Hole
 from holescan.ground.flightholes.read import (
@@ -22,6 +21,7 @@ from holescan.ground.flightholes.read import (
     read_flight_holes,
 )
 from holescan.missions import HOLE_FORMATS, HOLE_SUFFIXES, HoleFormat, rank_holes, write_hole_file
+from holescan.outputs import check_output, output_via_part
 
 __all__ = ["ExportReport", "default_out_path", "export_flight_holes"]
 

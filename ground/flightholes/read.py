@@ -26,7 +26,8 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
-from holescan.capture import (
+from holescan.errors import InputError
+from holescan.flightlog import (
     FlightLogError,
     LoggedDetections,
     LoggedFrame,
@@ -34,13 +35,11 @@ from holescan.capture import (
     LoggedMavlink,
     LoggedPose,
     TruncatedLogError,
-    home_from_home_position,
     read_flight_log,
 )
-from holescan.errors import InputError
 from holescan.geotag import AnnounceGate, Hole
 from holescan.ground.flightholes.views import BestViews, HoleThumbnail
-from holescan.missions import mavlink, parser
+from holescan.link import home_from_home_position, mavlink, parser
 
 __all__ = ["FlightHoles", "flight_log_files", "log_stem", "read_flight_holes"]
 

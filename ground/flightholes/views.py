@@ -12,13 +12,9 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from holescan.capture import (
-    LoggedDetections,
-    LoggedFrame,
-    crop_view,
-)
 from holescan.errors import InputError
-from holescan.geotag import Hole
+from holescan.flightlog import LoggedDetections, LoggedFrame
+from holescan.geotag import Hole, crop_view
 from holescan.ground.images.overlay import depth_colour
 
 _log = logging.getLogger(__name__)
@@ -34,7 +30,7 @@ class HoleThumbnail:
     """A hole's best view: colour | colourised depth around its box, side by side.
 
     jpeg : JPEG bytes. width, height : size of the picture, pixels.
-    frame_index : :attr:`capture.Frame.index` of the view; box : (x, y, w, h) pixels in it.
+    frame_index : :attr:`detect.Frame.index` of the view; box : (x, y, w, h) pixels in it.
     t_unix_ns : capture time of the frame, Unix clock.
     """
 

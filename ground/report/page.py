@@ -24,12 +24,12 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from holescan.capture import atomic_output, crop_view
 from holescan.errors import InputError
-from holescan.geotag import CIRCLE_95_PER_SIGMA, Hole, LocalFrame, VehiclePose
+from holescan.geotag import CIRCLE_95_PER_SIGMA, Hole, LocalFrame, VehiclePose, crop_view
 from holescan.ground.images.overlay import depth_colour
 from holescan.ground.report.bands import SCORE_BANDS, ScoreBand, score_band
 from holescan.ground.report.svgmap import legend_html, maps_svg
+from holescan.outputs import atomic_output
 
 __all__ = ["BestView", "render_report", "thumbnails", "write_report"]
 
@@ -63,8 +63,8 @@ def write_report(
 
     Parameters
     ----------
-    path : the ``.html`` file to write (replaced atomically, through capture's output rule
-        :func:`capture.atomic_output`); its folder must exist.
+    path : the ``.html`` file to write (replaced atomically, through the output-path rule
+        :func:`outputs.atomic_output`); its folder must exist.
     title : page heading, e.g. the flight's name.
     holes : the holes found (e.g. ``HoleTracker.confirmed()``); may be empty.
     track : vehicle poses in time order (WGS84); poses without a finite position are skipped.

@@ -3,7 +3,7 @@
 One file per partition, ``KEY.pkl``, where the key hashes the log's content (its chunk
 index, or every chunk's header with its CRC), the partition's chunk range and the detector
 settings (:func:`ground.reprocessing.plan.partition_key`). Written by the client as results arrive
-(through capture's output rule, :func:`capture.atomic_output`: ``.KEY.part.pkl``, fsynced,
+(through the output-path rule, :func:`outputs.atomic_output`: ``.KEY.part.pkl``, fsynced,
 then renamed, so a killed run leaves no half file). The files are pickles made
 by this program for this program: do not put files from elsewhere in the folder.
 """
@@ -14,8 +14,8 @@ import logging
 import pickle
 from pathlib import Path
 
-from holescan.capture import atomic_output
 from holescan.ground.reprocessing.task import PartitionResult
+from holescan.outputs import atomic_output
 
 __all__ = ["PartitionCache"]
 

@@ -1,7 +1,7 @@
 """Holes merged across the flights of an operation: one id per hole, sightings per flight.
 
 Every frame merged in a flight (:class:`ground.reprocessing.merge.FlightMerger`) also hands its
-sightings, geotagged by that flight's :class:`capture.HolePipeline`, to one campaign-wide
+sightings, geotagged by that flight's :class:`geotag.HolePipeline`, to one campaign-wide
 :class:`geotag.HoleTracker`: the same gate as in flight (position, each sighting's
 uncertainty, the GPS error that drifts between sorties), so a hole seen on two sorties or
 by two vehicles is one hole. Sightings are put on the Unix clock first (each vehicle's
@@ -17,8 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from holescan.capture import FrameHoles
-from holescan.geotag import Hole, HoleTracker, LocalFrame, VehiclePose
+from holescan.geotag import FrameHoles, Hole, HoleTracker, LocalFrame, VehiclePose
 from holescan.ground.reprocessing.merge import box_of, read_views
 from holescan.ground.reprocessing.plan import PartitionTask
 from holescan.ground.reprocessing.task import Box, FrameResult, View

@@ -1,11 +1,11 @@
 """On the client: one flight's partition results replayed in log order into holes.
 
 :class:`FlightMerger` takes the partitions of a flight in order and replays their events
-as the flight saw them: raw MAVLink packets through :class:`capture.TelemetryReplay` (the
+as the flight saw them: raw MAVLink packets through :class:`link.TelemetryReplay` (the
 live link's decoder), each frame posed at its autopilot boot time as soon as telemetry
 after it was read (at the end of the log the last frames are extrapolated or refused, as
 in flight), and the frames' detections merged in frame order through
-:class:`capture.HolePipeline`, the capture daemon's own step. With ``frames="flight"``
+:class:`geotag.HolePipeline`, the capture daemon's own step. With ``frames="flight"``
 only the frames the flight's ``/detections`` records name are merged, in their order.
 
 Every merged frame is also handed to ``on_frame`` (the campaign's cross-flight merge)
@@ -19,25 +19,23 @@ from collections import OrderedDict, deque
 from collections.abc import Callable
 from typing import Any, Final
 
-from holescan.capture import (
+from holescan.flightlog import (
     FlightLogError,
-    FrameHoles,
-    HolePipeline,
     LoggedDetections,
     LoggedHoles,
     LoggedMavlink,
     LoggedPose,
-    TelemetryReplay,
     annotations_message,
     detection_json,
     holes_geojson_message,
     jsonable,
 )
-from holescan.geotag import AnnounceGate, Hole, VehiclePose
+from holescan.geotag import AnnounceGate, FrameHoles, Hole, HolePipeline, VehiclePose
 from holescan.ground.reprocessing.mapchunk import horizontal_gap_m
 from holescan.ground.reprocessing.options import ReprocessOptions
 from holescan.ground.reprocessing.plan import FlightPlan, PartitionTask
 from holescan.ground.reprocessing.task import Box, FrameResult, PartitionResult, View, best_view
+from holescan.link import TelemetryReplay
 from holescan.mapping import MapLayers
 
 __all__ = ["FlightMerger", "box_of", "read_views"]

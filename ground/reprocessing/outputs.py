@@ -19,13 +19,14 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from holescan.capture import jsonable, output_via_part
+from holescan.flightlog import jsonable
 from holescan.geotag import AnnounceGate, Hole, VehiclePose
 from holescan.ground.flightholes.views import render_thumbnail
 from holescan.ground.report.page import write_report
 from holescan.ground.reprocessing.options import HoleMatch, ReprocessOptions
 from holescan.ground.station.datapackage import ground_hole_of, write_datapackage
 from holescan.missions import HOLE_SUFFIXES, write_hole_file
+from holescan.outputs import output_via_part
 
 __all__ = ["FlightResult", "write_hole_outputs"]
 

@@ -1,7 +1,7 @@
 """Planning a run on the client: flights, their logs' chunk indexes, and the partitions.
 
 Only the layout of each log is read here (its summary, or its record headers when it was
-cut off; see :func:`capture.read_log_layout`), plus the first chunks until the camera
+cut off; see :func:`flightlog.read_log_layout`), plus the first chunks until the camera
 calibration is found. Every check that can fail on the input (a missing file, a file
 that is not MCAP, a log without a camera) fails here, before any work is submitted.
 """
@@ -20,7 +20,9 @@ from typing import Any, Final
 
 from mcap.records import Message
 
-from holescan.capture import (
+from holescan.detect import CameraIntrinsics, DetectParams
+from holescan.errors import InputError
+from holescan.flightlog import (
     TOPIC_CAMERA_INFO,
     TOPIC_COLOR,
     TOPIC_DEPTH,
@@ -42,8 +44,6 @@ from holescan.capture import (
     read_chunk,
     read_log_layout,
 )
-from holescan.detect import CameraIntrinsics, DetectParams
-from holescan.errors import InputError
 from holescan.geotag import CameraMount, ErrorModel
 from holescan.ground.flightholes.read import flight_log_files, log_stem
 from holescan.ground.reprocessing.options import ReprocessOptions

@@ -9,7 +9,7 @@ operation, holes merged across them) share one engine (modules of this subpackag
    its own byte ranges; only detections come back. Finished partitions are cached on disk
    (:mod:`.cache`), so a rerun does only what is missing;
 3. **merge** on the client in log order (:mod:`.merge`): poses from the logged telemetry,
-   holes through :class:`capture.HolePipeline` as in flight; a campaign also merges every
+   holes through :class:`geotag.HolePipeline` as in flight; a campaign also merges every
    flight's sightings into one hole list (:mod:`.campaign`);
 4. **write** per flight ``NAME_reprocess.mcap`` (sidecar, :mod:`.sidecar`),
    ``NAME_holes.*``, ``NAME_report.html``, ``NAME_reprocess.json`` (:mod:`.outputs`);
@@ -34,8 +34,8 @@ from importlib.metadata import version as _dist_version
 from pathlib import Path
 from typing import Any
 
-from holescan.capture import FlightLogError, atomic_output, read_log_layout, to_json
 from holescan.errors import InputError
+from holescan.flightlog import FlightLogError, read_log_layout, to_json
 from holescan.geotag import VehiclePose
 from holescan.ground.reprocessing.cache import PartitionCache
 from holescan.ground.reprocessing.campaign import CampaignHole, CampaignMerge, campaign_summary
@@ -58,6 +58,7 @@ from holescan.ground.reprocessing.plan import (
     ref_name,
 )
 from holescan.ground.reprocessing.sidecar import Sidecar
+from holescan.outputs import atomic_output
 
 __all__ = ["ReprocessResult", "reprocess", "run_campaign"]
 
@@ -321,7 +322,7 @@ def _flight_outputs(
 
 
 def _write_json(path: Path, doc: Any) -> None:
-    """A run's JSON summary, replaced atomically (capture's output rule)."""
+    """A run's JSON summary, replaced atomically (the output-path rule)."""
     with atomic_output(path, force=True) as f:
         f.write((json.dumps(doc, indent=1, allow_nan=False) + "\n").encode())
 

@@ -7,8 +7,9 @@ files opened together into one timeline (open the flight's logs and the sidecar 
 so the new detections draw over the logged images without a second copy of every image:
 a campaign's logs are hundreds of gigabytes, and a copy would double them.
 
-The file is written through capture's :class:`~capture.McapFile` (``.NAME_reprocess.part.mcap``
-until complete, then renamed into place, replacing the sidecar of an earlier run).
+The file is written through the flight log's :class:`~flightlog.McapFile`
+(``.NAME_reprocess.part.mcap`` until complete, then renamed into place, replacing the
+sidecar of an earlier run).
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any
 
-from holescan.capture import JSON_SCHEMAS, TOPIC_DETECTIONS, TOPIC_HOLES, McapFile, to_json
+from holescan.flightlog import JSON_SCHEMAS, TOPIC_DETECTIONS, TOPIC_HOLES, McapFile, to_json
 
 __all__ = ["Sidecar"]
 

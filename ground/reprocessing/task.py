@@ -4,7 +4,7 @@
 byte ranges, so frames never travel through the scheduler. A frame belongs to the
 partition that holds its ``/camera/frame_info`` message; its image parts may lie in a
 neighbouring chunk, which is then read too (at most two either side). Messages are decoded
-by capture's flight-log decoder (:func:`capture.decode_messages`). What comes back is
+by the flight log's decoder (:func:`flightlog.decode_messages`). What comes back is
 small: the detections, the raw MAVLink packets and the flight's own records, each with its
 position in the file so the client replays everything in log order. The few pictures the
 outputs need (each hole's best view) are read again afterwards (:func:`best_view`).
@@ -25,7 +25,9 @@ import numpy as np
 import numpy.typing as npt
 from mcap.records import Channel, McapRecord, Message
 
-from holescan.capture import (
+from holescan.detect import Detection, detect_holes
+from holescan.errors import NoDepthError
+from holescan.flightlog import (
     TOPIC_FRAME_INFO,
     ChunkDamagedError,
     ChunkSpan,
@@ -38,8 +40,6 @@ from holescan.capture import (
     open_log,
     read_chunk,
 )
-from holescan.detect import Detection, detect_holes
-from holescan.errors import NoDepthError
 from holescan.geotag import VehiclePose
 from holescan.ground.reprocessing.mapchunk import MapFrame, fuse_frames
 from holescan.ground.reprocessing.plan import FRAME_TOPICS, TASK_TOPICS, PartitionTask

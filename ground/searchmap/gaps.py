@@ -27,11 +27,11 @@ from affine import Affine
 from shapely.geometry import MultiPoint, Polygon, mapping, shape
 from shapely.ops import unary_union
 
-from holescan.capture import atomic_output
 from holescan.errors import InputError
 from holescan.geotag import LocalFrame
 from holescan.mapping import MapLayers
 from holescan.missions import Area, SurveyParams, SurveyPlan, Waypoint, plan_survey
+from holescan.outputs import atomic_output
 
 __all__ = ["GapReport", "Refly", "find_gaps", "plan_refly", "write_gaps_geojson"]
 

@@ -23,9 +23,9 @@ from rasterio.crs import CRS
 from rasterio.enums import Resampling
 from rasterio.warp import calculate_default_transform, reproject
 
-from holescan.capture import output_via_part
 from holescan.geotag import LocalFrame
 from holescan.mapping import MapLayers
+from holescan.outputs import output_via_part
 
 __all__ = [
     "DSM_NODATA",

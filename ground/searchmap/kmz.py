@@ -22,11 +22,11 @@ from rasterio.crs import CRS
 from rasterio.enums import Resampling
 from rasterio.warp import calculate_default_transform, reproject
 
-from holescan.capture import atomic_output
 from holescan.geotag import Hole, LocalFrame
 from holescan.ground.searchmap.geotiff import local_crs
 from holescan.mapping import MapLayers
 from holescan.missions import hole_points
+from holescan.outputs import atomic_output
 
 __all__ = ["KML_NS", "write_map_kmz"]
 

@@ -9,7 +9,6 @@ from pathlib import Path
 
 from shapely.geometry import Polygon
 
-from holescan.capture import output_via_part
 from holescan.geotag import Hole, LocalFrame
 from holescan.ground.searchmap.gaps import (
     GapReport,
@@ -22,6 +21,7 @@ from holescan.ground.searchmap.geotiff import write_map_geotiffs
 from holescan.ground.searchmap.kmz import write_map_kmz
 from holescan.mapping import MapLayers
 from holescan.missions import SurveyParams, check_flight, sun_day, write_waypoints
+from holescan.outputs import output_via_part
 
 __all__ = ["MapOutputs", "write_map_outputs"]
 

@@ -34,7 +34,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from holescan.capture import OutputPathError
 from holescan.errors import InputError
 from holescan.ground.station.cot import hole_cot, hole_tier, on_tak, withdraw_cot
 from holescan.ground.station.datapackage import DATAPACKAGE_NAME, write_datapackage
@@ -45,7 +44,8 @@ from holescan.ground.station.pairing import Pairing, Pairings, check_operator
 from holescan.ground.station.state import GroundHole, StationState
 from holescan.ground.station.tak import DEFAULT_COT_URL, CotPublisher, TakTls, tak_settings
 from holescan.ground.station.web import StationWeb
-from holescan.missions import SigningKey
+from holescan.link import SigningKey
+from holescan.outputs import OutputPathError
 
 __all__ = ["GroundOptions", "GroundStation", "run_ground"]
 

@@ -18,7 +18,7 @@ kept), ``Contents`` with one ``Content zipEntry=...`` per file. Here:
 * ``overlay/<name>.kmz``: the map overlay when there is one (``contentType`` KML).
 
 The package uid is fixed per station (``holescan-<station>-holes``), so importing a newer
-package replaces the older one on the device. Written through capture's output rule
+package replaces the older one on the device. Written through the output-path rule
 (``.holes_datapackage.part.zip``, fsynced, renamed): a reader never sees half a zip.
 """
 
@@ -31,11 +31,11 @@ import zipfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
-from holescan.capture import atomic_output
 from holescan.errors import InputError
 from holescan.geotag import Hole
 from holescan.ground.station.cot import cot_uid, hole_cot, hole_tier, on_tak
 from holescan.ground.station.state import GroundHole
+from holescan.outputs import atomic_output
 
 __all__ = [
     "DATAPACKAGE_NAME",

@@ -11,8 +11,8 @@ In the station folder:
 
 Written with the project's waypoint writers (:func:`missions.write_kml`,
 :func:`missions.write_geojson`, :func:`missions.write_gpx`) from one
-:class:`missions.Waypoint` per hole, through capture's output rule
-(:func:`capture.output_via_part`: ``.NAME.part.EXT``, fsynced, renamed).
+:class:`missions.Waypoint` per hole, through the output-path rule
+(:func:`outputs.output_via_part`: ``.NAME.part.EXT``, fsynced, renamed).
 """
 
 from __future__ import annotations
@@ -22,7 +22,6 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from holescan.capture import atomic_output, output_via_part
 from holescan.ground.station.state import GroundHole
 from holescan.missions import (
     MAV_FRAME_GLOBAL,
@@ -32,6 +31,7 @@ from holescan.missions import (
     write_gpx,
     write_kml,
 )
+from holescan.outputs import atomic_output, output_via_part
 
 __all__ = ["hole_summary", "hole_waypoint", "write_station_files"]
 

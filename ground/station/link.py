@@ -9,7 +9,7 @@ or a serial radio, :class:`VehicleLink` (one thread) takes from the stream:
   ``ENCAPSULATED_DATA``): hole cards, picture and facts (:func:`missions.read_card`), and
   the live map's tiles (:func:`missions.is_map_tile`), kept in the ``map_store``;
 * ``GLOBAL_POSITION_INT`` / ``ATTITUDE`` from the autopilot: the track (1 point/s kept),
-  decoded by capture's one MAVLink adapter (:func:`capture.position_from_global_position_int`);
+  decoded by the link's one MAVLink adapter (:func:`link.position_from_global_position_int`);
 * the hole mission of component 191, downloaded by this thread itself (the MAVLink
   mission protocol, MISSION_REQUEST_LIST -> COUNT -> REQUEST_INT per seq -> ITEM_INT, each
   item read by :func:`missions.waypoint_from_mission_item`) a few seconds after each new
@@ -34,16 +34,18 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from holescan.capture import position_from_global_position_int
 from holescan.ground.station.mapstore import MapStore
 from holescan.ground.station.state import StationState, TrackPoint
-from holescan.missions import (
-    CardAssembler,
+from holescan.link import (
     MavConnection,
     SigningKey,
-    is_map_tile,
     mavlink,
     open_link,
+    position_from_global_position_int,
+)
+from holescan.missions import (
+    CardAssembler,
+    is_map_tile,
     read_card,
     send_inventory,
     waypoint_from_mission_item,

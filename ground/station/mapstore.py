@@ -2,8 +2,8 @@
 
 Each map tile the vehicle sends (:mod:`missions._maptiles`: coverage PNG, orthophoto JPEG,
 each carrying its own facts) is kept as received in ``DIR/map/`` as
-``m<map>-<layer>-<tx>_<ty>.png|jpg``, written through capture's output rule
-(:func:`capture.atomic_output`: ``.part``, fsync, rename), only when it is newer than the
+``m<map>-<layer>-<tx>_<ty>.png|jpg``, written through the output-path rule
+(:func:`outputs.atomic_output`: ``.part``, fsync, rename), only when it is newer than the
 one kept. There is no index to keep consistent: a restarted station reads the folder back
 (each file names itself in its facts); a damaged or foreign file there is skipped with one
 log line.
@@ -22,8 +22,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from holescan.capture import atomic_output
 from holescan.missions import TileFacts, TileInventory, coverage_from_levels, read_tile
+from holescan.outputs import atomic_output
 
 __all__ = ["MapStore", "StoredTile", "tile_file_name"]
 

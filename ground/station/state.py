@@ -1,7 +1,7 @@
 """The ground station's memory: holes, their pictures, the operator's marks, the track.
 
 Everything ``holescan ground`` learns is kept here and written to ``DIR/station.json``
-after every change (through capture's output rule, :func:`capture.atomic_output`: written
+after every change (through the output-path rule, :func:`outputs.atomic_output`: written
 to ``.station.part.json``, flushed, fsynced, renamed: a crash or a power cut leaves the
 previous or the new file, never half of one), pictures to ``DIR/cards/hole-ID.jpg`` the
 same way. A restart reads it back, so a link drop, a restart or a second sortie loses
@@ -32,10 +32,10 @@ from typing import Any, Literal
 
 import numpy as np
 
-from holescan.capture import atomic_output
 from holescan.errors import InputError
 from holescan.geotag import LocalFrame, nearest_pairs
 from holescan.ground.errors import StationFileError
+from holescan.outputs import atomic_output
 
 __all__ = [
     "FORMAT",

@@ -29,6 +29,7 @@ _COMMAND_MODULES = (
     "holescan.cli._cmd_plan",
     "holescan.cli._cmd_holes",
     "holescan.cli._cmd_fly",
+    "holescan.cli._cmd_check",
     "holescan.cli._cmd_reprocess",
     "holescan.cli._cmd_campaign",
     "holescan.cli._cmd_demo",

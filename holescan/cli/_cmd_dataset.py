@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from holescan.capture import check_folder
 from holescan.cli._args import Progress
 from holescan.ground import import_csv_dataset, load_dataset, read_camera
+from holescan.outputs import check_folder
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -17,6 +17,13 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     s.add_argument("out", type=Path, help="output folder")
     s.add_argument("--n", type=int, default=60, help="number of images (default 60)")
     s.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
+    s.add_argument(
+        "--sensor",
+        choices=("structured-light", "basic"),
+        default="structured-light",
+        help="depth model: the measured structured-light model (default; border bands, "
+        "projector shadows, IR dropouts, misregistration) or the basic one, for comparison",
+    )
     s.set_defaults(func=run_synth)
     c = verbs.add_parser(
         "import-csv",
@@ -49,7 +56,13 @@ def run_synth(args: argparse.Namespace) -> int:
         existing = existing.parent
     check_folder(existing)
     bar = Progress()
-    out = synth_dataset(args.out, args.n, args.seed, lambda i, n: bar(i, n, "rendering "))
+    out = synth_dataset(
+        args.out,
+        args.n,
+        args.seed,
+        lambda i, n: bar(i, n, "rendering "),
+        structured_light=args.sensor == "structured-light",
+    )
     bar.done()
     return run_info(argparse.Namespace(dataset=out))
 

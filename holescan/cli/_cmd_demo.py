@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, TextIO
 from holescan.cli._args import EXIT_INTERRUPTED, positive_float
 
 if TYPE_CHECKING:
-    from holescan.sim import DemoProgress
+    from holescan.demo import DemoProgress
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -105,7 +105,7 @@ class _Display:
 def run(args: argparse.Namespace) -> int:
     import dataclasses
 
-    from holescan.sim import DEMO_SORTIE, DemoOptions, format_result, run_demo
+    from holescan.demo import DEMO_SORTIE, DemoOptions, format_result, run_demo
 
     sortie = DEMO_SORTIE
     changes: dict[str, object] = {}

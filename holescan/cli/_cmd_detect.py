@@ -1,4 +1,5 @@
-"""``holescan detect RGB.png DEPTH.png``: detect holes in one frame, print and draw them."""
+"""``holescan detect RGB.png DEPTH.png`` (one frame: print and draw its holes) or
+``holescan detect RECORDING`` (every frame of a TUM folder, ROS bag, ``.oni`` or flight log)."""
 
 from __future__ import annotations
 
@@ -7,9 +8,10 @@ import json
 from dataclasses import asdict, replace
 from pathlib import Path
 
-from holescan.capture import atomic_output, check_output, output_via_part
 from holescan.detect import DEFAULT, PAPER, SEARCHERS, CameraIntrinsics, DetectParams, detect_holes
+from holescan.errors import InputError
 from holescan.ground import draw_detections, read_camera, read_depth, read_rgb
+from holescan.outputs import atomic_output, check_output, output_via_part
 
 
 def add_detector_options(p: argparse.ArgumentParser) -> None:
@@ -35,10 +37,37 @@ def params_from_args(args: argparse.Namespace, superpixels: int | None = None) -
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    p = sub.add_parser("detect", help="detect access holes in one RGB + depth pair")
-    p.add_argument("rgb", type=Path, help="8-bit colour image")
-    p.add_argument("depth", type=Path, help="16-bit depth PNG, millimetres, 0 = no reading")
-    p.add_argument("--camera", type=Path, help="camera.json (default: Xtion intrinsics)")
+    p = sub.add_parser(
+        "detect",
+        help="detect access holes in one RGB + depth pair, or in every frame of a recording",
+        description="RGB DEPTH: one frame. RECORDING alone: every frame of a TUM RGB-D folder "
+        "(rgb.txt, depth.txt), a ROS 1 .bag or ROS 2 bag folder (sensor_msgs/Image colour and "
+        "registered depth, CameraInfo), an OpenNI .oni file or a holescan flight log .mcap, "
+        "recognised by its content (docs/real-recordings.md).",
+    )
+    p.add_argument("rgb", type=Path, help="8-bit colour image, or a RECORDING")
+    p.add_argument(
+        "depth",
+        type=Path,
+        nargs="?",
+        help="16-bit depth PNG, millimetres, 0 = no reading (none with a RECORDING)",
+    )
+    p.add_argument(
+        "--camera",
+        type=Path,
+        help="camera.json (default: the recording's own, else Xtion intrinsics)",
+    )
+    p.add_argument(
+        "--every", type=int, default=1, metavar="N", help="RECORDING: every N-th frame (1)"
+    )
+    p.add_argument("--max-frames", type=int, metavar="N", help="RECORDING: at most N frames")
+    p.add_argument(
+        "--max-dt",
+        type=float,
+        default=0.02,
+        metavar="S",
+        help="RECORDING: largest colour-depth time difference of a pair, s (0.02)",
+    )
     p.add_argument("--superpixels", type=int, default=9, help="K for paper mode")
     p.add_argument("--json", type=Path, help="write the detections as JSON")
     p.add_argument(
@@ -55,6 +84,8 @@ _OVERLAY_SUFFIXES = {".png", ".jpg", ".jpeg"}
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.depth is None:
+        return run_recording(args)
     inputs = [p for p in (args.rgb, args.depth, args.camera) if p is not None]
     if args.json:  # checked before detecting: a bad output costs nothing
         check_output(args.json, inputs=inputs, suffixes={".json"}, force=args.force)
@@ -79,4 +110,46 @@ def run(args: argparse.Namespace) -> int:
         ) as tmp:
             draw_detections(tmp, rgb, depth, camera, params, dets)
         print(f"overlay: {args.overlay}")
+    return 0
+
+
+def run_recording(args: argparse.Namespace) -> int:
+    """``holescan detect RECORDING``: the candidates of every frame; --json: per frame."""
+    from holescan.ground.recordings import detect_recording, open_recording
+
+    recording = args.rgb
+    inputs = [p for p in (recording, args.camera) if p is not None]
+    if args.overlay:
+        raise InputError("--overlay draws one frame: give RGB DEPTH, not a recording")
+    if args.json:
+        check_output(args.json, inputs=inputs, suffixes={".json"}, force=args.force)
+    camera = read_camera(args.camera) if args.camera else None
+    params = params_from_args(args, args.superpixels)
+    source = open_recording(recording, camera=camera, max_dt_s=args.max_dt)
+    frames: list[dict[str, object]] = []
+    n_frames = n_dets = 0
+    with source:
+        for fd in detect_recording(source, params, every=args.every, max_frames=args.max_frames):
+            n_frames += 1
+            n_dets += len(fd.detections)
+            note = " (no depth)" if fd.no_depth else ""
+            print(f"frame {fd.index}: {len(fd.detections)} candidate hole(s){note}")
+            for i, d in enumerate(fd.detections, 1):
+                print(f"  {i}: box {d.box} {d.explain()}")
+            frames.append(
+                {
+                    "frame_index": fd.index,
+                    "t_sensor_ns": fd.t_sensor_ns,
+                    "no_depth": fd.no_depth,
+                    "detections": [asdict(d) for d in fd.detections],
+                }
+            )
+    c = source.camera
+    print(
+        f"{recording}: {n_frames} frame(s), {n_dets} candidate(s) ({params.mode.value} mode, "
+        f"{params.searcher.name}; camera {c.width}x{c.height} fx {c.fx:.1f})"
+    )
+    if args.json:
+        with atomic_output(args.json, inputs=inputs, force=args.force) as f:
+            f.write(json.dumps(frames, indent=1).encode())
     return 0

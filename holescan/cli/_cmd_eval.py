@@ -7,7 +7,6 @@ import os
 from dataclasses import replace
 from pathlib import Path
 
-from holescan.capture import check_output, output_via_part
 from holescan.cli._args import Progress
 from holescan.cli._cmd_detect import add_detector_options, params_from_args
 from holescan.errors import InputError
@@ -22,6 +21,7 @@ from holescan.ground import (
     run_detector,
     write_coco_results,
 )
+from holescan.outputs import check_output, output_via_part
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:

@@ -11,10 +11,9 @@ import argparse
 import logging
 import signal
 import threading
-from pathlib import Path
 from types import FrameType
 
-from holescan.cli._args import positive_float
+from holescan.cli._flightargs import add_flight_arguments, fly_config
 
 log = logging.getLogger("holescan.fly")
 
@@ -27,44 +26,34 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "-> holes served to the ground station. Command-line options override the config file "
         "(deploy/fly.example.toml documents it). Stop with SIGINT or SIGTERM.",
     )
+    add_flight_arguments(p)
     p.add_argument(
-        "--sensor",
-        help="openni2 (the Xtion), oni:PATH, mcap:PATH (replays a flight log), or sim "
-        "(the simulated Xtion: with its own simulated autopilot, or with --mavlink rendering "
-        "from the pose that autopilot reports, the world placed at its home); default openni2",
+        "--check",
+        action="store_true",
+        help="run the pre-flight check (as `holescan check`) and exit: 0 GO, 1 NO-GO",
     )
     p.add_argument(
-        "--mavlink",
-        help="autopilot link: /dev/ttyAMA0, udpin:0.0.0.0:14550, tcp:HOST:PORT ... "
-        "(with --sensor sim: the autopilot the simulated Xtion flies with, e.g. ArduPilot "
-        "SITL's tcp:127.0.0.1:5762; without it a simulated autopilot is started)",
+        "--json", action="store_true", help="with --check: the checklist as JSON on stdout"
     )
-    p.add_argument("--log-dir", type=Path, help="folder for the flight logs")
-    p.add_argument("--config", type=Path, help="TOML configuration file")
     p.add_argument(
-        "--gcs",
-        help="serve found holes as a mission (component 191) and announce them by STATUSTEXT "
-        "on this link, e.g. udpout:192.168.1.10:14550",
+        "--bench",
+        action="store_true",
+        help="a bench test: fly even without a streaming sensor or an answering autopilot "
+        "(else that is a NO-GO and fly exits 2 before flying)",
     )
-    p.add_argument("--duration", type=positive_float, help="stop after this many seconds")
-    p.add_argument("--max-frames", type=int, help="stop after this many frames")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from holescan.capture import fly, format_report, load_fly_config
+    from holescan.capture import fly, format_report, open_sensor, require_go
 
-    cfg = load_fly_config(
-        args.config,
-        {
-            "sensor": args.sensor,
-            "mavlink": args.mavlink,
-            "log_dir": args.log_dir,
-            "gcs": args.gcs,
-            "duration_s": args.duration,
-            "max_frames": args.max_frames,
-        },
-    )
+    if args.check:
+        from holescan.cli._cmd_check import run as check
+
+        return check(args)
+    cfg = fly_config(args)
+    if args.bench:
+        log.warning("bench test: flying without requiring a sensor or an autopilot")
     stop = threading.Event()
 
     def on_signal(signum: int, _frame: FrameType | None) -> None:
@@ -79,9 +68,12 @@ def run(args: argparse.Namespace) -> int:
         if cfg.sensor.kind == "sim":  # the simulator is loaded only when asked for
             from holescan.sim import fly_sim, format_sim_report
 
-            print(format_sim_report(fly_sim(cfg, stop=stop), gate))
+            print(format_sim_report(fly_sim(cfg, stop=stop, bench=args.bench), gate))
         else:
-            print(format_report(fly(cfg, stop=stop), gate))
+            setup = open_sensor(cfg)
+            if not args.bench:
+                require_go(cfg, setup)
+            print(format_report(fly(cfg, setup, stop=stop), gate))
     finally:
         for s, handler in previous.items():
             signal.signal(s, handler)

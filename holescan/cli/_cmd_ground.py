@@ -129,7 +129,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 def run(args: argparse.Namespace) -> int:
     from holescan.errors import InputError
     from holescan.ground import GroundOptions, TakTls, run_ground
-    from holescan.missions import SigningKey
+    from holescan.link import SigningKey
 
     host, port = "127.0.0.1", None
     if args.http != "off":

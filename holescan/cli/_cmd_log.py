@@ -19,7 +19,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
 
 def run_info(args: argparse.Namespace) -> int:
-    from holescan.capture import log_info
+    from holescan.flightlog import log_info
 
     for line in log_info(args.files).lines():
         print(line)
@@ -27,7 +27,7 @@ def run_info(args: argparse.Namespace) -> int:
 
 
 def run_recover(args: argparse.Namespace) -> int:
-    from holescan.capture import recover_log
+    from holescan.flightlog import recover_log
 
     out = args.out or args.file.with_name(f"{args.file.stem}-recovered.mcap")
     print(recover_log(args.file, out).line())

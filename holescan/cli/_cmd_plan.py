@@ -8,7 +8,6 @@ import logging
 import time
 from pathlib import Path
 
-from holescan.capture import check_output, output_via_part
 from holescan.errors import InputError
 from holescan.missions import (
     SunWindowError,
@@ -20,6 +19,7 @@ from holescan.missions import (
     upload_mission,
     write_waypoints,
 )
+from holescan.outputs import check_output, output_via_part
 
 log = logging.getLogger("holescan.plan")
 

@@ -11,8 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from holescan.capture import Flight, FlightConfig, Frame, read_flight_log
-from holescan.detect import CameraIntrinsics
+from holescan.capture import Flight, FlightConfig
+from holescan.detect import CameraIntrinsics, Frame
+from holescan.flightlog import read_flight_log
 from holescan.sim import SimAutopilot, SimPath
 
 CAM = CameraIntrinsics.xtion()

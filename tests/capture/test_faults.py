@@ -1,7 +1,7 @@
 """Fault injection in a flight: the MAVLink link gone for 10 s then the autopilot back
 rebooted (boot clock from 0, stream settings forgotten), the sensor stopping and coming
 back, the disk filling up while logging, and SIGKILL of the daemon. Each prints the figures
-the README quotes (run with ``-s``)."""
+docs/measurements.md quotes (run with ``-s``)."""
 
 from __future__ import annotations
 
@@ -17,17 +17,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from holescan.capture import (
-    Flight,
-    FlightConfig,
-    Frame,
-    LoggedFrame,
-    Telemetry,
-    log_info,
-    read_flight_log,
-    recover_log,
-)
-from holescan.detect import CameraIntrinsics
+from holescan.capture import Flight, FlightConfig, Telemetry
+from holescan.detect import CameraIntrinsics, Frame
+from holescan.flightlog import LoggedFrame, log_info, read_flight_log, recover_log
 from holescan.sim import SimAutopilot, SimPath
 from tests.capture.test_shutdown import group_members, start_sim_flight
 

@@ -23,23 +23,18 @@ from holescan.capture import (
     Flight,
     FlightConfig,
     FlyConfig,
-    Frame,
-    LoggedFrame,
-    LoggedHealth,
-    LoggedHoles,
     SensorSpec,
     load_fly_config,
-    log_info,
     parse_fly_config,
-    read_flight_log,
     write_oni,
 )
-from holescan.detect import CameraIntrinsics
+from holescan.detect import CameraIntrinsics, Frame
 from holescan.errors import InputError
+from holescan.flightlog import LoggedFrame, LoggedHealth, LoggedHoles, log_info, read_flight_log
 from holescan.sim import SimAutopilot, SimPath, sortie_params
 
 os.environ.setdefault("MAVLINK20", "1")
-from holescan.missions import mavutil
+from holescan.link import mavutil
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "deploy" / "fly.example.toml"
@@ -313,7 +308,14 @@ def test_fly_replays_oni_then_its_own_log_and_stops_cleanly_on_sigterm(tmp_path:
     frames = floor_frames(n, cam)
     write_oni(tmp_path / "in.oni", frames, cam)
     code, out, err = finish(
-        holescan("fly", "--sensor", f"oni:{tmp_path / 'in.oni'}", "--log-dir", str(tmp_path / "a"))
+        holescan(
+            "fly",
+            "--bench",
+            "--sensor",
+            f"oni:{tmp_path / 'in.oni'}",
+            "--log-dir",
+            str(tmp_path / "a"),
+        )
     )
     assert code == 0, err[-3000:]
     assert f"frames: captured {n}, logged {n}, dropped from the log 0, unposed {n}" in out
@@ -327,7 +329,9 @@ def test_fly_replays_oni_then_its_own_log_and_stops_cleanly_on_sigterm(tmp_path:
     for a, b in zip(got, frames, strict=True):
         assert np.array_equal(a.rgb, b.rgb) and np.array_equal(a.depth, b.depth)
 
-    proc = holescan("fly", "--sensor", f"mcap:{first[0]}", "--log-dir", str(tmp_path / "b"))
+    proc = holescan(
+        "fly", "--bench", "--sensor", f"mcap:{first[0]}", "--log-dir", str(tmp_path / "b")
+    )
     deadline = time.monotonic() + 60.0
     while time.monotonic() < deadline and proc.poll() is None:
         logs = list((tmp_path / "b").glob("*.mcap"))

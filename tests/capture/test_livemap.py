@@ -8,8 +8,8 @@ import time
 import numpy as np
 import pytest
 
-from holescan.capture import Frame, LiveMap, LiveMapConfig, parse_fly_config
-from holescan.detect import CameraIntrinsics
+from holescan.capture import LiveMap, LiveMapConfig, parse_fly_config
+from holescan.detect import CameraIntrinsics, Frame
 from holescan.errors import InputError
 from holescan.geotag import CameraMount, VehiclePose
 from holescan.missions import (

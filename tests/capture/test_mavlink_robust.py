@@ -13,8 +13,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from holescan.capture import MavlinkStream, Telemetry, TelemetryError
-from holescan.missions import mavlink, parser
+from holescan.capture import Telemetry
+from holescan.link import MavlinkStream, TelemetryError, mavlink, parser
 from holescan.sim import SimAutopilot, SimPath
 
 REPO = Path(__file__).resolve().parents[2]
@@ -157,8 +157,7 @@ def test_signed_link_ignores_a_forged_unsigned_autopilot(tmp_path: Path) -> None
     import socket
     import threading
 
-    from holescan.capture import read_signing_key
-    from holescan.missions import open_link
+    from holescan.link import open_link, read_signing_key
 
     key = bytes(range(32))
     (tmp_path / "key").write_text(key.hex() + "\n")

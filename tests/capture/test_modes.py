@@ -1,6 +1,6 @@
 """Issue 20: mode changes during a survey (AUTO -> RTL, LAND, LOITER, GUIDED, back to AUTO)
 and disarming / arming break nothing: capture, poses, detection and announcements go on
-in every mode (decided: nothing depends on the mode or on arming, see the README), and
+in every mode (decided: nothing depends on the mode or on arming, see docs/sitl.md), and
 the health records say which mode and arming state the autopilot reported."""
 
 from __future__ import annotations
@@ -9,14 +9,8 @@ import threading
 import time
 from pathlib import Path
 
-from holescan.capture import (
-    Flight,
-    FlightConfig,
-    LoggedFrame,
-    LoggedHealth,
-    Telemetry,
-    read_flight_log,
-)
+from holescan.capture import Flight, FlightConfig, Telemetry
+from holescan.flightlog import LoggedFrame, LoggedHealth, read_flight_log
 from holescan.sim import SimAutopilot
 from tests.capture.test_daemon import CAM, ScriptedSource, free_port, hover_path
 

@@ -11,9 +11,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from holescan.capture import Flight, FlightConfig, FlyReport, Frame, format_report, read_flight_log
-from holescan.detect import detect_holes
+from holescan.capture import Flight, FlightConfig, FlyReport, format_report
+from holescan.detect import Frame, detect_holes
 from holescan.errors import InputError, NoDepthError
+from holescan.flightlog import read_flight_log
 from holescan.ground import ReprocessOptions, reprocess
 from holescan.sim import SimAutopilot
 from tests.capture.test_daemon import CAM, ScriptedSource, free_port, hover_path

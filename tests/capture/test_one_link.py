@@ -11,7 +11,8 @@ from pathlib import Path
 import pytest
 
 from holescan.capture import FlyConfig, FlyReport, SensorSetup, fly, parse_fly_config
-from holescan.missions import SigningKey, radio_budget
+from holescan.link import SigningKey
+from holescan.missions import radio_budget
 from holescan.sim import SimAutopilot
 from tests.capture.test_daemon import CAM, ScriptedSource, free_port, hover_path
 
@@ -80,7 +81,8 @@ def test_companion_heartbeat_is_not_a_second_vehicle() -> None:
     from typing import Any
 
     from holescan.capture import Telemetry
-    from holescan.missions import HoleMissionServer, mavutil
+    from holescan.link import mavutil
+    from holescan.missions import HoleMissionServer
 
     port = free_port()
     ap = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=1)
@@ -121,7 +123,7 @@ def test_no_heartbeat_of_an_unknown_system_before_the_autopilot_is_heard() -> No
     from typing import Any
 
     from holescan.capture import Telemetry
-    from holescan.missions import mavutil
+    from holescan.link import mavutil
 
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

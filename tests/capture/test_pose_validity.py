@@ -15,8 +15,9 @@ import time
 from collections.abc import Mapping
 from pathlib import Path
 
-from holescan.capture import Flight, FlightConfig, HoleView, LoggedFrame, read_flight_log
-from holescan.geotag import Hole, local_en_m
+from holescan.capture import Flight, FlightConfig
+from holescan.flightlog import LoggedFrame, read_flight_log
+from holescan.geotag import Hole, HoleView, local_en_m
 from holescan.sim import SimAutopilot, SimPath
 from tests.capture.test_daemon import CAM, ScriptedSource, free_port
 

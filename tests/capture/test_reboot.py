@@ -11,7 +11,8 @@ import threading
 import time
 from pathlib import Path
 
-from holescan.capture import FlightConfig, LoggedFrame, read_flight_log
+from holescan.capture import FlightConfig
+from holescan.flightlog import LoggedFrame, read_flight_log
 from holescan.geotag import local_en_m
 from holescan.sim import SimAutopilot, SimPath
 from tests.capture.test_faults import floor_flight, free_port

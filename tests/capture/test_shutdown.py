@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from holescan.capture import LoggedHealth, log_info, read_flight_log
+from holescan.flightlog import LoggedHealth, log_info, read_flight_log
 from tests.capture.test_fly import SIM_TOML, holescan
 
 pytestmark = pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc")

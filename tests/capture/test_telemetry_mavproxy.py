@@ -22,12 +22,13 @@ from typing import Any
 import pymap3d
 import pytest
 
-from holescan.capture import ClockSync, PoseUnavailable, Telemetry, TelemetryTimeoutError
+from holescan.capture import ClockSync, Telemetry
 from holescan.geotag import VehiclePose
+from holescan.link import PoseUnavailable, TelemetryTimeoutError
 from holescan.sim import SimAutopilot, SimPath
 
 os.environ.setdefault("MAVLINK20", "1")
-from holescan.missions import mavlink as mavlink2
+from holescan.link import mavlink as mavlink2
 
 log = logging.getLogger(__name__)
 

@@ -6,8 +6,8 @@ import time
 
 import numpy as np
 
-from holescan.capture import DetectionWorker, Frame
-from holescan.detect import DEFAULT, CameraIntrinsics, detect_holes
+from holescan.capture import DetectionWorker
+from holescan.detect import DEFAULT, CameraIntrinsics, Frame, detect_holes
 
 CAM = CameraIntrinsics.xtion()
 

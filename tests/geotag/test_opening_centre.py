@@ -4,7 +4,7 @@ Two sources of truth: ``benchmarks/hard_scenes`` (written without reading holesc
 annotation carries the opening's area centroid on its rim plane in the camera frame) and
 the simulator's world (its access holes' centroids), seen 30 deg off the vertical, where
 the box centre at rim depth lands decimetres toward the camera. The figures over many
-more views are ``benchmarks/bench_geotag.py``'s (README, "Where a hole is").
+more views are ``benchmarks/bench_geotag.py``'s (docs/geotagging.md).
 """
 
 from __future__ import annotations

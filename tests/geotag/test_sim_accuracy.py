@@ -29,7 +29,8 @@ import numpy as np
 import pymap3d
 import pytest
 
-from holescan.capture import Flight, FlightConfig, LoggedDetections, read_flight_log
+from holescan.capture import Flight, FlightConfig
+from holescan.flightlog import LoggedDetections, read_flight_log
 from holescan.geotag import HoleSighting, geotag_frame
 from holescan.sim import SimSortie, SortieParams, TrueHole
 
@@ -68,6 +69,7 @@ def test_pipeline_geotag_error_and_every_hole_once(
     tmp_path: Path, caplog: pytest.LogCaptureFixture
 ) -> None:
     caplog.set_level(logging.ERROR, logger="holescan.capture")  # restored after the test
+    caplog.set_level(logging.ERROR, logger="holescan.link")
     with SimSortie(PARAMS) as sortie:
         cfg = FlightConfig(
             log_prefix=tmp_path / "flight",

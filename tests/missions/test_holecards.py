@@ -10,16 +10,16 @@ import pytest
 
 from holescan.errors import InputError
 from holescan.geotag import Hole
+from holescan.link import mavlink as mav_dialect
+from holescan.link import parser
 from holescan.missions import (
     CARD_PAYLOAD,
     CardAssembler,
     CardSender,
     card_facts,
     make_card,
-    parser,
     read_card,
 )
-from holescan.missions import mavlink as mav_dialect
 
 
 def jpeg(seed: int = 0, size: tuple[int, int] = (72, 96)) -> bytes:

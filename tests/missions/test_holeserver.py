@@ -25,7 +25,7 @@ from holescan.missions._holeserver import (
 )
 
 os.environ.setdefault("MAVLINK20", "1")
-from holescan.missions import mavutil
+from holescan.link import mavutil
 
 SYSID = 1
 

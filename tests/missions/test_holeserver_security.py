@@ -16,7 +16,8 @@ from typing import Any
 import pytest
 
 from holescan.geotag import Hole
-from holescan.missions import HoleMissionServer, open_link
+from holescan.link import open_link
+from holescan.missions import HoleMissionServer
 
 SYSID = 1
 _REST = (10**9, 2 * 10**9, 7, (1, 2, 3, 4), 0.7, 0.4)

@@ -12,6 +12,7 @@ import pytest
 from test_holecards import HOLE, Wire, jpeg
 
 from holescan.errors import InputError
+from holescan.link import parser
 from holescan.missions import (
     TYPE_COVERAGE,
     TYPE_ORTHO,
@@ -25,7 +26,6 @@ from holescan.missions import (
     encode_ortho_tile,
     is_map_tile,
     make_card,
-    parser,
     read_card,
     read_tile,
     tile_facts_of,

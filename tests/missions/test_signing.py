@@ -13,7 +13,8 @@ import pytest
 from holescan.capture import parse_fly_config
 from holescan.errors import InputError
 from holescan.geotag import Hole
-from holescan.missions import HoleMissionServer, SigningKey, open_link
+from holescan.link import SigningKey, open_link
+from holescan.missions import HoleMissionServer
 
 SYSID = 1
 KEY = SigningKey.from_passphrase("rubble-sortie-7")

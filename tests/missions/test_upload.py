@@ -17,6 +17,7 @@ from typing import Any
 import pytest
 
 from holescan import cli
+from holescan.link import mavlink
 from holescan.missions import (
     MAV_FRAME_GLOBAL,
     Area,
@@ -26,7 +27,6 @@ from holescan.missions import (
     MissionTimeoutError,
     Waypoint,
     download_mission,
-    mavlink,
     plan_survey,
     read_wpl,
     upload_mission,
@@ -133,7 +133,7 @@ def test_rejected_missions_raise_with_the_reason() -> None:
         MissionServer(f"udpin:127.0.0.1:{port}", MissionReceiver(capacity=5)),
         pytest.raises(MissionRejectedError, match="MAV_MISSION_NO_SPACE") as err,
     ):
-        upload_mission(f"udpout:127.0.0.1:{port}", _items(), HOME)
+        upload_mission(f"udpout:127.0.0.1:{port}", _items(), HOME, no_space_wait_s=0)
     assert err.value.result == 4
 
     def altitude_fence(items: Sequence[Waypoint]) -> int:

@@ -13,7 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from holescan.capture import LoggedFrame, parse_fly_config, read_flight_log
+from holescan.capture import parse_fly_config
+from holescan.flightlog import LoggedFrame, read_flight_log
 from holescan.geotag import local_en_m
 from holescan.sim import SimAutopilot, anchor_at_home, fly_sim, sortie_params
 from holescan.sim._sortie import make_sortie_world, survey_path

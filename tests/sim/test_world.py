@@ -157,9 +157,10 @@ def test_exact_depth_of_a_flat_field_is_the_plane() -> None:
 
 
 def test_depth_noise_matches_the_xtion_model() -> None:
+    # The basic depth model (the structured-light one has its own tests).
     flat = _flat_world()
     pose = CameraPose.looking_down(3.0, 3.0, 3.0)
-    cond = Conditions(dropout_fraction=0.0)
+    cond = Conditions(dropout_fraction=0.0, structured_light=False)
     _, depth, _ = render(flat, pose, CAM, np.random.default_rng(5), cond)
     valid = depth[depth > 0].astype(float)
     assert valid.size > 0.99 * depth.size  # flat ground at 3 m: no shadows, all in range
@@ -182,7 +183,7 @@ def test_projector_shadow_falls_left_of_a_raised_block() -> None:
     block = _flat_world(step=True)
     pose = CameraPose.looking_down(3.0, 3.0, 3.0)  # north up, east (+x) to the right
     exact, _ = render_exact(block, pose, CAM)
-    cond = Conditions(dropout_fraction=0.0)
+    cond = Conditions(dropout_fraction=0.0, structured_light=False)  # the basic model
     _, depth, _ = render(block, pose, CAM, np.random.default_rng(0), cond)
     rows = slice(200, 280)
     cols = np.flatnonzero(np.any(exact[rows] < 2.75, axis=0))  # the block's top

@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from holescan.capture import Frame, OniWriter, scan_oni, write_oni
-from holescan.detect import CameraIntrinsics
+from holescan.capture import OniWriter, scan_oni, write_oni
+from holescan.detect import CameraIntrinsics, Frame
 from holescan.errors import InputError
 
 CAM = CameraIntrinsics(64, 48, 57.3, 58.1, 31.0, 24.5)
@@ -260,7 +260,8 @@ def test_killed_writer_leaves_only_a_partial_file(tmp_path: Path) -> None:
     child = textwrap.dedent(
         f"""
         import os, numpy as np
-        from holescan.capture import Frame, OniWriter
+        from holescan.capture import OniWriter
+        from holescan.detect import Frame
         from holescan.detect import CameraIntrinsics
         cam = CameraIntrinsics(64, 48, 57.3, 58.1, 31.0, 24.5)
         w = OniWriter({str(path)!r}, cam)
@@ -298,7 +299,7 @@ def read_data_records(path: Path) -> dict[int, list[tuple[int, int, bytes]]]:
 
 
 def write_flight_log(prefix: Path, frames: list[Frame]) -> Path:
-    from holescan.capture import FlightLogWriter
+    from holescan.flightlog import FlightLogWriter
 
     with FlightLogWriter(prefix, CAM) as log:
         for f in frames:

@@ -17,9 +17,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from holescan.capture import Frame, OniSource, write_oni
+from holescan.capture import OniSource, write_oni
 from holescan.capture.openni import FramePairer, RawFrame
-from holescan.detect import CameraIntrinsics
+from holescan.detect import CameraIntrinsics, Frame
 from holescan.errors import InputError
 
 REPO = Path(__file__).resolve().parents[3]

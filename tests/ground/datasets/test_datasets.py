@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from holescan.capture import part_path
 from holescan.detect import CameraIntrinsics
 from holescan.errors import InputError
 from holescan.ground.datasets import Sample, load_dataset, load_image_pair, write_dataset
+from holescan.outputs import part_path
 from holescan.sim import synth_dataset
 
 CAM = CameraIntrinsics.xtion()

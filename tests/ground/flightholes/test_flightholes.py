@@ -23,11 +23,11 @@ import numpy.typing as npt
 import pytest
 
 from holescan import cli
-from holescan.capture import FlightLogWriter, Frame, LogOptions
-from holescan.detect import CameraIntrinsics, Detection, FeatureScores
+from holescan.detect import CameraIntrinsics, Detection, FeatureScores, Frame
+from holescan.flightlog import FlightLogWriter, LogOptions
 from holescan.geotag import Hole, VehiclePose
 from holescan.ground import flight_log_files, read_flight_holes
-from holescan.missions import mavlink as mavlink2
+from holescan.link import mavlink as mavlink2
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavwp

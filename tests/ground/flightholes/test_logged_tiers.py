@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from holescan.capture import FlightLogWriter, LoggedHoles, read_flight_log
 from holescan.detect import CameraIntrinsics
+from holescan.flightlog import FlightLogWriter, LoggedHoles, read_flight_log
 from holescan.geotag import AnnounceGate, Hole
 from holescan.ground import export_flight_holes, read_flight_holes
 

@@ -17,10 +17,10 @@ import numpy.typing as npt
 import pymap3d
 import pytest
 
-from holescan.capture import part_path
 from holescan.errors import InputError
 from holescan.geotag import Hole, VehiclePose
 from holescan.ground.report import SCORE_BANDS, render_report, score_band, thumbnails, write_report
+from holescan.outputs import part_path
 
 LAT0, LON0 = 47.3769, 8.5417
 CHROMIUM = Path("/usr/bin/chromium")

@@ -13,8 +13,9 @@ from pathlib import Path
 
 import pytest
 
-from holescan.capture import Flight, FlightConfig, FlightSummary, LogOptions
+from holescan.capture import Flight, FlightConfig, FlightSummary
 from holescan.detect import CameraIntrinsics
+from holescan.flightlog import LogOptions
 from holescan.geotag import AnnounceGate
 from holescan.sim import RubbleWorld, SimAutopilot, SimPath, SimSource, WorldAnchor, make_world
 

@@ -25,9 +25,10 @@ from mcap.reader import make_reader
 from rasterio.warp import transform as warp_transform
 
 from holescan import cli
-from holescan.capture import FlightSummary, LoggedFrame, log_info, read_flight_log
+from holescan.capture import FlightSummary
 from holescan.detect import DetectParams
 from holescan.errors import InputError
+from holescan.flightlog import LoggedFrame, log_info, read_flight_log
 from holescan.geotag import AnnounceGate, Hole
 from holescan.ground import (
     Progress,
@@ -226,8 +227,9 @@ def test_two_worker_processes_give_what_one_process_gives(
 def test_a_worker_killed_mid_run_loses_nothing(
     flight: Flown, reference: ReprocessResult, tmp_path: Path
 ) -> None:
-    """A cluster started as the README says (``dask scheduler``, ``dask worker``), used with
-    ``--scheduler``; one worker process is SIGKILLed mid-run (its nanny starts another)."""
+    """A cluster started as docs/reprocessing.md says (``dask scheduler``, ``dask worker``),
+    used with ``--scheduler``; one worker process is SIGKILLed mid-run (its nanny starts
+    another)."""
     import psutil
 
     files, _ = flight
@@ -376,7 +378,7 @@ def test_log_cut_right_after_its_header_is_an_empty_result(flight: Flown, tmp_pa
 
 def test_a_damaged_chunk_is_reported_and_the_rest_read(flight: Flown, tmp_path: Path) -> None:
     files, _summary = flight
-    from holescan.capture import read_log_layout
+    from holescan.flightlog import read_log_layout
 
     src = max(files, key=lambda p: p.stat().st_size)
     layout = read_log_layout(src)

@@ -32,7 +32,8 @@ import pytest
 from holescan import cli
 from holescan.geotag import Hole
 from holescan.ground import GroundOptions, GroundStation, StationState, state_document
-from holescan.missions import HoleMissionServer, mavlink
+from holescan.link import mavlink
+from holescan.missions import HoleMissionServer
 
 NODE_COT = Path(__file__).parents[1] / "cot"  # tests/ground/cot: the node parser
 HOME = (43.6532, -79.3832)

@@ -36,7 +36,7 @@ import pytest
 from devtools import Tab
 from test_station import PytakReceiver, Relay, free_port, parse_tak, wait_for
 
-from holescan.missions import mavlink
+from holescan.link import mavlink
 
 CHROMIUM = Path("/usr/bin/chromium")
 ROOT = Path(__file__).resolve().parents[3]

@@ -31,7 +31,8 @@ from typing import Any
 import pytest
 from test_station import free_port, hole, picture, wait_for
 
-from holescan.missions import HoleMissionServer, SigningKey, open_link
+from holescan.link import SigningKey, open_link
+from holescan.missions import HoleMissionServer
 
 ROOT = Path(__file__).resolve().parents[3]
 PASSPHRASE = "rubble-sortie-7"

@@ -1,0 +1,108 @@
+"""The MAVLink link: the one door to pymavlink, and what the autopilot says as SI records.
+
+Below the flight (:mod:`holescan.capture`), the missions and the ground station, which all
+speak MAVLink through it:
+
+* :func:`open_link`, :func:`parser`, ``mavlink`` (the dialect module: messages and every
+  enum), ``mavutil``: MAVLink 2 set up in one place (:mod:`~link._connection`);
+  :class:`SigningKey` its message signing;
+* :class:`MavlinkStream`: bytes -> packets, so that garbage costs only itself;
+* the adapters (``time_boot_ms``, degE7, mm, cm/s -> ns, deg, m, m/s, converted once):
+  :func:`telemetry_sample` and its per-message functions, for the live link and log replay
+  alike; the records they make (:class:`PositionSample`, :class:`AttitudeSample`,
+  :class:`GpsFix`, :class:`NavStatus`);
+* :class:`PoseBuffer` (with :class:`PoseValidity`): the vehicle's pose at any instant from
+  those samples; :class:`TelemetryReplay` fills one from logged packets;
+* :class:`RateRequests`: asking the autopilot for messages (commands with acknowledgement,
+  message intervals), :func:`read_signing_key`.
+
+Errors in :mod:`link.errors`.
+"""
+
+from holescan.link._adapt import (
+    TelemetrySample,
+    attitude_from_attitude,
+    attitude_from_quaternion,
+    gps_from_gps_raw_int,
+    home_from_home_position,
+    is_autopilot_heartbeat,
+    nav_from_ekf_status,
+    position_from_global_position_int,
+    telemetry_sample,
+)
+from holescan.link._connection import (
+    MavConnection,
+    mavlink,
+    mavutil,
+    open_link,
+    parser,
+)
+from holescan.link._posebuffer import (
+    AttitudeSample,
+    PoseBuffer,
+    quat_from_euler,
+)
+from holescan.link._posevalidity import (
+    GpsFix,
+    NavStatus,
+    PoseValidity,
+    PositionSample,
+    is_null_island,
+)
+from holescan.link._rates import (
+    RateMethod,
+    RateRequests,
+    read_signing_key,
+)
+from holescan.link._replay import (
+    TelemetryReplay,
+)
+from holescan.link._signing import (
+    SigningKey,
+)
+from holescan.link._stream import (
+    MavlinkStream,
+)
+from holescan.link.errors import (
+    LinkError,
+    PoseInvalid,
+    PoseUnavailable,
+    TelemetryError,
+    TelemetryTimeoutError,
+)
+
+__all__ = [
+    "AttitudeSample",
+    "GpsFix",
+    "LinkError",
+    "MavConnection",
+    "MavlinkStream",
+    "NavStatus",
+    "PoseBuffer",
+    "PoseInvalid",
+    "PoseUnavailable",
+    "PoseValidity",
+    "PositionSample",
+    "RateMethod",
+    "RateRequests",
+    "SigningKey",
+    "TelemetryError",
+    "TelemetryReplay",
+    "TelemetrySample",
+    "TelemetryTimeoutError",
+    "attitude_from_attitude",
+    "attitude_from_quaternion",
+    "gps_from_gps_raw_int",
+    "home_from_home_position",
+    "is_autopilot_heartbeat",
+    "is_null_island",
+    "mavlink",
+    "mavutil",
+    "nav_from_ekf_status",
+    "open_link",
+    "parser",
+    "position_from_global_position_int",
+    "quat_from_euler",
+    "read_signing_key",
+    "telemetry_sample",
+]

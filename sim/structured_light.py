@@ -1,0 +1,456 @@
+"""What a structured-light depth camera (Asus Xtion / Kinect v1) makes of an ideal frame.
+
+One seeded, pure function, :func:`structured_light_frame`: ideal axial depth, the colour
+image, the surfaces' infrared properties, the camera and its motion in; the registered
+depth image and the colour image the sensor delivers out, with the frame's random draws
+(:class:`FrameDraws`) so that tests and the validation script can check each effect. Every
+effect and its size comes from real PrimeSense frames (``docs/sensor-model.md`` compares
+the statistics of this model's frames with the real ones):
+
+* **disparity quantised** in 1/8 px (``f b`` with baseline 7.5 cm): depth steps of
+  ~11.5 / 18 / 26 mm at 2 / 2.5 / 3 m; axial noise so that noise and rounding together are
+  0.8-1.0 x 1.425e-3 Z^2 (m);
+* the **projector's shadow** on the LEFT of a nearer surface (the projector is at +x of the
+  infrared camera): raw width ~1.2 f b (1/Z_near - 1/Z_far) px, narrower after the depth is
+  registered to the colour camera (``registration_baseline_m`` closer);
+* the correlation window **fattens** the nearer surface by 1-2 px, and **flying pixels**
+  (values between the two plateaus) sit at 1-18 % of the edge crossings;
+* **IR dropouts**: surfaces that absorb the pattern (soot, char, wet or black material;
+  ``Surface.ir_unread``) lose that fraction of their pixels in ragged blobs; grazing
+  surfaces (incidence cosine below ~0.1-0.25) lose theirs;
+* **RGB-to-depth misregistration** (a 1-4 px shift and ~1 % scale) plus the depth/colour
+  **time offset** (up to ~16 ms) times the image motion;
+* **unread registration bands** at the frame border (right 24-43 px, top 8-14, bottom
+  6-12, left 0-11 at 640 px wide);
+* colour **motion blur** over the exposure (shot noise at dawn exposures is the colour
+  pipelines' own: :func:`sim._sensor.colour_image` and the scene generators' cameras).
+
+Examples
+--------
+>>> z = np.full((48, 64), 2.0, np.float32)
+>>> z[:, 32:] = 1.0  # a nearer surface on the right half
+>>> cam = SensorCamera(fx=72.5, cx=31.5, cy=23.5)
+>>> out = structured_light_frame(z, None, cam, seed=3, params=StructuredLight(bands=False))
+>>> bool((out.depth_mm[24, 24:32] == 0).any())  # the shadow: left of the near edge
+True
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+__all__ = [
+    "FrameDraws",
+    "Motion",
+    "SensorCamera",
+    "SensorFrame",
+    "StructuredLight",
+    "Surface",
+    "incidence_cosine",
+    "predicted_shadow_px",
+    "random_motion",
+    "structured_light_frame",
+]
+
+F32 = npt.NDArray[np.float32]
+F64 = npt.NDArray[np.float64]
+U8 = npt.NDArray[np.uint8]
+U16 = npt.NDArray[np.uint16]
+Range = tuple[float, float]
+
+#: sigma_Z = coeff * Z^2 (Z in metres): Khoshelham & Elberink 2012 (1.425e-6 per mm).
+NOISE_COEFF_PER_M = 1.425e-3
+
+
+@dataclass(frozen=True)
+class StructuredLight:
+    """The sensor's parameters; each ``(lo, hi)`` range is drawn uniformly per frame.
+
+    Widths in pixels are for a 640 px wide frame and scale with the width.
+    """
+
+    baseline_m: float = 0.075
+    disparity_step_px: float = 0.125
+    #: The correlation widens the shadow to this many times the geometric one (raw depth).
+    shadow_widening: float = 1.2
+    #: Registration onto the colour camera narrows the shadow by f x this x (1/Zn - 1/Zf).
+    registration_baseline_m: float = 0.025
+    #: Noise and rounding together, as a fraction of 1.425e-3 Z^2.
+    noise_fraction: Range = (0.8, 1.0)
+    fattening_px: tuple[int, int] = (1, 2)
+    flying_fraction: Range = (0.01, 0.18)
+    bands: bool = True
+    band_right_px: tuple[int, int] = (24, 43)
+    band_top_px: tuple[int, int] = (8, 14)
+    band_bottom_px: tuple[int, int] = (6, 12)
+    band_left_px: tuple[int, int] = (0, 11)
+    misregistration_px: Range = (1.0, 4.0)
+    misregistration_scale: float = 0.01
+    max_time_offset_s: float = 0.016
+    #: Incidence cosine below which a surface returns nothing (drawn per frame).
+    grazing_cos: Range = (0.1, 0.25)
+    #: Correlation length of absorbing-surface dropouts, pixels.
+    dropout_blob_px: float = 3.0
+    min_range_m: float = 0.5
+    max_range_m: float = 4.0
+    #: Readings thin out from here to ``max_range_m`` (the pattern fades).
+    fade_range_m: float = 3.5
+
+    def __post_init__(self) -> None:
+        if self.baseline_m <= 0 or self.disparity_step_px <= 0:
+            raise ValueError("baseline_m and disparity_step_px must be positive")
+        if not 0 <= self.min_range_m < self.max_range_m:
+            raise ValueError("need 0 <= min_range_m < max_range_m")
+
+
+@dataclass(frozen=True)
+class SensorCamera:
+    """Pinhole intrinsics of the registered frame (pixels)."""
+
+    fx: float
+    cx: float
+    cy: float
+
+
+@dataclass(frozen=True)
+class Surface:
+    """Infrared properties of what each pixel sees (None = ordinary rubble everywhere).
+
+    ir_unread : (H, W) float, fraction of the pixels of that surface that return no
+        infrared (0 = rubble, 0.55-0.76 = soot, char, wet or black patches, 1 = no return).
+    cos_incidence : (H, W) float, cosine between the line of sight and the surface normal;
+        computed from the depth when None.
+    """
+
+    ir_unread: F32 | None = None
+    cos_incidence: F32 | None = None
+
+
+@dataclass(frozen=True)
+class Motion:
+    """The camera's motion during the frame, as image motion.
+
+    velocity_px_s : (du/dt, dv/dt) of the scene in the image, pixels per second.
+    exposure_s : colour exposure time (motion blur = velocity x exposure).
+    """
+
+    velocity_px_s: tuple[float, float] = (0.0, 0.0)
+    exposure_s: float = 0.0
+
+
+@dataclass(frozen=True)
+class FrameDraws:
+    """The random draws of one frame (pixels at the frame's width)."""
+
+    band_left: int
+    band_right: int
+    band_top: int
+    band_bottom: int
+    fattening_px: int
+    flying_fraction: float
+    noise_fraction: float
+    grazing_cos: float
+    shift_px: tuple[float, float]
+    scale: float
+    time_offset_s: float
+
+
+@dataclass(frozen=True)
+class SensorFrame:
+    """What the sensor delivers.
+
+    depth_mm : (H, W) uint16, millimetres, 0 = no reading, registered to ``rgb``.
+    rgb : (H, W, 3) uint8 (None when no colour was given).
+    draws : the frame's random draws.
+    flying : (H, W) bool, pixels given a value between two plateaus (for validation).
+    """
+
+    depth_mm: U16
+    rgb: U8 | None
+    draws: FrameDraws
+    flying: npt.NDArray[np.bool_] = field(repr=False)
+
+
+def random_motion(
+    rng: np.random.Generator,
+    fx: float,
+    distance_m: float,
+    max_speed_m_s: float = 1.5,
+    exposure_s: Range = (0.005, 0.02),
+) -> Motion:
+    """A survey drone's image motion: 0-``max_speed_m_s`` across a scene ``distance_m`` away
+    (any direction), colour exposure drawn in ``exposure_s`` (long at dawn).
+
+    >>> m = random_motion(np.random.default_rng(0), 580.0, 2.5)
+    >>> math.hypot(*m.velocity_px_s) <= 1.5 * 580.0 / 2.5
+    True
+    """
+    speed = float(rng.uniform(0.0, max_speed_m_s)) * fx / max(distance_m, 0.1)
+    ang = float(rng.uniform(0.0, 2 * math.pi))
+    return Motion(
+        (round(speed * math.cos(ang), 2), round(speed * math.sin(ang), 2)),
+        round(float(rng.uniform(*exposure_s)), 4),
+    )
+
+
+def predicted_shadow_px(
+    z_near_m: float, z_far_m: float, fx: float, params: StructuredLight, registered: bool = True
+) -> float:
+    """Projector-shadow width (px) beside a near edge at ``z_near_m`` over ``z_far_m``.
+
+    >>> round(predicted_shadow_px(1.0, 2.0, 580.0, StructuredLight(), registered=False), 1)
+    26.1
+    """
+    base = params.shadow_widening * params.baseline_m
+    if registered:
+        base -= params.registration_baseline_m
+    return fx * base * (1.0 / z_near_m - 1.0 / z_far_m)
+
+
+def incidence_cosine(z: F64, fx: float, cx: float, cy: float) -> F64:
+    """|cos| between each pixel's line of sight and its surface normal, from depth (m).
+
+    For ``P = z (x', y', 1)`` the normal is ``(-z_u, -z_v, z_u x' + z_v y' + z / f)`` and its
+    product with the ray ``z / f``, with ``z_u``, ``z_v`` the depth's image gradients.
+    Pixels without depth (0) get 1.
+
+    >>> z = np.full((5, 5), 2.0)  # a wall facing the camera
+    >>> round(float(incidence_cosine(z, 100.0, 2.0, 2.0)[2, 2]), 3)
+    1.0
+    """
+    h, w = z.shape
+    zz = z.astype(np.float32)
+    gu, gv = _smaller_difference(zz, 1), _smaller_difference(zz, 0)
+    xs = ((np.arange(w, dtype=np.float32) - cx) / fx)[None, :]
+    ys = ((np.arange(h, dtype=np.float32) - cy) / fx)[:, None]
+    zf = zz / np.float32(fx)
+    nz = gu * xs + gv * ys + zf
+    norm_n = np.sqrt(gu * gu + gv * gv + nz * nz)
+    norm_r = np.sqrt(xs * xs + ys * ys + 1.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        c = np.abs(zf) / (norm_n * norm_r)
+    return np.where((z > 0) & np.isfinite(c), c, 1.0).astype(np.float64)
+
+
+def _smaller_difference(z: F32, axis: int) -> F32:
+    """Per pixel, the forward or backward difference along ``axis``, whichever is smaller:
+    a surface's slope, not the jump to another surface at a depth edge."""
+    d = np.diff(z, axis=axis)
+    pad_lo = [(0, 0), (0, 0)]
+    pad_hi = [(0, 0), (0, 0)]
+    pad_lo[axis] = (1, 0)
+    pad_hi[axis] = (0, 1)
+    back = np.pad(d, pad_lo, mode="edge")
+    fwd = np.pad(d, pad_hi, mode="edge")
+    return np.where(np.abs(back) < np.abs(fwd), back, fwd)
+
+
+def _draw_int(rng: np.random.Generator, r: tuple[int, int], s: float = 1.0) -> int:
+    return round(int(rng.integers(r[0], r[1] + 1)) * s)
+
+
+def _jump(z: F64) -> F64:
+    """Threshold (m) for a depth discontinuity between neighbours at depth z."""
+    return 0.04 + 0.03 * z
+
+
+def _fatten(z: F64, r: int) -> F64:
+    """The nearer surface grows by ``r`` px into the farther one (correlation window)."""
+    if r <= 0:
+        return z
+    big = np.where(z > 0, z, np.inf).astype(np.float32)
+    k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+    near = cv2.erode(big, k).astype(np.float64)
+    grow = (z > 0) & np.isfinite(near) & (z - near > _jump(near))
+    return np.where(grow, near, z)
+
+
+def _shadow(z: F64, fb_shadow: float) -> npt.NDArray[np.bool_]:
+    """Pixels the projector (at +x) cannot light: a pixel to the right maps left of them."""
+    w = z.shape[1]
+    with np.errstate(divide="ignore"):
+        up = np.arange(w, dtype=np.float64)[None, :] - np.where(z > 0, fb_shadow / z, np.inf)
+    up = np.where(z > 0, up, np.inf)
+    rev = np.minimum.accumulate(up[:, ::-1], axis=1)[:, ::-1]
+    right_min = np.concatenate([rev[:, 1:], np.full((z.shape[0], 1), np.inf)], axis=1)
+    return (z > 0) & (up > right_min + 0.5)
+
+
+def _flying(z: F64, fraction: float, rng: np.random.Generator) -> tuple[F64, npt.NDArray[np.bool_]]:
+    """At ``fraction`` of the horizontal edge crossings, the far pixel next to the near one
+    takes a value between the two plateaus."""
+    out = z.copy()
+    flying = np.zeros(z.shape, bool)
+    a, b = z[:, :-1], z[:, 1:]
+    both = (a > 0) & (b > 0)
+    step = both & (np.abs(a - b) > _jump(np.minimum(a, b)))
+    pick = step & (rng.random(step.shape) < fraction)
+    rows, cols = np.nonzero(pick)
+    za, zb, tt = a[rows, cols], b[rows, cols], rng.uniform(0.2, 0.8, size=rows.size)
+    far_is_a = za > zb
+    c = np.where(far_is_a, cols, cols + 1)
+    near, far = np.minimum(za, zb), np.maximum(za, zb)
+    out[rows, c] = near + tt * (far - near)
+    flying[rows, c] = True
+    return out, flying
+
+
+def _blobs(shape: tuple[int, int], corr_px: float, rng: np.random.Generator) -> F64:
+    """Smooth noise, uniformly distributed in [0, 1] (rank-transformed), blobs ~corr_px."""
+    h, w = shape
+    s = max(corr_px, 1.0)
+    small = rng.standard_normal((max(2, math.ceil(h / s)), max(2, math.ceil(w / s))))
+    smooth = cv2.resize(small.astype(np.float32), (w, h), interpolation=cv2.INTER_LINEAR)
+    big = np.asarray(smooth, np.float32) + 0.2 * rng.standard_normal((h, w)).astype(np.float32)
+    flat = big.ravel()
+    ranks = np.empty(flat.size, np.float64)
+    ranks[np.argsort(flat, kind="stable")] = (np.arange(flat.size) + 0.5) / flat.size
+    return ranks.reshape(h, w)
+
+
+def _motion_blur(rgb: U8, velocity: tuple[float, float], exposure_s: float) -> U8:
+    du, dv = velocity[0] * exposure_s, velocity[1] * exposure_s
+    length = math.hypot(du, dv)
+    if length < 1.0:
+        return rgb
+    n = math.ceil(length) + 1
+    size = 2 * n + 1
+    kernel = np.zeros((size, size), np.float32)
+    for t in np.linspace(-0.5, 0.5, 4 * n + 1):
+        kernel[round(n + t * dv), round(n + t * du)] += 1.0
+    kernel /= kernel.sum()
+    return np.asarray(cv2.filter2D(rgb, -1, kernel, borderType=cv2.BORDER_REFLECT), np.uint8)
+
+
+def structured_light_frame(
+    depth_m: npt.ArrayLike,
+    rgb: U8 | None,
+    camera: SensorCamera,
+    *,
+    seed: int | np.random.Generator,
+    surface: Surface | None = None,
+    motion: Motion | None = None,
+    params: StructuredLight | None = None,
+) -> SensorFrame:
+    """The sensor's registered depth (and colour) for an ideal frame (module docstring).
+
+    Parameters
+    ----------
+    depth_m : (H, W) float, metres along the optical axis of the colour camera, 0 or
+        non-finite = nothing there.
+    rgb : (H, W, 3) uint8 colour image, or None.
+    camera : intrinsics of the frame.
+    seed : seed or generator of the frame's randomness (same seed, same frame).
+    surface, motion, params : see :class:`Surface`, :class:`Motion`, :class:`StructuredLight`.
+    """
+    p = params if params is not None else StructuredLight()
+    m = motion if motion is not None else Motion()
+    s = surface if surface is not None else Surface()
+    rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+    z = np.asarray(depth_m, dtype=np.float64)
+    if z.ndim != 2:
+        raise ValueError(f"depth_m must be (H, W), got shape {z.shape}")
+    z = np.where(np.isfinite(z) & (z > 0), z, 0.0)
+    h, w = z.shape
+    k = w / 640.0
+    if p.bands:
+        bands = (
+            _draw_int(rng, p.band_left_px, k),
+            _draw_int(rng, p.band_right_px, k),
+            _draw_int(rng, p.band_top_px, k),
+            _draw_int(rng, p.band_bottom_px, k),
+        )
+    else:
+        bands = (0, 0, 0, 0)
+    fat = int(rng.integers(p.fattening_px[0], p.fattening_px[1] + 1))
+    fat = max(0, round(fat * k)) if k < 1 else fat
+    fly = float(rng.uniform(*p.flying_fraction))
+    noise_frac = float(rng.uniform(*p.noise_fraction))
+    graze = float(rng.uniform(*p.grazing_cos))
+    mag = float(rng.uniform(*p.misregistration_px)) * k
+    ang = float(rng.uniform(0.0, 2 * math.pi))
+    scale = 1.0 + float(rng.uniform(-p.misregistration_scale, p.misregistration_scale))
+    dt = float(rng.uniform(-p.max_time_offset_s, p.max_time_offset_s))
+    draws = FrameDraws(
+        band_left=bands[0],
+        band_right=bands[1],
+        band_top=bands[2],
+        band_bottom=bands[3],
+        fattening_px=fat,
+        flying_fraction=round(fly, 4),
+        noise_fraction=round(noise_frac, 4),
+        grazing_cos=round(graze, 4),
+        shift_px=(round(mag * math.cos(ang), 3), round(mag * math.sin(ang), 3)),
+        scale=round(scale, 5),
+        time_offset_s=round(dt, 5),
+    )
+
+    # Surfaces that return nothing: grazing, absorbing; judged on the true geometry.
+    cos_inc = (
+        np.asarray(s.cos_incidence, np.float64)
+        if s.cos_incidence is not None
+        else incidence_cosine(z, camera.fx, camera.cx, camera.cy)
+    )
+    drop = (z > 0) & (cos_inc < graze)
+    if s.ir_unread is not None:
+        unread = np.clip(np.asarray(s.ir_unread, np.float64), 0.0, 1.0)
+        if (unread > 0).any():
+            drop |= _blobs(z.shape, p.dropout_blob_px * max(k, 0.25), rng) < unread
+    # The correlation window: the nearer surface fattens, some crossings fly.
+    zf = _fatten(z, fat)
+    zf, flying = _flying(zf, fly, rng)
+    # The projector's shadow on the fattened surfaces (registered: narrower than raw).
+    fb = camera.fx * p.baseline_m
+    fb_shadow = camera.fx * (p.shadow_widening * p.baseline_m - p.registration_baseline_m)
+    drop |= _shadow(zf, max(fb_shadow, 0.0))
+    # Range: nothing nearer than the minimum, readings thinning out toward the maximum.
+    span = max(p.max_range_m - p.fade_range_m, 1e-6)
+    drop |= (zf < p.min_range_m) | (zf > p.max_range_m)
+    fading = np.flatnonzero((zf > p.fade_range_m).ravel())
+    if fading.size:
+        f = (zf.ravel()[fading] - p.fade_range_m) / span
+        drop.ravel()[fading[rng.random(fading.size) < f]] = True
+    # Noise, then disparity rounded to the step: together noise_frac x 1.425e-3 Z^2.
+    q_var = (p.disparity_step_px / fb) ** 2 / 12.0  # rounding variance / Z^4
+    coeff2 = (noise_frac * NOISE_COEFF_PER_M) ** 2 - q_var
+    coeff = math.sqrt(coeff2) if coeff2 > 0 else 0.0
+    zn = zf + coeff * zf * zf * rng.standard_normal(z.shape, dtype=np.float32)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        steps = np.round(fb / p.disparity_step_px / zn)
+        zq = np.where(steps > 0, fb / p.disparity_step_px / steps, 0.0)
+    zq = np.where((zf > 0) & ~drop & (zq >= p.min_range_m) & (zq <= p.max_range_m), zq, 0.0)
+    mm = np.clip(np.round(zq * 1000.0), 0, 65535).astype(np.uint16)
+
+    # Registration onto the colour camera: shift, scale and the time offset under motion.
+    sx = draws.shift_px[0] + m.velocity_px_s[0] * dt
+    sy = draws.shift_px[1] + m.velocity_px_s[1] * dt
+    uu = (np.arange(w, dtype=np.float32) - camera.cx) * scale + camera.cx + sx
+    vv = (np.arange(h, dtype=np.float32) - camera.cy) * scale + camera.cy + sy
+    map_x = np.broadcast_to(uu[None, :], (h, w)).astype(np.float32)
+    map_y = np.broadcast_to(vv[:, None], (h, w)).astype(np.float32)
+    mm = np.asarray(
+        cv2.remap(mm, map_x, map_y, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT),
+        np.uint16,
+    )
+    fl = (
+        cv2.remap(flying.astype(np.uint8), map_x, map_y, cv2.INTER_NEAREST).astype(bool)
+        if flying.any()
+        else flying
+    )
+    left, right, top, bottom = bands
+    if left:
+        mm[:, :left] = 0
+    if right:
+        mm[:, w - right :] = 0
+    if top:
+        mm[:top, :] = 0
+    if bottom:
+        mm[h - bottom :, :] = 0
+    fl &= mm > 0
+    out_rgb = None if rgb is None else _motion_blur(rgb, m.velocity_px_s, m.exposure_s)
+    return SensorFrame(mm, out_rgb, draws, fl)

@@ -1,0 +1,167 @@
+"""The structured-light sensor model: each effect on small seeded frames, exact properties."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from holescan.sim.structured_light import (
+    Motion,
+    SensorCamera,
+    StructuredLight,
+    Surface,
+    predicted_shadow_px,
+    structured_light_frame,
+)
+
+CAM = SensorCamera(fx=580.0, cx=319.5, cy=239.5)
+# Only the effect under test: no bands, no misregistration, no fattening.
+BARE = StructuredLight(
+    bands=False,
+    misregistration_px=(0.0, 0.0),
+    misregistration_scale=0.0,
+    max_time_offset_s=0.0,
+    fattening_px=(0, 0),
+    flying_fraction=(0.0, 0.0),
+)
+
+
+def _step(near_right: bool = True) -> np.ndarray:
+    z = np.full((480, 640), 2.0, np.float32)
+    if near_right:
+        z[:, 320:] = 1.0
+    else:
+        z[:, :320] = 1.0
+    return z
+
+
+def test_same_seed_same_frame_other_seed_other_frame() -> None:
+    z = _step()
+    a = structured_light_frame(z, None, CAM, seed=4)
+    b = structured_light_frame(z, None, CAM, seed=4)
+    c = structured_light_frame(z, None, CAM, seed=5)
+    assert np.array_equal(a.depth_mm, b.depth_mm) and a.draws == b.draws
+    assert not np.array_equal(a.depth_mm, c.depth_mm)
+
+
+def test_projector_shadow_lies_left_of_the_nearer_surface_at_the_predicted_width() -> None:
+    out = structured_light_frame(_step(near_right=True), None, CAM, seed=1, params=BARE)
+    gap = (out.depth_mm[100:380] == 0).mean(axis=0)
+    cols = np.flatnonzero(gap > 0.9)
+    predicted = predicted_shadow_px(1.0, 2.0, CAM.fx, BARE)  # 21.75 px, registered
+    assert cols.max() == 319  # ends at the near edge, on its left
+    assert abs(cols.size - predicted) <= 1.5
+    # A nearer surface on the LEFT casts no shadow on its right.
+    out = structured_light_frame(_step(near_right=False), None, CAM, seed=1, params=BARE)
+    assert (out.depth_mm[100:380] == 0).mean() < 0.001
+
+
+def test_registration_narrows_the_shadow_below_the_raw_width() -> None:
+    raw = predicted_shadow_px(1.0, 2.0, 580.0, BARE, registered=False)
+    assert raw == pytest.approx(1.2 * 43.5 * 0.5)
+    assert predicted_shadow_px(1.0, 2.0, 580.0, BARE) == pytest.approx(raw - 580 * 0.025 * 0.5)
+
+
+@pytest.mark.parametrize(("z_m", "step_mm"), [(2.0, 11.5), (2.5, 18.0), (3.0, 25.9)])
+def test_depth_is_quantised_in_eighth_pixel_disparity_steps(z_m: float, step_mm: float) -> None:
+    z = np.full((120, 160), z_m, np.float32)
+    cam = SensorCamera(580.0, 79.5, 59.5)
+    out = structured_light_frame(z, None, cam, seed=2, params=BARE)
+    values = np.unique(out.depth_mm[out.depth_mm > 0]).astype(float)
+    steps = np.diff(values)
+    central = steps[np.abs(values[1:] - 1000 * z_m) < 40]
+    assert central.size >= 2
+    assert np.all(np.abs(central - step_mm) <= 1.0)
+
+
+def test_flat_surface_noise_is_0_8_to_1_times_the_kinect_model() -> None:
+    z = np.full((240, 320), 2.5, np.float32)
+    cam = SensorCamera(580.0, 159.5, 119.5)
+    out = structured_light_frame(z, None, cam, seed=3, params=BARE)
+    read = out.depth_mm[out.depth_mm > 0].astype(float) / 1000.0
+    model = 1.425e-3 * 2.5**2
+    assert 0.75 * model < float(read.std()) < 1.05 * model
+    assert out.draws.noise_fraction * model == pytest.approx(float(read.std()), rel=0.1)
+
+
+def test_border_bands_are_unread_and_within_the_measured_widths() -> None:
+    z = np.full((480, 640), 2.0, np.float32)
+    for seed in range(6):
+        out = structured_light_frame(z, None, CAM, seed=seed)
+        d = out.draws
+        assert 24 <= d.band_right <= 43 and 8 <= d.band_top <= 14
+        assert 6 <= d.band_bottom <= 12 and 0 <= d.band_left <= 11
+        dm = out.depth_mm
+        assert not dm[:, 640 - d.band_right :].any() and not dm[: d.band_top].any()
+        assert not dm[480 - d.band_bottom :].any() and not dm[:, : d.band_left].any()
+        inner = dm[d.band_top + 5 : 475 - d.band_bottom, d.band_left + 5 : 635 - d.band_right]
+        assert (inner > 0).mean() > 0.99
+
+
+def test_absorbing_patch_loses_its_fraction_of_readings_in_blobs() -> None:
+    z = np.full((240, 320), 2.0, np.float32)
+    unread = np.zeros(z.shape, np.float32)
+    unread[60:180, 80:240] = 0.65
+    cam = SensorCamera(580.0, 159.5, 119.5)
+    out = structured_light_frame(z, None, cam, seed=7, surface=Surface(unread), params=BARE)
+    patch = out.depth_mm[60:180, 80:240] == 0
+    assert 0.6 < patch.mean() < 0.7
+    assert (out.depth_mm[:50] == 0).mean() < 0.01
+    # Ragged blobs, not salt: an unread pixel's right neighbour is unread more often than
+    # the patch's fraction (0.65 for independent pixels).
+    assert (patch[:, :-1] & patch[:, 1:]).sum() > 0.72 * patch[:, :-1].sum()
+
+
+def test_grazing_surfaces_return_nothing() -> None:
+    z = np.full((120, 160), 2.0, np.float32)
+    cos = np.ones(z.shape, np.float32)
+    cos[:, :80] = 0.05  # seen almost edge-on
+    cam = SensorCamera(580.0, 79.5, 59.5)
+    out = structured_light_frame(z, None, cam, seed=1, surface=Surface(None, cos), params=BARE)
+    assert not out.depth_mm[:, :80].any() and (out.depth_mm[:, 80:] > 0).all()
+
+
+def test_edges_fatten_the_near_surface_and_some_crossings_fly() -> None:
+    z = _step(near_right=False)  # near on the left: no shadow at this edge
+    params = StructuredLight(
+        bands=False,
+        misregistration_px=(0.0, 0.0),
+        misregistration_scale=0.0,
+        max_time_offset_s=0.0,
+        fattening_px=(2, 2),
+        flying_fraction=(0.1, 0.1),
+    )
+    out = structured_light_frame(z, None, CAM, seed=3, params=params)
+    near = (out.depth_mm > 0) & (out.depth_mm < 1100)
+    # The near surface reaches two pixels past its true edge (column 319).
+    assert near[:, 321].mean() > 0.97 and near[:, 322].mean() < 0.03
+    # Flying pixels (between the plateaus) at ~10 % of the rows' edge crossings.
+    assert 0.06 < out.flying.any(axis=1).mean() < 0.14
+    between = (out.depth_mm > 1100) & (out.depth_mm < 1900)
+    assert np.array_equal(between, out.flying)
+
+
+def test_misregistration_and_time_offset_shift_the_depth_against_the_colour() -> None:
+    z = _step(near_right=False)
+    still = StructuredLight(bands=False, fattening_px=(0, 0), flying_fraction=(0.0, 0.0))
+    out = structured_light_frame(z, None, CAM, seed=9, params=still, motion=Motion((400.0, 0.0)))
+    d = out.draws
+    assert 1.0 <= float(np.hypot(*d.shift_px)) <= 4.0 and abs(d.time_offset_s) <= 0.016
+    row = out.depth_mm[240]
+    edge = int(np.flatnonzero((row > 0) & (row < 1100)).max()) + 1  # first far column
+    expected = 320 - (d.shift_px[0] + 400.0 * d.time_offset_s) * d.scale
+    assert abs(edge - expected) <= 2.0
+
+
+def test_motion_blurs_the_colour_along_the_motion() -> None:
+    rgb = np.zeros((60, 80, 3), np.uint8)
+    rgb[:, 40:] = 200
+    z = np.full((60, 80), 2.0, np.float32)
+    cam = SensorCamera(580.0, 39.5, 29.5)
+    out = structured_light_frame(z, rgb, cam, seed=1, motion=Motion((1000.0, 0.0), 0.01))
+    assert out.rgb is not None
+    row = out.rgb[30, :, 0].astype(int)
+    ramp = np.flatnonzero((row > 10) & (row < 190))
+    assert 6 <= ramp.size <= 12  # 10 px of blur: a ramp, not a step
+    still = structured_light_frame(z, rgb, cam, seed=1)
+    assert still.rgb is not None and np.array_equal(still.rgb, rgb)
