@@ -46,12 +46,12 @@ class ServerCounters:
 
 
 def _protocol(limits: Limits, counters: ServerCounters) -> type[H11Protocol]:
-    class _Protocol(H11Protocol):
+    class _Protocol(H11Protocol):  # type: ignore[misc,unused-ignore]
         """uvicorn's h11 protocol with a per-address cap and a whole-request deadline."""
 
         _deadline: asyncio.TimerHandle | None = None
 
-        def connection_made(self, transport: asyncio.Transport) -> None:  # type: ignore[override]
+        def connection_made(self, transport: asyncio.Transport) -> None:  # type: ignore[override,unused-ignore]
             super().connection_made(transport)
             ip = self.client[0] if self.client else ""
             peers = [getattr(c, "client", None) or ("",) for c in self.connections]
@@ -79,7 +79,7 @@ def _protocol(limits: Limits, counters: ServerCounters) -> type[H11Protocol]:
             _log.info("web: %s cut off: no whole request in %g s", self.client, limits.request_s)
             self.transport.close()
 
-        def eof_received(self) -> bool:
+        def eof_received(self) -> bool:  # type: ignore[override,unused-ignore]
             """The client is done sending (a half-close, as ``curl``-like clients and
             ``nc -N`` do): a whole request already in is still answered, then the
             connection closes; anything else closes it now."""

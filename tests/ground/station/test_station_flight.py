@@ -280,8 +280,10 @@ def test_flight_mavproxy_ground_page_tak(tmp_path: Path) -> None:
         wait_for(lambda: _up(page), 30.0, "the ground station's page")
         # the operator's pairing link, issued while the station runs (never in its log)
         pair = subprocess.run(
-            [sys.executable, "-m", "holescan.cli", "pair", "-o", str(station_dir)]
-            + ["flight test", "--http", f"127.0.0.1:{http}"],
+            [
+                *(sys.executable, "-m", "holescan.cli", "pair", "-o", str(station_dir)),
+                *("flight test", "--http", f"127.0.0.1:{http}"),
+            ],
             cwd=ROOT,
             env={**os.environ, "PYTHONPATH": str(ROOT)},
             capture_output=True,

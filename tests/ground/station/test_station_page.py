@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 from test_station import wait_for
-from test_station_review import CHROMIUM, Browser, Page, _station
+from test_station_review import CHROMIUM, Browser, Page, review_station
 
 from holescan.ground.station.guard import Limits
 from holescan.ground.station.web import StationWeb
@@ -68,7 +68,7 @@ def _text(page: Page, el: str) -> str:
 def test_bad_pairing_links_say_so_and_the_page_still_works(
     tmp_path: Path, browser: Browser
 ) -> None:
-    state = _station(tmp_path / "st")
+    state = review_station(tmp_path / "st")
     with StationWeb(state, "127.0.0.1", 0) as web:
         for query in ("?token=%E2%82%AC", "?token=" + "Q" * 43, "?token="):
             page = _open(browser, web.url + query)
@@ -85,7 +85,7 @@ def test_bad_pairing_links_say_so_and_the_page_still_works(
 def test_a_good_link_pairs_without_leaving_the_token_behind(
     tmp_path: Path, browser: Browser
 ) -> None:
-    state = _station(tmp_path / "st")
+    state = review_station(tmp_path / "st")
     with StationWeb(state, "127.0.0.1", 0) as web:
         _, token = web.pairings.issue("Ana")
         page = _open(browser, web.pair_url(token))
@@ -116,7 +116,7 @@ def test_a_good_link_pairs_without_leaving_the_token_behind(
 
 
 def test_the_page_reconnects_its_event_stream_on_its_own(tmp_path: Path, browser: Browser) -> None:
-    state = _station(tmp_path / "st")
+    state = review_station(tmp_path / "st")
     limits = Limits(max_events_per_client=2, events_s=3.0)
     with StationWeb(state, "127.0.0.1", 0, limits=limits) as web:
         # another client on the same address holds both of its event slots

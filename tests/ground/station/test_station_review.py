@@ -114,7 +114,7 @@ class Browser:
             self.proc.kill()
 
 
-def _station(folder: Path) -> StationState:
+def review_station(folder: Path) -> StationState:
     state = StationState.open(folder)
     holes = {1: 0.91, 2: 0.52, 3: 0.74, 4: 0.63}  # id -> score
     for hid, score in holes.items():
@@ -140,7 +140,7 @@ def _station(folder: Path) -> StationState:
 
 @pytest.fixture
 def site(tmp_path: Path) -> Iterator[tuple[StationState, StationWeb]]:
-    state = _station(tmp_path / "st")
+    state = review_station(tmp_path / "st")
     with StationWeb(state, "127.0.0.1", 0) as web:
         yield state, web
 
