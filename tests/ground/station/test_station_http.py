@@ -304,3 +304,23 @@ def _raw(port: int, data: bytes) -> bytes:
         except (ConnectionResetError, TimeoutError):
             pass
     return b"".join(chunks)
+
+
+def test_holescan_pair_prints_one_link_and_refuses_bad_input(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from holescan.cli import main
+    from holescan.ground.station.pairing import Pairings
+
+    folder = tmp_path / "st"
+    folder.mkdir()
+    assert main(["pair", "-o", str(folder), "Ana", "--http", "127.0.0.1:8081"]) == 0
+    out = capsys.readouterr().out.strip()
+    m = re.fullmatch(r"Ana \(p1\): http://127\.0\.0\.1:8081/\?token=([\w-]{43})", out)
+    assert m is not None, out
+    assert Pairings(folder).check(m[1]) is not None
+    for argv in (["pair", "-o", str(folder), " "], ["pair", "-o", str(tmp_path / "no"), "Bea"]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "Traceback" not in err, err
+    assert [p.operator for p in Pairings(folder).all()] == ["Ana"]
