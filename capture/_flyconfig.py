@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import dataclasses
 import datetime as dt
+import importlib.util
 import logging
 import math
 import time
@@ -330,6 +331,11 @@ def parse_fly_config(
     det = tables["detect"]
     if det["mode"] not in ("default", "paper"):
         raise InputError(f"{where}: detect.mode must be 'default' or 'paper', got {det['mode']!r}")
+    if det["mode"] == "paper" and importlib.util.find_spec("numba") is None:
+        raise InputError(
+            f"{where}: detect.mode = 'paper' needs numba, which the flight install leaves out "
+            "(pip install 'holescan[ground]'; the default mode does not need it)"
+        )
     if det["searcher"] not in SEARCHERS:
         raise InputError(f"{where}: detect.searcher must be one of {sorted(SEARCHERS)}")
     params: DetectParams = (PAPER if det["mode"] == "paper" else DEFAULT).with_searcher(

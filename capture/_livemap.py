@@ -42,6 +42,9 @@ from holescan.errors import InputError
 from holescan.geotag import CameraMount, LocalFrame, VehiclePose, camera_pose_local
 from holescan.mapping import FuseParams, MapGrid, SearchMap
 from holescan.missions import (
+    CELL_M_RANGE,
+    MAP_RADIUS_MAX_M,
+    TILE_CELLS_RANGE,
     TYPE_COVERAGE,
     TYPE_ORTHO,
     MapLayer,
@@ -86,9 +89,9 @@ class LiveMapConfig:
 
     def __post_init__(self) -> None:
         checks = (
-            0.01 <= self.cell_m <= 5.0,
-            8 <= self.tile_cells <= 256,
-            1.0 <= self.radius_m <= 2000.0,
+            CELL_M_RANGE[0] <= self.cell_m <= CELL_M_RANGE[1],
+            TILE_CELLS_RANGE[0] <= self.tile_cells <= TILE_CELLS_RANGE[1],
+            1.0 <= self.radius_m <= MAP_RADIUS_MAX_M,
             1 <= self.pixel_stride <= 64,
             1 <= self.frame_every <= 1000,
             0.0 < self.budget_ms <= 1000.0,

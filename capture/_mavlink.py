@@ -43,6 +43,7 @@ from holescan.link import (
     PoseUnavailable,
     RateMethod,
     RateRequests,
+    SigningKey,
     TelemetryError,
     TelemetryTimeoutError,
     is_autopilot_heartbeat,
@@ -203,7 +204,7 @@ class Telemetry(RateRequests):
             raise TelemetryError(f"cannot open MAVLink link {self.connection!r}: {err}") from err
         self._conn = conn
         if self._signing_key is not None:  # unsigned or badly signed packets: bad packets
-            conn.setup_signing(self._signing_key, sign_outgoing=True)
+            SigningKey(self._signing_key).apply(conn)  # the signature checked first
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, name="telemetry-rx", daemon=True)
         self._thread.start()

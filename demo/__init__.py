@@ -24,6 +24,7 @@ from holescan.demo._run import (
     DemoOptions,
     DemoProgress,
     DemoResult,
+    default_demo_out,
     run_demo,
 )
 from holescan.demo._scoring import (
@@ -45,6 +46,7 @@ __all__ = [
     "FalseHole",
     "TruthRow",
     "count_in_view",
+    "default_demo_out",
     "format_result",
     "frames_in_view",
     "run_demo",

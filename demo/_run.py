@@ -30,6 +30,7 @@ import functools
 import json
 import logging
 import math
+import os
 import threading
 import time
 from collections import Counter
@@ -55,6 +56,7 @@ __all__ = [
     "DemoResult",
     "FalseHole",
     "TruthRow",
+    "default_demo_out",
     "run_demo",
 ]
 
@@ -69,8 +71,8 @@ DEMO_SORTIE = SortieParams(world_seed=3, size_m=(10.0, 10.0), n_access_holes=4)
 class DemoOptions:
     """What the demo flies.
 
-    out : folder for everything (None: a new ``holescan-demo-YYYYmmdd-HHMMSS`` folder in
-        the current directory). sortie : the simulated sortie.
+    out : folder for everything (None: :func:`default_demo_out`, a new folder in the
+        user's data folder). sortie : the simulated sortie.
     duration_s : seconds of capture (None: one lap of the survey).
     gate : when a hole is announced (served, sent, scored, written); weaker holes stay
         candidates. card_bytes_per_s : byte budget of the holes' pictures.
@@ -252,13 +254,19 @@ class _Ground:
 # --------------------------------------------------------------------------- the flight
 
 
-def _default_out() -> Path:
+def default_demo_out(data_home: Path | None = None) -> Path:
+    """A new folder for one demo: ``DATA/holescan/demo/YYYYmmdd-HHMMSS`` in the user's data
+    folder (``data_home``; None: ``$XDG_DATA_HOME``, else ``~/.local/share``), never the
+    current folder (a clone's root would otherwise collect gigabytes of demo logs)."""
+    if data_home is None:
+        xdg = os.environ.get("XDG_DATA_HOME", "")
+        data_home = Path(xdg) if os.path.isabs(xdg) else Path.home() / ".local" / "share"
     stamp = dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-    out = Path.cwd() / f"holescan-demo-{stamp}"
+    out = data_home / "holescan" / "demo" / stamp
     k = 1
     while out.exists():
         k += 1
-        out = Path.cwd() / f"holescan-demo-{stamp}-{k}"
+        out = out.with_name(f"{stamp}-{k}")
     return out
 
 
@@ -282,7 +290,7 @@ def run_demo(
     """
     opts = opts or DemoOptions()
     t_start = time.monotonic()
-    out = opts.out or _default_out()
+    out = opts.out or default_demo_out()
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as err:

@@ -14,7 +14,9 @@ speak MAVLink through it:
 * :class:`PoseBuffer` (with :class:`PoseValidity`): the vehicle's pose at any instant from
   those samples; :class:`TelemetryReplay` fills one from logged packets;
 * :class:`RateRequests`: asking the autopilot for messages (commands with acknowledgement,
-  message intervals), :func:`read_signing_key`.
+  message intervals), :func:`read_signing_key`;
+* the checks of every value that arrives (:mod:`~link._values`: finite, in range, ids in
+  the protocol's range, text XML can hold), raising :class:`LinkValueError`.
 
 Errors in :mod:`link.errors`.
 """
@@ -59,12 +61,27 @@ from holescan.link._replay import (
 )
 from holescan.link._signing import (
     SigningKey,
+    verified_signature,
 )
 from holescan.link._stream import (
     MavlinkStream,
 )
+from holescan.link._values import (
+    HOLE_ID_MAX,
+    CardValues,
+    card_values,
+    check_hole_id,
+    link_float,
+    link_int,
+    link_lat_lon,
+    link_yaw,
+    optional_float,
+    xml_safe_tree,
+    xml_text,
+)
 from holescan.link.errors import (
     LinkError,
+    LinkValueError,
     PoseInvalid,
     PoseUnavailable,
     TelemetryError,
@@ -72,9 +89,12 @@ from holescan.link.errors import (
 )
 
 __all__ = [
+    "HOLE_ID_MAX",
     "AttitudeSample",
+    "CardValues",
     "GpsFix",
     "LinkError",
+    "LinkValueError",
     "MavConnection",
     "MavlinkStream",
     "NavStatus",
@@ -92,17 +112,27 @@ __all__ = [
     "TelemetryTimeoutError",
     "attitude_from_attitude",
     "attitude_from_quaternion",
+    "card_values",
+    "check_hole_id",
     "gps_from_gps_raw_int",
     "home_from_home_position",
     "is_autopilot_heartbeat",
     "is_null_island",
+    "link_float",
+    "link_int",
+    "link_lat_lon",
+    "link_yaw",
     "mavlink",
     "mavutil",
     "nav_from_ekf_status",
     "open_link",
+    "optional_float",
     "parser",
     "position_from_global_position_int",
     "quat_from_euler",
     "read_signing_key",
     "telemetry_sample",
+    "verified_signature",
+    "xml_safe_tree",
+    "xml_text",
 ]

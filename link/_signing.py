@@ -17,11 +17,22 @@ SHA-256 of the key) to check that both ends hold the same one.
 A peer's first signed packet is accepted when its timestamp is at most one minute behind
 the receiver's own (pymavlink's rule): the companion computer's clock must be set (GPS,
 NTP or chrony from the autopilot) before it flies with signing.
+
+**The signature is verified before its timestamp is believed.** pymavlink 2.4.50's
+``MAVLink.check_signature`` stores a stream's timestamp *before* it compares the
+signature: anyone on the network, without the key, can send one badly signed packet per
+(link id, system, component) with the timestamp 2**48 - 1, and every later genuine packet
+of that stream is refused as a replay until a restart. :meth:`SigningKey.apply` replaces
+that check on the link's MAVLink object by :func:`verified_signature` (the C library's
+order: signature first, then the replay window), so a forger's packet changes nothing.
+``docs/trust-model.md`` says what this protects and what not.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
+import hmac
 import string
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,9 +40,10 @@ from typing import Any
 
 from holescan.errors import InputError
 
-__all__ = ["SigningKey"]
+__all__ = ["SigningKey", "guard_signing", "verified_signature"]
 
 _KEY_BYTES = 32
+_NEW_STREAM_BEHIND = 6000 * 1000  # 10 us units: a new stream at most 1 minute behind ours
 
 
 @dataclass(frozen=True)
@@ -101,3 +113,40 @@ class SigningKey:
         """Sign everything ``conn`` (a pymavlink ``mavfile``) sends; refuse every unsigned
         or badly signed packet it receives."""
         conn.setup_signing(self.key, sign_outgoing=True, allow_unsigned_callback=None)
+        guard_signing(conn.mav)
+
+
+def guard_signing(mav: Any) -> None:
+    """Make ``mav`` (a pymavlink ``MAVLink`` object with a signing key set) check incoming
+    signatures with :func:`verified_signature` instead of its own ``check_signature``."""
+    mav.check_signature = functools.partial(verified_signature, mav)
+
+
+def verified_signature(mav: Any, msgbuf: bytes, src_system: int, src_component: int) -> bool:
+    """Whether a signed MAVLink 2 packet ``msgbuf`` (whole, signature included) is genuine
+    and new; only then is its stream's timestamp recorded.
+
+    The same rules as pymavlink's ``check_signature`` and the C library: the signature is
+    the first 6 bytes of SHA-256(key + packet without the signature); a packet whose
+    timestamp is not newer than the last one of its (link id, system, component) stream is
+    a replay; a new stream's first timestamp may be at most one minute behind ours. But a
+    badly signed packet never touches the state.
+    """
+    signing = mav.signing
+    key = signing.secret_key
+    if key is None or len(msgbuf) < 13:
+        return False
+    digest = hashlib.sha256(bytes(key) + bytes(msgbuf[:-6])).digest()[:6]
+    if not hmac.compare_digest(digest, bytes(msgbuf[-6:])):
+        return False
+    timestamp = int.from_bytes(bytes(msgbuf[-12:-6]), "little")
+    stream = (msgbuf[-13], src_system, src_component)
+    last = signing.stream_timestamps.get(stream)
+    if last is not None:
+        if timestamp <= last:
+            return False  # a replay
+    elif timestamp + _NEW_STREAM_BEHIND < signing.timestamp:
+        return False  # a new stream far in the past: an old recording replayed
+    signing.stream_timestamps[stream] = timestamp
+    signing.timestamp = max(signing.timestamp, timestamp)
+    return True

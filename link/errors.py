@@ -3,6 +3,7 @@
 ::
 
     LinkError
+    ├── LinkValueError           a value from the link missing, not finite or out of range
     ├── TelemetryError           the MAVLink link cannot be opened or used
     │   └── TelemetryTimeoutError    ... nothing came in time (also a TimeoutError)
     └── PoseUnavailable          no trustworthy pose at that time
@@ -15,11 +16,23 @@ from __future__ import annotations
 
 from holescan.errors import HolescanError
 
-__all__ = ["LinkError", "PoseInvalid", "PoseUnavailable", "TelemetryError", "TelemetryTimeoutError"]
+__all__ = [
+    "LinkError",
+    "LinkValueError",
+    "PoseInvalid",
+    "PoseUnavailable",
+    "TelemetryError",
+    "TelemetryTimeoutError",
+]
 
 
 class LinkError(HolescanError):
     """Root of the MAVLink link's errors."""
+
+
+class LinkValueError(LinkError, ValueError):
+    """A value from the link is missing, not a number, not finite or out of its range
+    (:mod:`link._values`); the packet that carried it is counted and dropped."""
 
 
 class TelemetryError(LinkError):

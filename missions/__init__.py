@@ -59,7 +59,10 @@ from holescan.missions._mapinventory import (
     send_inventory,
 )
 from holescan.missions._maptiles import (
+    CELL_M_RANGE,
     MAP_LAYERS,
+    MAP_RADIUS_MAX_M,
+    TILE_CELLS_RANGE,
     TYPE_COVERAGE,
     TYPE_ORTHO,
     MapLayer,
@@ -124,10 +127,12 @@ from holescan.missions.errors import MissionsError
 
 __all__ = [
     "CARD_PAYLOAD",
+    "CELL_M_RANGE",
     "HOLE_FORMATS",
     "HOLE_SUFFIXES",
     "HOLE_TIERS",
     "MAP_LAYERS",
+    "MAP_RADIUS_MAX_M",
     "MAV_CMD_DO_CHANGE_SPEED",
     "MAV_CMD_NAV_LAND",
     "MAV_CMD_NAV_RETURN_TO_LAUNCH",
@@ -138,6 +143,7 @@ __all__ = [
     "MAV_FRAME_MISSION",
     "MAV_MISSION_ACCEPTED",
     "SUNRISE_ELEVATION_DEG",
+    "TILE_CELLS_RANGE",
     "TYPE_COVERAGE",
     "TYPE_INVENTORY",
     "TYPE_ORTHO",

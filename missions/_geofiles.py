@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from holescan.errors import InputError
+from holescan.link import xml_safe_tree, xml_text
 from holescan.missions._waypoint import (
     KML_NS,
     MAV_CMD_NAV_WAYPOINT,
@@ -87,7 +88,8 @@ def write_geojson(
             }
         )
     doc = {"type": "FeatureCollection", "features": features}
-    path.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+    text = json.dumps(doc, indent=2, allow_nan=False)  # strict: properties made finite above
+    path.write_text(text + "\n", encoding="utf-8")
     return path
 
 
@@ -190,6 +192,7 @@ def write_kml(
         ET.SubElement(pt, _kml("altitudeMode")).text = mode
         ET.SubElement(pt, _kml("coordinates")).text = _kml_coords([w])
     ET.indent(root)
+    xml_safe_tree(root)  # no text a reader refuses, whatever a name or description holds
     ET.ElementTree(root).write(path, encoding="utf-8", xml_declaration=True)
     return path
 
@@ -274,15 +277,15 @@ def write_gpx(
     path = Path(path)
     gpx = gpxpy.gpx.GPX()
     gpx.creator = "holescan"
-    route = gpxpy.gpx.GPXRoute(name=route_name) if route_name is not None else None
+    route = gpxpy.gpx.GPXRoute(name=xml_text(route_name)) if route_name is not None else None
     for w in positioned(items):
         ele = w.alt_m if w.frame == MAV_FRAME_GLOBAL else None
         kwargs: dict[str, Any] = {
             "latitude": round_ll(w.lat_deg),
             "longitude": round_ll(w.lon_deg),
             "elevation": ele,
-            "name": w.name or None,
-            "description": w.description or None,
+            "name": xml_text(w.name) or None,  # what XML can hold
+            "description": xml_text(w.description) or None,
         }
         gpx.waypoints.append(gpxpy.gpx.GPXWaypoint(**kwargs))
         if route is not None:

@@ -41,7 +41,10 @@ from holescan.link import mavlink
 from holescan.missions._holecards import make_card, read_card
 
 __all__ = [
+    "CELL_M_RANGE",
     "MAP_LAYERS",
+    "MAP_RADIUS_MAX_M",
+    "TILE_CELLS_RANGE",
     "TYPE_COVERAGE",
     "TYPE_ORTHO",
     "MapLayer",
@@ -63,6 +66,12 @@ TYPE_COVERAGE: int = mavlink.MAVLINK_DATA_STREAM_IMG_PNG
 """Handshake ``type`` of a coverage tile (PNG)."""
 TYPE_ORTHO: int = mavlink.MAVLINK_DATA_STREAM_IMG_JPEG
 """Handshake ``type`` of an orthophoto tile (JPEG, as the cards)."""
+CELL_M_RANGE = (0.01, 5.0)
+"""Cell sides a live map may have, metres (the vehicle's settings and what a tile may say)."""
+TILE_CELLS_RANGE = (8, 256)
+"""Cells per tile side a live map may have."""
+MAP_RADIUS_MAX_M = 2000.0
+"""How far a live map reaches from its origin at most, metres (a tile beyond is refused)."""
 _PNG_SIG = b"\x89PNG\r\n\x1a\n"
 _KEYWORD = b"holescan"
 _UNSEEN_RGB = (244, 241, 234)  # the live page's background: unseen cells disappear
@@ -109,7 +118,8 @@ class TileFacts:
 
 def tile_facts_of(d: Mapping[str, Any]) -> TileFacts | None:
     """The :class:`TileFacts` of a picture's JSON facts; None when they are not a tile's
-    (a hole card's, or malformed)."""
+    (a hole card's, or malformed, or out of what a live map can be: :data:`CELL_M_RANGE`,
+    :data:`TILE_CELLS_RANGE`, tiles within :data:`MAP_RADIUS_MAX_M` of the origin)."""
     try:
         layer = d["layer"]
         if "map" not in d or layer not in MAP_LAYERS:
@@ -127,11 +137,15 @@ def tile_facts_of(d: Mapping[str, Any]) -> TileFacts | None:
         )
     except (KeyError, TypeError, ValueError):
         return None
+    side = facts.n * facts.cell_m
+    reach = MAP_RADIUS_MAX_M + side  # the map's radius, rounded up to whole tiles
     ok = (
-        1 <= facts.n <= 1024
-        and 0.0 < facts.cell_m <= 100.0
-        and abs(facts.tx) < 1_000_000
-        and abs(facts.ty) < 1_000_000
+        TILE_CELLS_RANGE[0] <= facts.n <= TILE_CELLS_RANGE[1]
+        and CELL_M_RANGE[0] <= facts.cell_m <= CELL_M_RANGE[1]  # finite too
+        and 0 <= facts.map_id <= 0x7FFFFFFF
+        and 0 <= facts.version <= 2**63 - 1
+        and abs(facts.tx * side) <= reach
+        and abs(facts.ty * side) <= reach
         and -90.0 <= facts.lat0_deg <= 90.0
         and -180.0 <= facts.lon0_deg <= 180.0
     )

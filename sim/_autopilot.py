@@ -54,7 +54,7 @@ from typing import Any
 from scipy.spatial.transform import Rotation
 
 from holescan.geotag import LocalFrame, VehiclePose
-from holescan.link import mavlink, open_link
+from holescan.link import SigningKey, mavlink, open_link
 from holescan.missions import MissionReceiver
 from holescan.sim._simcommands import STREAMED, command_result, is_reboot, param_value, set_streams
 from holescan.sim._trajectory import SimPath, Trajectory
@@ -267,9 +267,7 @@ class SimAutopilot:
             self.connection, source_system=self.sysid, source_component=self.compid
         )
         if self._signing_key is not None:  # as ArduPilot with a key: signs, drops unsigned
-            self._conn.setup_signing(
-                self._signing_key, sign_outgoing=True, allow_unsigned_callback=None
-            )
+            SigningKey(self._signing_key).apply(self._conn)
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, name="sim-autopilot", daemon=True)
         self._thread.start()

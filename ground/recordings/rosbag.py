@@ -55,7 +55,8 @@ def is_ros2_bag(path: Path) -> bool:
     return path.is_dir() and (path / "metadata.yaml").is_file()
 
 
-def _stamp_ns(msg: Any, fallback_ns: int) -> int:
+def stamp_ns(msg: Any, fallback_ns: int) -> int:
+    """A message's header stamp, ns (``fallback_ns`` when it has none or it is zero)."""
     stamp = getattr(getattr(msg, "header", None), "stamp", None)
     if stamp is None:
         return fallback_ns
@@ -258,6 +259,11 @@ class BagSource:
         _log.warning("%s: no CameraInfo of the colour size: Xtion intrinsics assumed", self.path)
         return CameraIntrinsics.xtion(w, h)
 
+    @property
+    def reader(self) -> AnyReader | None:
+        """The open bag reader while the source is open (for other topics of the bag)."""
+        return self._reader
+
     def __enter__(self) -> BagSource:
         self._reader = self._open()
         return self
@@ -279,7 +285,7 @@ class BagSource:
         index = 0
         for conn, t_bag, raw in reader.messages(connections=conns):
             msg = reader.deserialize(raw, conn.msgtype)
-            item = (_stamp_ns(msg, t_bag), msg, conn)
+            item = (stamp_ns(msg, t_bag), msg, conn)
             (colours if conn.topic == self.topics.colour else depths).append(item)
             for frame in self._pairs(colours, depths, index, final=False):
                 index += 1

@@ -24,6 +24,7 @@ from rasterio.warp import calculate_default_transform, reproject
 
 from holescan.geotag import Hole, LocalFrame
 from holescan.ground.searchmap.geotiff import local_crs
+from holescan.link import xml_safe_tree
 from holescan.mapping import MapLayers
 from holescan.missions import hole_points
 from holescan.outputs import atomic_output
@@ -122,7 +123,7 @@ def write_map_kmz(
         _sub(pt, "altitudeMode", "clampToGround")
         _sub(pt, "coordinates", f"{w.lon_deg:.8f},{w.lat_deg:.8f},0")
     buf = io.BytesIO()
-    ET.ElementTree(kml).write(buf, encoding="utf-8", xml_declaration=True)
+    ET.ElementTree(xml_safe_tree(kml)).write(buf, encoding="utf-8", xml_declaration=True)
     with atomic_output(path, force=force) as f, zipfile.ZipFile(f, "w", zipfile.ZIP_DEFLATED) as z:
         z.writestr("doc.kml", buf.getvalue())
         z.writestr("files/ortho.png", png)

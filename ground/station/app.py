@@ -179,6 +179,7 @@ class GroundStation:
         self._stop.set()
         self._dirty.set()
         self._worker.join(timeout=5.0)
+        self.state.flush()  # a batched save still held
         self._flush()
 
     def mark(self, hole_id: int, mark: str) -> GroundHole:

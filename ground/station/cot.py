@@ -45,6 +45,7 @@ import xml.etree.ElementTree as ET
 from holescan.geotag import CIRCLE_95_PER_SIGMA
 from holescan.ground.station.files import hole_summary
 from holescan.ground.station.state import TIERS, GroundHole, Tier
+from holescan.link import xml_safe_tree
 
 __all__ = [
     "COT_TYPE",
@@ -191,6 +192,7 @@ def hole_cot(
         ET.SubElement(detail, "attachment_list", {"hashes": json.dumps([attachment_sha256])})
     if archive:
         ET.SubElement(detail, "archive")
+    xml_safe_tree(ev)  # the last line of defence: no character a TAK parser refuses
     return bytes(ET.tostring(ev, encoding="utf-8", xml_declaration=False))
 
 
@@ -226,4 +228,4 @@ def withdraw_cot(
     d = ET.SubElement(delete, "detail")
     ET.SubElement(d, "link", {"uid": uid, "relation": "none", "type": COT_TYPE})
     ET.SubElement(d, "__forcedelete")
-    return [ET.tostring(e, encoding="utf-8") for e in (stale, delete)]
+    return [ET.tostring(xml_safe_tree(e), encoding="utf-8") for e in (stale, delete)]

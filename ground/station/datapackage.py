@@ -35,6 +35,7 @@ from holescan.errors import InputError
 from holescan.geotag import Hole
 from holescan.ground.station.cot import cot_uid, hole_cot, hole_tier, on_tak
 from holescan.ground.station.state import GroundHole
+from holescan.link import xml_safe_tree
 from holescan.outputs import atomic_output
 
 __all__ = [
@@ -152,7 +153,7 @@ def write_datapackage(
             contentType="KML",
             visible="true",
         )
-    manifest = ET.tostring(root, encoding="utf-8", xml_declaration=True)
+    manifest = ET.tostring(xml_safe_tree(root), encoding="utf-8", xml_declaration=True)
     stamp = now.timetuple()[:6]
     with atomic_output(path, force=True) as f, zipfile.ZipFile(f, "w") as z:
         for entry, data in [("MANIFEST/manifest.xml", manifest), *files]:

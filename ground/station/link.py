@@ -21,7 +21,9 @@ first saying which live-map tiles it holds (:func:`missions.send_inventory`: onl
 others are sent again), and also when the mission has waypoints no known hole explains:
 holes announced while the link was down are caught up. A link that cannot be opened,
 dies or delivers garbage is reported in one log line and retried; nothing collected is
-lost (it is in the state).
+lost (it is in the state). Every value taken is checked first (:mod:`link._values`,
+through the state: a NaN yaw, a position off the Earth, an id out of range is counted in
+the state's ``rejected`` and logged, never kept).
 """
 
 from __future__ import annotations
@@ -37,8 +39,11 @@ from typing import Any
 from holescan.ground.station.mapstore import MapStore
 from holescan.ground.station.state import StationState, TrackPoint
 from holescan.link import (
+    LinkValueError,
     MavConnection,
     SigningKey,
+    link_int,
+    link_yaw,
     mavlink,
     open_link,
     position_from_global_position_int,
@@ -264,7 +269,10 @@ class VehicleLink:
                     if h is not None and h.seq is None:  # not yet seen in the mission
                         self._next_mission = min(self._next_mission, now + 2.0)
         elif kind == "ATTITUDE":
-            self._yaw = float(msg.yaw)
+            try:
+                self._yaw = link_yaw(msg.yaw)
+            except LinkValueError as err:
+                self.state.reject("an ATTITUDE", err)
         elif kind == "GLOBAL_POSITION_INT" and comp != _COMPANION:
             p = position_from_global_position_int(msg)
             if p.lat_deg == 0 and p.lon_deg == 0:  # no fix yet
@@ -320,7 +328,11 @@ class VehicleLink:
             return
         if msg.get_type() == "MISSION_COUNT":
             if m["count"] is None:
-                m["count"] = int(msg.count)
+                try:  # seq 0 is home; at most as many holes as the state keeps
+                    m["count"] = link_int(msg.count, 0, self.state.max_holes + 1, "item count")
+                except LinkValueError as err:
+                    self.state.reject("a MISSION_COUNT", err)
+                    return
         elif m["count"] is not None and msg.seq == len(m["items"]):
             w = waypoint_from_mission_item(msg)
             m["items"][int(msg.seq)] = (int(msg.seq), w.lat_deg, w.lon_deg)

@@ -18,15 +18,13 @@ one image per tile place whatever the number of flights.
 
 from __future__ import annotations
 
-import math
 import threading
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
-from holescan.geotag import LocalFrame
-from holescan.ground.station.mapstore import MapStore, StoredTile
+from holescan.ground.station.mapstore import MapStore, StoredTile, base_tiles, map_shift
 from holescan.missions import TileFacts, coverage_from_levels, read_tile
 
 __all__ = ["Combined", "CombinedCache", "combine", "combined_places"]
@@ -71,26 +69,6 @@ def _base(tiles: list[StoredTile]) -> TileFacts:
     return min(tiles, key=lambda t: t.seq).facts
 
 
-def _shift(base: TileFacts, f: TileFacts) -> tuple[float, float]:
-    """Where map ``f``'s origin lies in the base map's metres (east, north)."""
-    if (f.lat0_deg, f.lon0_deg) == (base.lat0_deg, base.lon0_deg):
-        return 0.0, 0.0
-    e, n = LocalFrame(base.lat0_deg, base.lon0_deg).to_en(f.lat0_deg, f.lon0_deg)
-    return float(e), float(n)
-
-
-def _base_tiles(base: TileFacts, f: TileFacts, shift: tuple[float, float]) -> tuple[range, range]:
-    """Base tile (columns, rows) that tile ``f`` overlaps."""
-    side = base.n * base.cell_m
-    x0, y0, x1, y1 = f.bounds_m
-    dx, dy = shift
-    eps = 1e-6 * side
-    return (
-        range(math.floor((x0 + dx + eps) / side), math.floor((x1 + dx - eps) / side) + 1),
-        range(math.floor((y0 + dy + eps) / side), math.floor((y1 + dy - eps) / side) + 1),
-    )
-
-
 def combined_places(store: MapStore) -> tuple[TileFacts, dict[tuple[int, int], tuple[int, bool]]]:
     """The base grid and, per base tile (tx, ty) any kept tile overlaps: (the newest
     arrival among them, :attr:`StoredTile.seq`; whether an orthophoto tile is among
@@ -105,8 +83,8 @@ def combined_places(store: MapStore) -> tuple[TileFacts, dict[tuple[int, int], t
     for t in tiles:
         key = (t.facts.lat0_deg, t.facts.lon0_deg)
         if key not in shifts:
-            shifts[key] = _shift(base, t.facts)
-        cols, rows = _base_tiles(base, t.facts, shifts[key])
+            shifts[key] = map_shift(base, t.facts)
+        cols, rows = base_tiles(base, t.facts, shifts[key])
         for tx in cols:
             for ty in rows:
                 seq, ortho = out.get((tx, ty), (-1, False))
@@ -144,7 +122,7 @@ def combine(store: MapStore) -> Combined | None:
     # the later flights last: they win ties for the orthophoto
     for _, group in sorted(by_map.items(), key=lambda kv: min(t.seq for t in kv[1])):
         f0 = group[0].facts
-        dx, dy = _shift(base, f0)
+        dx, dy = map_shift(base, f0)
         cm, nm = f0.cell_m, f0.n
         col = np.floor((east - dx) / cm).astype(np.int64)  # the map's own cell indices
         row = np.floor((north - dy) / cm).astype(np.int64)

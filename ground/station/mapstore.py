@@ -7,12 +7,21 @@ each carrying its own facts) is kept as received in ``DIR/map/`` as
 one kept. There is no index to keep consistent: a restarted station reads the folder back
 (each file names itself in its facts); a damaged or foreign file there is skipped with one
 log line.
+
+Several flights are drawn on the grid of the first tile kept (the *base*,
+:mod:`ground.station.mapcombine`). A tile whose place on that grid would make the
+combined map larger than :data:`MAX_COMBINED_CELLS` cells (a 290 m square at 10 cm: far
+more than an Xtion survey covers) is refused and counted (``rejected``), as is one of a
+map whose cell or tile size differs from its own first tile's: each tile's size is
+bounded by the protocol (:func:`missions.tile_facts_of`), but two valid maps of very
+different cells could still ask for a combined raster of billions of cells.
 """
 
 from __future__ import annotations
 
 import contextlib
 import logging
+import math
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -22,12 +31,43 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from holescan.geotag import LocalFrame
 from holescan.missions import TileFacts, TileInventory, coverage_from_levels, read_tile
 from holescan.outputs import atomic_output
 
-__all__ = ["MapStore", "StoredTile", "tile_file_name"]
+__all__ = [
+    "MAX_COMBINED_CELLS",
+    "MapStore",
+    "StoredTile",
+    "base_tiles",
+    "map_shift",
+    "tile_file_name",
+]
 
 _log = logging.getLogger(__name__)
+
+MAX_COMBINED_CELLS = 4096 * 2048
+"""Most cells the station's combined map may span (its bounding box on the base grid)."""
+
+
+def map_shift(base: TileFacts, f: TileFacts) -> tuple[float, float]:
+    """Where map ``f``'s origin lies in the base map's metres (east, north)."""
+    if (f.lat0_deg, f.lon0_deg) == (base.lat0_deg, base.lon0_deg):
+        return 0.0, 0.0
+    e, n = LocalFrame(base.lat0_deg, base.lon0_deg).to_en(f.lat0_deg, f.lon0_deg)
+    return float(e), float(n)
+
+
+def base_tiles(base: TileFacts, f: TileFacts, shift: tuple[float, float]) -> tuple[range, range]:
+    """Base tile (columns, rows) that tile ``f`` overlaps."""
+    side = base.n * base.cell_m
+    x0, y0, x1, y1 = f.bounds_m
+    dx, dy = shift
+    eps = 1e-6 * side
+    return (
+        range(math.floor((x0 + dx + eps) / side), math.floor((x1 + dx - eps) / side) + 1),
+        range(math.floor((y0 + dy + eps) / side), math.floor((y1 + dy - eps) / side) + 1),
+    )
 
 
 def tile_file_name(f: TileFacts) -> str:
@@ -66,6 +106,28 @@ class MapStore:
     listeners: list[Callable[[int], None]] = field(default_factory=list)
     _tiles: dict[str, StoredTile] = field(default_factory=dict)
     _lock: threading.Lock = field(default_factory=threading.Lock)
+    _base: TileFacts | None = None
+    _grids: dict[int, tuple[int, float]] = field(default_factory=dict)
+    _box: tuple[int, int, int, int] | None = None  # base tiles: west, east, south, north
+
+    def _fits(self, f: TileFacts) -> bool:
+        """Whether tile ``f`` keeps the combined map within :data:`MAX_COMBINED_CELLS`
+        and has its map's grid; if so, it is accounted (call with the lock held)."""
+        grid = self._grids.get(f.map_id)
+        if grid is not None and grid != (f.n, f.cell_m):
+            return False
+        base = self._base if self._base is not None else f
+        cols, rows = base_tiles(base, f, map_shift(base, f))
+        box = (cols.start, cols.stop - 1, rows.start, rows.stop - 1)
+        if self._box is not None:
+            w0, e0, s0, n0 = self._box
+            box = (min(w0, box[0]), max(e0, box[1]), min(s0, box[2]), max(n0, box[3]))
+        cells = (box[1] - box[0] + 1) * (box[3] - box[2] + 1) * base.n * base.n
+        if cells > MAX_COMBINED_CELLS:
+            return False
+        self._base, self._box = base, box
+        self._grids.setdefault(f.map_id, (f.n, f.cell_m))
+        return True
 
     @classmethod
     def open(cls, folder: Path) -> MapStore:
@@ -87,6 +149,10 @@ class MapStore:
             if got is None or tile_file_name(got[0]) != path.name:
                 _log.warning("%s is not a map tile of this station; skipped", path.name)
                 continue
+            if not store._fits(got[0]):
+                _log.warning("%s lies outside the station's map (too far or too big); skipped",
+                             path.name)  # fmt: skip
+                continue
             store._tiles[path.name] = StoredTile(got[0], path.name, seq)
         store.version = max((t.seq for t in store._tiles.values()), default=0)
         return store
@@ -103,6 +169,12 @@ class MapStore:
         with self._lock:
             old = self._tiles.get(name)
             if old is not None and old.facts.version >= facts.version:
+                return None
+            if not self._fits(facts):
+                self.rejected += 1
+                if self.rejected <= 20 or self.rejected % 1000 == 0:
+                    _log.warning("map tile %s refused: outside the station's map (too far "
+                                 "or too big); %d refused", name, self.rejected)  # fmt: skip
                 return None
             with atomic_output(self.folder / name, force=True) as f:
                 f.write(data)

@@ -4,10 +4,23 @@ Everything ``holescan ground`` learns is kept here and written to ``DIR/station.
 after every change (through the output-path rule, :func:`outputs.atomic_output`: written
 to ``.station.part.json``, flushed, fsynced, renamed: a crash or a power cut leaves the
 previous or the new file, never half of one), pictures to ``DIR/cards/hole-ID.jpg`` the
-same way. A restart reads it back, so a link drop, a restart or a second sortie loses
-nothing, and holes keep the vehicle's ids. A state file of an older station
-(``holescan-ground-1``: ``lat``/``lon``/``alt``/``sigma_m``, times in float seconds) is
-read too, and written back in the current format with the next change.
+same way. Writes are batched under a flood: a few at once, then at most one every
+``save_every_s`` (the last change always reaches the file; :meth:`StationState.flush`
+at the end); an operator's mark is written at once.
+
+Every value from the link is checked before it is kept (:mod:`link._values`:
+finite, in range, ids in the protocol's range, text XML can hold); a refused one is
+counted in ``rejected`` and logged, and nothing of its packet is kept. At most
+``max_holes`` holes are kept (a flood of forged ids cannot exhaust memory or bury a
+genuine hole: the genuine one sent later still has room). A state file is checked the same
+way when it is read back: a hole whose position is not a number on the Earth is left out,
+a bad optional fact is forgotten, each with one log line, and the file as it was is kept
+beside as ``station.rejected-<time>.json``.
+
+A restart reads it back, so a link drop, a restart or a second sortie loses nothing, and
+holes keep the vehicle's ids. A state file of an older station (``holescan-ground-1``:
+``lat``/``lon``/``alt``/``sigma_m``, times in float seconds) is read too, and written back
+in the current format with the next change.
 
 A hole is known from any of: the vehicle's STATUSTEXT ``HOLE <id> <score> <lat> <lon>``
 (fast, 50 bytes), its card (picture + facts, :func:`missions.read_card`), the hole mission
@@ -35,6 +48,18 @@ import numpy as np
 from holescan.errors import InputError
 from holescan.geotag import LocalFrame, nearest_pairs
 from holescan.ground.errors import StationFileError
+from holescan.link import (
+    HOLE_ID_MAX,
+    LinkValueError,
+    card_values,
+    check_hole_id,
+    link_float,
+    link_int,
+    link_lat_lon,
+    link_yaw,
+    optional_float,
+    xml_text,
+)
 from holescan.outputs import atomic_output
 
 __all__ = [
@@ -64,6 +89,11 @@ FORMAT = "holescan-ground-2"
 _FORMAT_1 = "holescan-ground-1"
 _STATUSTEXT = re.compile(r"(?:HOLE|REVIEW) (\d+) ([\d.]+) (-?[\d.]+) (-?[\d.]+)")
 _TRACK_MAX = 20_000
+MAX_HOLES = 10_000
+"""Holes one station keeps (a flight finds tens; a flood of forged ids stops here)."""
+_ALT_M = (-1000.0, 10_000.0)
+_SIZE_M = (0.0, 1000.0)
+_T_NS_MAX = 2**63 - 1
 _TRACK_SAVE_NS = 10 * 10**9
 _NS_PER_S = 1_000_000_000
 # keys of a holescan-ground-1 hole -> this version's
@@ -81,12 +111,17 @@ def parse_hole_statustext(text: str) -> tuple[int, float, float, float] | None:
     (4, 0.3, 43.65331, -79.38312)
     >>> parse_hole_statustext("PreArm: GPS") is None
     True
+    >>> parse_hole_statustext("HOLE 1000000000 0.88 43.6533100 -79.3831200") is None
+    True
     """
     m = _STATUSTEXT.fullmatch(text.strip().rstrip("\x00"))
-    if m is None:
+    if m is None or len(m[1]) > len(str(HOLE_ID_MAX)):
         return None
-    hid, score, lat, lon = int(m[1]), float(m[2]), float(m[3]), float(m[4])
-    if not (-90 <= lat <= 90 and -180 <= lon <= 180 and 0 <= score <= 1):
+    try:
+        hid = check_hole_id(int(m[1]))
+        score = link_float(m[2], 0.0, 1.0, "score")
+        lat, lon = link_lat_lon(m[3], m[4])
+    except LinkValueError:
         return None
     return hid, score, lat, lon
 
@@ -170,6 +205,45 @@ class GroundHole:
             h.vehicle_tier = "announced"
         return h
 
+    def checked(self) -> list[str]:
+        """Check every value in place as one from the link would be
+        (:mod:`link._values`): raise :class:`link.LinkValueError` when the id,
+        position or score is bad (the hole cannot be kept); a bad optional fact is set to
+        unknown and named in the list returned."""
+        self.id = check_hole_id(self.id)
+        self.lat_deg, self.lon_deg = link_lat_lon(self.lat_deg, self.lon_deg)
+        self.score = link_float(self.score, 0.0, 1.0, "score")
+        forgotten = []
+        optional = {
+            "alt_m": _ALT_M,
+            "sigma_h_m": _SIZE_M,
+            "major_m": _SIZE_M,
+            "minor_m": _SIZE_M,
+            "p_hole": (0.0, 1.0),
+        }
+        for name, (lo, hi) in optional.items():
+            try:
+                setattr(self, name, optional_float(getattr(self, name), lo, hi, name))
+            except LinkValueError:
+                setattr(self, name, None)
+                forgotten.append(name)
+        ints = {"sightings": 0, "card_rev": 0, "t_first_unix_ns": 0, "t_updated_unix_ns": 0}
+        for name, default in ints.items():
+            try:
+                setattr(self, name, link_int(getattr(self, name), 0, _T_NS_MAX, name))
+            except LinkValueError:
+                setattr(self, name, default)
+                forgotten.append(name)
+        if self.seq is not None:
+            try:
+                self.seq = link_int(self.seq, 0, 65535, "seq")
+            except LinkValueError:
+                self.seq = None
+                forgotten.append("seq")
+        self.has_picture = self.has_picture is True
+        self.why = xml_text(self.why if isinstance(self.why, str) else "", 500)
+        return forgotten
+
 
 @dataclass(frozen=True)
 class TrackPoint:
@@ -186,7 +260,16 @@ class TrackPoint:
         """A track row of the state file (``holescan-ground-1``: time in float seconds)."""
         t, lat, lon, rel_alt, yaw = row
         t_ns = _ns_of_seconds(t) if file_format == _FORMAT_1 else int(t)
-        return cls(t_ns, float(lat), float(lon), float(rel_alt), float(yaw))
+        return cls(t_ns, float(lat), float(lon), float(rel_alt), float(yaw)).checked()
+
+    def checked(self) -> TrackPoint:
+        """This point when every value is one the link may give (else
+        :class:`missions.LinkValueError`): time, position on the Earth, height, yaw."""
+        link_int(self.t_unix_ns, 0, _T_NS_MAX, "time")
+        link_lat_lon(self.lat_deg, self.lon_deg)
+        link_float(self.rel_alt_m, *_ALT_M, "height above home")
+        link_yaw(self.yaw)
+        return self
 
 
 @dataclass
@@ -204,8 +287,16 @@ class StationState:
     version: int = 0
     listeners: list[Callable[[int], None]] = field(default_factory=list)
     clock: Callable[[], int] = time.time_ns
+    max_holes: int = MAX_HOLES
+    save_every_s: float = 0.5
+    save_burst: int = 5
+    rejected: int = 0
     _lock: threading.RLock = field(default_factory=threading.RLock)
     _last_track_save_ns: int = 0
+    _save_tokens: float = 5.0
+    _save_t: float = field(default_factory=time.monotonic)
+    _unsaved: bool = False
+    _timer: threading.Timer | None = None
 
     @property
     def path(self) -> Path:
@@ -232,15 +323,47 @@ class StationState:
             try:
                 doc = json.loads(state.path.read_text())
                 fmt = str(doc.get("format", _FORMAT_1))
-                state.holes = {int(d["id"]): GroundHole.from_json(d) for d in doc["holes"]}
-                state.track = [TrackPoint.from_json(p, fmt) for p in doc.get("track", [])]
-                state.version = int(doc.get("version", 0))
+                holes = [GroundHole.from_json(d) for d in doc["holes"]]
+                rows = list(doc.get("track", []))
+                state.version = link_int(doc.get("version", 0), 0, _T_NS_MAX, "version")
             except (OSError, ValueError, KeyError, TypeError, AttributeError) as err:
                 raise StationFileError(
                     f"{state.path} is not a holescan ground station file ({err}); move it away"
                 ) from err
+            state._resume(holes, rows, fmt)
             _log.info("resumed %d holes from %s", len(state.holes), state.path)
         return state
+
+    def _resume(self, holes: list[GroundHole], rows: list[Any], fmt: str) -> None:
+        """Keep what a state file holds that the link could have given (see the module
+        docstring); the file as it was is copied aside when anything was left out."""
+        problems = 0
+        for h in holes:
+            try:
+                forgotten = h.checked()
+            except LinkValueError as err:
+                problems += 1
+                _log.warning("%s: a hole left out (%s)", self.path, err)
+                continue
+            if forgotten:
+                problems += 1
+                _log.warning("%s: hole %d: %s unknown (not numbers in range)", self.path,
+                             h.id, ", ".join(forgotten))  # fmt: skip
+            self.holes[h.id] = h
+        for row in rows:
+            try:
+                self.track.append(TrackPoint.from_json(row, fmt))
+            except (LinkValueError, ValueError, TypeError, OverflowError):
+                problems += 1
+        if len(self.track) < len(rows):
+            _log.warning("%s: %d track points left out", self.path, len(rows) - len(self.track))
+        if problems:
+            aside = self.folder / f"station.rejected-{time.time_ns()}.json"
+            try:
+                aside.write_bytes(self.path.read_bytes())
+                _log.warning("%s kept as it was in %s", self.path.name, aside.name)
+            except OSError as err:
+                _log.warning("%s not copied aside: %s", self.path, err)
 
     # -- reading ------------------------------------------------------------------------
     def snapshot(self) -> tuple[int, list[GroundHole], list[TrackPoint]]:
@@ -253,12 +376,49 @@ class StationState:
             )
 
     # -- changes ------------------------------------------------------------------------
-    def _changed(self) -> None:
+    def _changed(self, *, save_now: bool = False) -> None:
         with self._lock:
             self.version += 1
             version = self.version
-            self._save()
+            if save_now or self._may_save():
+                self._save()
+            else:
+                self._save_later()
         self._tell(version)
+
+    def _may_save(self) -> bool:
+        """A token bucket: ``save_burst`` writes at once, then one per ``save_every_s``."""
+        now = time.monotonic()
+        self._save_tokens = min(
+            float(self.save_burst), self._save_tokens + (now - self._save_t) / self.save_every_s
+        )
+        self._save_t = now
+        if self._save_tokens >= 1.0:
+            self._save_tokens -= 1.0
+            return True
+        return False
+
+    def _save_later(self) -> None:
+        self._unsaved = True
+        if self._timer is None:
+            self._timer = threading.Timer(self.save_every_s, self.flush)
+            self._timer.daemon = True
+            self._timer.start()
+
+    def flush(self) -> None:
+        """Write what a batched save still holds (the station calls it when it stops)."""
+        with self._lock:
+            self._timer = None
+            if self._unsaved:
+                self._save()
+
+    def reject(self, what: str, err: Exception) -> None:
+        """Count and log a value from the link that was refused (nothing of it is kept)."""
+        with self._lock:
+            self.rejected += 1
+            n = self.rejected
+        if n <= 20 or n % 1000 == 0:  # a flood: one line per thousand
+            _log.warning("refused %s from the link (%s); %d refused so far", what, err, n)
 
     def _tell(self, version: int) -> None:
         for fn in list(self.listeners):
@@ -274,9 +434,18 @@ class StationState:
             "holes": [h.to_json() for _, h in sorted(self.holes.items())],
             "track": [dataclasses.astuple(p) for p in self.track],
         }
+        text = json.dumps(doc, separators=(",", ":"), allow_nan=False)  # strict: checked above
         with atomic_output(self.path, force=True) as f:
-            f.write(json.dumps(doc, separators=(",", ":")).encode())
+            f.write(text.encode())
+        self._unsaved = False
         self._last_track_save_ns = self.clock()
+
+    def _room_for(self, hole_id: int) -> bool:
+        """Whether hole ``hole_id`` may be kept: known, or fewer than ``max_holes`` kept."""
+        if hole_id in self.holes or len(self.holes) < self.max_holes:
+            return True
+        self.reject(f"hole {hole_id}", LinkValueError(f"{self.max_holes} holes kept already"))
+        return False
 
     def _hole(self, hole_id: int, lat_deg: float, lon_deg: float, score: float) -> GroundHole:
         now = self.clock()
@@ -288,13 +457,18 @@ class StationState:
         return h
 
     def on_statustext(self, text: str) -> GroundHole | None:
-        """Take a ``HOLE ...`` STATUSTEXT; return the hole when it was one."""
+        """Take a ``HOLE ...`` STATUSTEXT; return the hole when it was one (a text that
+        starts as one but whose values are out of range is counted in ``rejected``)."""
         parsed = parse_hole_statustext(text)
         if parsed is None:
+            if text.lstrip().startswith(("HOLE ", "REVIEW ")):
+                self.reject("a hole STATUSTEXT", LinkValueError(repr(xml_text(text, 60))))
             return None
         hid, score, lat, lon = parsed
         tier: VehicleTier = "review" if text.strip().startswith("REVIEW") else "announced"
         with self._lock:
+            if not self._room_for(hid):
+                return None
             h = self.holes.get(hid)
             if h is not None and (h.lat_deg, h.lon_deg, h.score, h.vehicle_tier) == (
                 lat,
@@ -312,27 +486,35 @@ class StationState:
         """Take a card's facts (:func:`missions.read_card`) and picture; an older revision
         than kept is ignored."""
         try:
-            hid, rev = int(facts["id"]), int(facts.get("rev", 1))
-            lat, lon, score = float(facts["lat"]), float(facts["lon"]), float(facts["score"])
-        except (KeyError, TypeError, ValueError) as err:
-            _log.warning("card without usable facts ignored (%s)", err)
+            v = card_values(facts)
+        except LinkValueError as err:
+            self.reject("a card", err)
             return None
+        hid, rev = v.hole_id, v.rev
         with self._lock:
             h = self.holes.get(hid)
             if h is not None and h.card_rev >= rev:
                 return h
+            if not self._room_for(hid):
+                return None
             with atomic_output(self.card_path(hid), force=True) as f:
                 f.write(jpeg)
-            h = self._hole(hid, lat, lon, score)
-            h.lat_deg, h.lon_deg, h.score, h.card_rev, h.has_picture = lat, lon, score, rev, True
-            h.alt_m = _opt(facts.get("alt"))
-            h.sigma_h_m = _opt(facts.get("sigma"))
-            h.major_m = _opt(facts.get("major"))
-            h.minor_m = _opt(facts.get("minor"))
-            h.sightings = int(facts.get("n", h.sightings))
-            h.why = str(facts.get("why", h.why))[:500]
-            h.vehicle_tier = "review" if facts.get("tier") == "review" else "announced"
-            h.p_hole = _opt(facts.get("p"))
+            h = self._hole(hid, v.lat_deg, v.lon_deg, v.score)
+            h.lat_deg, h.lon_deg, h.score, h.card_rev, h.has_picture = (
+                v.lat_deg,
+                v.lon_deg,
+                v.score,
+                rev,
+                True,
+            )
+            h.alt_m, h.sigma_h_m = v.alt_m, v.sigma_h_m
+            h.major_m, h.minor_m = v.major_m, v.minor_m
+            if v.sightings is not None:
+                h.sightings = v.sightings
+            if v.why is not None:
+                h.why = v.why
+            h.vehicle_tier = v.tier
+            h.p_hole = v.p_hole
         self._changed()
         return h
 
@@ -365,7 +547,7 @@ class StationState:
                 raise InputError(f"no hole {hole_id}")
             h.mark = mark
             h.t_updated_unix_ns = self.clock()
-        self._changed()
+        self._changed(save_now=True)  # an operator's word is never held back
         return h
 
     def on_position(self, p: TrackPoint, min_step_s: float = 1.0) -> bool:
@@ -373,6 +555,11 @@ class StationState:
 
         The track is saved with the next change, or every 10 s.
         """
+        try:
+            p.checked()
+        except LinkValueError as err:
+            self.reject("a track point", err)
+            return False
         with self._lock:
             if self.track and p.t_unix_ns - self.track[-1].t_unix_ns < min_step_s * _NS_PER_S:
                 return False
@@ -416,10 +603,3 @@ def _ns_of_seconds(t_s: Any) -> int:
     1700000000250000000
     """
     return round(float(t_s) * 1_000_000) * 1000
-
-
-def _opt(v: Any) -> float | None:
-    try:
-        return None if v is None else float(v)
-    except (TypeError, ValueError):
-        return None

@@ -20,6 +20,12 @@ from holescan import __version__
 from holescan.cli._args import EXIT_INPUT, EXIT_INTERRUPTED, end_progress
 from holescan.errors import HolescanError
 
+GROUND_ONLY = frozenset(
+    {"numba", "matplotlib", "dask", "distributed", "fsspec", "pytak", "takproto"}
+    | {"cryptography", "rasterio", "rosbags", "starlette", "uvicorn", "h11", "bokeh"}
+)
+"""Import names of what pyproject's ``ground`` extra installs (the flight install lacks them)."""
+
 _COMMAND_MODULES = (
     "holescan.cli._cmd_detect",
     "holescan.cli._cmd_dataset",
@@ -65,6 +71,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         end_progress()
         where = f": {err.filename}" if err.filename else ""
         print(f"holescan {args.verb}: error: {err.strerror or err}{where}", file=sys.stderr)
+        return EXIT_INPUT
+    except ModuleNotFoundError as err:  # a ground command on the flight install
+        top = (err.name or "").split(".")[0]
+        if top not in GROUND_ONLY:
+            raise
+        end_progress()
+        print(
+            f"holescan {args.verb}: error: this needs the ground install (module {top!r} is "
+            "missing): pip install 'holescan[ground]'",
+            file=sys.stderr,
+        )
         return EXIT_INPUT
     except KeyboardInterrupt:
         end_progress()

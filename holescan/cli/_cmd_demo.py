@@ -33,8 +33,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "-o",
         "--out",
         type=Path,
-        help="folder for the log, hole files and report (default: a new "
-        "holescan-demo-YYYYmmdd-HHMMSS folder here)",
+        help="folder for the log, hole files and report (default: a new folder "
+        "holescan/demo/YYYYmmdd-HHMMSS in the user's data folder, $XDG_DATA_HOME or "
+        "~/.local/share; printed when the demo starts)",
     )
     p.add_argument(
         "--duration",
@@ -105,7 +106,7 @@ class _Display:
 def run(args: argparse.Namespace) -> int:
     import dataclasses
 
-    from holescan.demo import DEMO_SORTIE, DemoOptions, format_result, run_demo
+    from holescan.demo import DEMO_SORTIE, DemoOptions, default_demo_out, format_result, run_demo
 
     sortie = DEMO_SORTIE
     changes: dict[str, object] = {}
@@ -117,7 +118,9 @@ def run(args: argparse.Namespace) -> int:
         changes["n_access_holes"] = args.holes
     if changes:
         sortie = dataclasses.replace(sortie, **changes)  # type: ignore[arg-type]
-    opts = DemoOptions(out=args.out, sortie=sortie, duration_s=args.duration)
+    out = args.out or default_demo_out()
+    print(f"holescan demo: writing to {out}", file=sys.stderr, flush=True)
+    opts = DemoOptions(out=out, sortie=sortie, duration_s=args.duration)
     stop = threading.Event()
 
     def on_sigint(signum: int, _frame: FrameType | None) -> None:

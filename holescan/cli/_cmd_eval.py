@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import tempfile
 from dataclasses import replace
 from pathlib import Path
 
@@ -18,9 +19,11 @@ from holescan.ground import (
     load_dataset,
     plot_pr,
     plot_reliability,
+    read_camera,
     run_detector,
     write_coco_results,
 )
+from holescan.ground.recordings import recording_dataset
 from holescan.outputs import check_output, output_via_part
 
 
@@ -32,8 +35,21 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "authors' rule (intersection / larger box > 0.5), recall and precision at full recall.",
     )
     p.add_argument(
-        "dataset", type=Path, nargs="?", help="dataset folder (annotations.json, camera.json)"
+        "dataset",
+        type=Path,
+        nargs="?",
+        help="dataset folder (annotations.json, camera.json), or a RECORDING (TUM RGB-D "
+        "folder, ROS 1/ROS 2 bag, .oni, flight log) with --boxes",
     )
+    p.add_argument(
+        "--boxes",
+        type=Path,
+        metavar="CSV",
+        help="with a RECORDING: its hole boxes, frame,x,y,w,h per row (frame index, "
+        "frame_NNNNNN or a TUM colour file; x, y 1-based unless --zero-based)",
+    )
+    p.add_argument("--zero-based", action="store_true", help="--boxes x, y count from 0")
+    p.add_argument("--camera", type=Path, help="with a RECORDING: camera.json to use instead")
     p.add_argument(
         "--synthetic",
         type=int,
@@ -118,9 +134,30 @@ def run(args: argparse.Namespace) -> int:
             bar.done()
     if args.dataset is None:
         raise InputError("give a DATASET folder or --synthetic")
+    if args.boxes is None:
+        return _evaluate(args, outputs, args.dataset)
+    if (args.dataset / "annotations.json").is_file():
+        raise InputError(
+            f"{args.dataset}: a dataset folder has its boxes: --boxes goes with a RECORDING"
+        )
+    with tempfile.TemporaryDirectory(prefix="holescan-eval-") as tmp:
+        # the recording's frames and --boxes as a scratch dataset, gone after the run
+        camera = read_camera(args.camera) if args.camera else None
+        origin = 0 if args.zero_based else 1
+        recording_dataset(args.dataset, args.boxes, tmp, camera=camera, origin=origin)
+        shown = args.dataset
+        args.dataset = Path(tmp)
+        return _evaluate(args, outputs, shown)
+
+
+def _evaluate(
+    args: argparse.Namespace, outputs: dict[str, tuple[set[str], Path | None]], shown: Path
+) -> int:
+    """Run and print the evaluation of the dataset folder ``args.dataset`` (``shown``: what
+    the user gave, for the printed lines)."""
     dataset = load_dataset(args.dataset)
     if not any(img.boxes for img in dataset.images):
-        raise InputError(f"{args.dataset}: the dataset has no annotated hole; nothing to evaluate")
+        raise InputError(f"{shown}: the dataset has no annotated hole; nothing to evaluate")
     ks = _parse_ks(args.superpixels)
     base = params_from_args(args)
     runs: list[tuple[str, object]] = []
@@ -150,7 +187,7 @@ def run(args: argparse.Namespace) -> int:
         reports.append(run_detector(dataset, params, name, progress, args.workers))  # type: ignore[arg-type]
         bar.done()
     n_gt = reports[0].iou.n_gt
-    print(f"{args.dataset}: {n} images, {n_gt} access holes (crowd boxes ignored)")
+    print(f"{shown}: {n} images, {n_gt} access holes (crowd boxes ignored)")
     print(format_table(reports))
     if args.detections:
         suffixes = outputs["detections"][0]
@@ -159,7 +196,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"detections ({reports[0].name}): {args.detections}")
     if args.plot:
         with output_via_part(args.plot, suffixes=_PLOT_SUFFIXES, force=args.force) as tmp:
-            plot_pr(tmp, reports, f"{args.dataset.name}: {n} images, {n_gt} holes")
+            plot_pr(tmp, reports, f"{shown.name}: {n} images, {n_gt} holes")
         print(f"precision-recall plot: {args.plot}")
     reliability = args.reliability
     default = next((r for r in reports if r.name == "default"), None)
@@ -167,7 +204,7 @@ def run(args: argparse.Namespace) -> int:
         p, is_true = calibration_outcomes(default.iou)
         brier = brier_score(p, is_true)
         print(f"default mode p_hole: Brier score {brier:.4f} over {len(p)} detections")
-        title = f"{args.dataset.name}: {len(p)} detections, Brier {brier:.3f}"
+        title = f"{shown.name}: {len(p)} detections, Brier {brier:.3f}"
         with output_via_part(reliability, suffixes=_PLOT_SUFFIXES, force=args.force) as tmp:
             plot_reliability(tmp, p, is_true, title)
         print(f"reliability diagram (p_hole): {reliability}")

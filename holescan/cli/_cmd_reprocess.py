@@ -40,7 +40,8 @@ def add_engine_arguments(p: argparse.ArgumentParser, default_out: str) -> None:
         "logs",
         nargs="+",
         help="flight logs: files of one or more flights (NAME_0000.mcap brings its parts); "
-        "paths every worker can read, or URLs fsspec opens",
+        "paths every worker can read, or URLs fsspec opens; or recordings (TUM RGB-D folder, "
+        "ROS 1/ROS 2 bag, .oni), written as flight logs into OUT/recordings/ first",
     )
     p.add_argument(
         "-o", "--out", type=Path, default=Path(default_out), help=f"output folder ({default_out})"
@@ -274,15 +275,22 @@ def _quiet_dask() -> None:
 
 def execute(args: argparse.Namespace, fn: Callable[..., ReprocessResult]) -> int:
     """Run ``fn(logs, out, opts, progress=..., stop=...)``; print its lines."""
+    from holescan.ground.recordings import flight_logs_of
+
     opts = options(args)
     if not args.verbose:  # INFO lines would break the progress display
         logging.getLogger().setLevel(logging.WARNING)
         _quiet_dask()
+    logs, converted = flight_logs_of(args.logs, args.out)
+    for source, done in converted:
+        poses = "poses from {} + {}".format(*done.telemetry) if done.telemetry else "no poses"
+        what = "kept (made from it before)" if done.reused else f"{done.frames} frames, {poses}"
+        print(f"{source}: as the flight log {done.log}: {what}")
     stop = threading.Event()
     restore = stop_on_sigint(stop)
     try:
         with ProgressBar() as bar:
-            result = fn(args.logs, args.out, opts, progress=bar, stop=stop)
+            result = fn(logs, args.out, opts, progress=bar, stop=stop)
     finally:
         restore()
     for line in result.lines():

@@ -13,7 +13,7 @@ from tests.ground.recordings.recwrite import Pair, write_bag, write_tum
 Scene = tuple[list[Pair], CameraIntrinsics, list[tuple[tuple[float, float, float, float], ...]]]
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def scene(tmp_path_factory: pytest.TempPathFactory) -> Scene:
     from holescan.ground.images import read_depth, read_rgb
     from holescan.sim import synth_dataset
@@ -23,7 +23,7 @@ def scene(tmp_path_factory: pytest.TempPathFactory) -> Scene:
     return pairs, ds.camera, [im.boxes for im in ds.images]
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def recordings(tmp_path_factory: pytest.TempPathFactory, scene: Scene) -> dict[str, Path]:
     """The scene as a TUM folder, a ROS 1 bag and a ROS 2 bag folder."""
     pairs, camera, _ = scene

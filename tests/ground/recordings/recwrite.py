@@ -53,10 +53,13 @@ def write_bag(
     *,
     depth_encoding: Literal["16UC1", "32FC1"] = "16UC1",
     compressed_colour: bool = False,
+    fix: tuple[float, float, float] | None = None,
 ) -> Path:
     """A ROS ``version`` bag: colour on /camera/rgb/image_color (bgr8, or JPEG-free PNG
     CompressedImage), registered depth on /camera/depth_registered/image_raw, raw depth of
-    another size on /camera/depth/image_raw (must not be chosen), CameraInfo beside colour."""
+    another size on /camera/depth/image_raw (must not be chosen), CameraInfo beside colour.
+    ``fix`` (lat, lon, alt): MAVROS's NavSatFix at 10 Hz and Imu at 50 Hz (level, facing
+    north) from 0.5 s before the first frame to 0.5 s after the last."""
     ts = get_typestore(Stores.ROS1_NOETIC if version == 1 else Stores.ROS2_HUMBLE)
     T = ts.types
     Image, Info = T["sensor_msgs/msg/Image"], T["sensor_msgs/msg/CameraInfo"]
@@ -126,6 +129,8 @@ def write_bag(
         )
         c_raw = writer.add_connection("/camera/depth/image_raw", Image.__msgtype__, typestore=ts)
         c_info = writer.add_connection("/camera/rgb/camera_info", Info.__msgtype__, typestore=ts)
+        if fix is not None:
+            _write_pose(writer, ts, serialize, header, fix, len(frames))
         for i, (rgb, mm) in enumerate(frames):
             t = T0_NS + i * PERIOD_NS
             t_d = t + 3_000_000
@@ -153,3 +158,47 @@ def write_bag(
             ):
                 writer.write(conn, when, serialize(msg, conn.msgtype))
     return path
+
+
+def _write_pose(
+    writer: Any, ts: Any, serialize: Any, header: Any, fix: tuple[float, float, float], n: int
+) -> None:
+    T = ts.types
+    NavSatFix, Status, Imu = (
+        T["sensor_msgs/msg/NavSatFix"],
+        T["sensor_msgs/msg/NavSatStatus"],
+        T["sensor_msgs/msg/Imu"],
+    )
+    Quaternion, Vector3 = T["geometry_msgs/msg/Quaternion"], T["geometry_msgs/msg/Vector3"]
+    c_fix = writer.add_connection(
+        "/mavros/global_position/global", NavSatFix.__msgtype__, typestore=ts
+    )
+    c_imu = writer.add_connection("/mavros/imu/data", Imu.__msgtype__, typestore=ts)
+    start, end = T0_NS - 500_000_000, T0_NS + n * PERIOD_NS + 500_000_000
+    s45 = float(np.sqrt(0.5))
+    zeros = np.zeros(9)
+    msgs: list[tuple[int, Any, Any]] = []
+    for k, t in enumerate(range(start, end, 100_000_000)):
+        msg = NavSatFix(
+            header=header(t, k),
+            status=Status(status=0, service=1),
+            latitude=fix[0],
+            longitude=fix[1],
+            altitude=fix[2],
+            position_covariance=np.diag([0.25, 0.25, 1.0]).reshape(-1),
+            position_covariance_type=2,
+        )
+        msgs.append((t, c_fix, msg))
+    for k, t in enumerate(range(start, end, 20_000_000)):
+        msg = Imu(
+            header=header(t, k),
+            orientation=Quaternion(x=0.0, y=0.0, z=s45, w=s45),
+            orientation_covariance=zeros,
+            angular_velocity=Vector3(x=0.0, y=0.0, z=0.0),
+            angular_velocity_covariance=zeros,
+            linear_acceleration=Vector3(x=0.0, y=0.0, z=9.81),
+            linear_acceleration_covariance=zeros,
+        )
+        msgs.append((t, c_imu, msg))
+    for t, conn, msg in sorted(msgs, key=lambda m: m[0]):
+        writer.write(conn, t, serialize(msg, conn.msgtype))
