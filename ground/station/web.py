@@ -26,12 +26,11 @@ import math
 import socket
 import threading
 from collections.abc import Callable, Iterable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from holescan.errors import InputError
 from holescan.geotag import CIRCLE_95_PER_SIGMA, LocalFrame
 from holescan.ground.station.audit import AuditEntry, AuditTrail
-from holescan.ground.station.events import Changes, EventStream
 from holescan.ground.station.files import hole_summary
 from holescan.ground.station.guard import GuardMiddleware, Limits, RateLimiter, default_names
 from holescan.ground.station.mapcombine import CombinedCache
@@ -39,9 +38,11 @@ from holescan.ground.station.maplayers import Reply, map_route
 from holescan.ground.station.mapstore import MapStore
 from holescan.ground.station.pairing import Pairing, Pairings
 from holescan.ground.station.state import MARKS, GroundHole, StationState
-from holescan.ground.station.webapp import make_app
-from holescan.ground.station.webserver import WebServer
 from holescan.missions import XTION, Camera
+
+if TYPE_CHECKING:
+    from holescan.ground.station.events import Changes, EventStream
+    from holescan.ground.station.webserver import WebServer
 
 __all__ = ["StationWeb", "state_document", "station_url"]
 
@@ -185,8 +186,14 @@ class StationWeb:
         self.errors = 0
         """Requests whose handler raised (a bug: the fuzz tests want none)."""
         self._mark_lock = threading.Lock()
-        self.changes = Changes(state.version)
-        self.events = EventStream(self.changes, limits)
+        # the web stack (the ground extra) is imported when a page is served, not with
+        # holescan.ground: the flight install can import the ground package's names
+        from holescan.ground.station.events import Changes, EventStream
+        from holescan.ground.station.webapp import make_app
+        from holescan.ground.station.webserver import WebServer
+
+        self.changes: Changes = Changes(state.version)
+        self.events: EventStream = EventStream(self.changes, limits)
         state.listeners.append(self.changes.set)
         app = GuardMiddleware(
             make_app(self),
@@ -195,7 +202,7 @@ class StationWeb:
             on_refuse=self._count_refused,
             max_head_bytes=limits.max_head_bytes,
         )
-        self.server = WebServer(app, host, port, limits)
+        self.server: WebServer = WebServer(app, host, port, limits)
 
     def _count_refused(self) -> None:
         self.refused += 1

@@ -72,35 +72,38 @@ def test_pairing_is_checked_before_the_page_keeps_it(station: Station) -> None:
     assert station.state.holes[2].mark == "visited"
 
 
-def _open_stream(port: int) -> socket.socket:
+def _open_stream(port: int) -> tuple[socket.socket, bytes]:
+    """An event stream, and what came with its head."""
     s = socket.create_connection(("127.0.0.1", port), timeout=10)
     s.sendall(f"GET /events HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n\r\n".encode())
-    assert s.recv(4096).startswith(b"HTTP/1.1 200")
-    return s
+    first = s.recv(4096)
+    assert first.startswith(b"HTTP/1.1 200")
+    return s, first
 
 
 def test_event_streams_are_capped_per_address_and_end_by_a_deadline(tmp_path: Path) -> None:
     limits = Limits(max_events_per_client=2, events_s=1.5)
     st_ = Station(tmp_path / "st", limits=limits)
     p = st_.port
-    socks: list[socket.socket] = []
+    socks: list[tuple[socket.socket, bytes]] = []
     try:
         socks = [_open_stream(p), _open_stream(p)]
         r = request(p, "GET", "/events")
         assert r.status == 503 and r.headers["retry-after"] == "5"
         assert st_.web.events.refused == 1
-        # each stream says how soon to come back, and ends by its deadline
-        for s in socks:
-            data = b""
-            s.settimeout(10)
-            while chunk := s.recv(4096):
+        # each stream says how soon to come back, and ends by its deadline (the chunked
+        # body's last chunk; the connection may stay open for another request)
+        for s, data in socks:
+            while not data.endswith(b"\r\n0\r\n\r\n"):
+                chunk = s.recv(4096)
+                assert chunk, data
                 data += chunk
             assert b"retry: 2000" in data and b"data: " in data
         wait_for(lambda: st_.web.events.open == 0, 10.0, "the slots given back")
         assert request(p, "GET", "/state.json").status == 200
         socks = [_open_stream(p)]  # and the address may open one again
     finally:
-        for s in socks:
+        for s, _ in socks:
             s.close()
         st_.close()
 
