@@ -9,6 +9,13 @@ and the hole pipeline in :mod:`holescan.geotag`.
 
 from holescan.capture._clock import ClockEstimate, ClockSync
 from holescan.capture._daemon import Flight
+from holescan.capture._diskbudget import (
+    DiskBudget,
+    DiskPolicy,
+    disk_budget,
+    expected_bytes_per_s,
+    preflight_disk_budget,
+)
 from holescan.capture._flightrecords import FlightConfig, FlightCounters, FlightSummary
 from holescan.capture._fly import FlyReport, fly, format_report
 from holescan.capture._flyconfig import (
@@ -38,7 +45,7 @@ from holescan.capture._preflightitems import (
 from holescan.capture._sensorsetup import PacedReplay, SensorSetup, open_sensor
 from holescan.capture._usb import UsbDeviceInfo, find_xtion, reset_xtion
 from holescan.capture._worker import DetectionWorker, WorkerResult
-from holescan.capture.errors import CaptureError, ClockUnavailable, SensorError
+from holescan.capture.errors import CaptureError, ClockUnavailable, DiskBudgetError, SensorError
 from holescan.capture.openni import (
     OniInfo,
     OniSource,
@@ -63,6 +70,9 @@ __all__ = [
     "ClockSync",
     "ClockUnavailable",
     "DetectionWorker",
+    "DiskBudget",
+    "DiskBudgetError",
+    "DiskPolicy",
     "Flight",
     "FlightConfig",
     "FlightCounters",
@@ -90,7 +100,9 @@ __all__ = [
     "WorkerResult",
     "camera_from_fov",
     "check_table",
+    "disk_budget",
     "disk_item",
+    "expected_bytes_per_s",
     "export_oni",
     "find_xtion",
     "fly",
@@ -101,6 +113,7 @@ __all__ = [
     "openni2_library",
     "parse_fly_config",
     "preflight",
+    "preflight_disk_budget",
     "require_go",
     "reset_xtion",
     "scan_oni",

@@ -43,6 +43,7 @@ from holescan.capture._worker import DetectionWorker, WorkerResult
 from holescan.capture.errors import ClockUnavailable, SensorError
 from holescan.detect import CameraIntrinsics, Frame, FrameSource
 from holescan.flightlog import FlightLogError
+from holescan.flightlog.diskspace import DiskSpace
 from holescan.flightlog.writer import FlightLogWriter
 from holescan.geotag import BestViews, Hole, HolePipeline, HoleView, Tier, VehiclePose, local_en_m
 from holescan.link import PoseInvalid, PoseUnavailable, TelemetryTimeoutError
@@ -75,8 +76,10 @@ class Flight:
         on_holes: HoleListener | None = None,
         before_close: Callable[[], None] | None = None,
         on_frame: FrameListener | None = None,
+        disk: DiskSpace | None = None,
     ) -> None:
         self.config = config
+        self._disk = disk
         self._on_frame_hook = on_frame
         self.camera = camera
         self._source_factory = source_factory
@@ -423,6 +426,7 @@ class Flight:
             mount=cfg.mount,
             errors=cfg.errors,
             options=cfg.log_options,
+            disk=self._disk,
         )
         self._writer = writer
         deadline: threading.Timer | None = None

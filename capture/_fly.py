@@ -21,11 +21,13 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from holescan.capture._daemon import Flight
+from holescan.capture._diskbudget import DiskBudget, preflight_disk_budget
 from holescan.capture._flightrecords import FlightSummary
 from holescan.capture._flyconfig import FlyConfig
 from holescan.capture._livemap import LiveMap, LiveMapStats
 from holescan.capture._mavlink import Telemetry
 from holescan.capture._sensorsetup import SensorSetup, open_sensor
+from holescan.flightlog.diskspace import DiskSpace
 from holescan.geotag import AnnounceGate, Hole, HoleView, Tier
 from holescan.link import TelemetryError
 from holescan.missions import HoleMissionServer, MapLayer
@@ -47,6 +49,7 @@ class FlyReport:
     map_stats : the live map's counters (None: no live map).
     map_tiles : the newest bytes of every map tile the flight held at its end
         ((layer, tx, ty) -> picture), what the ground station should hold.
+    disk : the disk budget said before take-off (None: not checked).
     """
 
     summary: FlightSummary
@@ -58,10 +61,15 @@ class FlyReport:
     tile_bytes: int = 0
     map_stats: LiveMapStats | None = None
     map_tiles: Mapping[tuple[MapLayer, int, int], bytes] = field(default_factory=dict)
+    disk: DiskBudget | None = None
 
 
 def fly(
-    cfg: FlyConfig, setup: SensorSetup | None = None, *, stop: threading.Event | None = None
+    cfg: FlyConfig,
+    setup: SensorSetup | None = None,
+    *,
+    stop: threading.Event | None = None,
+    disk: DiskSpace | None = None,
 ) -> FlyReport:
     """Run one flight as configured; return when it ends (limit reached, source ended, stop).
 
@@ -70,8 +78,15 @@ def fly(
 
     ``stop`` (e.g. set by a SIGINT/SIGTERM handler) ends the flight cleanly: capture stops,
     the detection worker is drained and the MCAP log is finished and closed.
+
+    Before anything starts, the disk budget is said (and the flight refused with
+    :class:`~capture.errors.DiskBudgetError` when the planned flight does not fit and the
+    configuration says refuse: :func:`~capture._diskbudget.preflight_disk_budget`).
+    ``disk`` : where the log folder's free space is read (default: the real file system),
+    before take-off and by the log writer's image reserve during the flight.
     """
     announced: list[str] = []
+    budget = preflight_disk_budget(cfg, disk)
     fc = cfg.flight_config()
     if setup is None:
         setup = open_sensor(cfg)
@@ -179,6 +194,7 @@ def fly(
             # On the shared link the last pictures must go out before the link closes.
             before_close=flush_shared if shared else None,
             on_frame=live_map.offer if live_map is not None else None,
+            disk=disk,
         )
         if stop is not None:
             flight.stop = stop
@@ -205,6 +221,7 @@ def fly(
         *counts,
         map_stats=live_map.stats if live_map is not None else None,
         map_tiles=map_tiles,
+        disk=budget,
     )
 
 
@@ -245,6 +262,13 @@ def format_report(report: FlyReport, gate: AnnounceGate | None = None) -> str:
         f"the rest candidates; "
         f"{c.announcements} announcements, {len(report.announced)} sent to the ground station"
     )
+    if report.disk is not None:
+        lines.append(report.disk.describe())
+    if s.log.images_stopped_t_unix_ns is not None:
+        lines.append(
+            f"disk reserve reached: frames stopped being logged ({s.log.frames_not_logged} "
+            "not logged); telemetry, detections and holes were kept"
+        )
     if report.cards_sent or report.card_bytes:
         lines.append(
             f"hole pictures: {report.cards_sent} sent, {report.card_bytes} B "

@@ -9,7 +9,8 @@ sensor and the links, and one table per part::
     [capture]  frame timeout, retry back-off, start-up sync, USB reset ...
     [detect]   detector mode, searcher ...
     [mount]    camera angles and offset on the vehicle
-    [log]      MCAP compression, chunk and file sizes
+    [log]      MCAP compression, chunk and file sizes, image codecs
+    [disk]     the disk budget before take-off, the image reserve, retention
     [holes]    announcing and serving holes
     [sim]      the simulated sortie (``sensor = "sim"``), checked by :mod:`sim`
 
@@ -40,6 +41,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
+from holescan.capture._diskbudget import DiskPolicy
 from holescan.capture._flightrecords import FlightConfig
 from holescan.capture._livemap import LiveMapConfig
 from holescan.capture._mavlink import DEFAULT_BAUD
@@ -107,6 +109,8 @@ class FlyConfig:
     hole_card_bytes_per_s : byte budget of the holes' pictures to the ground station.
     live_map : the on-board live map sent to the ground station with what the pictures
         leave of their budget (:class:`~capture._livemap.LiveMapConfig`; None: off).
+    disk : the ``[disk]`` table: the budget before take-off
+        (:class:`~capture._diskbudget.DiskPolicy`).
     sim_table : the ``[sim]`` table as written (checked by :mod:`sim`). record : the settings
     as flat ``table.key`` -> value
     (logged as the flight's ``holescan.config`` metadata).
@@ -129,6 +133,7 @@ class FlyConfig:
     hole_clearance_m: float = 5.0
     hole_card_bytes_per_s: float = 1000.0
     live_map: LiveMapConfig | None = field(default_factory=LiveMapConfig)
+    disk: DiskPolicy = field(default_factory=DiskPolicy)
     sim_table: Mapping[str, Any] = field(default_factory=dict)
     record: Mapping[str, Any] = field(default_factory=dict)
 
@@ -221,6 +226,16 @@ _TABLES: dict[str, dict[str, tuple[tuple[type, ...], Any]]] = {
         "sync_interval_s": _from(LogOptions, _NUM, "sync_interval_s"),
         "max_queued_frames": _from(LogOptions, (int,), "max_queued_frames"),
         "max_queued_messages": _from(LogOptions, (int,), "max_queued_messages"),
+        "color": _from(LogOptions, (str,), "color"),
+        "jpeg_quality": _from(LogOptions, (int,), "jpeg_quality"),
+        "depth": _from(LogOptions, (str,), "depth"),
+    },
+    "disk": {
+        "planned_flight_s": (_NUM, None),
+        "expected_bytes_per_s": (_NUM, None),
+        "when_short": _from(DiskPolicy, (str,), "when_short"),
+        "image_reserve_bytes": _from(LogOptions, (int,), "image_reserve_bytes"),
+        "remove_oldest_finished": _from(DiskPolicy, (bool,), "remove_oldest_finished"),
     },
     "holes": {
         "announce_min_p_hole": (_NUM, AnnounceGate.min_p_hole),
@@ -362,16 +377,33 @@ def parse_fly_config(
     except InputError as err:
         raise InputError(f"{where}: mount.{err}") from err
 
-    lg = tables["log"]
-    options = LogOptions(
-        chunk_size=lg["chunk_size"],
-        compression=lg["compression"],
-        max_file_bytes=lg["max_file_bytes"],
-        max_file_s=float(lg["max_file_s"]),
-        sync_interval_s=float(lg["sync_interval_s"]),
-        max_queued_frames=lg["max_queued_frames"],
-        max_queued_messages=lg["max_queued_messages"],
-    )
+    lg, dk = tables["log"], tables["disk"]
+    try:
+        options = LogOptions(
+            chunk_size=lg["chunk_size"],
+            compression=lg["compression"],
+            max_file_bytes=lg["max_file_bytes"],
+            max_file_s=float(lg["max_file_s"]),
+            sync_interval_s=float(lg["sync_interval_s"]),
+            max_queued_frames=lg["max_queued_frames"],
+            max_queued_messages=lg["max_queued_messages"],
+            color=lg["color"],
+            jpeg_quality=lg["jpeg_quality"],
+            depth=lg["depth"],
+            image_reserve_bytes=dk["image_reserve_bytes"],
+        )
+        disk = DiskPolicy(
+            planned_flight_s=None
+            if dk["planned_flight_s"] is None
+            else float(dk["planned_flight_s"]),
+            expected_bytes_per_s=(
+                None if dk["expected_bytes_per_s"] is None else float(dk["expected_bytes_per_s"])
+            ),
+            when_short=dk["when_short"],
+            remove_oldest_finished=dk["remove_oldest_finished"],
+        )
+    except InputError as err:
+        raise InputError(f"{where}: {err}") from err
 
     holes = tables["holes"]
     try:
@@ -445,6 +477,7 @@ def parse_fly_config(
         hole_clearance_m=float(holes["clearance_m"]),
         hole_card_bytes_per_s=float(holes["card_bytes_per_s"]),
         live_map=live_map,
+        disk=disk,
         sim_table=dict(sim_table),
         record=record,
     )

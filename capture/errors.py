@@ -5,7 +5,8 @@
 
     CaptureError
     ├── SensorError              the camera is missing or stopped (the daemon resets it)
-    └── ClockUnavailable         no clock estimate yet
+    ├── ClockUnavailable         no clock estimate yet
+    └── DiskBudgetError          the planned flight does not fit on the log's disk
 
 The link's errors (telemetry, poses) are in :mod:`holescan.link.errors`, the flight log's
 in :mod:`holescan.flightlog.errors`, an output path's is
@@ -17,7 +18,7 @@ from __future__ import annotations
 
 from holescan.errors import HolescanError
 
-__all__ = ["CaptureError", "ClockUnavailable", "SensorError"]
+__all__ = ["CaptureError", "ClockUnavailable", "DiskBudgetError", "SensorError"]
 
 
 class CaptureError(HolescanError):
@@ -33,3 +34,7 @@ class SensorError(CaptureError):
 
 class ClockUnavailable(CaptureError):  # noqa: N818 (reads as a state, like PoseUnavailable)
     """No estimate yet: no TIMESYNC reply, no stamped message (or no SYSTEM_TIME for UTC)."""
+
+
+class DiskBudgetError(CaptureError):
+    """The planned flight does not fit on the log's disk (``fly`` refuses to take off)."""

@@ -6,6 +6,8 @@ Modules, from the bytes up:
   framing, footer, chunk fields, summary section, compression names);
 * :mod:`~flightlog.schemas`: which topic holds what, and the conversions of
   holescan's records to Foxglove protobuf / JSON messages and back;
+  :mod:`~flightlog.images` how the pixels are stored (JPEG/PNG colour, zstd/PNG
+  depth as ``foxglove.CompressedImage``, or raw);
   :mod:`~flightlog.detections` and :mod:`~flightlog.metadata` the same for
   detections and the ``holescan.mount`` record;
 * :mod:`~flightlog.mcapfile`: :class:`McapFile`, the one lifecycle of an MCAP file
@@ -17,17 +19,21 @@ Modules, from the bytes up:
   :class:`McapSource`);
 * :mod:`~flightlog.layout`: a log's chunk index and reading one chunk (for work
   split along chunks);
+* :mod:`~flightlog.diskspace` (:class:`DiskSpace`) and :mod:`~flightlog.storage`
+  (finished logs in a folder, their measured rate, the retention rule);
 * :mod:`~flightlog.info` (:func:`log_info`) and :mod:`~flightlog.recover`
   (:func:`recover_log`): what a log holds, and repairing one.
 """
 
 from holescan.flightlog.detections import annotations_message, decode_detection, detection_json
+from holescan.flightlog.diskspace import DiskSpace, SystemDiskSpace
 from holescan.flightlog.errors import (
     ChunkDamagedError,
     FlightLogError,
     RecordError,
     TruncatedLogError,
 )
+from holescan.flightlog.images import ImageEncoder, decode_compressed
 from holescan.flightlog.info import LogInfo, TopicInfo, log_info
 from holescan.flightlog.layout import (
     ChunkSpan,
@@ -74,6 +80,12 @@ from holescan.flightlog.schemas import (
     jsonable,
     to_json,
 )
+from holescan.flightlog.storage import (
+    FlightLogSet,
+    flight_logs,
+    measured_rate,
+    remove_oldest_finished,
+)
 from holescan.flightlog.writer import FlightLogWriter
 
 __all__ = [
@@ -94,8 +106,11 @@ __all__ = [
     "ChunkDamagedError",
     "ChunkSpan",
     "DamagedRegion",
+    "DiskSpace",
     "FlightLogError",
+    "FlightLogSet",
     "FlightLogWriter",
+    "ImageEncoder",
     "JsonSchema",
     "LogInfo",
     "LogLayout",
@@ -113,18 +128,22 @@ __all__ = [
     "RecordError",
     "RecoveryReport",
     "ScanState",
+    "SystemDiskSpace",
     "TopicInfo",
     "TruncatedLogError",
     "WriterStats",
     "annotations_message",
+    "decode_compressed",
     "decode_detection",
     "decode_messages",
     "detection_json",
     "errors_from_metadata",
+    "flight_logs",
     "holes_geojson_message",
     "jsonable",
     "log_file_path",
     "log_info",
+    "measured_rate",
     "mount_from_metadata",
     "mount_metadata",
     "open_log",
@@ -133,6 +152,7 @@ __all__ = [
     "read_flight_log",
     "read_log_layout",
     "recover_log",
+    "remove_oldest_finished",
     "scan_records",
     "to_json",
 ]

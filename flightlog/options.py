@@ -15,6 +15,7 @@ from typing import Literal
 
 from holescan.errors import InputError
 from holescan.flightlog.format import COMPRESSION
+from holescan.flightlog.images import COLOR_CODECS, DEPTH_CODECS, ColorCodec, DepthCodec
 
 __all__ = ["LogOptions", "WriterStats", "log_file_path"]
 
@@ -33,6 +34,13 @@ class LogOptions:
     max_queued_frames : RGB-D frames waiting for the writer before new ones are dropped
         (1.2 MB each at 640x480).
     max_queued_messages : all records waiting (frames included) before records are dropped.
+    color, jpeg_quality : how colour images are stored: ``jpeg`` (lossy, this quality),
+        ``png`` (lossless) or ``raw`` (``foxglove.RawImage``, ~28 MB/s at 30 fps).
+    depth : how depth images are stored, always lossless: ``zstd`` (fast), ``png``
+        (Foxglove shows it; 5-10x slower) or ``raw`` (see :mod:`~flightlog.images`).
+    image_reserve_bytes : when the log's disk has less free space than this, the writer
+        stops logging frames (colour, depth) and keeps everything else (telemetry,
+        detections, holes, health); 0 = never stop. Checked every ``sync_interval_s``.
     """
 
     chunk_size: int = 1 << 20
@@ -42,6 +50,10 @@ class LogOptions:
     sync_interval_s: float = 1.0
     max_queued_frames: int = 60
     max_queued_messages: int = 20_000
+    color: ColorCodec = "jpeg"
+    jpeg_quality: int = 90
+    depth: DepthCodec = "zstd"
+    image_reserve_bytes: int = 1 << 30
 
     def __post_init__(self) -> None:
         if self.compression not in COMPRESSION:
@@ -52,6 +64,14 @@ class LogOptions:
             raise InputError("max_file_s and sync_interval_s must be positive")
         if self.max_queued_frames < 1 or self.max_queued_messages < self.max_queued_frames:
             raise InputError("max_queued_frames >= 1 and max_queued_messages >= it")
+        if self.color not in COLOR_CODECS:
+            raise InputError(f"color must be one of {list(COLOR_CODECS)}, got {self.color!r}")
+        if self.depth not in DEPTH_CODECS:
+            raise InputError(f"depth must be one of {list(DEPTH_CODECS)}, got {self.depth!r}")
+        if not 1 <= self.jpeg_quality <= 100:
+            raise InputError(f"jpeg_quality must be 1..100, got {self.jpeg_quality}")
+        if self.image_reserve_bytes < 0:
+            raise InputError("image_reserve_bytes must be >= 0")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -64,7 +84,11 @@ class WriterStats:
     frames_queued_max : RGB-D frames waiting at most so far.
     frame_write_ms_mean, frame_write_ms_max : writer-thread time to encode and write one
         frame (amortising the chunk compression it triggers).
+    frame_cpu_ms_mean : the writer thread's CPU time per frame (image encoding, protobuf,
+        chunk compression): x fps / 1000 = the share of one core logging takes.
     enqueue_ms_max : the longest a ``write_*`` call took on the caller's thread.
+    images_stopped_t_unix_ns : when the disk reserve stopped frame logging (None: never).
+    frames_not_logged : frames offered after that (not logged, not counted as dropped).
     """
 
     enqueued: Mapping[str, int]
@@ -76,10 +100,13 @@ class WriterStats:
     frames_queued_max: int
     frame_write_ms_mean: float
     frame_write_ms_max: float
+    frame_cpu_ms_mean: float
     enqueue_ms_max: float
     bytes_written: int
     files: tuple[Path, ...]
     error: str | None
+    images_stopped_t_unix_ns: int | None = None
+    frames_not_logged: int = 0
 
 
 def log_file_path(prefix: str | os.PathLike[str], index: int) -> Path:

@@ -14,10 +14,12 @@ import math
 import os
 from collections.abc import Collection, Iterable, Iterator, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
+from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+from google.protobuf.message import DecodeError
 from mcap.records import Channel, Message, Metadata, Schema
 
 import holescan.flightlog.schemas as sch
@@ -25,6 +27,7 @@ from holescan.detect import CameraIntrinsics, Detection, Frame
 from holescan.errors import InputError
 from holescan.flightlog.detections import decode_detection
 from holescan.flightlog.errors import FlightLogError, TruncatedLogError
+from holescan.flightlog.images import decode_compressed
 from holescan.flightlog.scan import ScanState, scan_records
 from holescan.geotag import AnnounceGate, Hole, VehiclePose
 
@@ -257,6 +260,19 @@ def _check_schema(topic: str, schema: Schema | None, expected: str) -> None:
         raise FlightLogError(f"topic {topic} has schema {got}, expected {expected}")
 
 
+def _decode_image(topic: str, schema: Schema | None, data: bytes) -> Any:
+    """The pixels of one logged image, raw (older logs, ``raw`` settings) or compressed."""
+    name = None if schema is None else schema.name
+    try:
+        if name == "foxglove.CompressedImage":
+            kind: Literal["color", "depth"] = "depth" if topic == sch.TOPIC_DEPTH else "color"
+            return decode_compressed(CompressedImage.FromString(data), kind)
+        _check_schema(topic, schema, "foxglove.RawImage")
+        return sch.image_from_raw(RawImage.FromString(data))
+    except DecodeError as err:
+        raise FlightLogError(f"damaged {name} message on {topic}: {err}") from err
+
+
 def decode_message(
     topic: str,
     schema: Schema | None,
@@ -278,8 +294,7 @@ def decode_message(
         if topic == sch.TOPIC_FRAME_INFO:
             parts[topic] = sch.from_json(msg.data)
         else:
-            _check_schema(topic, schema, "foxglove.RawImage")
-            parts[topic] = sch.image_from_raw(RawImage.FromString(msg.data))
+            parts[topic] = _decode_image(topic, schema, msg.data)
         if len(parts) < 3:
             return None
         del pending[seq]

@@ -28,13 +28,13 @@ from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
 from foxglove_schemas_protobuf.GeoJSON_pb2 import GeoJSON
 from foxglove_schemas_protobuf.LocationFix_pb2 import LocationFix
 from foxglove_schemas_protobuf.Quaternion_pb2 import Quaternion
-from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 from foxglove_schemas_protobuf.Vector3_pb2 import Vector3
 from google.protobuf.timestamp_pb2 import Timestamp
 from scipy.spatial.transform import Rotation
 
 from holescan.detect import CameraIntrinsics, FeatureScores
 from holescan.errors import InputError
+from holescan.flightlog.images import image_from_raw, raw_image_message
 from holescan.geotag import VehiclePose, dcm_from_euler
 
 __all__ = [
@@ -246,38 +246,6 @@ def float_or_none(value: Any) -> float | None:
 def timestamp(t_ns: int) -> Timestamp:
     """The protobuf ``Timestamp`` of ``t_ns`` nanoseconds since the Unix epoch."""
     return Timestamp(seconds=t_ns // 1_000_000_000, nanos=t_ns % 1_000_000_000)
-
-
-def raw_image_message(image: npt.NDArray[Any], t_unix_ns: int) -> RawImage:
-    """``foxglove.RawImage`` of an (H, W, 3) uint8 RGB (``rgb8``) or an (H, W) uint16
-    millimetre depth image (``16UC1``, little-endian, step = 2 W, 0 = no reading)."""
-    h, w = image.shape[:2]
-    if image.ndim == 3:
-        encoding, step, data = "rgb8", 3 * w, np.ascontiguousarray(image).tobytes()
-    else:
-        encoding, step = "16UC1", 2 * w
-        data = np.ascontiguousarray(image, dtype="<u2").tobytes()
-    return RawImage(
-        timestamp=timestamp(t_unix_ns),
-        frame_id=CAMERA_FRAME,
-        width=w,
-        height=h,
-        encoding=encoding,
-        step=step,
-        data=data,
-    )
-
-
-def image_from_raw(msg: RawImage) -> npt.NDArray[Any]:
-    """Inverse of :func:`raw_image_message`: a writable (H, W, 3) uint8 or (H, W) uint16."""
-    h, w = int(msg.height), int(msg.width)
-    if msg.encoding == "rgb8":
-        flat = np.frombuffer(msg.data, np.uint8)
-        return flat.reshape(h, msg.step)[:, : 3 * w].reshape(h, w, 3).copy()
-    if msg.encoding in ("16UC1", "mono16"):
-        flat = np.frombuffer(msg.data, "<u2")
-        return flat.reshape(h, msg.step // 2)[:, :w].astype(np.uint16)
-    raise InputError(f"unsupported image encoding {msg.encoding!r} (expected rgb8 or 16UC1)")
 
 
 def calibration_message(camera: CameraIntrinsics, t_unix_ns: int) -> CameraCalibration:

@@ -28,7 +28,9 @@ import holescan.flightlog.schemas as sch
 from holescan.detect import CameraIntrinsics, Detection, Frame
 from holescan.errors import InputError
 from holescan.flightlog.detections import annotations_message, detection_json
+from holescan.flightlog.diskspace import DiskSpace, SystemDiskSpace
 from holescan.flightlog.errors import FlightLogError
+from holescan.flightlog.images import ImageEncoder
 from holescan.flightlog.mcapfile import McapFile, mcap_version
 from holescan.flightlog.metadata import mount_metadata
 from holescan.flightlog.options import LogOptions, WriterStats, log_file_path
@@ -55,12 +57,18 @@ class FlightLogWriter:
         nose); logged as the ``/tf`` transform base_link -> camera and as metadata
         ``holescan.mount``. A gimbal attitude in it is not logged.
     errors : the sightings' error model; its attitude sigma goes into ``holescan.mount``.
-    options : :class:`LogOptions`.
+    options : :class:`LogOptions` (compression, image codecs, the disk reserve).
+    disk : where the free space of the log's folder is read (default: the real file
+        system). When it falls under ``options.image_reserve_bytes`` the writer stops
+        logging frames for the rest of the flight and keeps every other record; a
+        ``/health`` record with ``event = "images_stopped"`` says when, and later health
+        records carry ``images_stopped_t_unix_ns`` and ``frames_not_logged``.
 
     Every ``write_*`` returns at once: True when queued, False when dropped (queue full
-    or writer failed). ``t_unix_ns`` arguments are when the thing happened (capture or
-    receive time, Unix clock) and become the MCAP ``publish_time``; ``log_time`` is
-    ``time.time_ns()`` at the call.
+    or writer failed); ``write_frame`` also returns True for a frame deliberately not
+    logged after images were stopped (counted apart, never as a drop). ``t_unix_ns``
+    arguments are when the thing happened (capture or receive time, Unix clock) and become
+    the MCAP ``publish_time``; ``log_time`` is ``time.time_ns()`` at the call.
     """
 
     def __init__(
@@ -72,8 +80,15 @@ class FlightLogWriter:
         mount: CameraMount | None = None,
         errors: ErrorModel | None = None,
         options: LogOptions | None = None,
+        disk: DiskSpace | None = None,
     ) -> None:
         self.options = options or LogOptions()
+        o = self.options
+        self._encoder = ImageEncoder(o.color, o.depth, o.jpeg_quality)
+        self._disk: DiskSpace = disk or SystemDiskSpace()
+        self._images_stopped_ns: int | None = None
+        self._frames_not_logged = 0
+        self._frame_cpu_ns_total = 0
         self.camera = camera
         self._prefix = Path(prefix)
         mount = mount or CameraMount()
@@ -113,6 +128,7 @@ class FlightLogWriter:
         self._closing = threading.Event()
         self._closed = False
         self._open_next_file()  # fail here, on the caller's thread, if the path is bad
+        self._check_disk(time.time_ns())
         self._thread = threading.Thread(target=self._run, name="flight-log-writer", daemon=True)
         self._thread.start()
 
@@ -149,6 +165,10 @@ class FlightLogWriter:
             raise InputError(f"frame.rgb must be ({h}, {w}, 3) uint8, got {frame.rgb.shape}")
         if frame.depth.shape != (h, w) or frame.depth.dtype != np.uint16:
             raise InputError(f"frame.depth must be ({h}, {w}) uint16, got {frame.depth.shape}")
+        if self._images_stopped_ns is not None:
+            with self._lock:
+                self._frames_not_logged += 1
+            return True
         return self._put("frames", "frame", frame, int(t_unix_ns), pose, t_boot_ns)
 
     def write_pose(self, pose: VehiclePose, t_unix_ns: int) -> bool:
@@ -200,10 +220,13 @@ class FlightLogWriter:
                 frames_queued_max=self._frames_queued_max,
                 frame_write_ms_mean=self._frame_write_ns_total / max(frames, 1) / 1e6,
                 frame_write_ms_max=self._frame_write_ns_max / 1e6,
+                frame_cpu_ms_mean=self._frame_cpu_ns_total / max(frames, 1) / 1e6,
                 enqueue_ms_max=self._enqueue_ns_max / 1e6,
                 bytes_written=self._bytes_closed + self._open_bytes(),
                 files=tuple(self._files),
                 error=None if self._error is None else repr(self._error),
+                images_stopped_t_unix_ns=self._images_stopped_ns,
+                frames_not_logged=self._frames_not_logged,
             )
 
     def close(self) -> None:
@@ -336,6 +359,7 @@ class FlightLogWriter:
         t_boot_ns: int | None,
     ) -> None:
         t0 = time.perf_counter_ns()
+        cpu0 = time.thread_time_ns()
         info = {
             "index": frame.index,
             "t_mono_ns": frame.t_mono_ns,
@@ -345,14 +369,14 @@ class FlightLogWriter:
             "pose": None if pose is None else sch.pose_json(pose),
         }
         self._json(sch.TOPIC_FRAME_INFO, info, seq, log_time, t_unix_ns)
-        self._proto(
-            sch.TOPIC_COLOR, sch.raw_image_message(frame.rgb, t_unix_ns), seq, log_time, t_unix_ns
-        )
-        self._proto(
-            sch.TOPIC_DEPTH, sch.raw_image_message(frame.depth, t_unix_ns), seq, log_time, t_unix_ns
-        )
+        color = self._encoder.color_message(frame.rgb, t_unix_ns)
+        self._proto(sch.TOPIC_COLOR, color, seq, log_time, t_unix_ns)
+        depth = self._encoder.depth_message(frame.depth, t_unix_ns)
+        self._proto(sch.TOPIC_DEPTH, depth, seq, log_time, t_unix_ns)
         dt = time.perf_counter_ns() - t0
+        cpu = time.thread_time_ns() - cpu0
         with self._lock:
+            self._frame_cpu_ns_total += cpu
             self._written["frames"] += 1
             self._frames_queued -= 1
             self._frame_write_ns_total += dt
@@ -474,9 +498,40 @@ class FlightLogWriter:
             self._file = None
             self._open_next_file()
 
+    def _check_disk(self, now: int) -> None:
+        """Stop logging frames when the disk's free space is under the reserve (once)."""
+        reserve = self.options.image_reserve_bytes
+        if self._images_stopped_ns is not None or reserve <= 0:
+            return
+        try:
+            free = self._disk.free_bytes(self._prefix.parent)
+        except OSError as err:
+            _log.warning("cannot read the free space of %s: %s", self._prefix.parent, err)
+            return
+        if free >= reserve:
+            return
+        with self._lock:
+            self._images_stopped_ns = now
+        _log.warning(
+            "disk nearly full (%.0f MB free, reserve %.0f MB): frames are no longer logged; "
+            "telemetry, detections and holes still are",
+            free / 1e6,
+            reserve / 1e6,
+        )
+        record = {
+            "source": "logger",
+            "event": "images_stopped",
+            "free_bytes": free,
+            "reserve_bytes": reserve,
+            "images_stopped_t_unix_ns": now,
+        }
+        self._json(sch.TOPIC_HEALTH, record, self._own_seq(sch.TOPIC_HEALTH), now, now)
+        self._count(sch.TOPIC_HEALTH)
+
     def _periodic(self) -> None:
         assert self._file is not None
         now = time.time_ns()
+        self._check_disk(now)
         st = self.stats()
         health = {
             "source": "logger",
@@ -487,9 +542,13 @@ class FlightLogWriter:
             "dropped": dict(st.dropped),
             "frame_write_ms_mean": round(st.frame_write_ms_mean, 3),
             "frame_write_ms_max": round(st.frame_write_ms_max, 3),
+            "frame_cpu_ms_mean": round(st.frame_cpu_ms_mean, 3),
             "bytes_written": st.bytes_written,
             "file_index": len(st.files) - 1,
         }
+        if st.images_stopped_t_unix_ns is not None:
+            health["images_stopped_t_unix_ns"] = st.images_stopped_t_unix_ns
+            health["frames_not_logged"] = st.frames_not_logged
         self._json(sch.TOPIC_HEALTH, health, self._own_seq(sch.TOPIC_HEALTH), now, now)
         self._count(sch.TOPIC_HEALTH)
         self._write_calibration(now)

@@ -36,14 +36,24 @@ from holescan.geotag._project import (
     geotag_frame,
     project_to_pixel,
 )
-from holescan.geotag._tiers import TIERS, AnnounceGate, Tier
+from holescan.geotag._tiers import (
+    HOLE_TIERS,
+    TIERS,
+    VEHICLE_TIERS,
+    AnnounceGate,
+    HoleTier,
+    Tier,
+    VehicleTier,
+)
 from holescan.geotag._types import VehiclePose
 
 __all__ = [
     "CIRCLE_95_PER_SIGMA",
     "DEFAULT_CONFIDENCE",
+    "HOLE_TIERS",
     "R_ENU_NED",
     "TIERS",
+    "VEHICLE_TIERS",
     "AnnounceGate",
     "BestViews",
     "CameraMount",
@@ -55,6 +65,7 @@ __all__ = [
     "HoleEvidence",
     "HolePipeline",
     "HoleSighting",
+    "HoleTier",
     "HoleTracker",
     "HoleView",
     "LocalCameraPose",
@@ -63,6 +74,7 @@ __all__ = [
     "PoseOf",
     "Tier",
     "VehiclePose",
+    "VehicleTier",
     "box_cut_by_border",
     "camera_pose_local",
     "crop_view",

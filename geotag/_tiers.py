@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, get_args
 
 import pymap3d
 
@@ -16,12 +16,28 @@ from holescan.detect import p_hole_of_score
 from holescan.errors import InputError
 from holescan.geotag._merge import Hole
 
-__all__ = ["TIERS", "AnnounceGate", "Tier"]
+__all__ = [
+    "HOLE_TIERS",
+    "TIERS",
+    "VEHICLE_TIERS",
+    "AnnounceGate",
+    "HoleTier",
+    "Tier",
+    "VehicleTier",
+]
 
 _P_HOLE_MAX = 0.99  # p_hole is kept within [0.01, 0.99]
 
 Tier = Literal["announced", "review", "candidate"]
-TIERS: tuple[Tier, ...] = ("announced", "review", "candidate")
+"""What the vehicle makes of a hole (:meth:`AnnounceGate.tier`)."""
+TIERS: tuple[Tier, ...] = get_args(Tier)
+VehicleTier = Literal["announced", "review"]
+"""The tiers that reach the ground (a candidate stays on board)."""
+VEHICLE_TIERS: tuple[VehicleTier, ...] = get_args(VehicleTier)
+HoleTier = Literal["announced", "review", "confirmed", "rejected"]
+"""What a hole is for the crews: the vehicle's tier, or the operator's confirmation or
+rejection (hole files, the ground station, TAK)."""
+HOLE_TIERS: tuple[HoleTier, ...] = get_args(HoleTier)
 
 
 @dataclass(frozen=True)

@@ -39,6 +39,7 @@ from holescan.link._connection import (
     open_link,
     parser,
 )
+from holescan.link._holetext import STATUSTEXT_MAX, HoleText, hole_text, read_hole_text
 from holescan.link._posebuffer import (
     AttitudeSample,
     PoseBuffer,
@@ -90,9 +91,11 @@ from holescan.link.errors import (
 
 __all__ = [
     "HOLE_ID_MAX",
+    "STATUSTEXT_MAX",
     "AttitudeSample",
     "CardValues",
     "GpsFix",
+    "HoleText",
     "LinkError",
     "LinkValueError",
     "MavConnection",
@@ -115,6 +118,7 @@ __all__ = [
     "card_values",
     "check_hole_id",
     "gps_from_gps_raw_int",
+    "hole_text",
     "home_from_home_position",
     "is_autopilot_heartbeat",
     "is_null_island",
@@ -130,6 +134,7 @@ __all__ = [
     "parser",
     "position_from_global_position_int",
     "quat_from_euler",
+    "read_hole_text",
     "read_signing_key",
     "telemetry_sample",
     "verified_signature",

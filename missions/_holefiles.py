@@ -54,7 +54,7 @@ from pathlib import Path
 from typing import Any, Final, Literal, get_args
 
 from holescan.errors import InputError
-from holescan.geotag import Hole
+from holescan.geotag import HOLE_TIERS, Hole
 from holescan.missions._geofiles import write_geojson, write_gpx, write_kml
 from holescan.missions._holeserver import hole_waypoints
 from holescan.missions._qgcfiles import write_plan, write_wpl
@@ -63,9 +63,7 @@ from holescan.missions._waypoint import MAV_FRAME_GLOBAL, MAV_FRAME_GLOBAL_RELAT
 __all__ = [
     "HOLE_FORMATS",
     "HOLE_SUFFIXES",
-    "HOLE_TIERS",
     "HoleFormat",
-    "HoleTier",
     "hole_description",
     "hole_mission",
     "hole_points",
@@ -86,8 +84,6 @@ HOLE_SUFFIXES: Final[Mapping[HoleFormat, str]] = {
 }
 _KMZ_IMAGE_DIR = "images"
 
-HoleTier = Literal["announced", "review", "confirmed", "rejected"]
-HOLE_TIERS: Final[tuple[HoleTier, ...]] = get_args(HoleTier)
 _MISSION_TIERS: Final = ("announced", "confirmed")
 
 

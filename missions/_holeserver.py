@@ -49,7 +49,7 @@ from typing import Any
 
 from holescan.errors import InputError
 from holescan.geotag import Hole
-from holescan.link import SigningKey, mavlink
+from holescan.link import SigningKey, hole_text, mavlink
 from holescan.missions._holecards import (
     CardAssembler,
     CardSender,
@@ -82,7 +82,6 @@ _INVENTORY_S = 10.0
 """A station's inventory counts for the request for everything within this long after it."""
 
 MAV_COMP_ID_ONBOARD_COMPUTER: int = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
-_STATUSTEXT_MAX = 50
 
 
 def hole_waypoints(
@@ -127,25 +126,15 @@ def hole_waypoints(
 
 
 def hole_statustext(hole: Hole, tier: str = "announced") -> str:
-    """``HOLE <id> <score> <lat> <lon>``, at most 50 characters (STATUSTEXT's text field);
-    ``REVIEW <id> ...`` for a hole sent for review (not announced: an operator confirms it).
-
-    Seven decimals (1 cm) fit for any id below 10**9; fewer are used only if needed.
+    """``HOLE <id> <score> <lat> <lon>`` (``REVIEW ...`` for a hole sent for review) of
+    ``hole``, through the link's one codec (:func:`link.hole_text`).
 
     >>> from holescan.geotag import Hole
     >>> h = Hole(3, 43.65331, -79.38312, 120.0, 0.5, 0.88, 4, 0, 10, 1, (0, 0, 9, 9), 1.0, 0.7)
     >>> hole_statustext(h), hole_statustext(h, "review")
     ('HOLE 3 0.88 43.6533100 -79.3831200', 'REVIEW 3 0.88 43.6533100 -79.3831200')
     """
-    if tier not in ("announced", "review"):
-        raise InputError(f"a hole sent to the ground is announced or review, not {tier!r}")
-    word = "HOLE" if tier == "announced" else "REVIEW"
-    for decimals in (7, 6, 5, 4):
-        lat, lon = f"{hole.lat_deg:.{decimals}f}", f"{hole.lon_deg:.{decimals}f}"
-        text = f"{word} {hole.id} {hole.score:.2f} {lat} {lon}"
-        if len(text) <= _STATUSTEXT_MAX:
-            return text
-    raise InputError(f"hole id {hole.id} too long for a STATUSTEXT")
+    return hole_text(hole.id, hole.score, hole.lat_deg, hole.lon_deg, tier)
 
 
 _MIN_CARD_BYTES_PER_S = 50.0

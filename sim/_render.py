@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 import numpy.typing as npt
 
@@ -127,7 +128,9 @@ def render(
         rgb = colour_image(radiance, camera.cx, camera.cy, cond, rng)
         return rgb, depth, hole_boxes(world, pose, camera)
     depth_m, surf = render_exact(world, pose, camera, surface=True)
-    rgb = colour_image(surf[..., :3], camera.cx, camera.cy, cond, rng)
+    # One SIMD pass for the radiance as its own contiguous array (a strided copy is slower).
+    radiance = np.asarray(cv2.cvtColor(surf, cv2.COLOR_RGBA2RGB), np.float32)
+    rgb = colour_image(radiance, camera.cx, camera.cy, cond, rng)
     params = StructuredLight(
         min_range_m=cond.min_range_m,
         max_range_m=cond.max_range_m,

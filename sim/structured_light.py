@@ -39,10 +39,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TypeVar
 
 import cv2
 import numpy as np
 import numpy.typing as npt
+from numba import njit
+
+from holescan.sim._sensor import _normal, _normal_table, _state, _uniform
 
 __all__ = [
     "FrameDraws",
@@ -62,6 +66,7 @@ F64 = npt.NDArray[np.float64]
 U8 = npt.NDArray[np.uint8]
 U16 = npt.NDArray[np.uint16]
 Range = tuple[float, float]
+_T = TypeVar("_T", bound=np.generic)
 
 #: sigma_Z = coeff * Z^2 (Z in metres): Khoshelham & Elberink 2012 (1.425e-6 per mm).
 NOISE_COEFF_PER_M = 1.425e-3
@@ -104,8 +109,8 @@ class StructuredLight:
     def __post_init__(self) -> None:
         if self.baseline_m <= 0 or self.disparity_step_px <= 0:
             raise ValueError("baseline_m and disparity_step_px must be positive")
-        if not 0 <= self.min_range_m < self.max_range_m:
-            raise ValueError("need 0 <= min_range_m < max_range_m")
+        if not 0 <= self.min_range_m < self.max_range_m <= 65.0:
+            raise ValueError("need 0 <= min_range_m < max_range_m <= 65 (uint16 millimetres)")
 
 
 @dataclass(frozen=True)
@@ -223,75 +228,111 @@ def incidence_cosine(z: F64, fx: float, cx: float, cy: float) -> F64:
     >>> round(float(incidence_cosine(z, 100.0, 2.0, 2.0)[2, 2]), 3)
     1.0
     """
-    h, w = z.shape
-    zz = z.astype(np.float32)
-    gu, gv = _smaller_difference(zz, 1), _smaller_difference(zz, 0)
-    xs = ((np.arange(w, dtype=np.float32) - cx) / fx)[None, :]
-    ys = ((np.arange(h, dtype=np.float32) - cy) / fx)[:, None]
-    zf = zz / np.float32(fx)
-    nz = gu * xs + gv * ys + zf
-    norm_n = np.sqrt(gu * gu + gv * gv + nz * nz)
-    norm_r = np.sqrt(xs * xs + ys * ys + 1.0)
+    zz = np.asarray(z, np.float32)
+    zf, n2, r2 = _normal_terms(zz, fx, cx, cy)
     with np.errstate(invalid="ignore", divide="ignore"):
-        c = np.abs(zf) / (norm_n * norm_r)
-    return np.where((z > 0) & np.isfinite(c), c, 1.0).astype(np.float64)
+        c = np.abs(zf) / np.sqrt(n2 * r2)
+    return np.where((zz > 0) & np.isfinite(c), c, 1.0).astype(np.float64)
+
+
+def _normal_terms(z: F32, fx: float, cx: float, cy: float) -> tuple[F32, F32, F32]:
+    """``z / f``, the squared norm of the (unnormalised) surface normal and of the ray, per
+    pixel (see :func:`incidence_cosine`), in float32."""
+    h, w = z.shape
+    gu, gv = _smaller_difference(z, 1), _smaller_difference(z, 0)
+    xs = ((np.arange(w, dtype=np.float32) - np.float32(cx)) / np.float32(fx))[None, :]
+    ys = ((np.arange(h, dtype=np.float32) - np.float32(cy)) / np.float32(fx))[:, None]
+    zf = z / np.float32(fx)
+    nz = gu * xs
+    nz += gv * ys
+    nz += zf
+    n2 = gu * gu
+    n2 += gv * gv
+    n2 += nz * nz
+    r2 = xs * xs + ys * ys + np.float32(1.0)
+    return zf, n2, r2
+
+
+def _grazing(z: F32, fx: float, cx: float, cy: float, cos_min: float) -> npt.NDArray[np.bool_]:
+    """Read pixels seen at an incidence cosine below ``cos_min``, judged on every second
+    pixel (grazing surfaces are wide; a quarter of the work) and spread back to full size.
+    No square root, no division: ``cos^2 < c^2`` as ``(z/f)^2 < c^2 |n|^2 |r|^2``."""
+    h, w = z.shape
+    zs = np.ascontiguousarray(z[::2, ::2])
+    # Pixel j of the half grid is pixel 2j of the full one: intrinsics halved.
+    zf, n2, r2 = _normal_terms(zs, fx / 2.0, cx / 2.0, cy / 2.0)
+    n2 *= r2
+    n2 *= np.float32(cos_min * cos_min)
+    small = zf * zf < n2
+    full = np.repeat(np.repeat(small, 2, axis=0), 2, axis=1)[:h, :w]
+    return (z > 0) & full
 
 
 def _smaller_difference(z: F32, axis: int) -> F32:
     """Per pixel, the forward or backward difference along ``axis``, whichever is smaller:
     a surface's slope, not the jump to another surface at a depth edge."""
     d = np.diff(z, axis=axis)
-    pad_lo = [(0, 0), (0, 0)]
-    pad_hi = [(0, 0), (0, 0)]
-    pad_lo[axis] = (1, 0)
-    pad_hi[axis] = (0, 1)
-    back = np.pad(d, pad_lo, mode="edge")
-    fwd = np.pad(d, pad_hi, mode="edge")
-    return np.where(np.abs(back) < np.abs(fwd), back, fwd)
+    ad = np.abs(d)
+    out = np.empty_like(z)
+    if axis == 1:
+        np.copyto(out[:, 1:-1], np.where(ad[:, :-1] < ad[:, 1:], d[:, :-1], d[:, 1:]))
+        out[:, :1], out[:, -1:] = d[:, :1], d[:, -1:]
+    else:
+        np.copyto(out[1:-1], np.where(ad[:-1] < ad[1:], d[:-1], d[1:]))
+        out[:1], out[-1:] = d[:1], d[-1:]
+    return out
+
+
+def _resample_nearest(img: npt.NDArray[_T], uu: F64, vv: F64) -> npt.NDArray[_T]:
+    """``out[r, c] = img[round(vv[r]), round(uu[c])]``, 0 where that falls off the image
+    (a separable nearest-neighbour warp: shift and scale per axis)."""
+    h, w = img.shape[:2]
+    ui = np.floor(uu + 0.5).astype(np.intp)
+    vi = np.floor(vv + 0.5).astype(np.intp)
+    u_ok = (ui >= 0) & (ui < w)
+    v_ok = (vi >= 0) & (vi < h)
+    out = img.take(np.clip(vi, 0, h - 1), axis=0).take(np.clip(ui, 0, w - 1), axis=1)
+    out[~v_ok] = 0
+    out[:, ~u_ok] = 0
+    return out
 
 
 def _draw_int(rng: np.random.Generator, r: tuple[int, int], s: float = 1.0) -> int:
     return round(int(rng.integers(r[0], r[1] + 1)) * s)
 
 
-def _jump(z: F64) -> F64:
+def _jump(z: F32) -> F32:
     """Threshold (m) for a depth discontinuity between neighbours at depth z."""
-    return 0.04 + 0.03 * z
+    return np.float32(0.04) + np.float32(0.03) * z
 
 
-def _fatten(z: F64, r: int) -> F64:
+def _fatten(z: F32, r: int) -> F32:
     """The nearer surface grows by ``r`` px into the farther one (correlation window)."""
     if r <= 0:
         return z
-    big = np.where(z > 0, z, np.inf).astype(np.float32)
+    big = np.where(z > 0, z, np.float32(np.inf))
     k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
-    near = cv2.erode(big, k).astype(np.float64)
+    near = np.asarray(cv2.erode(big, k), np.float32)
     grow = (z > 0) & np.isfinite(near) & (z - near > _jump(near))
     return np.where(grow, near, z)
 
 
-def _shadow(z: F64, fb_shadow: float) -> npt.NDArray[np.bool_]:
-    """Pixels the projector (at +x) cannot light: a pixel to the right maps left of them."""
-    w = z.shape[1]
-    with np.errstate(divide="ignore"):
-        up = np.arange(w, dtype=np.float64)[None, :] - np.where(z > 0, fb_shadow / z, np.inf)
-    up = np.where(z > 0, up, np.inf)
-    rev = np.minimum.accumulate(up[:, ::-1], axis=1)[:, ::-1]
-    right_min = np.concatenate([rev[:, 1:], np.full((z.shape[0], 1), np.inf)], axis=1)
-    return (z > 0) & (up > right_min + 0.5)
-
-
-def _flying(z: F64, fraction: float, rng: np.random.Generator) -> tuple[F64, npt.NDArray[np.bool_]]:
+def _flying(z: F32, fraction: float, rng: np.random.Generator) -> tuple[F32, npt.NDArray[np.bool_]]:
     """At ``fraction`` of the horizontal edge crossings, the far pixel next to the near one
     takes a value between the two plateaus."""
     out = z.copy()
     flying = np.zeros(z.shape, bool)
+    if fraction <= 0.0:
+        return out, flying
     a, b = z[:, :-1], z[:, 1:]
-    both = (a > 0) & (b > 0)
-    step = both & (np.abs(a - b) > _jump(np.minimum(a, b)))
-    pick = step & (rng.random(step.shape) < fraction)
-    rows, cols = np.nonzero(pick)
-    za, zb, tt = a[rows, cols], b[rows, cols], rng.uniform(0.2, 0.8, size=rows.size)
+    step = np.abs(a - b) > _jump(np.minimum(a, b))
+    step &= a > 0
+    step &= b > 0
+    rows, cols = np.nonzero(step)
+    keep = rng.random(rows.size) < fraction
+    rows, cols = rows[keep], cols[keep]
+    za, zb = a[rows, cols], b[rows, cols]
+    tt = rng.uniform(0.2, 0.8, size=rows.size).astype(np.float32)
     far_is_a = za > zb
     c = np.where(far_is_a, cols, cols + 1)
     near, far = np.minimum(za, zb), np.maximum(za, zb)
@@ -300,17 +341,72 @@ def _flying(z: F64, fraction: float, rng: np.random.Generator) -> tuple[F64, npt
     return out, flying
 
 
-def _blobs(shape: tuple[int, int], corr_px: float, rng: np.random.Generator) -> F64:
-    """Smooth noise, uniformly distributed in [0, 1] (rank-transformed), blobs ~corr_px."""
+@njit(cache=True)
+def _read(
+    z: F32,
+    drop: npt.NDArray[np.bool_],
+    state: npt.NDArray[np.uint64],
+    table: F64,
+    fb_shadow: float,
+    fb_steps: float,
+    noise_coeff: float,
+    min_m: float,
+    fade_m: float,
+    max_m: float,
+) -> U16:
+    """The readings (mm) of the depth ``z`` (m) in one pass per row, right to left.
+
+    A pixel is unread when ``drop`` says so, when the projector (at +x) cannot light it (a
+    pixel to its right maps more than half a pixel left of it: ``u - fb_shadow / z``), out
+    of range, or fading past ``fade_m``; else it reads ``z`` plus noise ``noise_coeff z^2``,
+    rounded to the disparity step (``fb_steps / z`` steps).
+    """
+    height, width = z.shape
+    out = np.zeros((height, width), dtype=np.uint16)
+    span = max(max_m - fade_m, 1e-6)
+    for v in range(height):
+        run_min = np.inf
+        for u in range(width - 1, -1, -1):
+            zz = z[v, u]
+            if zz <= 0.0:
+                continue
+            up = u - fb_shadow / zz
+            shadowed = up > run_min + 0.5
+            run_min = min(run_min, up)
+            if shadowed or drop[v, u] or zz < min_m or zz > max_m:
+                continue
+            if zz > fade_m and _uniform(state) < (zz - fade_m) / span:
+                continue
+            zn = zz + noise_coeff * zz * zz * _normal(state, table)
+            if zn <= 0.0:
+                continue
+            steps = math.floor(fb_steps / zn + 0.5)
+            if steps <= 0:
+                continue
+            zq = fb_steps / steps
+            if zq < min_m or zq > max_m:
+                continue
+            out[v, u] = np.uint16(int(zq * 1000.0 + 0.5))
+    return out
+
+
+def _blobs(
+    shape: tuple[int, int], where: npt.NDArray[np.bool_], corr_px: float, rng: np.random.Generator
+) -> F32:
+    """Smooth noise with blobs ~corr_px, uniformly distributed in [0, 1] over the pixels of
+    ``where`` (rank-transformed there; 1 elsewhere)."""
     h, w = shape
     s = max(corr_px, 1.0)
     small = rng.standard_normal((max(2, math.ceil(h / s)), max(2, math.ceil(w / s))))
     smooth = cv2.resize(small.astype(np.float32), (w, h), interpolation=cv2.INTER_LINEAR)
-    big = np.asarray(smooth, np.float32) + 0.2 * rng.standard_normal((h, w)).astype(np.float32)
-    flat = big.ravel()
-    ranks = np.empty(flat.size, np.float64)
-    ranks[np.argsort(flat, kind="stable")] = (np.arange(flat.size) + 0.5) / flat.size
-    return ranks.reshape(h, w)
+    idx = np.flatnonzero(where.ravel())
+    vals = np.asarray(smooth, np.float32).ravel()[idx]
+    vals += np.float32(0.2) * rng.standard_normal(idx.size, dtype=np.float32)
+    ranks = np.empty(idx.size, np.float32)
+    ranks[np.argsort(vals, kind="stable")] = (np.arange(idx.size) + 0.5) / max(idx.size, 1)
+    out = np.ones(h * w, np.float32)
+    out[idx] = ranks
+    return out.reshape(h, w)
 
 
 def _motion_blur(rgb: U8, velocity: tuple[float, float], exposure_s: float) -> U8:
@@ -352,10 +448,10 @@ def structured_light_frame(
     m = motion if motion is not None else Motion()
     s = surface if surface is not None else Surface()
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
-    z = np.asarray(depth_m, dtype=np.float64)
+    z = np.asarray(depth_m, dtype=np.float32)
     if z.ndim != 2:
         raise ValueError(f"depth_m must be (H, W), got shape {z.shape}")
-    z = np.where(np.isfinite(z) & (z > 0), z, 0.0)
+    z = np.where(np.isfinite(z) & (z > 0), z, np.float32(0.0))
     h, w = z.shape
     k = w / 640.0
     if p.bands:
@@ -391,57 +487,46 @@ def structured_light_frame(
     )
 
     # Surfaces that return nothing: grazing, absorbing; judged on the true geometry.
-    cos_inc = (
-        np.asarray(s.cos_incidence, np.float64)
-        if s.cos_incidence is not None
-        else incidence_cosine(z, camera.fx, camera.cx, camera.cy)
-    )
-    drop = (z > 0) & (cos_inc < graze)
+    if s.cos_incidence is not None:
+        drop = (z > 0) & (np.asarray(s.cos_incidence, np.float32) < graze)
+    else:
+        drop = _grazing(z, camera.fx, camera.cx, camera.cy, graze)
     if s.ir_unread is not None:
-        unread = np.clip(np.asarray(s.ir_unread, np.float64), 0.0, 1.0)
-        if (unread > 0).any():
-            drop |= _blobs(z.shape, p.dropout_blob_px * max(k, 0.25), rng) < unread
+        unread = np.clip(np.asarray(s.ir_unread, np.float32), 0.0, 1.0)
+        absorbing = unread > 0
+        if absorbing.any():
+            blobs = _blobs(z.shape, absorbing, p.dropout_blob_px * max(k, 0.25), rng)
+            drop |= blobs < unread
     # The correlation window: the nearer surface fattens, some crossings fly.
     zf = _fatten(z, fat)
     zf, flying = _flying(zf, fly, rng)
-    # The projector's shadow on the fattened surfaces (registered: narrower than raw).
+    # The projector's shadow on the fattened surfaces (registered: narrower than raw), the
+    # range (nothing nearer than the minimum, readings thinning out toward the maximum),
+    # then noise and the disparity rounded to its step: together noise_frac x 1.425e-3 Z^2.
     fb = camera.fx * p.baseline_m
     fb_shadow = camera.fx * (p.shadow_widening * p.baseline_m - p.registration_baseline_m)
-    drop |= _shadow(zf, max(fb_shadow, 0.0))
-    # Range: nothing nearer than the minimum, readings thinning out toward the maximum.
-    span = max(p.max_range_m - p.fade_range_m, 1e-6)
-    drop |= (zf < p.min_range_m) | (zf > p.max_range_m)
-    fading = np.flatnonzero((zf > p.fade_range_m).ravel())
-    if fading.size:
-        f = (zf.ravel()[fading] - p.fade_range_m) / span
-        drop.ravel()[fading[rng.random(fading.size) < f]] = True
-    # Noise, then disparity rounded to the step: together noise_frac x 1.425e-3 Z^2.
     q_var = (p.disparity_step_px / fb) ** 2 / 12.0  # rounding variance / Z^4
     coeff2 = (noise_frac * NOISE_COEFF_PER_M) ** 2 - q_var
-    coeff = math.sqrt(coeff2) if coeff2 > 0 else 0.0
-    zn = zf + coeff * zf * zf * rng.standard_normal(z.shape, dtype=np.float32)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        steps = np.round(fb / p.disparity_step_px / zn)
-        zq = np.where(steps > 0, fb / p.disparity_step_px / steps, 0.0)
-    zq = np.where((zf > 0) & ~drop & (zq >= p.min_range_m) & (zq <= p.max_range_m), zq, 0.0)
-    mm = np.clip(np.round(zq * 1000.0), 0, 65535).astype(np.uint16)
+    mm = _read(
+        np.ascontiguousarray(zf, np.float32),
+        np.ascontiguousarray(drop),
+        _state(rng),
+        _normal_table(),
+        max(fb_shadow, 0.0),
+        fb / p.disparity_step_px,
+        math.sqrt(coeff2) if coeff2 > 0 else 0.0,
+        p.min_range_m,
+        p.fade_range_m,
+        p.max_range_m,
+    )
 
     # Registration onto the colour camera: shift, scale and the time offset under motion.
     sx = draws.shift_px[0] + m.velocity_px_s[0] * dt
     sy = draws.shift_px[1] + m.velocity_px_s[1] * dt
-    uu = (np.arange(w, dtype=np.float32) - camera.cx) * scale + camera.cx + sx
-    vv = (np.arange(h, dtype=np.float32) - camera.cy) * scale + camera.cy + sy
-    map_x = np.broadcast_to(uu[None, :], (h, w)).astype(np.float32)
-    map_y = np.broadcast_to(vv[:, None], (h, w)).astype(np.float32)
-    mm = np.asarray(
-        cv2.remap(mm, map_x, map_y, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT),
-        np.uint16,
-    )
-    fl = (
-        cv2.remap(flying.astype(np.uint8), map_x, map_y, cv2.INTER_NEAREST).astype(bool)
-        if flying.any()
-        else flying
-    )
+    uu = (np.arange(w, dtype=np.float64) - camera.cx) * scale + camera.cx + sx
+    vv = (np.arange(h, dtype=np.float64) - camera.cy) * scale + camera.cy + sy
+    mm = _resample_nearest(mm, uu, vv)
+    fl = _resample_nearest(flying, uu, vv) if flying.any() else flying
     left, right, top, bottom = bands
     if left:
         mm[:, :left] = 0

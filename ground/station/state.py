@@ -35,7 +35,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
-import re
 import threading
 import time
 from collections.abc import Callable, Mapping
@@ -46,10 +45,16 @@ from typing import Any, Literal
 import numpy as np
 
 from holescan.errors import InputError
-from holescan.geotag import LocalFrame, nearest_pairs
+from holescan.geotag import (
+    HOLE_TIERS,
+    VEHICLE_TIERS,
+    HoleTier,
+    LocalFrame,
+    VehicleTier,
+    nearest_pairs,
+)
 from holescan.ground.errors import StationFileError
 from holescan.link import (
-    HOLE_ID_MAX,
     LinkValueError,
     card_values,
     check_hole_id,
@@ -58,6 +63,7 @@ from holescan.link import (
     link_lat_lon,
     link_yaw,
     optional_float,
+    read_hole_text,
     xml_text,
 )
 from holescan.outputs import atomic_output
@@ -80,14 +86,12 @@ _log = logging.getLogger(__name__)
 
 Mark = Literal["new", "confirmed", "rejected", "visited"]
 MARKS: tuple[Mark, ...] = ("new", "confirmed", "rejected", "visited")
-VehicleTier = Literal["announced", "review"]
-VEHICLE_TIERS: tuple[VehicleTier, ...] = ("announced", "review")
-Tier = Literal["announced", "review", "confirmed", "rejected"]
-TIERS: tuple[Tier, ...] = ("announced", "review", "confirmed", "rejected")
+Tier = HoleTier
+"""What a hole is for the crews (:data:`geotag.HoleTier`, defined once there)."""
+TIERS = HOLE_TIERS
 FORMAT = "holescan-ground-2"
 """The state file's ``format``; ``holescan-ground-1`` files (older stations) are read too."""
 _FORMAT_1 = "holescan-ground-1"
-_STATUSTEXT = re.compile(r"(?:HOLE|REVIEW) (\d+) ([\d.]+) (-?[\d.]+) (-?[\d.]+)")
 _TRACK_MAX = 20_000
 MAX_HOLES = 10_000
 """Holes one station keeps (a flight finds tens; a flood of forged ids stops here)."""
@@ -103,7 +107,8 @@ _OLD_SECONDS = {"first_unix": "t_first_unix_ns", "updated_unix": "t_updated_unix
 
 def parse_hole_statustext(text: str) -> tuple[int, float, float, float] | None:
     """``HOLE <id> <score> <lat> <lon>`` (an announced hole) or ``REVIEW <id> ...`` (a hole
-    for review) -> (id, score, lat_deg, lon_deg); None for other texts.
+    for review) -> (id, score, lat_deg, lon_deg); None for other texts. The link's one codec
+    (:func:`link.read_hole_text`, which also gives the tier).
 
     >>> parse_hole_statustext("HOLE 3 0.88 43.6533100 -79.3831200")
     (3, 0.88, 43.65331, -79.38312)
@@ -114,16 +119,8 @@ def parse_hole_statustext(text: str) -> tuple[int, float, float, float] | None:
     >>> parse_hole_statustext("HOLE 1000000000 0.88 43.6533100 -79.3831200") is None
     True
     """
-    m = _STATUSTEXT.fullmatch(text.strip().rstrip("\x00"))
-    if m is None or len(m[1]) > len(str(HOLE_ID_MAX)):
-        return None
-    try:
-        hid = check_hole_id(int(m[1]))
-        score = link_float(m[2], 0.0, 1.0, "score")
-        lat, lon = link_lat_lon(m[3], m[4])
-    except LinkValueError:
-        return None
-    return hid, score, lat, lon
+    said = read_hole_text(text)
+    return None if said is None else (said.hole_id, said.score, said.lat_deg, said.lon_deg)
 
 
 @dataclass
@@ -459,13 +456,14 @@ class StationState:
     def on_statustext(self, text: str) -> GroundHole | None:
         """Take a ``HOLE ...`` STATUSTEXT; return the hole when it was one (a text that
         starts as one but whose values are out of range is counted in ``rejected``)."""
-        parsed = parse_hole_statustext(text)
-        if parsed is None:
+        said = read_hole_text(text)
+        if said is None:
             if text.lstrip().startswith(("HOLE ", "REVIEW ")):
                 self.reject("a hole STATUSTEXT", LinkValueError(repr(xml_text(text, 60))))
             return None
-        hid, score, lat, lon = parsed
-        tier: VehicleTier = "review" if text.strip().startswith("REVIEW") else "announced"
+        hid, score, lat, lon, tier = (
+            said.hole_id, said.score, said.lat_deg, said.lon_deg, said.tier,
+        )  # fmt: skip
         with self._lock:
             if not self._room_for(hid):
                 return None

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import socket
 import threading
 import time
 from collections.abc import Iterator
@@ -15,14 +14,9 @@ from holescan.capture import Flight, FlightConfig
 from holescan.detect import CameraIntrinsics, Frame
 from holescan.flightlog import read_flight_log
 from holescan.sim import SimAutopilot, SimPath
+from tests._support import free_udp_port
 
 CAM = CameraIntrinsics.xtion()
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 class ScriptedSource:
@@ -62,7 +56,7 @@ def hover_path() -> SimPath:
 
 
 def test_flight_logs_every_frame_poses_them_and_finds_the_hole(tmp_path: Path) -> None:
-    port = free_port()
+    port = free_udp_port()
     with SimAutopilot(f"udpout:127.0.0.1:{port}", hover_path()):
         cfg = FlightConfig(log_prefix=tmp_path / "flight", max_frames=90)
         flight = Flight(cfg, lambda: ScriptedSource(200), CAM, mavlink=f"udpin:127.0.0.1:{port}")
@@ -126,7 +120,7 @@ def test_sensor_fault_is_retried_with_reset(tmp_path: Path, fault: str) -> None:
 def test_silent_autopilot_at_start_still_logs_unposed_frames(tmp_path: Path) -> None:
     from holescan.capture import Telemetry
 
-    port = free_port()
+    port = free_udp_port()
     cfg = FlightConfig(log_prefix=tmp_path / "flight", max_frames=45)
 
     def quick(conn: str, **kw: object) -> Telemetry:

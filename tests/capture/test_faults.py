@@ -21,19 +21,12 @@ from holescan.capture import Flight, FlightConfig, Telemetry
 from holescan.detect import CameraIntrinsics, Frame
 from holescan.flightlog import LoggedFrame, log_info, read_flight_log, recover_log
 from holescan.sim import SimAutopilot, SimPath
+from tests._support import free_udp_port
 from tests.capture.test_shutdown import group_members, start_sim_flight
 
 CAM = CameraIntrinsics.xtion(160, 120)
 FPS = 15.0
 PATH = SimPath(waypoints_enu=((0.0, 0.0, 2.5), (0.4, 0.0, 2.5), (0.4, 0.4, 2.5)), speed_m_s=0.2)
-
-
-def free_port() -> int:
-    import socket
-
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 class FloorSource:
@@ -88,7 +81,7 @@ def floor_flight(cfg: FlightConfig, port: int) -> tuple[Flight, list[Telemetry]]
 
 @pytest.mark.slow
 def test_link_gone_10_s_then_a_rebooted_autopilot(tmp_path: Path) -> None:
-    port = free_port()
+    port = free_udp_port()
     cfg = FlightConfig(log_prefix=tmp_path / "f", max_duration_s=26.0, startup_sync_s=5.0)
     flight, telemetry = floor_flight(cfg, port)
     marks: dict[str, float] = {}
@@ -169,7 +162,7 @@ def test_disk_full_while_logging(tmp_path: Path) -> None:
     if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=20m", "tmpfs", str(logs)]).returncode:
         pytest.skip("cannot mount a tmpfs")
     try:
-        port = free_port()
+        port = free_udp_port()
         cam = CameraIntrinsics.xtion(640, 480)  # ~0.5 MB a frame: 20 MB fill in seconds
 
         class Big(FloorSource):

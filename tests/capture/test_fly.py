@@ -7,7 +7,6 @@ import os
 import re
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -35,16 +34,11 @@ from holescan.sim import SimAutopilot, SimPath, sortie_params
 
 os.environ.setdefault("MAVLINK20", "1")
 from holescan.link import mavutil
+from tests._support import free_udp_port
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "deploy" / "fly.example.toml"
 UNIT = ROOT / "deploy" / "holescan.service"
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def holescan(*args: str, **kw: Any) -> subprocess.Popen[str]:
@@ -233,7 +227,7 @@ def test_fly_sim_serves_holes_to_the_gcs_and_stops_cleanly_on_sigint(tmp_path: P
     """The simulated sortie through the CLI: a ground station hears the holes; Ctrl-C."""
     cfg = tmp_path / "fly.toml"
     cfg.write_text(SIM_TOML)
-    port = free_port()
+    port = free_udp_port()
     gcs = mavutil.mavlink_connection(
         f"udpin:127.0.0.1:{port}", source_system=255, source_component=190
     )
@@ -307,6 +301,8 @@ def test_fly_replays_oni_then_its_own_log_and_stops_cleanly_on_sigterm(tmp_path:
     cam = CameraIntrinsics.xtion(320, 240)
     frames = floor_frames(n, cam)
     write_oni(tmp_path / "in.oni", frames, cam)
+    raw = tmp_path / "raw.toml"  # the raw image layout: exact pixels through both legs
+    raw.write_text('[log]\ncolor = "raw"\ndepth = "raw"\n')
     code, out, err = finish(
         holescan(
             "fly",
@@ -315,6 +311,8 @@ def test_fly_replays_oni_then_its_own_log_and_stops_cleanly_on_sigterm(tmp_path:
             f"oni:{tmp_path / 'in.oni'}",
             "--log-dir",
             str(tmp_path / "a"),
+            "--config",
+            str(raw),
         )
     )
     assert code == 0, err[-3000:]
@@ -330,8 +328,9 @@ def test_fly_replays_oni_then_its_own_log_and_stops_cleanly_on_sigterm(tmp_path:
         assert np.array_equal(a.rgb, b.rgb) and np.array_equal(a.depth, b.depth)
 
     proc = holescan(
-        "fly", "--bench", "--sensor", f"mcap:{first[0]}", "--log-dir", str(tmp_path / "b")
-    )
+        "fly", "--bench", "--sensor", f"mcap:{first[0]}", "--log-dir", str(tmp_path / "b"),
+        "--config", str(raw),
+    )  # fmt: skip
     deadline = time.monotonic() + 60.0
     while time.monotonic() < deadline and proc.poll() is None:
         logs = list((tmp_path / "b").glob("*.mcap"))
@@ -384,7 +383,7 @@ class FloorSource:
 
 def test_garbage_on_the_mavlink_link_is_ignored_and_counted(tmp_path: Path) -> None:
     cam = CameraIntrinsics.xtion(320, 240)
-    port = free_port()
+    port = free_udp_port()
     path = SimPath(waypoints_enu=((0.0, 0.0, 2.5), (0.3, 0.0, 2.5), (0.3, 0.3, 2.5)), speed_m_s=0.2)
     junk = b"not mavlink at all; " * 3  # no 0xFD/0xFE: every byte is a bad prefix byte
     bad_crc = bytes([0xFD, 9, 0, 0, 7, 1, 1, 0, 0, 0]) + bytes(9) + b"\x12\x34"

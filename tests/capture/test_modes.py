@@ -12,7 +12,8 @@ from pathlib import Path
 from holescan.capture import Flight, FlightConfig, Telemetry
 from holescan.flightlog import LoggedFrame, LoggedHealth, read_flight_log
 from holescan.sim import SimAutopilot
-from tests.capture.test_daemon import CAM, ScriptedSource, free_port, hover_path
+from tests._support import free_udp_port
+from tests.capture.test_daemon import CAM, ScriptedSource, hover_path
 
 # ArduCopter custom modes: 3 AUTO, 6 RTL, 9 LAND, 5 LOITER, 4 GUIDED
 NAMES = {3: "AUTO", 6: "RTL", 9: "LAND", 5: "LOITER", 4: "GUIDED"}
@@ -20,7 +21,7 @@ STEPS = [(6, True), (9, True), (5, True), (4, True), (3, True), (3, False), (3, 
 
 
 def test_mode_changes_and_arming_break_nothing(tmp_path: Path) -> None:
-    port = free_port()
+    port = free_udp_port()
     telemetry: list[Telemetry] = []
 
     def factory(conn: str, **kw: object) -> Telemetry:

@@ -17,7 +17,8 @@ from holescan.errors import InputError, NoDepthError
 from holescan.flightlog import read_flight_log
 from holescan.ground import ReprocessOptions, reprocess
 from holescan.sim import SimAutopilot
-from tests.capture.test_daemon import CAM, ScriptedSource, free_port, hover_path
+from tests._support import free_udp_port
+from tests.capture.test_daemon import CAM, ScriptedSource, hover_path
 
 ON_GROUND = 40  # frames before take-off: depth all zero (closer than 0.5 m)
 
@@ -42,7 +43,7 @@ def test_no_depth_is_its_own_error_class() -> None:
 
 
 def test_frames_on_the_ground_are_no_depth_not_detector_errors(tmp_path: Path) -> None:
-    port = free_port()
+    port = free_udp_port()
     n = 120
     with SimAutopilot(f"udpout:127.0.0.1:{port}", hover_path()):
         cfg = FlightConfig(log_prefix=tmp_path / "flight", max_frames=n, startup_sync_s=1.0)

@@ -14,7 +14,8 @@ from holescan.capture import FlyConfig, FlyReport, SensorSetup, fly, parse_fly_c
 from holescan.link import SigningKey
 from holescan.missions import radio_budget
 from holescan.sim import SimAutopilot
-from tests.capture.test_daemon import CAM, ScriptedSource, free_port, hover_path
+from tests._support import free_udp_port
+from tests.capture.test_daemon import CAM, ScriptedSource, hover_path
 
 
 def _scripted_flight(tmp_path: Path, port: int, **top: object) -> tuple[FlyConfig, SensorSetup]:
@@ -41,7 +42,7 @@ def test_radio_budget_follows_the_radio_buffer() -> None:
 
 
 def _fly_one_link(tmp_path: Path, txbuf: int | None) -> tuple[FlyReport, dict[str, int]]:
-    port = free_port()
+    port = free_udp_port()
     with SimAutopilot(f"udpout:127.0.0.1:{port}", hover_path()) as ap:
         ap.radio_txbuf = txbuf
         cfg, setup = _scripted_flight(tmp_path, port)
@@ -84,7 +85,7 @@ def test_companion_heartbeat_is_not_a_second_vehicle() -> None:
     from holescan.link import mavutil
     from holescan.missions import HoleMissionServer
 
-    port = free_port()
+    port = free_udp_port()
     ap = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=1)
     stop = threading.Event()
     beats: list[Any] = []
@@ -166,7 +167,7 @@ def test_shared_link_is_signed_with_the_fly_key(tmp_path: Path) -> None:
     from pymavlink import mavutil
 
     key = SigningKey.from_passphrase("rubble-sortie-7")
-    port = free_port()
+    port = free_udp_port()
     answers: list[str] = []
     done = threading.Event()
     sent = [0]

@@ -19,7 +19,8 @@ from holescan.capture import Flight, FlightConfig
 from holescan.flightlog import LoggedFrame, read_flight_log
 from holescan.geotag import Hole, HoleView, local_en_m
 from holescan.sim import SimAutopilot, SimPath
-from tests.capture.test_daemon import CAM, ScriptedSource, free_port
+from tests._support import free_udp_port
+from tests.capture.test_daemon import CAM, ScriptedSource
 
 HOME = (43.6532, -79.3832)  # SimPath's default home
 
@@ -37,7 +38,7 @@ def _fly(
     """Fly ``n_frames`` of the scripted hole over the hovering autopilot; ``script`` sets
     its GPS fix when that many frames were captured (30 a second). Returns the flight, every hole it
     announced (in order) and the logged frames."""
-    port = free_port()
+    port = free_udp_port()
     announced: list[Hole] = []
 
     def on_holes(

@@ -5,7 +5,6 @@ the pymavlink simulated autopilot on loopback."""
 from __future__ import annotations
 
 import json
-import socket
 import threading
 import time
 from collections.abc import Iterator
@@ -30,17 +29,12 @@ from holescan.detect import CameraIntrinsics, Frame
 from holescan.link import SigningKey
 from holescan.missions import MissionReceiver, Waypoint, upload_mission
 from holescan.sim import SimAutopilot, SimPath
+from tests._support import free_udp_port
 
 CAM = CameraIntrinsics.xtion()
 FAST = PreflightLimits(sensor_s=3.0, heartbeat_s=2.0, timesync_s=2.0, ready_s=2.0, fix_s=2.0)
 HOVER = SimPath(waypoints_enu=((0.0, 0.0, 2.5), (0.3, 0.0, 2.5), (0.3, 0.3, 2.5)), speed_m_s=0.2)
 no_xtion = pytest.mark.skipif(bool(find_xtion()), reason="an Xtion is attached to this machine")
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 class FloorSource:
@@ -86,7 +80,7 @@ def test_fly_without_sensor_or_autopilot_is_no_go_in_one_line(
 def test_check_lists_every_item_as_json_and_exits_1_on_no_go(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    port = free_port()
+    port = free_udp_port()
     with SimAutopilot(f"udpout:127.0.0.1:{port}", HOVER):
         argv = ["check", "--json", "--log-dir", str(tmp_path), "--mavlink"]
         code = main([*argv, f"udpin:127.0.0.1:{port}"])
@@ -110,7 +104,7 @@ def test_check_lists_every_item_as_json_and_exits_1_on_no_go(
 
 
 def test_everything_go_with_a_streaming_sensor_and_a_ready_autopilot(tmp_path: Path) -> None:
-    port = free_port()
+    port = free_udp_port()
     link = f"udpin:127.0.0.1:{port}"
     with SimAutopilot(f"udpout:127.0.0.1:{port}", HOVER, sysid=7):
         report = preflight(config(tmp_path), SensorSetup(FloorSource, CAM, link), limits=FAST)
@@ -122,7 +116,7 @@ def test_everything_go_with_a_streaming_sensor_and_a_ready_autopilot(tmp_path: P
 
 
 def test_an_autopilot_still_initialising_without_a_fix_is_no_go(tmp_path: Path) -> None:
-    port = free_port()
+    port = free_udp_port()
     with SimAutopilot(f"udpout:127.0.0.1:{port}", HOVER, gps_fix=False) as ap:
         ap.params = None  # as just after boot: its parameters are not loaded yet
         setup = SensorSetup(lambda: FloorSource(ranged=0.1), CAM, f"udpin:127.0.0.1:{port}")
@@ -139,7 +133,7 @@ def test_a_silent_autopilot_a_bad_mount_and_a_full_plan_are_no_go(tmp_path: Path
     from holescan.geotag import CameraMount
 
     sideways = FlightConfig(log_prefix=Path("flight"), mount=CameraMount.from_euler_deg(0, 0, 0))
-    cfg = config(tmp_path, mavlink=f"udpin:127.0.0.1:{free_port()}", flight=sideways)
+    cfg = config(tmp_path, mavlink=f"udpin:127.0.0.1:{free_udp_port()}", flight=sideways)
     cfg = FlyConfig(**{**cfg.__dict__, "duration_s": 1e9})  # more than any card holds
     report = preflight(cfg, SensorSetup(FloorSource, CAM, cfg.mavlink), limits=FAST)
     assert report.item("autopilot").status == "NO-GO"
@@ -150,7 +144,7 @@ def test_a_silent_autopilot_a_bad_mount_and_a_full_plan_are_no_go(tmp_path: Path
 
 
 def test_require_go_passes_a_flight_with_both_and_names_the_missing_one(tmp_path: Path) -> None:
-    port = free_port()
+    port = free_udp_port()
     with SimAutopilot(f"udpout:127.0.0.1:{port}", HOVER):
         setup = SensorSetup(FloorSource, CAM, f"udpin:127.0.0.1:{port}")
         assert [i.name for i in require_go(config(tmp_path), setup, limits=FAST).items] == [
@@ -165,7 +159,7 @@ def test_the_ground_station_is_checked_on_its_own_signed_link(tmp_path: Path) ->
     from holescan.link import mavlink, open_link
 
     key = SigningKey.from_passphrase("rubble")
-    port = free_port()
+    port = free_udp_port()
     gcs = open_link(f"udpin:127.0.0.1:{port}", source_system=255, source_component=190, signing=key)
     stop = threading.Event()
 
@@ -197,7 +191,7 @@ def test_the_ground_station_is_checked_on_its_own_signed_link(tmp_path: Path) ->
 def test_an_upload_just_after_boot_waits_for_the_mission_storage() -> None:
     """ArduPilot SITL answered MAV_MISSION_NO_SPACE seconds after boot: the upload asks
     again until the storage is sized, instead of failing the sortie."""
-    port = free_port()
+    port = free_udp_port()
     home = Waypoint(43.0, -79.0, 0.0)
     items = [Waypoint(43.0 + k * 1e-5, -79.0, 10.0) for k in range(1, 4)]
     receiver = MissionReceiver(capacity=0)  # not sized yet

@@ -15,14 +15,15 @@ from holescan.capture import FlightConfig
 from holescan.flightlog import LoggedFrame, read_flight_log
 from holescan.geotag import local_en_m
 from holescan.sim import SimAutopilot, SimPath
-from tests.capture.test_faults import floor_flight, free_port
+from tests._support import free_udp_port
+from tests.capture.test_faults import floor_flight
 
 # 1 m/s: a pose from the wrong side of a 1.5 s reboot is metres off.
 PATH = SimPath(waypoints_enu=((0.0, 0.0, 3.0), (6.0, 0.0, 3.0), (6.0, 6.0, 3.0)), speed_m_s=1.0)
 
 
 def test_autopilot_reboot_in_flight(tmp_path: Path) -> None:
-    port = free_port()
+    port = free_udp_port()
     cfg = FlightConfig(log_prefix=tmp_path / "f", max_duration_s=16.0, startup_sync_s=3.0)
     flight, telemetry = floor_flight(cfg, port)
     with SimAutopilot(f"udpout:127.0.0.1:{port}", PATH) as ap:

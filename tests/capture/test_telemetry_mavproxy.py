@@ -12,7 +12,6 @@ import math
 import os
 import shutil
 import signal
-import socket
 import subprocess
 import time
 from collections.abc import Iterator
@@ -29,18 +28,13 @@ from holescan.sim import SimAutopilot, SimPath
 
 os.environ.setdefault("MAVLINK20", "1")
 from holescan.link import mavlink as mavlink2
+from tests._support import free_udp_port
 
 log = logging.getLogger(__name__)
 
 MS = 1_000_000
 RATES = {"GLOBAL_POSITION_INT": 20.0, "ATTITUDE_QUATERNION": 50.0, "GPS_RAW_INT": 5.0,
          "SYSTEM_TIME": 2.0}  # fmt: skip
-
-
-def _free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def _pose_errors(sim: SimAutopilot, pose: VehiclePose, t_mono_ns: int) -> tuple[float, float]:
@@ -71,7 +65,7 @@ def flight(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Flight]:
     if mavproxy is None:
         pytest.fail("mavproxy.py not installed (pip install MAVProxy)")
     state = tmp_path_factory.mktemp("mavproxy")
-    p_master, p_out = _free_udp_port(), _free_udp_port()
+    p_master, p_out = free_udp_port(), free_udp_port()
     seen: list[tuple[Any, int]] = []
     with SimAutopilot(f"udpout:127.0.0.1:{p_master}", seed=11) as sim:
         proc = subprocess.Popen(
@@ -215,7 +209,7 @@ def test_silent_link_refuses_poses_quickly(flight: Flight) -> None:
 
 
 def test_fallback_to_request_data_stream_at_10hz() -> None:
-    port = _free_udp_port()
+    port = free_udp_port()
     rates = {"GLOBAL_POSITION_INT": 10.0, "ATTITUDE": 10.0, "SYSTEM_TIME": 1.0}
     with (
         SimAutopilot(f"udpout:127.0.0.1:{port}", message_interval=False, seed=5) as sim,
@@ -249,7 +243,7 @@ def test_fallback_to_request_data_stream_at_10hz() -> None:
 
 
 def test_garbage_is_ignored_and_counted() -> None:
-    port = _free_udp_port()
+    port = free_udp_port()
     with (
         SimAutopilot(f"udpout:127.0.0.1:{port}", seed=6) as sim,
         Telemetry(f"udpin:127.0.0.1:{port}", rates_hz={"GLOBAL_POSITION_INT": 20.0,
@@ -277,7 +271,7 @@ def test_garbage_is_ignored_and_counted() -> None:
 
 
 def test_no_autopilot_times_out() -> None:
-    tel = Telemetry(f"udpin:127.0.0.1:{_free_udp_port()}", heartbeat_timeout_s=0.5)
+    tel = Telemetry(f"udpin:127.0.0.1:{free_udp_port()}", heartbeat_timeout_s=0.5)
     t0 = time.monotonic()
     with pytest.raises(TelemetryTimeoutError, match="no autopilot heartbeat"), tel:
         pass
@@ -296,7 +290,7 @@ def test_sim_accepts_and_flies_an_uploaded_mission() -> None:
     for e, n in square:
         lat, lon, _ = pymap3d.enu2geodetic(e, n, 0.0, home.home_lat_deg, home.home_lon_deg, 0.0)
         items.append(Waypoint(float(lat), float(lon), 15.0))
-    port = _free_udp_port()
+    port = free_udp_port()
     with SimAutopilot(f"udpout:127.0.0.1:{port}", seed=7) as sim:
         upload_mission(f"udpin:127.0.0.1:{port}", items,
                        Waypoint(home.home_lat_deg, home.home_lon_deg, 0.0))  # fmt: skip

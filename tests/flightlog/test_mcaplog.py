@@ -15,10 +15,13 @@ import sys
 import textwrap
 import time
 from pathlib import Path
+from typing import Any
 
+import cv2
 import numpy as np
 import pymap3d
 import pytest
+import zstandard
 from mcap.reader import make_reader
 from mcap.records import Footer, Message
 from mcap.stream_reader import StreamReader
@@ -54,6 +57,9 @@ VGA = CameraIntrinsics.xtion()
 T0_UNIX_NS = 1_750_000_000_123_456_789
 FRAME_TOPICS = ("/camera/frame_info", "/camera/color/image_raw", "/camera/depth/image_raw")
 _log = logging.getLogger(__name__)
+
+#: The layout of older logs (raw images): what these container tests were sized for.
+RAW: dict[str, Any] = {"color": "raw", "depth": "raw"}
 
 
 def make_frame(i: int, cam: CameraIntrinsics = SMALL) -> Frame:
@@ -153,7 +159,9 @@ def poses_equal(a: VehiclePose | None, b: VehiclePose | None) -> bool:
 # ----------------------------------------------------------------------------- round trip
 
 
-def write_full_log(prefix: Path, n_frames: int = 12) -> dict[str, object]:
+def write_full_log(
+    prefix: Path, n_frames: int = 12, options: LogOptions | None = None
+) -> dict[str, object]:
     """A short flight with every kind of record; returns what was written."""
     packets = mavlink_packets(25)
     poses = [make_pose(i) for i in range(20)]
@@ -162,7 +170,7 @@ def write_full_log(prefix: Path, n_frames: int = 12) -> dict[str, object]:
     holes = [make_hole(1), make_hole(2)]
     config = {"detector": {"mode": "default", "superpixels": 9}, "fps": 30}
     mount = CameraMount.from_euler_deg(0.0, -80.0, 0.0, offset_m=(0.1, 0.0, 0.05))
-    with FlightLogWriter(prefix, SMALL, config=config, mount=mount) as w:
+    with FlightLogWriter(prefix, SMALL, config=config, mount=mount, options=options) as w:
         for i, frame in enumerate(frames):
             t = T0_UNIX_NS + i * 33_333_333
             for p in packets[2 * i : 2 * i + 2]:
@@ -191,8 +199,24 @@ def write_full_log(prefix: Path, n_frames: int = 12) -> dict[str, object]:
     }
 
 
-def test_round_trip_every_record(tmp_path: Path) -> None:
-    wrote = write_full_log(tmp_path / "flight")
+def jpeg_round_trip(rgb: np.ndarray, quality: int) -> np.ndarray:
+    """What OpenCV's JPEG codec gives back for ``rgb`` at ``quality`` (RGB in, RGB out)."""
+    bgr = cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)
+    ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, quality])
+    assert ok
+    return np.asarray(cv2.cvtColor(cv2.imdecode(buf, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB))
+
+
+#: Every chunk compression with every image codec pair worth telling apart: the layout of
+#: older logs (raw), the default (JPEG + zstd), and the lossless ones.
+IMAGE_MODES = [("raw", "raw"), ("jpeg", "zstd"), ("png", "zstd"), ("jpeg", "png"), ("png", "raw")]
+
+
+@pytest.mark.parametrize("compression", ["zstd", "lz4", "none"])
+@pytest.mark.parametrize(("color", "depth"), IMAGE_MODES)
+def test_round_trip_every_record(tmp_path: Path, compression: str, color: str, depth: str) -> None:
+    options = LogOptions(compression=compression, color=color, depth=depth, jpeg_quality=85)  # type: ignore[arg-type]
+    wrote = write_full_log(tmp_path / "flight", options=options)
     paths = wrote["paths"]
     assert paths == (tmp_path / "flight_0000.mcap",)
     stats = wrote["stats"]
@@ -226,7 +250,13 @@ def test_round_trip_every_record(tmp_path: Path) -> None:
     assert info.frame_index_gaps == ()
     assert {t: ti.count for t, ti in info.topics.items()} == counts
     assert all(ti.missing_sequences == () for ti in info.topics.values())
-    assert info.topics["/camera/color/image_raw"].schema == "foxglove.RawImage"
+    schema = {"raw": "foxglove.RawImage"}
+    assert info.topics["/camera/color/image_raw"].schema == schema.get(
+        color, "foxglove.CompressedImage"
+    )
+    assert info.topics["/camera/depth/image_raw"].schema == schema.get(
+        depth, "foxglove.CompressedImage"
+    )
     assert info.topics["/detections"].message_encoding == "json"
     assert json.loads(info.metadata["holescan.config"]["detector"]) == wrote["config"]["detector"]
     assert info.metadata["holescan"]["version"] == "0.1.0"
@@ -247,6 +277,8 @@ def test_round_trip_every_record(tmp_path: Path) -> None:
     frames = [r for r in recs if isinstance(r, LoggedFrame)]
     assert [r.sequence for r in frames] == list(range(12))
     for r, f in zip(frames, wrote["frames"], strict=True):
+        if color == "jpeg":  # lossy: exactly what the JPEG codec gives back
+            f = dataclasses.replace(f, rgb=jpeg_round_trip(f.rgb, 85))
         assert frames_equal(r.frame, f)
         assert r.frame.rgb.flags.writeable
         assert r.frame.depth.dtype == np.uint16
@@ -290,7 +322,9 @@ def test_detection_p_hole_and_brightness_round_trip(tmp_path: Path) -> None:
 
 
 def test_foxglove_messages_decode_with_generic_reader(tmp_path: Path) -> None:
-    wrote = write_full_log(tmp_path / "fox", n_frames=4)
+    wrote = write_full_log(
+        tmp_path / "fox", n_frames=4, options=LogOptions(color="raw", depth="raw")
+    )
     protobuf_topics = [
         "/camera/color/image_raw",
         "/camera/depth/image_raw",
@@ -355,11 +389,43 @@ def test_foxglove_messages_decode_with_generic_reader(tmp_path: Path) -> None:
     assert geo["features"][1]["properties"]["id"] == 2
 
 
+@pytest.mark.parametrize(("color", "depth"), [("jpeg", "zstd"), ("png", "png")])
+def test_compressed_images_describe_themselves(tmp_path: Path, color: str, depth: str) -> None:
+    """A generic protobuf reader gets ``foxglove.CompressedImage`` messages whose format
+    says how to decode them without holescan: OpenCV for jpeg/png, zstd for the depth."""
+    options = LogOptions(color=color, depth=depth)  # type: ignore[arg-type]
+    wrote = write_full_log(tmp_path / "fox", n_frames=2, options=options)
+    topics = ["/camera/color/image_raw", "/camera/depth/image_raw"]
+    seen: dict[str, list[object]] = {}
+    with open(wrote["paths"][0], "rb") as f:
+        reader = make_reader(f, validate_crcs=True, decoder_factories=[DecoderFactory()])
+        for _, channel, _, msg in reader.iter_decoded_messages(topics=topics):
+            seen.setdefault(channel.topic, []).append(msg)
+    c, d = seen["/camera/color/image_raw"][0], seen["/camera/depth/image_raw"][0]
+    assert type(c).__name__ == type(d).__name__ == "CompressedImage"
+    assert c.frame_id == d.frame_id == "camera"
+    assert c.timestamp.seconds * 10**9 + c.timestamp.nanos == T0_UNIX_NS
+    frame = wrote["frames"][0]
+    assert c.format == color
+    bgr = cv2.imdecode(np.frombuffer(c.data, np.uint8), cv2.IMREAD_COLOR)
+    want = jpeg_round_trip(frame.rgb, 90) if color == "jpeg" else frame.rgb
+    assert np.array_equal(bgr[..., ::-1], want)
+    if depth == "zstd":
+        assert d.format == "16UC1; zstd; 80x60"
+        raw = zstandard.ZstdDecompressor().decompress(d.data)
+        got = np.frombuffer(raw, "<u2").reshape(60, 80)
+    else:
+        assert d.format == "png"
+        got = cv2.imdecode(np.frombuffer(d.data, np.uint8), cv2.IMREAD_UNCHANGED)
+    assert got.dtype == np.uint16
+    assert np.array_equal(got, frame.depth)
+
+
 # ------------------------------------------------------------------------------- rotation
 
 
 def test_rotation_by_size_keeps_sequences_across_files(tmp_path: Path) -> None:
-    opts = LogOptions(chunk_size=8 * 1024, max_file_bytes=60 * 1024)
+    opts = LogOptions(chunk_size=8 * 1024, max_file_bytes=60 * 1024, **RAW)
     frames = [make_frame(i) for i in range(40)]
     with FlightLogWriter(tmp_path / "rot.mcap", SMALL, options=opts) as w:
         for i, f in enumerate(frames):
@@ -467,7 +533,7 @@ def chunked_log(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[Fr
     """A complete log of 30 small frames in many small chunks."""
     prefix = tmp_path_factory.mktemp("chunked") / "c"
     frames = [make_frame(i) for i in range(30)]
-    with FlightLogWriter(prefix, SMALL, options=LogOptions(chunk_size=20_000)) as w:
+    with FlightLogWriter(prefix, SMALL, options=LogOptions(chunk_size=20_000, **RAW)) as w:
         for i, f in enumerate(frames):
             w.write_frame(f, T0_UNIX_NS + i * 33_333_333)
             w.write_mavlink(mavlink_packets(1)[0], T0_UNIX_NS + i * 33_333_333)
@@ -704,7 +770,8 @@ def test_sigkilled_writer_loses_at_most_about_a_second(tmp_path: Path) -> None:
     got = [r.frame for r in read_flight_log(report.dst, kinds={LoggedFrame}, strict=True)]
     assert [f.index for f in got] == list(range(len(got)))
     for k in (0, len(got) // 2, len(got) - 1):  # spot-check exact pixels (regenerating is slow)
-        assert frames_equal(got[k], make_frame(k, VGA))
+        want = make_frame(k, VGA)  # as flights log it: colour through JPEG q90, depth exact
+        assert frames_equal(got[k], dataclasses.replace(want, rgb=jpeg_round_trip(want.rgb, 90)))
     lost = enqueued - len(got)
     print(
         f"SIGKILL after {enqueued} frames: {len(got)} recovered, lost {lost} "
@@ -745,7 +812,8 @@ _DISK_FULL_CHILD = textwrap.dedent(
 
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # writes past the limit fail with EFBIG
     resource.setrlimit(resource.RLIMIT_FSIZE, (300_000, 300_000))
-    w = FlightLogWriter(sys.argv[1], SMALL, options=LogOptions(chunk_size=50_000))
+    options = LogOptions(chunk_size=50_000, color="raw", depth="raw")
+    w = FlightLogWriter(sys.argv[1], SMALL, options=options)
     accepted = []
     for i in range(200):
         accepted.append(w.write_frame(make_frame(i), i))

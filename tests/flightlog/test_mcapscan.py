@@ -8,6 +8,7 @@ import hashlib
 import struct
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 from mcap.reader import make_reader
@@ -36,12 +37,15 @@ from tests.flightlog.test_mcaplog import (
 
 N_FRAMES = 40
 
+#: The layout of older logs (raw images): what these container tests were sized for.
+RAW: dict[str, Any] = {"color": "raw", "depth": "raw"}
+
 
 @pytest.fixture(scope="module")
 def flight(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """40 small frames in ~2-frame chunks, a /holes record every 5 frames."""
     prefix = tmp_path_factory.mktemp("scan") / "f"
-    with FlightLogWriter(prefix, SMALL, options=LogOptions(chunk_size=20_000)) as w:
+    with FlightLogWriter(prefix, SMALL, options=LogOptions(chunk_size=20_000, **RAW)) as w:
         for i in range(N_FRAMES):
             t = T0_UNIX_NS + i * 33_333_333
             w.write_frame(make_frame(i), t)
@@ -186,7 +190,7 @@ def test_no_verb_writes_over_an_input_or_a_flight_log(
 ) -> None:
     a = tmp_path / "A.mcap"
     a.write_bytes(flight.read_bytes())
-    opts = LogOptions(chunk_size=8 * 1024, max_file_bytes=60 * 1024)
+    opts = LogOptions(chunk_size=8 * 1024, max_file_bytes=60 * 1024, **RAW)
     with FlightLogWriter(tmp_path / "P", SMALL, options=opts) as w:
         for i in range(30):
             w.write_frame(make_frame(i), T0_UNIX_NS + i)

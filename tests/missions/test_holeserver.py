@@ -6,7 +6,6 @@ import math
 import os
 import shutil
 import signal
-import socket
 import subprocess
 import time
 from collections.abc import Iterator
@@ -26,6 +25,7 @@ from holescan.missions._holeserver import (
 
 os.environ.setdefault("MAVLINK20", "1")
 from holescan.link import mavutil
+from tests._support import free_udp_port
 
 SYSID = 1
 
@@ -43,12 +43,6 @@ HOLES = [
     hole(4, 0.73, 45.12346388, 7.65433512, sightings=9),
 ]
 ORDER = [2, 4, 3, 1]  # best score first, then more sightings
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def recv(conn: Any, kind: str, timeout: float = 5.0) -> Any:

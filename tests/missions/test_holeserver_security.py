@@ -7,7 +7,6 @@ from __future__ import annotations
 import os
 import shutil
 import signal
-import socket
 import subprocess
 import time
 from pathlib import Path
@@ -18,6 +17,7 @@ import pytest
 from holescan.geotag import Hole
 from holescan.link import open_link
 from holescan.missions import HoleMissionServer
+from tests._support import free_udp_port
 
 SYSID = 1
 _REST = (10**9, 2 * 10**9, 7, (1, 2, 3, 4), 0.7, 0.4)
@@ -25,12 +25,6 @@ HOLES = [
     Hole(1, 45.12345671, 7.65432109, 31.0, 1.5, 0.55, 3, *_REST),
     Hole(2, 45.12347013, 7.65430877, 31.0, 1.5, 0.91, 5, *_REST),
 ]
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def download(port: int) -> list[tuple[int, int]]:

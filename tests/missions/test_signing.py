@@ -15,18 +15,13 @@ from holescan.errors import InputError
 from holescan.geotag import Hole
 from holescan.link import SigningKey, open_link
 from holescan.missions import HoleMissionServer
+from tests._support import free_udp_port
 
 SYSID = 1
 KEY = SigningKey.from_passphrase("rubble-sortie-7")
 HOLES = [
     Hole(1, 45.1234567, 7.6543210, 31.0, 0.4, 0.9, 5, 10**9, 2 * 10**9, 7, (1, 2, 3, 4), 0.7, 0.4)
 ]
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def test_keys_from_hex_passphrase_and_file(tmp_path: Path) -> None:

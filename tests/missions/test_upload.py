@@ -7,7 +7,6 @@ import math
 import os
 import shutil
 import signal
-import socket
 import subprocess
 import time
 from collections.abc import Sequence
@@ -32,16 +31,10 @@ from holescan.missions import (
     upload_mission,
     write_wpl,
 )
+from tests._support import free_udp_port
 
 AREA = Area(((47.0, 8.0), (47.00015, 8.0), (47.00015, 8.0003), (47.0, 8.0003)))
 HOME = Waypoint(47.0, 8.0, 430.0, name="home", frame=MAV_FRAME_GLOBAL)
-
-
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        port: int = s.getsockname()[1]
-        return port
 
 
 def _items() -> list[Waypoint]:
@@ -61,7 +54,7 @@ def _same(got: Sequence[Waypoint], want: Sequence[Waypoint], tol_deg: float = 1e
 
 
 def test_upload_then_download_round_trip() -> None:
-    port = _free_port()
+    port = free_udp_port()
     items = _items()
     with MissionServer(f"udpin:127.0.0.1:{port}") as vehicle:
         report = upload_mission(f"udpout:127.0.0.1:{port}", items, HOME)
@@ -77,7 +70,7 @@ def test_upload_then_download_round_trip() -> None:
 
 
 def test_dropped_request_is_recovered_by_resending() -> None:
-    port = _free_port()
+    port = free_udp_port()
     dropped: list[int] = []
 
     def lossy(msg: Any) -> bool:
@@ -100,7 +93,7 @@ def test_dropped_request_is_recovered_by_resending() -> None:
 
 
 def test_dropped_ack_is_sent_again() -> None:
-    port = _free_port()
+    port = free_udp_port()
     acks: list[str] = []
 
     def lose_first_ack(msg: Any) -> bool:
@@ -117,7 +110,7 @@ def test_dropped_ack_is_sent_again() -> None:
 
 
 def test_legacy_mission_request_gets_mission_item() -> None:
-    port = _free_port()
+    port = free_udp_port()
     items = _items()
     receiver = MissionReceiver(legacy=True)
     with MissionServer(f"udpin:127.0.0.1:{port}", receiver) as vehicle:
@@ -128,7 +121,7 @@ def test_legacy_mission_request_gets_mission_item() -> None:
 
 
 def test_rejected_missions_raise_with_the_reason() -> None:
-    port = _free_port()
+    port = free_udp_port()
     with (
         MissionServer(f"udpin:127.0.0.1:{port}", MissionReceiver(capacity=5)),
         pytest.raises(MissionRejectedError, match="MAV_MISSION_NO_SPACE") as err,
@@ -140,7 +133,7 @@ def test_rejected_missions_raise_with_the_reason() -> None:
         too_high = any(w.has_position and w.frame == 3 and w.alt_m > 2.0 for w in items)
         return 12 if too_high else 0  # MAV_MISSION_INVALID_PARAM7
 
-    port = _free_port()
+    port = free_udp_port()
     receiver = MissionReceiver(validate=altitude_fence)
     with (
         MissionServer(f"udpin:127.0.0.1:{port}", receiver),
@@ -151,7 +144,7 @@ def test_rejected_missions_raise_with_the_reason() -> None:
 
 
 def test_unreachable_autopilot_times_out_quickly() -> None:
-    port = _free_port()
+    port = free_udp_port()
     t0 = time.monotonic()
     with pytest.raises(MissionTimeoutError, match="no heartbeat from system 1"):
         upload_mission(f"udpout:127.0.0.1:{port}", _items(), HOME, heartbeat_timeout_s=0.5)
@@ -160,7 +153,7 @@ def test_unreachable_autopilot_times_out_quickly() -> None:
 
 
 def test_vehicle_going_silent_mid_upload_times_out() -> None:
-    port = _free_port()
+    port = free_udp_port()
 
     def dead_after_two(msg: Any) -> bool:
         return bool(msg.get_type() == "MISSION_REQUEST_INT" and msg.seq >= 2)
@@ -203,7 +196,7 @@ def test_mavproxy_loads_our_wpl_and_uploads_it(tmp_path: Path) -> None:
     plan = plan_survey(AREA)
     wpl = write_wpl(tmp_path / "survey.waypoints", plan.mission_items(), plan.home)
     home, items = read_wpl(wpl)
-    port = _free_port()
+    port = free_udp_port()
     cmd = [
         exe, f"--master=udpin:127.0.0.1:{port}", "--daemon", f"--state-basedir={tmp_path}",
         "--target-system", "1", "--target-component", "1", "--streamrate=-1",
@@ -244,7 +237,7 @@ NOON = "2024-06-21T11:00:00+00:00"
 
 
 def test_cli_uploads_in_a_sun_window(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    port = _free_port()
+    port = free_udp_port()
     out_file = tmp_path / "s.waypoints"
     with MissionServer(f"udpin:127.0.0.1:{port}") as vehicle:
         rc, out, _ = _cli(
@@ -262,7 +255,7 @@ def test_cli_uploads_in_a_sun_window(tmp_path: Path, capsys: pytest.CaptureFixtu
 def test_cli_refuses_outside_a_window_unless_forced(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    port = _free_port()
+    port = free_udp_port()
     args = [AREA_ARG, "--takeoff", NOON, "--out", str(tmp_path / "s.plan")]
     with MissionServer(f"udpin:127.0.0.1:{port}") as vehicle:
         rc, _, err = _cli(capsys, *args, "--upload", f"udpout:127.0.0.1:{port}")
@@ -286,7 +279,7 @@ def test_cli_refuses_outside_a_window_unless_forced(
 
 
 def test_cli_unreachable_autopilot(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    port = _free_port()
+    port = free_udp_port()
     rc, _, err = _cli(
         capsys, AREA_ARG, "--takeoff", IN_WINDOW, "--out", str(tmp_path / "s.plan"),
         "--upload", f"udpout:127.0.0.1:{port}", "--timeout", "0.5",

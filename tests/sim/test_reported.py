@@ -8,7 +8,6 @@ telemetry reports (not the simulator's truth), the world placed at the autopilot
 from __future__ import annotations
 
 import math
-import socket
 from pathlib import Path
 
 import pytest
@@ -18,14 +17,9 @@ from holescan.flightlog import LoggedFrame, read_flight_log
 from holescan.geotag import local_en_m
 from holescan.sim import SimAutopilot, anchor_at_home, fly_sim, sortie_params
 from holescan.sim._sortie import make_sortie_world, survey_path
+from tests._support import free_udp_port
 
 TABLE = {"size_m": [4.0, 4.0], "world_seed": 15, "n_access_holes": 4, "fps": 10.0}
-
-
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def test_anchor_at_home_puts_home_margin_inside_the_world() -> None:
@@ -42,7 +36,7 @@ def test_sim_camera_renders_from_the_reported_pose(tmp_path: Path) -> None:
     world = make_sortie_world(params)
     plan, path = survey_path(world, params)
     home = (plan.path[0].lat_deg, plan.path[0].lon_deg, params.anchor.alt_m)
-    port = _free_port()
+    port = free_udp_port()
     cfg = parse_fly_config(
         {"sensor": "sim", "sim": TABLE, "holes": {"announce_min_sightings": 3}},
         {"log_dir": tmp_path, "mavlink": f"udpin:127.0.0.1:{port}", "duration_s": 12.0},

@@ -9,7 +9,9 @@ import sys
 import textwrap
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
+import cv2
 import numpy as np
 import pytest
 
@@ -298,21 +300,26 @@ def read_data_records(path: Path) -> dict[int, list[tuple[int, int, bytes]]]:
         pos += fields + payload
 
 
-def write_flight_log(prefix: Path, frames: list[Frame]) -> Path:
-    from holescan.flightlog import FlightLogWriter
+def write_flight_log(prefix: Path, frames: list[Frame], **images: Any) -> Path:
+    from holescan.flightlog import FlightLogWriter, LogOptions
 
-    with FlightLogWriter(prefix, CAM) as log:
+    with FlightLogWriter(prefix, CAM, options=LogOptions(**images)) as log:
         for f in frames:
             assert log.write_frame(f, 1_700_000_000_000_000_000 + f.t_mono_ns)
     (path,) = log.paths
     return path
 
 
-def test_export_oni_from_a_flight_log(tmp_path: Path) -> None:
+@pytest.mark.parametrize(
+    ("color", "depth"), [("raw", "raw"), ("png", "zstd"), ("jpeg", "png"), ("jpeg", "zstd")]
+)
+def test_export_oni_from_a_flight_log(tmp_path: Path, color: str, depth: str) -> None:
+    """Every way the log stores images exports: depth exactly, colour exactly or, from a
+    JPEG log, as the JPEG codec gives it back."""
     from holescan.capture import export_oni
 
     frames = [replace(f, t_mono_ns=10_000 + i * 33_000_000) for i, f in enumerate(make_frames(6))]
-    log = write_flight_log(tmp_path / "flight", frames)
+    log = write_flight_log(tmp_path / "flight", frames, color=color, depth=depth)
     out = tmp_path / "flight.oni"
     assert export_oni(log, out, fps=30) == 6
     records = read_data_records(out)
@@ -320,7 +327,12 @@ def test_export_oni_from_a_flight_log(tmp_path: Path) -> None:
         ts, frame_id, depth = records[1][i]
         assert (ts, frame_id) == (f.t_sensor_ns // 1000, i + 1)
         assert depth == f.depth.astype("<u2").tobytes()
-        assert records[2][i][2] == f.rgb.tobytes()
+        rgb = f.rgb
+        if color == "jpeg":
+            ok, buf = cv2.imencode(".jpg", rgb[..., ::-1], [cv2.IMWRITE_JPEG_QUALITY, 90])
+            assert ok
+            rgb = cv2.imdecode(buf, cv2.IMREAD_COLOR)[..., ::-1]
+        assert records[2][i][2] == np.ascontiguousarray(rgb).tobytes()
     assert scan_oni(out).stream("image").camera == CAM
 
 

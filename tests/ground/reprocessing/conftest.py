@@ -8,7 +8,6 @@ frames/s, the log rotated every 3 s. ``sortie_a`` and ``sortie_b`` fly different
 
 from __future__ import annotations
 
-import socket
 from pathlib import Path
 
 import pytest
@@ -18,6 +17,7 @@ from holescan.detect import CameraIntrinsics
 from holescan.flightlog import LogOptions
 from holescan.geotag import AnnounceGate
 from holescan.sim import RubbleWorld, SimAutopilot, SimPath, SimSource, WorldAnchor, make_world
+from tests._support import free_udp_port
 
 CAM = CameraIntrinsics.xtion()
 ANCHOR = WorldAnchor(43.6532, -79.3832, 120.0)
@@ -25,12 +25,6 @@ GATE = AnnounceGate(min_p_hole=0.5, review_min_p_hole=0.05)
 """The sorties' gate (not the default)."""
 
 Flown = tuple[list[Path], FlightSummary]
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @pytest.fixture(scope="session")
@@ -60,7 +54,7 @@ def fly(world: RubbleWorld, out: Path, name: str, reverse: bool, uptime_s: float
         waypoints_enu=tuple(reversed(corners)) if reverse else corners,
         speed_m_s=0.8,
     )
-    port = free_port()
+    port = free_udp_port()
     with SimAutopilot(f"udpout:127.0.0.1:{port}", path, uptime_at_start_s=uptime_s) as ap:
 
         def source() -> SimSource:
@@ -70,7 +64,9 @@ def fly(world: RubbleWorld, out: Path, name: str, reverse: bool, uptime_s: float
         cfg = FlightConfig(
             log_prefix=out / name,
             max_frames=40,
-            log_options=LogOptions(max_file_s=3.0),
+            # Lossless colour (depth is always lossless): reprocessing sees the pixels the
+            # flight detected on, and must find exactly its holes.
+            log_options=LogOptions(max_file_s=3.0, color="png"),
             pose_wait_s=1.0,  # a loaded test machine can delay telemetry; the flight waits
             # Not the default gate: the log records it, reprocessing gives its tiers with it.
             announce_min_p_hole=GATE.min_p_hole,

@@ -21,14 +21,27 @@ from pathlib import Path
 import pymap3d
 import pytest
 import rasterio
+from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
 from mcap.reader import make_reader
+from mcap.records import Channel, Message, Metadata, Schema
 from rasterio.warp import transform as warp_transform
 
 from holescan import cli
 from holescan.capture import FlightSummary
 from holescan.detect import DetectParams
 from holescan.errors import InputError
-from holescan.flightlog import LoggedFrame, log_info, read_flight_log
+from holescan.flightlog import (
+    TOPIC_COLOR,
+    TOPIC_DEPTH,
+    ImageEncoder,
+    LoggedFrame,
+    McapFile,
+    ScanState,
+    decode_compressed,
+    log_info,
+    read_flight_log,
+    scan_records,
+)
 from holescan.geotag import AnnounceGate, Hole
 from holescan.ground import (
     Progress,
@@ -39,6 +52,7 @@ from holescan.ground import (
     read_flight_holes,
 )
 from holescan.ground import reprocess as _reprocess
+from tests._support import free_tcp_port
 
 Flown = tuple[list[Path], FlightSummary]
 GATE = AnnounceGate(min_p_hole=0.5, review_min_p_hole=0.05)  # conftest's sorties fly with it
@@ -198,6 +212,72 @@ def test_the_flights_recorded_gate_gives_the_tiers(
     assert "announced p_hole &gt;= 0.99 and review p_hole &gt;= 0 given" in report
 
 
+def transcode(files: list[Path], out: Path, encoder: ImageEncoder) -> list[Path]:
+    """The flight's log files with their images stored as ``encoder`` stores them, every
+    other record (metadata, telemetry, detections, holes, times, sequences) copied as is."""
+    out.mkdir()
+    result = []
+    for src in files:
+        schemas: dict[int, Schema] = {}
+        channels: dict[int, Channel] = {}
+        ids: dict[int, int] = {}
+        with McapFile(out / src.name, library="test") as dst:
+            for rec in scan_records(src, ScanState(src)):
+                if isinstance(rec, Schema):
+                    schemas[rec.id] = rec
+                elif isinstance(rec, Channel):
+                    channels[rec.id] = rec
+                elif isinstance(rec, Metadata):
+                    dst.add_metadata(rec.name, dict(rec.metadata))
+                elif isinstance(rec, Message):
+                    ch = channels[rec.channel_id]
+                    data = rec.data
+                    if ch.topic in (TOPIC_COLOR, TOPIC_DEPTH):
+                        stored = CompressedImage.FromString(data)  # the flight's PNG / zstd
+                        if ch.topic == TOPIC_DEPTH:
+                            depth = decode_compressed(stored, "depth")
+                            msg = encoder.depth_message(depth, rec.publish_time)
+                        else:
+                            rgb = decode_compressed(stored, "color")
+                            msg = encoder.color_message(rgb, rec.publish_time)
+                        cid = dst.channel(ch.topic, type(msg))
+                        data = msg.SerializeToString()
+                    else:
+                        if rec.channel_id not in ids:
+                            sid = dst.copy_schema(schemas[ch.schema_id])
+                            ids[rec.channel_id] = dst.copy_channel(ch, sid)
+                        cid = ids[rec.channel_id]
+                    dst.add_message(cid, rec.log_time, data, rec.publish_time, rec.sequence)
+        result.append(out / src.name)
+    return result
+
+
+@pytest.mark.parametrize(
+    ("color", "tol_m"),
+    [("raw", 0.0), ("jpeg", 0.10)],
+    ids=["raw-log-written-the-old-way", "jpeg-colour"],
+)
+def test_a_compressed_log_finds_the_holes_of_the_raw_log(
+    flight: Flown, reference: ReprocessResult, tmp_path: Path, color: str, tol_m: float
+) -> None:
+    """The flight's lossless log (PNG colour, zstd depth: what the reference reprocessed)
+    rewritten as a raw log (the image layout of older logs) and with JPEG colour (the
+    default): the raw log gives exactly the same holes; JPEG the same holes, ids and tiers,
+    each within 10 cm (JPEG moves an opening's outline by a pixel or two)."""
+    files, _ = flight
+    enc = ImageEncoder(color, "raw" if color == "raw" else "zstd", 90)  # type: ignore[arg-type]
+    other = transcode(files, tmp_path / color, enc)
+    assert log_info(other).frames == log_info(files).frames == 40
+    res = reprocess(other, tmp_path / "out", opts(cache=False))
+    (f,), (ref,) = res.flights, reference.flights
+    assert f.frames_detected == ref.frames_detected == 40
+    if tol_m == 0.0:
+        assert f.holes == ref.holes
+    else:
+        same_holes(f.holes, ref.holes, tol_m)
+    assert tiers_of(f.confirmed, GATE) == tiers_of(ref.confirmed, GATE)
+
+
 def tiers_in(geojson: Path) -> dict[int, str]:
     doc = json.loads(geojson.read_text())
     return {x["properties"]["hole_id"]: x["properties"]["tier"] for x in doc["features"]}
@@ -233,7 +313,7 @@ def test_a_worker_killed_mid_run_loses_nothing(
     import psutil
 
     files, _ = flight
-    port = free_port()
+    port = free_tcp_port()
     bin_dir = Path(sys.executable).parent
     dask = (
         [str(bin_dir / "dask")] if (bin_dir / "dask").exists() else [sys.executable, "-m", "dask"]
@@ -289,14 +369,6 @@ def test_a_worker_killed_mid_run_loses_nothing(
     assert res.engine.computed == a.partitions  # each partition used once
     assert a.frames_read == b.frames_read and a.holes == b.holes
     assert sidecar(a.outputs[0]) == sidecar(b.outputs[0])
-
-
-def free_port() -> int:
-    import socket
-
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def test_stopped_run_resumes_from_the_cache(

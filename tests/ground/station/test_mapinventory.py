@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_station import Relay, free_port, wait_for
+from test_station import Relay, wait_for
 
 from holescan.ground.station import StationState
 from holescan.ground.station.link import VehicleLink
@@ -27,6 +27,7 @@ from holescan.missions import (
     held_by,
     read_inventory,
 )
+from tests._support import free_udp_port
 
 N = 16
 
@@ -89,7 +90,7 @@ def test_inventory_bytes_round_trip_and_hostile_ones_refused() -> None:
 
 @pytest.mark.timeout(120)
 def test_link_up_resends_only_what_the_station_lacks(tmp_path: Path) -> None:
-    ground = free_port()
+    ground = free_udp_port()
     relay = Relay(ground)
     state = StationState.open(tmp_path / "st")
     store = MapStore.open(tmp_path / "st" / "map")

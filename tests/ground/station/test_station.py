@@ -34,15 +34,10 @@ from holescan.geotag import Hole
 from holescan.ground import GroundOptions, GroundStation, StationState, state_document
 from holescan.link import mavlink
 from holescan.missions import HoleMissionServer
+from tests._support import free_udp_port
 
 NODE_COT = Path(__file__).parents[1] / "cot"  # tests/ground/cot: the node parser
 HOME = (43.6532, -79.3832)
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def hole(hid: int, score: float = 0.88, sigma: float = 0.3) -> Hole:
@@ -111,7 +106,7 @@ class Relay:
     """UDP relay vehicle <-> station that can be cut (drops both ways while cut)."""
 
     def __init__(self, to_port: int) -> None:
-        self.port = free_port()
+        self.port = free_udp_port()
         self.to = ("127.0.0.1", to_port)
         self.cut = False
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -154,7 +149,7 @@ class Relay:
 @pytest.fixture
 def rig(tmp_path: Path) -> Iterator[dict[str, Any]]:
     """Vehicle server -> relay -> station; CoT (TAK protocol v1) to a pytak receiver."""
-    station_port, cot_port = free_port(), free_port()
+    station_port, cot_port = free_udp_port(), free_udp_port()
     relay = Relay(station_port)
     rx = PytakReceiver(f"udp+ro://127.0.0.1:{cot_port}")
     opts = GroundOptions(
@@ -313,7 +308,7 @@ def test_link_cut_for_10_s_loses_no_hole(rig: dict[str, Any]) -> None:
 
 
 def test_restart_resumes_ids_marks_and_pictures(tmp_path: Path) -> None:
-    port = free_port()
+    port = free_udp_port()
     opts = GroundOptions(
         mavlink=f"udpin:127.0.0.1:{port}", out=tmp_path / "st", http_port=None, cot_url=None
     )
@@ -335,7 +330,7 @@ def test_restart_resumes_ids_marks_and_pictures(tmp_path: Path) -> None:
 def test_bad_link_and_garbage_keep_the_station_going(
     tmp_path: Path, caplog: pytest.LogCaptureFixture
 ) -> None:
-    port = free_port()
+    port = free_udp_port()
     opts = GroundOptions(
         mavlink="udpin:127.0.0.1:notaport", out=tmp_path / "a", http_port=None, cot_url=None
     )
@@ -372,7 +367,7 @@ def test_cot_xml_parsed_by_node_cot(tmp_path: Path) -> None:
     """The XML the station sends over UDP, received by pytak, parsed by @tak-ps/node-cot."""
     if not (NODE_COT / "node_modules" / "@tak-ps" / "node-cot").exists():
         pytest.skip(f"npm install --prefix {NODE_COT} (the independent CoT parser)")
-    port, cot_port = free_port(), free_port()
+    port, cot_port = free_udp_port(), free_udp_port()
     rx = PytakReceiver(f"udp+ro://127.0.0.1:{cot_port}")
     opts = GroundOptions(
         mavlink=f"udpin:127.0.0.1:{port}",

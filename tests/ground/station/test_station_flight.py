@@ -34,9 +34,10 @@ from typing import Any
 
 import pytest
 from devtools import Tab
-from test_station import PytakReceiver, Relay, free_port, parse_tak, wait_for
+from test_station import PytakReceiver, Relay, parse_tak, wait_for
 
 from holescan.link import mavlink
+from tests._support import free_udp_port
 
 CHROMIUM = Path("/usr/bin/chromium")
 ROOT = Path(__file__).resolve().parents[3]
@@ -155,7 +156,7 @@ class Chromium(Tab):
     """Headless Chromium driven over the DevTools protocol: its first tab."""
 
     def __init__(self, url: str, profile: Path) -> None:
-        port = free_port()
+        port = free_udp_port()
         self.proc = subprocess.Popen(
             [
                 str(CHROMIUM),
@@ -232,8 +233,8 @@ def test_flight_mavproxy_ground_page_tak(tmp_path: Path) -> None:
         pytest.skip("MAVProxy is not installed (a test dependency)")
     art = Path(os.environ.get("HOLESCAN_ARTEFACTS", tmp_path))
     art.mkdir(parents=True, exist_ok=True)
-    gcs, ground_port = free_port(), free_port()
-    http, cot = free_port(), free_port()
+    gcs, ground_port = free_udp_port(), free_udp_port()
+    http, cot = free_udp_port(), free_udp_port()
     relay = Relay(ground_port)
     relay_in = relay.port
     rx = PytakReceiver(f"udp+ro://127.0.0.1:{cot}")

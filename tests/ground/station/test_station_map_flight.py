@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_station import free_port, wait_for
+from test_station import wait_for
 
 from holescan.capture import SensorSetup, fly, parse_fly_config
 from holescan.detect import CameraIntrinsics
@@ -32,6 +32,7 @@ from holescan.ground import GroundOptions, GroundStation
 from holescan.ground.station.mapstore import tile_file_name
 from holescan.missions import read_tile
 from holescan.sim import SimSortie, camera_pose_in_world, render_exact, sortie_params
+from tests._support import free_udp_port
 
 COARSE_M = 0.5
 
@@ -66,7 +67,7 @@ def truth_seen(
 
 @pytest.mark.slow
 def test_flight_map_reaches_the_station_and_matches_the_simulators_view(tmp_path: Path) -> None:
-    port = free_port()
+    port = free_udp_port()
     station_dir = tmp_path / "station"
     opts = GroundOptions(
         mavlink=f"udpin:127.0.0.1:{port}", out=station_dir, http_port=0, cot_url=None

@@ -21,11 +21,12 @@ from typing import Any
 
 import pytest
 from devtools import Tab
-from test_station import free_port, picture, wait_for
+from test_station import picture, wait_for
 
 from holescan.ground import StationState
 from holescan.ground.station.audit import AuditTrail
 from holescan.ground.station.web import StationWeb
+from tests._support import free_udp_port
 
 CHROMIUM = Path("/usr/bin/chromium")
 
@@ -46,7 +47,7 @@ class Browser:
     def __init__(self, profile: Path) -> None:
         import websocket
 
-        self.port = free_port()
+        self.port = free_udp_port()
         self.proc = subprocess.Popen(
             [
                 str(CHROMIUM),

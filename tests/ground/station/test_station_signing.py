@@ -29,10 +29,11 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from test_station import free_port, hole, picture, wait_for
+from test_station import hole, picture, wait_for
 
 from holescan.link import SigningKey, open_link
 from holescan.missions import HoleMissionServer
+from tests._support import free_udp_port
 
 ROOT = Path(__file__).resolve().parents[3]
 PASSPHRASE = "rubble-sortie-7"
@@ -68,7 +69,7 @@ def test_signed_link_through_mavproxy_and_forgers_refused(tmp_path: Path) -> Non
     key_file = tmp_path / "mavlink.key"
     key_file.write_text(PASSPHRASE + "\n")
     key_file.chmod(0o600)
-    radio, ground_port, side = free_port(), free_port(), free_port()
+    radio, ground_port, side = free_udp_port(), free_udp_port(), free_udp_port()
     station_dir = tmp_path / "station"
     env = {**os.environ, "PYTHONPATH": str(ROOT), "MAVLINK20": "1"}
     log = tmp_path / "ground.log"

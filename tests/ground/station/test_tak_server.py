@@ -12,7 +12,6 @@ from __future__ import annotations
 import dataclasses
 import datetime as dt
 import json
-import socket
 import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
@@ -34,14 +33,9 @@ from holescan.ground import CotError, GroundHole, GroundOptions, GroundStation, 
 from holescan.ground.station import DATAPACKAGE_NAME, tak_settings
 from holescan.ground.station.state import FORMAT
 from holescan.missions import HoleMissionServer
+from tests._support import free_udp_port
 
 UID = "holescan-ground-hole-1"
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def cot_time(text: str | None) -> dt.datetime:
