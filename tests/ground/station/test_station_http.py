@@ -20,11 +20,12 @@ from urllib.parse import quote
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from test_station import free_port, wait_for
+from test_station import wait_for
 from test_station_guard import Station, mark_body, request, send
 
 from holescan.ground import GroundOptions, run_ground
 from holescan.ground.station.guard import Limits
+from tests._support import free_udp_port
 
 
 @pytest.fixture
@@ -113,7 +114,7 @@ def test_tokens_never_reach_the_logs(tmp_path: Path, caplog: pytest.LogCaptureFi
     shown: list[str] = []
     stop = threading.Event()
     opts = GroundOptions(
-        mavlink=f"udpin:127.0.0.1:{free_port()}",
+        mavlink=f"udpin:127.0.0.1:{free_udp_port()}",
         out=tmp_path / "st",
         http_port=0,
         cot_url=None,
