@@ -36,8 +36,8 @@ const Review = (() => {
 
   function facts(h) {
     const size = h.major_m != null && h.minor_m != null ? ` &middot; ${h.major_m.toFixed(2)} x ${h.minor_m.toFixed(2)} m` : "";
-    const seen = h.sightings ? ` &middot; seen ${h.sightings}x` : "";
-    return `p ${conf(h).toFixed(2)}${size}${seen}`;
+    const seen = h.sightings ? ` &middot; seen in ${h.sightings} frames` : "";
+    return `p_hole ${conf(h).toFixed(2)}${size}${seen}`;
   }
 
   function buttons(h) {

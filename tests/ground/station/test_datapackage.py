@@ -164,7 +164,7 @@ def test_cot_details_stale_age_tier() -> None:
     assert ev.get("time") == ev.get("start") == "2026-12-03T14:00:00.000Z"
     assert ev.get("stale") == "2026-12-03T14:05:00.000Z"  # from now, not from T0
     text = ev.findtext("detail/remarks") or ""
-    assert text.startswith("ANNOUNCED: hole 1, score 0.88")
+    assert text.startswith("ANNOUNCED: hole 1, best frame's score 0.88")
     assert text.endswith("(first seen 5.0 h ago (09:00Z), updated 4.5 h ago)")
     facts = ev.find("detail/holescan")
     assert facts is not None and facts.attrib == {
