@@ -251,7 +251,7 @@ class BagSource:
         if self.topics.camera_info is not None:
             conns = [c for c in reader.connections if c.topic == self.topics.camera_info]
             for c, _, raw in reader.messages(connections=conns):
-                info = reader.deserialize(raw, c.msgtype)
+                info: Any = reader.deserialize(raw, c.msgtype)  # sensor_msgs/CameraInfo, ROS 1 or 2
                 k = [float(v) for v in info.k] if hasattr(info, "k") else [float(v) for v in info.K]
                 if (int(info.width), int(info.height)) != (w, h) or not k[0] > 0:
                     break
