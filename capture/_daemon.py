@@ -167,10 +167,7 @@ class Flight:
     def _tiers(self, holes: list[Hole]) -> tuple[list[Hole], dict[int, Tier]]:
         """The holes to serve, and every hole's tier (the gate's select and review)."""
         served = self._gate.select(holes, announced=self._announced)
-        review = {h.id for h in self._gate.review(holes, announced=self._announced)}
-        tiers: dict[int, Tier] = {h.id: "review" if h.id in review else "candidate" for h in holes}
-        tiers.update({h.id: "announced" for h in served})
-        return served, tiers
+        return served, self._gate.tiers(holes, announced=self._announced)
 
     def _handle_result_locked(self, r: WorkerResult) -> None:
         assert self._writer is not None

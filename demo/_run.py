@@ -157,6 +157,13 @@ class DemoResult:
         errors = [r.error_m for r in self.truth if r.status == "found"]
         c = self.summary.counters
         return {
+            "holes_found": len(self.confirmed) + len(self.review),
+            "holes_found_means": "announced + for review (FOUND_TIERS): what reached a person",
+            "tiers": {
+                "announced": [h.id for h in self.confirmed],
+                "review": [h.id for h in self.review],
+                "candidate": self.candidates,
+            },
             "found": self.found,
             "missed": self.missed,
             "not_in_view": sum(r.status == "not in view" for r in self.truth),
@@ -422,8 +429,8 @@ def run_demo(
         card_bytes, cards_sent = server.cards.bytes_sent, server.cards.cards_sent
     interrupted = capture_s < duration - 1.0
     confirmed = tuple(opts.gate.select(summary.holes, first_announced))
-    announced_ids = {h.id for h in confirmed}
-    review = tuple(h for h in summary.holes if h.id in first_review and h.id not in announced_ids)
+    final = opts.gate.tiers(summary.holes, first_announced)  # the one gate, as the log has it
+    review = tuple(h for h in summary.holes if final[h.id] == "review")
     truth = sortie.truth
     in_view = frames_in_view(sortie.sources)
     scored = functools.partial(
@@ -433,7 +440,8 @@ def run_demo(
     log_files = tuple(summary.log.files)
     mapper = DemoMapper(sortie.world, opts.sortie, sortie.camera, sortie.mount)
     views, track, boot_to_unix = views_and_track(log_files, (*confirmed, *review), mapper.add)
-    search = mapper.finish(out, confirmed, boot_to_unix)
+    tiers = {h.id: "announced" for h in confirmed} | {h.id: "review" for h in review}
+    search = mapper.finish(out, (*confirmed, *review), boot_to_unix, tiers)
     kinds = Counter(str(h.kind) for h in sortie.world.holes)
     facts = {
         "flight log": ", ".join(p.name for p in log_files),
@@ -445,7 +453,6 @@ def run_demo(
         f"true opening or within {opts.match_m:g} m of its centre)",
     }
     review_rows, _ = scored(review, truth, sortie.world, anchor, in_view)
-    tiers = {h.id: "announced" for h in confirmed} | {h.id: "review" for h in review}
     files = write_hole_outputs(
         out,
         "flight",
@@ -481,7 +488,7 @@ def run_demo(
         candidates=len(summary.holes) - len(confirmed) - len(review),
         review=review,
         review_true=sum(r.status == "found" for r in review_rows),
-        review_latency_s=tuple(first_review[h.id] for h in review),
+        review_latency_s=tuple(first_review[h.id] for h in review if h.id in first_review),
         area_m2=opts.sortie.size_m[0] * opts.sortie.size_m[1],
         latency_s=tuple(first_announced[h.id] for h in confirmed if h.id in first_announced),
         card_bytes=card_bytes,
