@@ -222,8 +222,10 @@ def test_station_keeps_the_datapackage_current(tmp_path: Path) -> None:
             station.state.on_card(facts | {"score": 0.9, "sigma": 0.3}, picture(hid))
         both = {"holescan-ground-hole-1", "holescan-ground-hole-2"}
         wait_for(lambda: holes_in_package() == both, 10.0, "both holes in the package")
-        station.mark(2, "rejected")  # the mark flushes the files at once
-        assert holes_in_package() == {"holescan-ground-hole-1"}
+        station.mark(2, "rejected")  # the station's own thread writes the files after it
+        wait_for(
+            lambda: holes_in_package() == {"holescan-ground-hole-1"}, 10.0, "the rejected one out"
+        )
     _, contents, z = manifest(path)
     assert z.read("holescan-ground-hole-1/hole-1.jpg") == picture(1)
     assert "overlay/area_map.kmz" in contents
