@@ -208,7 +208,25 @@ def cpu_quota(name: str, quota: float | None) -> Iterator[Path | None]:
             (group / "cpu.cfs_quota_us").write_text(str(round(quota * PERIOD_US)))
         yield group
     finally:
-        group.rmdir()
+        _remove_group(group)
+
+
+def _remove_group(group: Path) -> None:
+    """Remove the cgroup once its last member (a detection worker ending after its parent)
+    has gone; a straggler after 10 s is moved to the root group first."""
+    deadline = time.monotonic() + 10.0
+    while True:
+        try:
+            group.rmdir()
+            return
+        except OSError:
+            if time.monotonic() < deadline:
+                time.sleep(0.2)
+                continue
+            for pid in (group / "cgroup.procs").read_text().split():
+                (group.parent / "cgroup.procs").write_text(pid)
+            group.rmdir()
+            return
 
 
 def _throttled(group: Path | None) -> str:
