@@ -1,5 +1,6 @@
 """Geotagging (pure): detections + camera + vehicle pose -> hole positions; merging sightings."""
 
+from holescan.geotag._announce import AnnouncePolicy, HoleNews, Told
 from holescan.geotag._camera import (
     CameraMount,
     GimbalAttitude,
@@ -55,6 +56,7 @@ __all__ = [
     "TIERS",
     "VEHICLE_TIERS",
     "AnnounceGate",
+    "AnnouncePolicy",
     "BestViews",
     "CameraMount",
     "ConfidenceModel",
@@ -63,6 +65,7 @@ __all__ = [
     "GimbalAttitude",
     "Hole",
     "HoleEvidence",
+    "HoleNews",
     "HolePipeline",
     "HoleSighting",
     "HoleTier",
@@ -73,6 +76,7 @@ __all__ = [
     "MergeParams",
     "PoseOf",
     "Tier",
+    "Told",
     "VehiclePose",
     "VehicleTier",
     "box_cut_by_border",
