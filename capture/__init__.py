@@ -36,7 +36,6 @@ from holescan.capture._preflight import (
     require_go,
 )
 from holescan.capture._preflightitems import (
-    RAW_LOG_BYTES_PER_S,
     CheckItem,
     CheckStatus,
     PreflightReport,
@@ -62,7 +61,6 @@ from holescan.capture.openni import (
 __all__ = [
     "DEFAULT_RATES_HZ",
     "ITEMS",
-    "RAW_LOG_BYTES_PER_S",
     "CaptureError",
     "CheckItem",
     "CheckStatus",

@@ -13,11 +13,11 @@ from typing import Any, Final, Literal
 
 import numpy as np
 
+from holescan.capture._diskbudget import disk_budget
 from holescan.capture._flyconfig import FlyConfig
 from holescan.detect import CameraIntrinsics
 
 __all__ = [
-    "RAW_LOG_BYTES_PER_S",
     "CheckItem",
     "CheckStatus",
     "PreflightReport",
@@ -27,10 +27,6 @@ __all__ = [
 ]
 
 CheckStatus = Literal["GO", "NO-GO", "WARN", "SKIP"]
-
-RAW_LOG_BYTES_PER_S: Final = 34e6
-"""What a flight log takes at 30 fps with raw colour and depth (zstd-3 over a rubble scene:
-the high end of the 19-34 MB/s measured on simulated and demo sorties)."""
 
 _MAX_OFF_NADIR_DEG: Final = 60.0
 
@@ -73,24 +69,23 @@ class PreflightReport:
 
 
 def disk_item(cfg: FlyConfig) -> CheckItem:
-    """Room for the flight's log on the file system of ``cfg.log_dir``.
+    """Room for the flight's log on the file system of ``cfg.log_dir``, by the flight's own
+    disk budget (:func:`capture.disk_budget`: the rate measured on the last finished log or
+    expected for the image settings, the image reserve, the planned flight). Removes
+    nothing (the retention rule is ``fly``'s, when configured).
 
-    NO-GO: the folder cannot be written, or the planned ``duration_s`` does not fit at
-    :data:`RAW_LOG_BYTES_PER_S`; WARN: less than 10 minutes of log fit; else GO with the
-    minutes that fit.
+    NO-GO: the folder cannot be written, or the planned flight does not fit; WARN: under
+    10 minutes of log fit; else GO.
     """
     folder = cfg.log_dir
     existing = next((p for p in (folder, *folder.parents) if p.exists()), Path("/"))
     if not os.access(existing, os.W_OK):
         return CheckItem("disk", "NO-GO", f"{existing} is not writable by this user")
-    free = shutil.disk_usage(existing).free
-    fits_s = free / RAW_LOG_BYTES_PER_S
-    what = f"{free / 1e9:.1f} GB free on {existing}: {fits_s / 60:.0f} min of log at "
-    what += f"{RAW_LOG_BYTES_PER_S / 1e6:.0f} MB/s"
-    planned = cfg.duration_s
-    if planned is not None and fits_s < planned:
-        return CheckItem("disk", "NO-GO", f"{what}; the planned {planned / 60:.0f} min do not fit")
-    if fits_s < 600:
+    budget = disk_budget(cfg, shutil.disk_usage(existing).free)
+    what = budget.describe().removeprefix("disk: ")
+    if budget.fits is False:
+        return CheckItem("disk", "NO-GO", what)
+    if budget.lasts_s < 600:
         return CheckItem("disk", "WARN", what)
     return CheckItem("disk", "GO", what)
 

@@ -42,7 +42,8 @@ def format_result(r: DemoResult) -> list[str]:
             h = next(h for h in r.confirmed if h.id == row.hole_id)
             lines.append(
                 f"  {where}: FOUND, ANNOUNCED as hole {row.hole_id} (p_hole {h.p_hole:.2f}, "
-                f"score {h.score:.2f}), {100 * row.error_m:.0f} cm off, {row.sightings} sightings"
+                f"best frame's score {h.score:.2f}), {100 * row.error_m:.0f} cm off, seen in "
+                f"{row.sightings} frames from {h.views} viewpoints"
             )
         elif row.status == "missed":
             lines.append(f"  {where}: MISSED (whole in view in {row.frames_in_view} frames)")
@@ -52,7 +53,8 @@ def format_result(r: DemoResult) -> list[str]:
             lines.append(f"    the search map: {r.search.why_missed(t.id)}")
     for f in r.false:
         lines.append(
-            f"  hole {f.hole.id}: FALSE (score {f.hole.score:.2f}, {f.hole.sightings} sightings;"
+            f"  hole {f.hole.id}: FALSE (best frame's score {f.hole.score:.2f}, seen in "
+            f"{f.hole.sightings} frames;"
             f" nearest feature: {f.nearest}, {f.distance_m:.2f} m)"
         )
     per_ha = len(r.review) / (r.area_m2 / 1e4) if r.area_m2 else float("nan")
@@ -68,8 +70,8 @@ def format_result(r: DemoResult) -> list[str]:
     )
     for h in r.review:
         lines.append(
-            f"    hole {h.id}: REVIEW (p_hole {h.p_hole:.2f}, score {h.score:.2f}, "
-            f"{h.sightings} sightings from {h.views} viewpoints)"
+            f"    hole {h.id}: REVIEW (p_hole {h.p_hole:.2f}, best frame's score {h.score:.2f}, "
+            f"seen in {h.sightings} frames from {h.views} viewpoints)"
         )
     errors = [row.error_m for row in r.truth if row.status == "found"]
     in_view = sum(row.status != "not in view" for row in r.truth)
@@ -80,7 +82,9 @@ def format_result(r: DemoResult) -> list[str]:
         else ""
     )
     lines.append(
-        f"  => found {r.found} of {in_view} in view, missed {r.missed}, false {len(r.false)}" + err
+        f"  => holes found (announced + for review): {len(r.confirmed) + len(r.review)}; "
+        f"true holes found {r.found} of {in_view} in view, missed {r.missed}, "
+        f"announced false {len(r.false)}" + err
     )
     if r.search is not None:
         s = r.search

@@ -12,7 +12,7 @@ are written too (:func:`ground.searchmap.write_map_outputs`).
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -100,6 +100,7 @@ class DemoMapper:
         out: Path,
         confirmed: Sequence[Hole],
         boot_to_unix_ns: int | None,
+        tiers: Mapping[int, str] | None = None,
     ) -> DemoMap:
         layers = self.map.layers()
         area = self.area()
@@ -141,6 +142,7 @@ class DemoMapper:
             threshold=self.threshold,
             survey=SurveyParams(altitude_m=self.sortie.altitude_m),
             boot_to_unix_ns=boot_to_unix_ns,
+            tiers=tiers,
         )
         g = res.gaps
         return dataclasses.replace(

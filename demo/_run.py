@@ -47,6 +47,7 @@ from holescan.errors import InputError
 from holescan.geotag import AnnounceGate, Hole, HoleView, Tier
 from holescan.ground import GroundOptions, GroundStation, ReprocessOptions, write_hole_outputs
 from holescan.missions import HoleMissionServer
+from holescan.outputs import atomic_output
 from holescan.sim import SimSortie, SortieParams, loop_length_m
 
 __all__ = [
@@ -156,6 +157,13 @@ class DemoResult:
         errors = [r.error_m for r in self.truth if r.status == "found"]
         c = self.summary.counters
         return {
+            "holes_found": len(self.confirmed) + len(self.review),
+            "holes_found_means": "announced + for review (FOUND_TIERS): what reached a person",
+            "tiers": {
+                "announced": [h.id for h in self.confirmed],
+                "review": [h.id for h in self.review],
+                "candidate": self.candidates,
+            },
             "found": self.found,
             "missed": self.missed,
             "not_in_view": sum(r.status == "not in view" for r in self.truth),
@@ -254,6 +262,10 @@ class _Ground:
 # --------------------------------------------------------------------------- the flight
 
 
+_RESULT = "demo.json"
+"""The demo's numbers, in its output folder."""
+
+
 def default_demo_out(data_home: Path | None = None) -> Path:
     """A new folder for one demo: ``DATA/holescan/demo/YYYYmmdd-HHMMSS`` in the user's data
     folder (``data_home``; None: ``$XDG_DATA_HOME``, else ``~/.local/share``), never the
@@ -295,7 +307,7 @@ def run_demo(
         out.mkdir(parents=True, exist_ok=True)
     except OSError as err:
         raise InputError(f"cannot create {out}: {err.strerror}") from err
-    if any(out.glob("flight_*.mcap")):
+    if any(out.glob("flight_*.mcap")) or (out / _RESULT).exists():
         raise InputError(f"{out} already holds a demo flight: choose another --out folder")
     stop = stop or threading.Event()
 
@@ -417,8 +429,8 @@ def run_demo(
         card_bytes, cards_sent = server.cards.bytes_sent, server.cards.cards_sent
     interrupted = capture_s < duration - 1.0
     confirmed = tuple(opts.gate.select(summary.holes, first_announced))
-    announced_ids = {h.id for h in confirmed}
-    review = tuple(h for h in summary.holes if h.id in first_review and h.id not in announced_ids)
+    final = opts.gate.tiers(summary.holes, first_announced)  # the one gate, as the log has it
+    review = tuple(h for h in summary.holes if final[h.id] == "review")
     truth = sortie.truth
     in_view = frames_in_view(sortie.sources)
     scored = functools.partial(
@@ -428,7 +440,8 @@ def run_demo(
     log_files = tuple(summary.log.files)
     mapper = DemoMapper(sortie.world, opts.sortie, sortie.camera, sortie.mount)
     views, track, boot_to_unix = views_and_track(log_files, (*confirmed, *review), mapper.add)
-    search = mapper.finish(out, confirmed, boot_to_unix)
+    tiers = {h.id: "announced" for h in confirmed} | {h.id: "review" for h in review}
+    search = mapper.finish(out, (*confirmed, *review), boot_to_unix, tiers)
     kinds = Counter(str(h.kind) for h in sortie.world.holes)
     facts = {
         "flight log": ", ".join(p.name for p in log_files),
@@ -440,7 +453,6 @@ def run_demo(
         f"true opening or within {opts.match_m:g} m of its centre)",
     }
     review_rows, _ = scored(review, truth, sortie.world, anchor, in_view)
-    tiers = {h.id: "announced" for h in confirmed} | {h.id: "review" for h in review}
     files = write_hole_outputs(
         out,
         "flight",
@@ -476,7 +488,7 @@ def run_demo(
         candidates=len(summary.holes) - len(confirmed) - len(review),
         review=review,
         review_true=sum(r.status == "found" for r in review_rows),
-        review_latency_s=tuple(first_review[h.id] for h in review),
+        review_latency_s=tuple(first_review[h.id] for h in review if h.id in first_review),
         area_m2=opts.sortie.size_m[0] * opts.sortie.size_m[1],
         latency_s=tuple(first_announced[h.id] for h in confirmed if h.id in first_announced),
         card_bytes=card_bytes,
@@ -486,6 +498,7 @@ def run_demo(
         match_m=opts.match_m,
         search=search,
     )
-    path = out / "demo.json"
-    path.write_text(json.dumps(result.numbers(), indent=1) + "\n")
+    path = out / _RESULT
+    with atomic_output(path) as f:
+        f.write((json.dumps(result.numbers(), indent=1) + "\n").encode())
     return dataclasses.replace(result, files=(*result.files, ("result", path)))

@@ -226,7 +226,7 @@ class Detection:
             if self.beyond_range
             else (f"{self.depth_rel_m:.2f} m")
         )
-        prob = "" if self.p_hole is None else f"p(hole) {self.p_hole:.2f}, "
+        prob = "" if self.p_hole is None else f"this frame's p_hole {self.p_hole:.2f}, "
         light = (
             ""
             if self.relative_brightness is None

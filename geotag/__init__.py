@@ -16,6 +16,7 @@ from holescan.geotag._confidence import (
     evidence_of,
     viewpoint_of,
 )
+from holescan.geotag._ids import IdMap, carry_ids, same_opening_gate_m
 from holescan.geotag._local import LocalFrame, local_en_m
 from holescan.geotag._matching import nearest_pairs
 from holescan.geotag._merge import Hole, HoleTracker, MergeParams
@@ -38,6 +39,7 @@ from holescan.geotag._project import (
     project_to_pixel,
 )
 from holescan.geotag._tiers import (
+    FOUND_TIERS,
     HOLE_TIERS,
     TIERS,
     VEHICLE_TIERS,
@@ -45,12 +47,14 @@ from holescan.geotag._tiers import (
     HoleTier,
     Tier,
     VehicleTier,
+    holes_found,
 )
 from holescan.geotag._types import VehiclePose
 
 __all__ = [
     "CIRCLE_95_PER_SIGMA",
     "DEFAULT_CONFIDENCE",
+    "FOUND_TIERS",
     "HOLE_TIERS",
     "R_ENU_NED",
     "TIERS",
@@ -71,6 +75,7 @@ __all__ = [
     "HoleTier",
     "HoleTracker",
     "HoleView",
+    "IdMap",
     "LocalCameraPose",
     "LocalFrame",
     "MergeParams",
@@ -81,16 +86,19 @@ __all__ = [
     "VehicleTier",
     "box_cut_by_border",
     "camera_pose_local",
+    "carry_ids",
     "crop_view",
     "dcm_from_euler",
     "dcm_from_quaternion",
     "evidence_of",
     "geotag_detection",
     "geotag_frame",
+    "holes_found",
     "local_en_m",
     "nearest_pairs",
     "project_to_pixel",
     "rotation_ned_from_optical",
+    "same_opening_gate_m",
     "view_jpeg",
     "viewpoint_of",
 ]

@@ -92,15 +92,11 @@ class AnnouncePolicy:
         return self._told["review"]
 
     def tiers(self, holes: Sequence[Hole]) -> tuple[list[Hole], dict[int, Tier]]:
-        """The holes to serve (the gate's :meth:`~AnnounceGate.select`, the holes already
-        announced kept) and every hole's tier (its :meth:`~AnnounceGate.review` less
-        duplicates of an announced one; the rest candidates)."""
-        announced = self.announced
-        served = self.gate.select(holes, announced=announced)
-        review = {h.id for h in self.gate.review(holes, announced=announced)}
-        tiers: dict[int, Tier] = {h.id: "review" if h.id in review else "candidate" for h in holes}
-        tiers.update({h.id: "announced" for h in served})
-        return served, tiers
+        """The holes to serve (the gate's :meth:`~AnnounceGate.select`: the holes already
+        announced stay while they pass) and every hole's tier (:meth:`AnnounceGate.tiers`,
+        given the holes announced so far)."""
+        announced = tuple(self.announced)
+        return self.gate.select(holes, announced), self.gate.tiers(holes, announced)
 
     def worth_telling(self, hole: Hole, tier: VehicleTier) -> bool:
         """True when ``hole`` is news in ``tier`` (see the class docstring)."""

@@ -17,6 +17,7 @@ from holescan.errors import InputError
 from holescan.geotag._merge import Hole
 
 __all__ = [
+    "FOUND_TIERS",
     "HOLE_TIERS",
     "TIERS",
     "VEHICLE_TIERS",
@@ -24,6 +25,7 @@ __all__ = [
     "HoleTier",
     "Tier",
     "VehicleTier",
+    "holes_found",
 ]
 
 _P_HOLE_MAX = 0.99  # p_hole is kept within [0.01, 0.99]
@@ -38,6 +40,21 @@ HoleTier = Literal["announced", "review", "confirmed", "rejected"]
 """What a hole is for the crews: the vehicle's tier, or the operator's confirmation or
 rejection (hole files, the ground station, TAK)."""
 HOLE_TIERS: tuple[HoleTier, ...] = get_args(HoleTier)
+
+FOUND_TIERS: tuple[HoleTier, ...] = ("announced", "review", "confirmed")
+"""What "holes found" counts, everywhere (console, report, ``demo.json``, reprocessing's
+summaries): the holes that reach a person: *announced*, *for review*, and those an operator
+*confirmed* (or visited). Candidates (logged only) and holes an operator *rejected* are not
+found holes."""
+
+
+def holes_found(tiers: Iterable[str]) -> int:
+    """How many of ``tiers`` (one per hole) are found holes (:data:`FOUND_TIERS`).
+
+    >>> holes_found(["announced", "review", "candidate", "rejected", "confirmed"])
+    3
+    """
+    return sum(t in FOUND_TIERS for t in tiers)
 
 
 @dataclass(frozen=True)
@@ -116,6 +133,20 @@ class AnnounceGate:
         if self.passes(hole):
             return "announced"
         return "review" if self.p_hole(hole) >= self.review_min_p_hole else "candidate"
+
+    def tiers(self, holes: Sequence[Hole], announced: Iterable[int] = ()) -> dict[int, Tier]:
+        """Every hole's tier, as the vehicle gives it: :meth:`select` (announced, less
+        duplicates), :meth:`review` (for review, not at an announced hole's place), the
+        rest candidates (a hole that passes but duplicates a kept one is a candidate).
+        ``announced`` : ids the ground already has as announced (they stay announced while
+        they pass). The one rule for tiers: in flight, in the demo, in reprocessing and
+        campaigns.
+        """
+        announced = tuple(announced)
+        out: dict[int, Tier] = {h.id: "candidate" for h in holes}
+        out.update({h.id: "review" for h in self.review(holes, announced)})
+        out.update({h.id: "announced" for h in self.select(holes, announced)})
+        return out
 
     def review(self, holes: Sequence[Hole], announced: Iterable[int] = ()) -> list[Hole]:
         """The holes for review: in the review tier, not at the place of an announced one

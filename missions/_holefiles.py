@@ -30,8 +30,9 @@ What each format holds:
 
 What each hole is: every file says it, per hole: ``hole_id``, ``tier`` (``announced``,
 ``review``, ``confirmed``, ``rejected``: :data:`HOLE_TIERS`), ``p_hole`` (the hole-level
-confidence, :attr:`geotag.Hole.p_hole`), ``sightings``, the size (``major_m``,
-``minor_m``) and ``sigma_h_m`` (GeoJSON properties, KML data and description, GPX
+confidence, :attr:`geotag.Hole.p_hole`), ``sightings`` (frames it was detected in),
+``views`` (distinct viewpoints), the size (``major_m``, ``minor_m``), ``sigma_h_m`` and
+``r95_m`` (the 95 % circle's radius) (GeoJSON properties, KML data and description, GPX
 description, ``.plan`` item data). The missions (``.plan``, WPL) hold only the announced
 and confirmed holes; holes for review or rejected are points, never waypoints to fly to.
 Candidates below the review tier are not in these files at all (they stay in the flight
@@ -54,7 +55,7 @@ from pathlib import Path
 from typing import Any, Final, Literal, get_args
 
 from holescan.errors import InputError
-from holescan.geotag import HOLE_TIERS, Hole
+from holescan.geotag import CIRCLE_95_PER_SIGMA, HOLE_TIERS, Hole
 from holescan.missions._geofiles import write_geojson, write_gpx, write_kml
 from holescan.missions._holeserver import hole_waypoints
 from holescan.missions._qgcfiles import write_plan, write_wpl
@@ -131,9 +132,11 @@ def hole_properties(
         "rank": rank,
         "score": _r(hole.score, 4),
         "sightings": hole.sightings,
+        "views": hole.views,
         "major_m": _r(hole.major_m, 3),
         "minor_m": _r(hole.minor_m, 3),
         "sigma_h_m": _r(hole.sigma_h_m, 3),
+        "r95_m": _r(CIRCLE_95_PER_SIGMA * hole.sigma_h_m, 3),
         "alt_msl_m": _r(hole.alt_m, 3),
         "t_first_boot_ns": hole.t_first_boot_ns,
         "t_last_boot_ns": hole.t_last_boot_ns,
@@ -166,10 +169,10 @@ def hole_description(
 ) -> str:
     """One ASCII line a person reads on a handheld GPS: the hole's data and position."""
     return (
-        f"hole {hole.id} ({tier}, rank {rank}): {_p(hole)}, score {hole.score:.2f}, seen in "
-        f"{hole.sightings} "
-        f"frames, opening {hole.major_m:.2f} x {hole.minor_m:.2f} m, position +-"
-        f"{hole.sigma_h_m:.2f} m (1 sigma), {_seen(hole, boot_to_unix_ns)}, "
+        f"hole {hole.id} ({tier}, rank {rank}): {_p(hole)}, best frame's score "
+        f"{hole.score:.2f}, seen in {hole.sightings} frames from {hole.views} viewpoints, "
+        f"opening {hole.major_m:.2f} x {hole.minor_m:.2f} m, within "
+        f"{CIRCLE_95_PER_SIGMA * hole.sigma_h_m:.2f} m (95 %), {_seen(hole, boot_to_unix_ns)}, "
         f"lat {hole.lat_deg:.7f} lon {hole.lon_deg:.7f}, alt {hole.alt_m:.1f} m MSL"
     )
 
@@ -181,10 +184,10 @@ def _html_description(
         ("tier", tier),
         ("p_hole", _p(hole).removeprefix("p_hole ")),
         ("rank", str(rank)),
-        ("score", f"{hole.score:.2f}"),
-        ("sightings", str(hole.sightings)),
+        ("best frame's score", f"{hole.score:.2f}"),
+        ("sightings", f"{hole.sightings} frames from {hole.views} viewpoints"),
         ("opening", f"{hole.major_m:.2f} x {hole.minor_m:.2f} m"),
-        ("position error", f"{hole.sigma_h_m:.2f} m (1 sigma)"),
+        ("95 % circle", f"{CIRCLE_95_PER_SIGMA * hole.sigma_h_m:.2f} m"),
         ("lat, lon", f"{hole.lat_deg:.7f}, {hole.lon_deg:.7f}"),
         ("altitude", f"{hole.alt_m:.1f} m MSL"),
     ]

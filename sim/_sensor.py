@@ -1,7 +1,6 @@
 """What the Xtion makes of a perfect image: depth noise, quantisation, dropouts, colour noise.
 
-Random numbers come from a xorshift64* stream seeded per frame (fast and reproducible);
-normal deviates are read from an inverse-CDF table of 4096 equiprobable values.
+Random numbers come from the simulators' xorshift64* stream (:mod:`holescan.sim._xorshift`).
 """
 
 from __future__ import annotations
@@ -12,9 +11,12 @@ import math
 import numpy as np
 import numpy.typing as npt
 from numba import njit
-from scipy.special import ndtri
 
 from holescan.sim._camera_model import XTION_NOISE_COEFF_PER_MM, Conditions
+from holescan.sim._xorshift import normal as _normal
+from holescan.sim._xorshift import normal_table as _normal_table
+from holescan.sim._xorshift import stream_state as _state
+from holescan.sim._xorshift import uniform as _uniform
 
 __all__ = ["colour_image", "depth_image"]
 
@@ -24,39 +26,11 @@ U8 = npt.NDArray[np.uint8]
 U16 = npt.NDArray[np.uint16]
 U64 = npt.NDArray[np.uint64]
 
-_TABLE_BITS = 12
-
-
-@functools.cache
-def _normal_table() -> F64:
-    n = 1 << _TABLE_BITS
-    return np.asarray(ndtri((np.arange(n) + 0.5) / n), dtype=np.float64)
-
 
 @functools.cache
 def _gamma_lut() -> U8:
     x = np.arange(65536, dtype=np.float64) / 65535.0
     return np.round(255.0 * x ** (1.0 / 2.2)).astype(np.uint8)
-
-
-@njit(cache=True, inline="always")
-def _next(state: U64) -> np.uint64:
-    x = state[0]
-    x ^= x >> np.uint64(12)
-    x ^= x << np.uint64(25)
-    x ^= x >> np.uint64(27)
-    state[0] = x
-    return np.uint64(x * np.uint64(0x2545F4914F6CDD1D))
-
-
-@njit(cache=True, inline="always")
-def _uniform(state: U64) -> float:
-    return float(_next(state) >> np.uint64(11)) * (1.0 / 9007199254740992.0)
-
-
-@njit(cache=True, inline="always")
-def _normal(state: U64, table: F64) -> float:
-    return float(table[int(_next(state) >> np.uint64(64 - _TABLE_BITS))])
 
 
 @njit(cache=True)
@@ -154,11 +128,6 @@ def _colour(
             out[v, u, 1] = lut[int(min(max(sg, 0.0), 1.0) * 65535.0 + 0.5)]
             out[v, u, 2] = lut[int(min(max(sb, 0.0), 1.0) * 65535.0 + 0.5)]
     return out
-
-
-def _state(rng: np.random.Generator) -> U64:
-    seed = int(rng.integers(1, 2**63 - 1))
-    return np.array([seed], dtype=np.uint64)
 
 
 def depth_image(depth_m: F32, fx: float, conditions: Conditions, rng: np.random.Generator) -> U16:

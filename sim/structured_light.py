@@ -46,7 +46,10 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit
 
-from holescan.sim._sensor import _normal, _normal_table, _state, _uniform
+from holescan.sim._xorshift import normal as _normal
+from holescan.sim._xorshift import normal_table as _normal_table
+from holescan.sim._xorshift import stream_state as _state
+from holescan.sim._xorshift import uniform as _uniform
 
 __all__ = [
     "FrameDraws",

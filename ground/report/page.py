@@ -25,7 +25,14 @@ import numpy as np
 import numpy.typing as npt
 
 from holescan.errors import InputError
-from holescan.geotag import CIRCLE_95_PER_SIGMA, Hole, LocalFrame, VehiclePose, crop_view
+from holescan.geotag import (
+    CIRCLE_95_PER_SIGMA,
+    Hole,
+    LocalFrame,
+    VehiclePose,
+    crop_view,
+    holes_found,
+)
 from holescan.ground.images.overlay import depth_colour
 from holescan.ground.report.bands import SCORE_BANDS, ScoreBand, score_band
 from holescan.ground.report.svgmap import legend_html, maps_svg
@@ -58,6 +65,7 @@ def write_report(
     facts: Mapping[str, str] | None = None,
     track_breaks: Sequence[int] = (),
     search_map: str | None = None,
+    tiers: Mapping[int, str] | None = None,
 ) -> Path:
     """Write the flight report to ``path`` as one self-contained HTML file.
 
@@ -78,6 +86,9 @@ def write_report(
         goes back or jumps by more than a minute.
     search_map : the search map's section (:func:`ground.report.searchmap.search_map_section`),
         shown after the map.
+    tiers : hole id -> tier (``announced``, ``review``, ``confirmed``, ``rejected``; None:
+        every hole ``announced``), shown per hole; "holes found" counts
+        :data:`geotag.FOUND_TIERS`.
 
     Returns
     -------
@@ -97,6 +108,7 @@ def write_report(
         facts=facts,
         track_breaks=track_breaks,
         search_map=search_map,
+        tiers=tiers,
     )
     out = Path(path)
     with atomic_output(out, force=True) as f:
@@ -121,9 +133,11 @@ def render_report(
     facts: Mapping[str, str] | None = None,
     track_breaks: Sequence[int] = (),
     search_map: str | None = None,
+    tiers: Mapping[int, str] | None = None,
 ) -> str:
     """The page :func:`write_report` writes, as a string (same parameters)."""
     holes = sorted(holes, key=lambda h: h.id)
+    tiers = {h.id: (tiers or {}).get(h.id, "announced") for h in holes}
     _check_holes(holes)
     kept = [i for i, p in enumerate(track) if math.isfinite(p.lat_deg) and math.isfinite(p.lon_deg)]
     poses = [track[i] for i in kept]
@@ -132,19 +146,22 @@ def render_report(
         logger.warning("report: %d track poses without a position skipped", len(track) - len(poses))
     frame, origin_name = _map_frame(poses, holes, truth)
     t0_ns = poses[0].t_boot_ns if poses else min((h.t_first_boot_ns for h in holes), default=0)
-    holes_html = _holes_section(holes, views, frame, t0_ns, truth, bool(poses))
+    holes_html = _holes_section(holes, views, frame, t0_ns, truth, bool(poses), tiers)
     maps = maps_svg(frame, holes, poses, truth, breaks)
     map_html = f"<section><h2>Map</h2>{legend_html(bool(truth))}{maps}</section>"
     map_html += search_map or ""
     body = [
-        f"<header><h1>{_e(title)}</h1>{_summary(holes, poses, frame)}"
+        f"<header><h1>{_e(title)}</h1>{_summary(holes, poses, frame, tiers)}"
         f"{_facts(facts or {})}</header>",
         *((map_html, holes_html) if holes else (holes_html, map_html)),
         f"<footer>holescan {_e(_dist_version('holescan'))} &middot; positions WGS84; map in a "
         "local "
         f"east/north frame around {_e(origin_name)} "
-        f"({frame.lat0_deg:.7f}, {frame.lon0_deg:.7f}); a hole lies within its 1&sigma; circle "
-        f"with 68 % probability, within {_R95:.2f}&sigma; with 95 %.</footer>",
+        f"({frame.lat0_deg:.7f}, {frame.lon0_deg:.7f}); the circles are 95 % circles: a hole "
+        f"lies within {_R95:.2f}&sigma; of its position with 95 % probability (within "
+        "1&sigma; with 68 %). Holes found: announced, for review and confirmed by an "
+        "operator; sightings: frames a hole was detected in, from distinct viewpoints (views)."
+        "</footer>",
     ]
     return (
         '<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
@@ -188,10 +205,16 @@ def _track_length_m(frame: LocalFrame, poses: Sequence[VehiclePose]) -> float:
     return float(np.hypot(np.diff(e), np.diff(n)).sum())
 
 
-def _summary(holes: Sequence[Hole], poses: Sequence[VehiclePose], frame: LocalFrame) -> str:
+def _summary(
+    holes: Sequence[Hole],
+    poses: Sequence[VehiclePose],
+    frame: LocalFrame,
+    tiers: Mapping[int, str],
+) -> str:
+    count = {t: sum(v == t for v in tiers.values()) for t in ("announced", "review", "confirmed")}
     stats = [
-        ("holes found", str(len(holes))),
-        ("seen twice or more", str(sum(h.sightings >= 2 for h in holes))),
+        ("holes found", str(holes_found(tiers.values()))),
+        *((t if t != "review" else "for review", str(n)) for t, n in count.items() if n),
         (
             f"score &ge; {SCORE_BANDS[0].min_score:.1f}",
             str(sum(score_band(h.score) is SCORE_BANDS[0] for h in holes)),
@@ -229,6 +252,7 @@ def _holes_section(
     t0_ns: int,
     truth: Sequence[tuple[str, float, float]],
     have_track: bool,
+    tiers: Mapping[int, str],
 ) -> str:
     if not holes:
         return (
@@ -237,11 +261,12 @@ def _holes_section(
         )
     heads = [
         "Hole",
-        "Score",
+        "Tier",
+        "p_hole / best frame's score",
         "Position (WGS84)",
-        "Uncertainty",
+        "95 % circle",
         "Opening",
-        "Sightings",
+        "Frames / views",
         "Seen (s from start)",
     ]
     if truth:
@@ -266,14 +291,17 @@ def _holes_section(
         )
         first = (h.t_first_boot_ns - t0_ns) * 1e-9
         last = (h.t_last_boot_ns - t0_ns) * 1e-9
+        p_hole = f"{h.p_hole:.2f}" if math.isfinite(h.p_hole) else "&mdash;"
         cells = [
             f'<td><span class="badge" style="background:{band.hex}">{h.id}</span></td>',
-            f'<td><b class="score">{h.score:.2f}</b><div class="note">{band.name}</div></td>',
+            f"<td>{_e(tiers[h.id])}</td>",
+            f'<td><b class="score">{p_hole}</b><div class="note">{h.score:.2f} '
+            f"({band.name})</div></td>",
             f'<td class="mono">{h.lat_deg:.7f}<br>{h.lon_deg:.7f}{where}</td>',
-            f'<td class="nw">1&sigma; {h.sigma_h_m:.2f} m<div class="note">95 %: '
-            f"{_R95 * h.sigma_h_m:.2f} m</div></td>",
+            f'<td class="nw">{_R95 * h.sigma_h_m:.2f} m<div class="note">1&sigma; '
+            f"{h.sigma_h_m:.2f} m</div></td>",
             f'<td class="nw">{size}</td>',
-            f'<td class="num">{h.sightings}</td>',
+            f'<td class="num">{h.sightings} / {h.views}</td>',
             f'<td class="nw">{first:.1f} &ndash; {last:.1f}</td>',
         ]
         if truth:

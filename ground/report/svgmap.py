@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from shapely.geometry import LineString
 
-from holescan.geotag import Hole, LocalFrame, VehiclePose
+from holescan.geotag import CIRCLE_95_PER_SIGMA, Hole, LocalFrame, VehiclePose
 from holescan.ground.report.bands import SCORE_BANDS, score_band
 
 __all__ = ["legend_html", "maps_svg"]
@@ -97,7 +97,9 @@ def maps_svg(
     he, hn = frame.to_en([h.lat_deg for h in holes], [h.lon_deg for h in holes])
     ge, gn = frame.to_en([t[1] for t in truth], [t[2] for t in truth])
     reach = np.nan_to_num(
-        np.array([max(h.sigma_h_m, _finite(h.major_m) / 2, 0.0) for h in holes]),
+        np.array(
+            [max(CIRCLE_95_PER_SIGMA * h.sigma_h_m, _finite(h.major_m) / 2, 0.0) for h in holes]
+        ),
         nan=0.0,
         posinf=0.0,
     )
@@ -141,7 +143,7 @@ def _map_svg(
     for h, (x, y) in zip(holes, centres, strict=True):
         band = score_band(h.score)
         r = (
-            max(h.sigma_h_m * view.scale, _MIN_SIGMA_PX)
+            max(CIRCLE_95_PER_SIGMA * h.sigma_h_m * view.scale, _MIN_SIGMA_PX)
             if math.isfinite(h.sigma_h_m)
             else _MIN_SIGMA_PX
         )
@@ -368,7 +370,7 @@ def legend_html(with_truth: bool) -> str:
             f'<circle cx="17" cy="14" r="12" fill="{SCORE_BANDS[0].hex}" fill-opacity="0.16" '
             f'stroke="{SCORE_BANDS[0].hex}" stroke-width="1.5"/>'
         )
-        + "position &plusmn;1&sigma;",
+        + f"95 % circle of the position (radius {CIRCLE_95_PER_SIGMA:.2f}&sigma;)",
         sw('<circle cx="17" cy="14" r="8" fill="#1b1b1b" fill-opacity="0.85"/>')
         + "opening (major axis, to scale)",
         sw(f'<line x1="2" y1="14" x2="32" y2="14" stroke="{_TRACK}" stroke-width="3"/>')

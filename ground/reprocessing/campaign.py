@@ -6,6 +6,10 @@ sightings, geotagged by that flight's :class:`geotag.HolePipeline`, to one campa
 uncertainty, the GPS error that drifts between sorties), so a hole seen on two sorties or
 by two vehicles is one hole. Sightings are put on the Unix clock first (each vehicle's
 autopilot boot clock is its own), and flights are merged in the order they started.
+
+Ids: the campaign's holes take the ids of the first flight's (its reprocessed holes carry
+the vehicle's ids; :func:`geotag.carry_ids`), and holes it did not see ids above every id
+that flight used; each hole also lists the id each flight knows it by (``flights``).
 """
 
 from __future__ import annotations
@@ -17,7 +21,15 @@ from typing import Any
 
 import numpy as np
 
-from holescan.geotag import FrameHoles, Hole, HoleTracker, LocalFrame, VehiclePose
+from holescan.geotag import (
+    FrameHoles,
+    Hole,
+    HoleTracker,
+    IdMap,
+    LocalFrame,
+    VehiclePose,
+    carry_ids,
+)
 from holescan.ground.reprocessing.merge import box_of, read_views
 from holescan.ground.reprocessing.plan import PartitionTask
 from holescan.ground.reprocessing.task import Box, FrameResult, View
@@ -40,6 +52,7 @@ class FlightSightings:
     sightings: int
     first_seen_unix_ns: int
     last_seen_unix_ns: int
+    hole_id: int | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -49,6 +62,7 @@ class CampaignHole:
 
     hole: Hole
     flights: tuple[FlightSightings, ...]
+    tier: str = "announced"
 
     @property
     def id(self) -> int:
@@ -58,12 +72,15 @@ class CampaignHole:
         h = self.hole
         return {
             "id": h.id,
+            "tier": self.tier,
+            "p_hole": h.p_hole if math.isfinite(h.p_hole) else None,
             "lat_deg": h.lat_deg,
             "lon_deg": h.lon_deg,
             "alt_m": h.alt_m,
             "sigma_h_m": h.sigma_h_m,
             "score": h.score,
-            "sightings": h.sightings,
+            "frames": h.sightings,
+            "views": h.views,
             "major_m": h.major_m,
             "minor_m": h.minor_m,
             "first_seen_unix_ns": h.t_first_boot_ns,
@@ -79,6 +96,8 @@ class CampaignMerge:
         self.tracker = HoleTracker()
         self.best: dict[int, tuple[PartitionTask, int, Box]] = {}
         self._seen: dict[int, dict[str, list[int]]] = {}  # id -> flight -> [n, first, last]
+        self.id_map: IdMap | None = None
+        self._flight_ids: dict[str, dict[int, int]] = {}  # flight -> own id -> its id
 
     def on_frame(self, flight: str, fr: FrameResult, step: FrameHoles, task: PartitionTask) -> None:
         if not step.sightings:
@@ -94,22 +113,42 @@ class CampaignMerge:
                 self.best[h.id] = (task, fr.index, box_of(h.best_box))
 
     def views(self, ids: set[int]) -> dict[int, View]:
-        """The best views of holes ``ids``, read again from the logs."""
-        return read_views({i: self.best[i] for i in ids if i in self.best})
+        """The best views of holes ``ids`` (carried ids), read again from the logs."""
+        back = {v: k for k, v in self.id_map.ids.items()} if self.id_map else {i: i for i in ids}
+        own = {i: back[i] for i in ids if i in back and back[i] in self.best}
+        got = read_views({b: self.best[b] for b in own.values()})
+        return {i: got[b] for i, b in own.items() if b in got}
+
+    def carry_ids(self, flights: Sequence[tuple[str, Sequence[Hole], int]]) -> None:
+        """Give the campaign's holes the first flight's ids (see the module docstring).
+
+        flights : (name, reprocessed holes with the vehicle's ids, highest id it used), in
+        start order."""
+        holes = self.tracker.holes()
+        if flights:
+            _, ref, top = flights[0]
+            self.id_map = carry_ids(ref, holes, reference_max_id=top)
+        for name, fholes, top in flights:
+            m = carry_ids(fholes, holes, reference_max_id=top)
+            self._flight_ids[name] = {k: v for k, v in m.ids.items() if v in m.from_reference}
 
     def holes(self, min_sightings: int = 1) -> list[CampaignHole]:
-        """The campaign's holes seen at least ``min_sightings`` times, by id."""
+        """The campaign's holes seen at least ``min_sightings`` times, by (carried) id."""
         out = []
         for h in self.tracker.holes():
             if h.sightings < min_sightings:
                 continue
             per = self._seen.get(h.id, {})
             flights = sorted(
-                (FlightSightings(name, n, first, last) for name, (n, first, last) in per.items()),
+                (
+                    FlightSightings(name, n, first, last, self._flight_ids.get(name, {}).get(h.id))
+                    for name, (n, first, last) in per.items()
+                ),
                 key=lambda f: f.first_seen_unix_ns,
             )
-            out.append(CampaignHole(h, tuple(flights)))
-        return out
+            carried = h if self.id_map is None else dataclasses.replace(h, id=self.id_map.ids[h.id])
+            out.append(CampaignHole(carried, tuple(flights)))
+        return sorted(out, key=lambda c: c.id)
 
 
 def track_coverage(track: Sequence[VehiclePose]) -> tuple[float, float]:

@@ -13,7 +13,7 @@ import dataclasses
 import datetime as dt
 import logging
 import statistics
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -85,6 +85,7 @@ def flight_map_outputs(
     pose_gap_m: Sequence[float] = (),
     map_s: float = 0.0,
     map_frames: int = 0,
+    tiers: Mapping[int, str] | None = None,
 ) -> MapResult:
     """Merge the windows and write the map's files (nothing when nothing was seen)."""
     cell = opts.map_cell_m or 0.02
@@ -114,6 +115,7 @@ def flight_map_outputs(
             survey=_survey(track, home),
             day=day,
             boot_to_unix_ns=boot_to_unix_ns,
+            tiers=tiers,
         )
     except InputError as err:  # e.g. a file that cannot be written
         _log.warning("%s: map files: %s", name, err)

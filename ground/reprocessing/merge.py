@@ -10,6 +10,14 @@ only the frames the flight's ``/detections`` records name are merged, in their o
 
 Every merged frame is also handed to ``on_frame`` (the campaign's cross-flight merge)
 and its records to ``write`` (the sidecar MCAP).
+
+**One hole, one id.** The replay's tracker numbers holes in its own order of first
+sighting; at :meth:`FlightMerger.finish` its holes take the ids the flight gave the same
+openings (:func:`geotag.carry_ids` against the flight's last ``/holes`` record), and holes
+only the replay found take ids above every id the flight used. :meth:`FlightMerger.holes`
+and every output carry those ids; the sidecar's ``/holes`` records written during the
+replay use the replay's own numbering, and its last one the flight's, with the mapping
+(``"ids"``).
 """
 
 from __future__ import annotations
@@ -30,7 +38,15 @@ from holescan.flightlog import (
     holes_geojson_message,
     jsonable,
 )
-from holescan.geotag import AnnounceGate, FrameHoles, Hole, HolePipeline, VehiclePose
+from holescan.geotag import (
+    AnnounceGate,
+    FrameHoles,
+    Hole,
+    HolePipeline,
+    IdMap,
+    VehiclePose,
+    carry_ids,
+)
 from holescan.ground.reprocessing.mapchunk import horizontal_gap_m
 from holescan.ground.reprocessing.options import ReprocessOptions
 from holescan.ground.reprocessing.plan import FlightPlan, PartitionTask
@@ -71,6 +87,9 @@ class FlightMerger:
         self.track: list[VehiclePose] = []
         self.flight_holes: tuple[Hole, ...] = ()
         self.flight_gate: AnnounceGate | None = None  # as the last /holes record gives it
+        self.flight_tiers: dict[int, str] = {}  # the flight's own tiers (last record)
+        self.flight_max_id = 0  # the highest hole id any of the flight's /holes records used
+        self.id_map: IdMap | None = None  # set by finish(): this run's ids -> the flight's
         self.first_pose: VehiclePose | None = None
         self.best: dict[int, tuple[PartitionTask, int, Box]] = {}
         self._task: PartitionTask | None = None
@@ -93,6 +112,7 @@ class FlightMerger:
         self.map_s = 0.0
         self.pose_gap_m: list[float] = []
         self._map_every = 0
+        self._last_t_unix_ns = 0
 
     # -- feeding -----------------------------------------------------------------------------
 
@@ -119,7 +139,10 @@ class FlightMerger:
                 if self.opts.frames == "flight":
                     self._decide(ev.frame_index)
             elif isinstance(ev, LoggedHoles):
+                ids = [h["id"] for h in ev.holes if isinstance(h.get("id"), int)]
+                self.flight_max_id = max([self.flight_max_id, *ids])
                 try:
+                    self.flight_tiers = ev.tiers() or {}
                     self.flight_gate = ev.announce_gate()
                     self.flight_holes = ev.as_holes()
                 except FlightLogError as err:
@@ -207,6 +230,7 @@ class FlightMerger:
         for h in step.changed:
             if h.best_frame_index == fr.index:
                 self.best[h.id] = (task, fr.index, box_of(h.best_box))
+        self._last_t_unix_ns = t
         holes = [jsonable(h) for h in self.pipeline.holes()]
         self.write("holes", {"holes": holes}, t)
         self.write("holes/geojson", holes_geojson_message(holes), t)
@@ -216,15 +240,40 @@ class FlightMerger:
         self._undecided.clear()
         self._pose_ready(final=True)
         self._merge()
+        self.id_map = carry_ids(
+            self.flight_holes,
+            self.pipeline.holes(),
+            self.pipeline.tracker.params,
+            reference_max_id=self.flight_max_id,
+        )
+        if self.pipeline.holes():  # the last record: the holes with the flight's ids
+            holes = [jsonable(h) for h in self.holes()]
+            t = self._last_t_unix_ns
+            self.write("holes", {"holes": holes, "ids": self._ids_record()}, t)
+            self.write("holes/geojson", holes_geojson_message(holes), t)
+
+    def _ids_record(self) -> dict[str, Any]:
+        m = self.id_map
+        assert m is not None
+        return {
+            "this_run_to_flight": {str(k): v for k, v in m.ids.items()},
+            "new_in_reprocessing": m.new_ids,
+            "first_new_id": m.first_new_id,
+        }
 
     # -- what came out -----------------------------------------------------------------------
 
     def holes(self) -> list[Hole]:
-        return self.pipeline.holes()
+        """The holes, with the flight's ids (:func:`geotag.carry_ids`; after :meth:`finish`)."""
+        holes = self.pipeline.holes()
+        return holes if self.id_map is None else self.id_map.apply(holes)
 
     def views(self, ids: set[int]) -> dict[int, View]:
-        """The best views of holes ``ids``, read again from the logs."""
-        return read_views({i: self.best[i] for i in ids if i in self.best})
+        """The best views of holes ``ids`` (the flight's ids), read again from the logs."""
+        back = {v: k for k, v in self.id_map.ids.items()} if self.id_map else {i: i for i in ids}
+        own = {i: back[i] for i in ids if i in back and back[i] in self.best}
+        got = read_views({back_id: self.best[back_id] for back_id in own.values()})
+        return {i: got[b] for i, b in own.items() if b in got}
 
     def home(self) -> tuple[float, float, float] | None:
         if self.telemetry.home is not None:

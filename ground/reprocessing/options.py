@@ -60,6 +60,9 @@ class ReprocessOptions:
     announce_min_p_hole, review_min_p_hole : the thresholds of the tiers of the reprocessed
         holes (:class:`geotag.AnnounceGate`); None: the flight's own, as its log records
         them (:meth:`gate_for`).
+    marks : the operators' marks by the flight's hole id (``confirmed``, ``rejected``,
+        ``visited``: a station folder's, :func:`ground.station.marks.read_station_marks`);
+        they decide those holes' tiers in every output (the holes keep the flight's ids).
     """
 
     params: DetectParams = DEFAULT
@@ -80,6 +83,7 @@ class ReprocessOptions:
     area: Area | None = None
     announce_min_p_hole: float | None = None
     review_min_p_hole: float | None = None
+    marks: Mapping[int, str] = dataclasses.field(default_factory=dict)
 
     def __post_init__(self) -> None:
         self.gate_for(None)  # refuses thresholds outside [0, 0.99]

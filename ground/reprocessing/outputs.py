@@ -20,7 +20,7 @@ import numpy as np
 import numpy.typing as npt
 
 from holescan.flightlog import jsonable
-from holescan.geotag import AnnounceGate, Hole, VehiclePose
+from holescan.geotag import CIRCLE_95_PER_SIGMA, FOUND_TIERS, AnnounceGate, Hole, VehiclePose
 from holescan.ground.flightholes.views import render_thumbnail
 from holescan.ground.report.page import write_report
 from holescan.ground.reprocessing.options import HoleMatch, ReprocessOptions
@@ -41,10 +41,14 @@ class FlightResult:
     MCAP written. files : (kind, path) of the hole files, report and JSON summary.
     frames_read : complete frames in the log; frames_detected : frames detected and merged;
     frames_unposed : of those with detections, frames no pose could be found for.
-    holes : every hole (sorted by id); confirmed : seen in >= ``min_sightings`` frames.
+    holes : every hole (sorted by id), with the flight's ids (:func:`geotag.carry_ids`).
+    tiers : hole id -> tier (the one gate, :meth:`geotag.AnnounceGate.tiers`, then the
+        operators' marks); :attr:`found` are the holes found (:data:`geotag.FOUND_TIERS`).
+    new_ids : ids of the holes only reprocessing found (above every id the flight used).
     flight_holes : the log's own final hole list (what the flight found).
-    flight_matches : each confirmed flight hole and the reprocessed hole nearest to it
-        (indices into the confirmed lists); flight_same_ids : pairs with the same id.
+    flight_matches : each hole the flight found (announced or for review) and the
+        reprocessed hole with its id (indices into ``flight found`` and :attr:`holes`;
+        distance between them); flight_same_ids : of those, found again.
     truncated : files cut off or damaged, in words (read up to their last good chunk).
     interrupted : stopped early; the outputs hold what was done.
     partitions, partitions_cached : tasks of this flight, and how many came from the cache.
@@ -65,7 +69,8 @@ class FlightResult:
     detections: int
     detect_errors: int
     holes: tuple[Hole, ...]
-    confirmed: tuple[Hole, ...]
+    tiers: Mapping[int, str]
+    new_ids: tuple[int, ...]
     flight_holes: tuple[Hole, ...]
     flight_matches: tuple[HoleMatch, ...]
     flight_same_ids: int
@@ -78,6 +83,17 @@ class FlightResult:
     map_summary: Mapping[str, Any] = dataclasses.field(default_factory=dict)
     map_lines: tuple[str, ...] = ()
     frames_no_depth: int = 0
+
+    @property
+    def found(self) -> tuple[Hole, ...]:
+        """The holes found (announced, for review, confirmed by an operator)."""
+        return tuple(h for h in self.holes if self.tiers.get(h.id) in FOUND_TIERS)
+
+    @property
+    def for_crew(self) -> tuple[Hole, ...]:
+        """The holes the crew's files hold: found ones and those an operator rejected
+        (shown as rejected); never candidates."""
+        return tuple(h for h in self.holes if self.tiers.get(h.id, "candidate") != "candidate")
 
     @property
     def frames_per_s(self) -> float:
@@ -97,9 +113,12 @@ class FlightResult:
             "detections": self.detections,
             "detect_errors": self.detect_errors,
             "frames_no_depth": self.frames_no_depth,
-            "holes": len(self.holes),
-            "confirmed": len(self.confirmed),
-            "flight_confirmed": len(self.flight_matches),
+            "holes_found": len(self.found),
+            "holes_found_means": "announced + for review + confirmed by an operator",
+            "tiers": self._counts(),
+            "holes_tracked": len(self.holes),
+            "new_in_reprocessing": list(self.new_ids),
+            "flight_found": len(self.flight_matches),
             "flight_reproduced": len(found),
             "flight_same_ids": self.flight_same_ids,
             "flight_max_offset_m": max((m.distance_m for m in found), default=None),
@@ -109,9 +128,20 @@ class FlightResult:
             "partitions_cached": self.partitions_cached,
             "detect_ms_mean": round(self.detect_ms_mean, 2),
             "elapsed_s": round(self.elapsed_s, 2),
-            "confirmed_holes": [jsonable(h) for h in self.confirmed],
+            "holes": [self._hole_json(h) for h in self.for_crew],
             "map": dict(self.map_summary),
         }
+
+    def _counts(self) -> dict[str, int]:
+        return {t: sum(v == t for v in self.tiers.values()) for t in _ALL_TIERS}
+
+    def _hole_json(self, h: Hole) -> dict[str, Any]:
+        d = jsonable(h)
+        d["tier"] = self.tiers.get(h.id, "candidate")
+        d["frames"] = d.pop("sightings")  # frames it was detected in; views: viewpoints
+        d["r95_m"] = CIRCLE_95_PER_SIGMA * h.sigma_h_m if math.isfinite(h.sigma_h_m) else None
+        d["found_in_flight"] = h.id not in self.new_ids
+        return dict(d)
 
     def lines(self) -> list[str]:
         """A short human summary."""
@@ -122,15 +152,23 @@ class FlightResult:
         out = [
             f"{self.name}:{stop} {self.frames_detected}/{self.frames_read} frames "
             f"({self.partitions_cached}/{self.partitions} partitions from the cache){cut}; "
-            f"{len(self.confirmed)} holes seen >= 2 times ({len(self.holes)} in all)",
-            f"  in-flight holes reproduced: {len(found)}/{len(self.flight_matches)}"
-            + (f" (same id {self.flight_same_ids}, farthest {worst:.2f} m)" if found else ""),
+            f"{len(self.found)} holes found (announced + for review + confirmed: "
+            + ", ".join(f"{n} {t}" for t, n in self._counts().items() if n)
+            + ")",
+            f"  holes the flight found, found again with their ids: {self.flight_same_ids}/"
+            f"{len(self.flight_matches)}"
+            + (f" (farthest {worst:.2f} m)" if found else "")
+            + "; found only by reprocessing: "
+            + (", ".join(f"hole {i}" for i in self.new_ids) or "none"),
         ]
         out += [f"  {t}" for t in self.truncated]
         out += list(self.map_lines)
         out += [f"  wrote {path} ({kind})" for kind, path in self.files]
         out += [f"  wrote {p} (sidecar mcap: open it with the logs)" for p in self.outputs]
         return out
+
+
+_ALL_TIERS = ("announced", "review", "confirmed", "rejected", "candidate")
 
 
 def _hole_files(
@@ -217,13 +255,14 @@ def write_hole_outputs(
     tiers : hole id ->
     ``announced``, ``review``, ``confirmed``, ``rejected`` or ``candidate`` (default: the
     vehicle's :meth:`geotag.AnnounceGate.tier` with its default thresholds); candidates
-    are left out of the hole files, holes for review out of the TAK data package (they
-    all stay in the report). Returns (kind, path) pairs.
+    are in no file (not even the report: every file here may reach a crew), holes for
+    review not in the TAK data package. Returns (kind, path) pairs.
     """
     opts = opts or ReprocessOptions()
     if tiers is None:
         gate = AnnounceGate()
         tiers = {h.id: gate.tier(h) for h in holes}
+    holes = [h for h in holes if tiers.get(h.id, "candidate") != "candidate"]
     wanted = {h.id for h in holes}
     jpegs = {
         hid: render_thumbnail(rgb, depth, box)[0]
@@ -247,6 +286,7 @@ def write_hole_outputs(
         facts=facts,
         track_breaks=track_breaks,
         search_map=search_map,
+        tiers=tiers,
     )
     written.append(("report", path))
     return written

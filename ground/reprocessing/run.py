@@ -26,26 +26,27 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
+import math
 import os
 import threading
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from importlib.metadata import version as _dist_version
 from pathlib import Path
 from typing import Any
 
 from holescan.errors import InputError
 from holescan.flightlog import FlightLogError, read_log_layout, to_json
-from holescan.geotag import VehiclePose
+from holescan.geotag import FOUND_TIERS, AnnounceGate, Hole, VehiclePose
 from holescan.ground.reprocessing.cache import PartitionCache
 from holescan.ground.reprocessing.campaign import CampaignHole, CampaignMerge, campaign_summary
 from holescan.ground.reprocessing.engine import EngineStats, run_tasks
 from holescan.ground.reprocessing.mapfiles import flight_map_outputs
 from holescan.ground.reprocessing.merge import FlightMerger
 from holescan.ground.reprocessing.options import (
+    HoleMatch,
     Progress,
     ReprocessOptions,
-    match_points,
     out_folder,
 )
 from holescan.ground.reprocessing.outputs import FlightResult, write_hole_outputs
@@ -58,6 +59,7 @@ from holescan.ground.reprocessing.plan import (
     ref_name,
 )
 from holescan.ground.reprocessing.sidecar import Sidecar
+from holescan.ground.station.marks import tier_with_mark
 from holescan.outputs import atomic_output
 
 __all__ = ["ReprocessResult", "reprocess", "run_campaign"]
@@ -221,14 +223,22 @@ def _flight_outputs(
     anchor: tuple[float, float, float] | None = None,
 ) -> FlightResult:
     holes = tuple(fl.holes()) if fl is not None else ()
-    confirmed = tuple(h for h in holes if h.sightings >= opts.min_sightings)
+    gate, source = opts.gate_for(fl.flight_gate if fl is not None else None)
+    tiers = flight_tiers(holes, gate, opts, fl.flight_tiers if fl is not None else {})
     flight_holes = fl.flight_holes if fl is not None else ()
-    flight_confirmed = [h for h in flight_holes if h.sightings >= opts.min_sightings]
-    matches = match_points(
-        [(h.lat_deg, h.lon_deg) for h in flight_confirmed],
-        [(h.lat_deg, h.lon_deg) for h in confirmed],
-        2.0,
-    )
+    told = fl.flight_tiers if fl is not None else {}
+    flight_found = [
+        h
+        for h in flight_holes
+        if told.get(h.id, "announced" if h.sightings >= opts.min_sightings else "candidate")
+        in FOUND_TIERS
+    ]
+    by_id = {h.id: k for k, h in enumerate(holes)}
+    dist = fl.id_map.distance_m if fl is not None and fl.id_map is not None else {}
+    matches = [
+        HoleMatch(k, by_id.get(h.id), dist.get(h.id, math.nan) if h.id in by_id else math.nan)
+        for k, h in enumerate(flight_found)
+    ]
     problems = (*plan.problems, *(fl.damaged if fl is not None else ()))
     result = FlightResult(
         name=plan.name,
@@ -242,12 +252,12 @@ def _flight_outputs(
         detect_errors=fl.detect_errors if fl else 0,
         frames_no_depth=fl.frames_no_depth if fl else 0,
         holes=holes,
-        confirmed=confirmed,
+        tiers=tiers,
+        new_ids=tuple(fl.id_map.new_ids) if fl is not None and fl.id_map is not None else (),
         flight_holes=flight_holes,
         flight_matches=tuple(matches),
         flight_same_ids=sum(
-            m.found is not None and flight_confirmed[m.reference].id == confirmed[m.found].id
-            for m in matches
+            m.found is not None and tiers[holes[m.found].id] in FOUND_TIERS for m in matches
         ),
         truncated=problems,
         interrupted=interrupted,
@@ -266,15 +276,20 @@ def _flight_outputs(
             f"{sum(m.found is not None for m in matches)} of {len(matches)}"
         ),
     }
-    gate, source = opts.gate_for(fl.flight_gate if fl is not None else None)
     if fl is not None and fl.flight_gate is None:
         _log.info("%s: the log predates recorded tiers: default gate %s", plan.name, gate.summary())
     facts["tiers"] = f"{gate.summary()} ({source})"
+    facts["ids"] = (
+        "the flight's own (the same opening keeps its id); found only by reprocessing: "
+        + (", ".join(str(i) for i in result.new_ids) or "none")
+    )
+    if opts.marks:
+        facts["operator marks"] = ", ".join(f"hole {i} {m}" for i, m in sorted(opts.marks.items()))
     if problems:
         facts["cut off or damaged"] = "; ".join(problems)
     views = {}
     if fl is not None:
-        got = fl.views({h.id for h in confirmed})
+        got = fl.views({h.id for h in result.for_crew})
         views = {hid: (v.rgb, v.depth, v.box_in_crop) for hid, v in got.items()}
     mapped = None
     if fl is not None and anchor is not None:
@@ -283,8 +298,9 @@ def _flight_outputs(
             plan.name,
             fl.map_parts,
             anchor,
-            confirmed,
+            result.for_crew,
             opts,
+            tiers=tiers,
             track=fl.track,
             home=fl.home(),
             boot_to_unix_ns=fl.boot_to_unix_ns,
@@ -295,7 +311,7 @@ def _flight_outputs(
     files = write_hole_outputs(
         out,
         plan.name,
-        confirmed,
+        result.for_crew,
         views,
         fl.track if fl is not None else [],
         opts=opts,
@@ -303,7 +319,7 @@ def _flight_outputs(
         boot_to_unix_ns=fl.boot_to_unix_ns if fl is not None else None,
         facts=facts,
         title=f"holescan reprocessed flight: {plan.name}",
-        tiers={h.id: gate.tier(h) for h in confirmed},
+        tiers=tiers,
         search_map=mapped.section if mapped else None,
         overlay=mapped.overlay if mapped else None,
     )
@@ -321,6 +337,25 @@ def _flight_outputs(
     return result
 
 
+def flight_tiers(
+    holes: Sequence[Hole],
+    gate: AnnounceGate,
+    opts: ReprocessOptions,
+    told: Mapping[int, str],
+) -> dict[int, str]:
+    """Every reprocessed hole's tier: the one gate (:meth:`geotag.AnnounceGate.tiers`, holes
+    the flight announced staying announced while they pass), holes seen fewer than
+    ``opts.min_sightings`` times candidates, then the operators' marks
+    (:func:`ground.station.marks.tier_with_mark`)."""
+    announced = [i for i, t in told.items() if t == "announced"]
+    tiers: dict[int, str] = dict(gate.tiers(holes, announced=announced))
+    for h in holes:
+        if h.sightings < opts.min_sightings:
+            tiers[h.id] = "candidate"
+        tiers[h.id] = tier_with_mark(tiers[h.id], opts.marks.get(h.id))
+    return tiers
+
+
 def _write_json(path: Path, doc: Any) -> None:
     """A run's JSON summary, replaced atomically (the output-path rule)."""
     with atomic_output(path, force=True) as f:
@@ -334,9 +369,22 @@ def _tracks(run: _Run) -> dict[str, list[VehiclePose]]:
     }
 
 
+def _campaign_gate(run: _Run) -> tuple[AnnounceGate, str]:
+    gates = {m.flight_gate for m in run.mergers.values()}  # one gate when all flights agree
+    return run.opts.gate_for(gates.pop() if len(gates) == 1 else None)
+
+
+def _campaign_tiers(run: _Run, holes: list[CampaignHole]) -> list[CampaignHole]:
+    """The campaign's holes with their tiers (:func:`flight_tiers`, the first flight's
+    announced holes staying announced while they pass)."""
+    first = run.mergers[min(run.mergers)].flight_tiers if run.mergers else {}
+    tiers = flight_tiers([h.hole for h in holes], _campaign_gate(run)[0], run.opts, first)
+    return [dataclasses.replace(h, tier=tiers[h.id]) for h in holes]
+
+
 def _campaign_outputs(run: _Run, holes: list[CampaignHole]) -> list[tuple[str, Path]]:
     assert run.campaign is not None
-    confirmed = [h.hole for h in holes]
+    confirmed = [h.hole for h in holes if h.tier != "candidate"]
     got = run.campaign.views({h.id for h in confirmed})
     views = {hid: (v.rgb, v.depth, v.box_in_crop) for hid, v in got.items()}
     track: list[VehiclePose] = []  # every flight's, on the Unix clock like the holes' times
@@ -347,8 +395,7 @@ def _campaign_outputs(run: _Run, holes: list[CampaignHole]) -> list[tuple[str, P
         breaks.append(len(track))
         track += [dataclasses.replace(p, t_boot_ns=p.t_boot_ns + shift) for p in m.track]
     homes = [m.home() for m in run.mergers.values() if m.home() is not None]
-    gates = {m.flight_gate for m in run.mergers.values()}  # one gate when all flights agree
-    gate, source = run.opts.gate_for(gates.pop() if len(gates) == 1 else None)
+    gate, source = _campaign_gate(run)
     facts = {
         "flights": ", ".join(p.name for p in run.plans),
         "frames": str(sum(r.frames_detected for r in run.results.values())),
@@ -372,6 +419,7 @@ def _campaign_outputs(run: _Run, holes: list[CampaignHole]) -> list[tuple[str, P
             run.map_anchor,
             confirmed,
             run.opts,
+            tiers={h.id: h.tier for h in holes},
             track=track,
             home=homes[0] if homes else None,
             boot_to_unix_ns=0,
@@ -388,7 +436,7 @@ def _campaign_outputs(run: _Run, holes: list[CampaignHole]) -> list[tuple[str, P
         facts=facts,
         track_breaks=breaks,
         title="holescan campaign: " + ", ".join(p.name for p in run.plans),
-        tiers={h.id: gate.tier(h) for h in confirmed},
+        tiers={h.id: h.tier for h in holes},
         search_map=mapped.section if mapped else None,
         overlay=mapped.overlay if mapped else None,
     )
@@ -454,7 +502,13 @@ def _execute(
         "flights": [r.summary() for r in results],
     }
     if run.campaign is not None:
-        holes = run.campaign.holes(opts.min_sightings)
+        run.campaign.carry_ids(
+            [
+                (run.plans[k].name, run.mergers[k].holes(), run.mergers[k].flight_max_id)
+                for k in sorted(run.mergers)
+            ]
+        )
+        holes = _campaign_tiers(run, run.campaign.holes(opts.min_sightings))
         files = _campaign_outputs(run, holes)
         doc["campaign"] = campaign_summary(holes, _tracks(run))
     summary = out_dir / "summary.json"

@@ -12,7 +12,7 @@ import io
 import math
 import xml.etree.ElementTree as ET
 import zipfile
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import cv2
@@ -22,7 +22,7 @@ from rasterio.crs import CRS
 from rasterio.enums import Resampling
 from rasterio.warp import calculate_default_transform, reproject
 
-from holescan.geotag import Hole, LocalFrame
+from holescan.geotag import AnnounceGate, Hole, LocalFrame
 from holescan.ground.searchmap.geotiff import local_crs
 from holescan.link import xml_safe_tree
 from holescan.mapping import MapLayers
@@ -93,8 +93,18 @@ def write_map_kmz(
     *,
     boot_to_unix_ns: int | None = None,
     force: bool = True,
+    tiers: Mapping[int, str] | None = None,
 ) -> Path:
-    """``NAME_map.kmz``: the orthophoto as a GroundOverlay and the holes as placemarks."""
+    """``NAME_map.kmz``: the orthophoto as a GroundOverlay and the holes as placemarks.
+
+    tiers : hole id -> tier (None: :meth:`geotag.AnnounceGate.tier` with the default
+        gate); each placemark is named and described by its tier, candidates are left out
+        (the KMZ goes to the crews, inside the TAK data package too).
+    """
+    if tiers is None:
+        gate = AnnounceGate()
+        tiers = {h.id: gate.tier(h) for h in holes}
+    holes = [h for h in holes if tiers.get(h.id, "candidate") != "candidate"]
     png, (west, south, east, north) = _lonlat_png(layers, frame)
     ET.register_namespace("", KML_NS)
     kml = ET.Element(f"{{{KML_NS}}}kml")
@@ -115,7 +125,7 @@ def write_map_kmz(
         _sub(box, tag, f"{v:.9f}")
     folder = _sub(doc, "Folder")
     _sub(folder, "name", "holes")
-    for w in hole_points(holes, boot_to_unix_ns=boot_to_unix_ns, on_ground=True):
+    for w in hole_points(holes, boot_to_unix_ns=boot_to_unix_ns, on_ground=True, tiers=tiers):
         pm = _sub(folder, "Placemark")
         _sub(pm, "name", w.name)
         _sub(pm, "description", w.description)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import datetime as dt
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -65,6 +65,7 @@ def write_map_outputs(
     day: dt.date | None = None,
     boot_to_unix_ns: int | None = None,
     force: bool = True,
+    tiers: Mapping[int, str] | None = None,
 ) -> MapOutputs:
     """``NAME_ortho.tif``, ``NAME_dsm.tif``, ``NAME_coverage.tif``, ``NAME_map.kmz``,
     ``NAME_gaps.geojson`` and, when there are gaps, ``NAME_refly.plan`` and
@@ -72,7 +73,8 @@ def write_map_outputs(
 
     ``area`` is the planned area in the frame's metres (None: the hull of what was seen);
     ``survey`` the parameters of the re-fly (the flight's altitude), ``day`` the day whose
-    sun windows it is checked against.
+    sun windows it is checked against. ``tiers``: the holes' tiers for the KMZ
+    (:func:`write_map_kmz`: candidates left out).
     """
     files = write_map_geotiffs(folder, name, layers, frame, force=force)
     kmz = write_map_kmz(
@@ -83,6 +85,7 @@ def write_map_outputs(
         holes,
         boot_to_unix_ns=boot_to_unix_ns,
         force=force,
+        tiers=tiers,
     )
     files.append(("map", kmz))
     gaps = find_gaps(layers, area, threshold=threshold)

@@ -7,9 +7,11 @@
 * :mod:`.files` - KML/GeoJSON/GPX always current; :mod:`.cot` - holes as TAK CoT;
   :mod:`.tak` - the link to TAK (mesh, TAK server over TCP/TLS); :mod:`.datapackage` -
   the TAK data package with the pictures;
-* :mod:`.web` - the live page (``station.html``) and its state document; :mod:`.webserver`
-  its HTTP server, :mod:`.guard` the checks every request passes (Host, Origin, the
-  station token, bounds), :mod:`.audit` the operators' marks in ``DIR/audit.jsonl``.
+* :mod:`.web` - the live page (``static/station.html``) and its state document;
+  :mod:`.webapp` its routes (Starlette), :mod:`.webserver` its server (uvicorn),
+  :mod:`.guard` the policy every request passes (Host, Origin, rate, headers),
+  :mod:`.events` the bounded event stream, :mod:`.pairing` the operators' pairings,
+  :mod:`.audit` the operators' marks in ``DIR/audit.jsonl``.
 """
 
 from holescan.ground.station.app import GroundOptions, GroundStation, run_ground
@@ -33,8 +35,9 @@ from holescan.ground.station.datapackage import (
     write_datapackage,
 )
 from holescan.ground.station.files import hole_summary, hole_waypoint, write_station_files
-from holescan.ground.station.guard import Limits, StationToken
+from holescan.ground.station.guard import Limits
 from holescan.ground.station.link import VehicleLink
+from holescan.ground.station.pairing import Pairing, Pairings
 from holescan.ground.station.state import (
     MARKS,
     GroundHole,
@@ -65,8 +68,9 @@ __all__ = [
     "GroundOptions",
     "GroundStation",
     "Limits",
+    "Pairing",
+    "Pairings",
     "StationState",
-    "StationToken",
     "StationWeb",
     "TakTls",
     "Tier",

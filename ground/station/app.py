@@ -17,6 +17,11 @@ vehicle's MAVLink stream (MAVProxy ``--out``, a UDP port or a serial radio):
   (:mod:`ground.station.mapstore`) and drawn on the page (:mod:`ground.station.maplayers`);
 * every ``cot_refresh_s`` all holes are sent to TAK again (markers outlive their stale
   time only while the station runs).
+
+The files and TAK follow on the station's own thread (``ground-follow``), never on the
+thread of a web request or of the MAVLink link: an operator's mark is in the state (and
+the audit trail) when the page is answered, and the follower writes the files and sends
+TAK right after; one lock per station keeps a flush whole.
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ import contextlib
 import logging
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -34,6 +40,7 @@ from holescan.ground.station.datapackage import DATAPACKAGE_NAME, write_datapack
 from holescan.ground.station.files import write_station_files
 from holescan.ground.station.link import VehicleLink
 from holescan.ground.station.mapstore import MapStore
+from holescan.ground.station.pairing import Pairing, Pairings, check_operator
 from holescan.ground.station.state import GroundHole, StationState
 from holescan.ground.station.tak import DEFAULT_COT_URL, CotPublisher, TakTls, tak_settings
 from holescan.ground.station.web import StationWeb
@@ -59,7 +66,9 @@ class GroundOptions:
     uids. cot_stale_s, cot_refresh_s : CoT stale time (from each sending) and re-send
     period, s. kml_refresh_s : Google Earth's NetworkLink reload period. overlay : a map
     overlay (``.kmz``) for the data package. signing : MAVLink 2 signing key shared with
-    the vehicle (None: unsigned link).
+    the vehicle (None: unsigned link). pair : operators to issue a pairing for at start
+    (:mod:`ground.station.pairing`; when the folder has none and none is asked for, one
+    for "operator 1").
     """
 
     mavlink: str
@@ -79,6 +88,7 @@ class GroundOptions:
     silence_s: float = 3.0
     signing: SigningKey | None = None
     overlay: Path | None = None
+    pair: tuple[str, ...] = ()
 
     def check(self) -> None:
         """Raise InputError for options that cannot work together."""
@@ -94,6 +104,8 @@ class GroundOptions:
             )
         if self.overlay is not None and not self.overlay.is_file():
             raise InputError(f"map overlay {self.overlay}: no such file")
+        for name in self.pair:
+            check_operator(name)
 
 
 class GroundStation:
@@ -111,6 +123,10 @@ class GroundStation:
         self._files_key: tuple[object, ...] | None = None
         self._dirty = threading.Event()
         self._stop = threading.Event()
+        self._flush_lock = threading.Lock()  # one per station: a flush is whole
+        self.pairings = Pairings(opts.out)
+        self.new_pairings: list[tuple[Pairing, str]] = []
+        """Pairings issued at this start, with their tokens (to be shown once)."""
         self.web: StationWeb | None = None
         self.cot: CotPublisher | None = None
         self.link: VehicleLink | None = None
@@ -128,8 +144,11 @@ class GroundStation:
                         on_mark=self.mark,
                         map_store=self.map_store,
                         names=o.http_names,
+                        pairings=self.pairings,
                     )
                 )
+                names = list(o.pair) or ([] if self.pairings.all() else ["operator 1"])
+                self.new_pairings = [self.pairings.issue(n) for n in names]
             if o.cot_url is not None and self._tak is not None:
                 extra = {**self._tak, "TAK_PROTO": str(o.cot_proto)}
                 self.cot = self._stack.enter_context(CotPublisher(o.cot_url, extra))
@@ -164,9 +183,10 @@ class GroundStation:
         self._flush()
 
     def mark(self, hole_id: int, mark: str) -> GroundHole:
-        """The operator's mark; TAK and the files follow at once."""
+        """The operator's mark, in the state; TAK and the files follow on the station's
+        thread right after."""
         h = self.state.mark(hole_id, mark)
-        self._flush()
+        self._dirty.set()
         return h
 
     # -- following the state -----------------------------------------------------------
@@ -181,8 +201,6 @@ class GroundStation:
                 with self._flush_lock:
                     self._sent.clear()  # re-send every hole before its CoT goes stale
             self._flush()
-
-    _flush_lock = threading.Lock()
 
     def _flush(self) -> None:
         with self._flush_lock:
@@ -242,16 +260,37 @@ class GroundStation:
         )
 
 
-def run_ground(opts: GroundOptions, stop: threading.Event) -> GroundStation:
-    """Run the station until ``stop`` is set; return it (closed) for its counters."""
+def run_ground(
+    opts: GroundOptions, stop: threading.Event, show: Callable[[str], None] | None = None
+) -> GroundStation:
+    """Run the station until ``stop`` is set; return it (closed) for its counters.
+
+    show : where the pairing links issued at this start are shown, once (the terminal; a
+    link is never written to the log). None: not shown (the log says how to issue one).
+    """
     with GroundStation(opts) as station:
         if station.web is not None:
             _log.warning("live page (read-only): %s", station.web.url)
+            if station.new_pairings and show is not None:
+                show(
+                    "Pairing links (shown once, not logged; each lets one operator's browser "
+                    "mark holes under that operator's name; open it once in that browser):"
+                )
+                for p, token in station.new_pairings:
+                    show(f"  {p.operator} ({p.id}): {station.web.pair_url(token)}")
+            elif station.new_pairings:
+                _log.warning(
+                    "%d pairing link(s) issued but not shown (no terminal): issue one to show "
+                    "with: holescan pair -o %s NAME",
+                    len(station.new_pairings),
+                    opts.out,
+                )
             _log.warning(
-                "to mark holes, open once in each operator's browser (keep it private; "
-                "delete %s/.station-token to un-pair every browser): %s",
+                "operators paired: %s (more: holescan pair -o %s NAME; un-pair: delete the "
+                "line from %s)",
+                ", ".join(str(p) for p in station.pairings.all()) or "none",
                 opts.out,
-                station.web.pair_url,
+                station.pairings.path,
             )
         _log.warning(
             "files in %s: holes.kml, holes_live.kml (Google Earth), holes.geojson, holes.gpx, "

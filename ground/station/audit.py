@@ -3,12 +3,14 @@
 ``DIR/audit.jsonl``, one JSON object per line, appended and fsynced before the change is
 acknowledged, never rewritten (the station only ever opens it to append)::
 
-    {"t_unix_ns": 1764766800000000000, "operator": "Ana", "client": "192.168.1.23",
-     "hole": 3, "mark_from": "new", "mark_to": "confirmed",
+    {"t_unix_ns": 1764766800000000000, "pairing": "p1", "operator": "Ana",
+     "client": "192.168.1.23", "hole": 3, "mark_from": "new", "mark_to": "confirmed",
      "tier_from": "review", "tier_to": "confirmed"}
 
-``operator`` is the name the operator typed once in that browser; ``client`` the address
-the request came from. A line cut by a power loss is skipped when the trail is read back.
+``pairing`` is the id of the operator's pairing (:mod:`ground.station.pairing`) and
+``operator`` the name the station's user gave that pairing, never a name typed in the page;
+``client`` the address the request came from. A line cut by a power loss is skipped when
+the trail is read back.
 """
 
 from __future__ import annotations
@@ -21,42 +23,26 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from holescan.errors import InputError
 from holescan.ground.errors import GroundError
 
-__all__ = ["AUDIT_FILE", "AuditEntry", "AuditError", "AuditTrail", "check_operator"]
+__all__ = ["AUDIT_FILE", "AuditEntry", "AuditError", "AuditTrail"]
 
 _log = logging.getLogger(__name__)
 
 AUDIT_FILE = "audit.jsonl"
-_OPERATOR_MAX = 40
 
 
 class AuditError(GroundError):
     """The audit trail cannot be written (the change it was for is not made)."""
 
 
-def check_operator(name: object) -> str:
-    """An operator's name as given with a mark: 1-40 printable characters, trimmed.
-
-    >>> check_operator("  Ana B. ")
-    'Ana B.'
-    >>> check_operator("")
-    Traceback (most recent call last):
-    ...
-    holescan.errors.InputError: an operator name (1-40 printable characters) is required
-    """
-    text = name.strip() if isinstance(name, str) else ""
-    if not 1 <= len(text) <= _OPERATOR_MAX or not text.isprintable():
-        raise InputError(f"an operator name (1-{_OPERATOR_MAX} printable characters) is required")
-    return text
-
-
 @dataclass(frozen=True)
 class AuditEntry:
-    """One change: Unix clock ns, who (name, address), which hole, mark and tier before/after."""
+    """One change: Unix clock ns, who (pairing id, its operator, address), which hole, mark
+    and tier before/after."""
 
     t_unix_ns: int
+    pairing: str
     operator: str
     client: str
     hole: int

@@ -22,6 +22,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from holescan.geotag import CIRCLE_95_PER_SIGMA
 from holescan.ground.station.state import GroundHole
 from holescan.missions import (
     MAV_FRAME_GLOBAL,
@@ -38,13 +39,13 @@ __all__ = ["hole_summary", "hole_waypoint", "write_station_files"]
 
 def hole_summary(h: GroundHole) -> str:
     """One line: size, depth reason, score, sightings, uncertainty, operator's mark."""
-    parts = [f"hole {h.id}", f"score {h.score:.2f}"]
+    parts = [f"hole {h.id}", f"best frame's score {h.score:.2f}"]
     if h.major_m is not None and h.minor_m is not None:
         parts.append(f"opening {h.major_m:.2f} x {h.minor_m:.2f} m")
     if h.sightings:
-        parts.append(f"seen {h.sightings}x")
+        parts.append(f"seen in {h.sightings} frames")
     if h.sigma_h_m is not None:
-        parts.append(f"+-{h.sigma_h_m:.2f} m (1 sigma)")
+        parts.append(f"within {CIRCLE_95_PER_SIGMA * h.sigma_h_m:.2f} m (95 %)")
     parts.append(f"operator: {h.mark}")
     text = ", ".join(parts)
     return f"{text}. {h.why}" if h.why else text

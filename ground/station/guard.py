@@ -1,59 +1,52 @@
 """Who may talk to the live page, and how much: every request is treated as hostile.
 
-The live page (:mod:`ground.station.web`) passes every request through these checks
-before it looks at the state:
+The live page (:mod:`ground.station.web`, served by :mod:`ground.station.webserver`) runs on
+Starlette and uvicorn: request parsing and the bounds of a request's head (h11), keep-alive
+and connection limits are the server's. What is policy is here, in :class:`GuardMiddleware`,
+which every request passes before any route sees it:
 
 * **Host** (:func:`host_allowed`): the ``Host`` header must name the address the request
   arrived on (the connection's own local address, port included), ``localhost`` when that
   address is loopback, or one of the names the station was told it serves (its hostname
   and ``HOSTNAME.local`` by default). A page of ``evil.example`` re-bound by DNS to the
   station's address (DNS rebinding) sends ``Host: evil.example`` and gets 403: it can
-  neither read the holes nor hold an event stream.
+  neither read the holes nor hold an event stream. (Starlette's ``TrustedHostMiddleware``
+  checks names only: it cannot say "the address this connection arrived on, this port",
+  which is what a station bound to ``0.0.0.0`` on a changing incident network needs.)
 * **Origin** (:func:`origin_allowed`): a request that carries ``Origin`` must come from
   the page itself (``http://`` + the checked Host); ``Sec-Fetch-Site`` must be
   ``same-origin`` or ``none`` when a browser sends it. A simple cross-site request (a
   ``text/plain`` POST that needs no CORS preflight) gets 403 before its body is read.
-* **Secret** (:class:`StationToken`): every change needs ``Authorization: Bearer TOKEN``,
-  the station's secret, wherever the page listens, loopback included (a browser is paired
-  once by opening the ``?token=`` link printed at start; the page keeps the token in the
-  browser's ``localStorage``). Without it the page is read-only. The token is kept in
-  ``DIR/.station-token`` (mode 0600), so a restart keeps every browser paired; delete the
-  file to revoke every browser.
-* **Bounds** (:class:`Limits`): request head (line + headers) and body sizes, requests per
-  second per client (:class:`RateLimiter`, a token bucket), open connections per client
-  and in all, event-stream clients, and a deadline for reading a whole request
-  (:class:`Deadlines`: a slow-loris client that drips one byte at a time is cut off).
+* **Rate** (:class:`RateLimiter`): a token bucket per client address (429).
+* **Headers** on every answer: ``nosniff``, no framing, no referrer, the page's
+  Content-Security-Policy (:data:`PAGE_CSP`: scripts and styles only from the station's
+  own static files, nothing inline), ``Cache-Control: no-store`` unless the route says
+  otherwise.
+
+Who may *change* anything (mark a hole) is the operator's pairing
+(:mod:`ground.station.pairing`), checked by the route.
 
 Why on loopback too: the ground-station laptop runs a browser that visits other sites and
-other programs (a second user, a plug-in, a local tool) can reach ``127.0.0.1``; the token
-is one click per browser (the printed link), the same as Jupyter's.
+other programs (a second user, a plug-in, a local tool) can reach ``127.0.0.1``.
 """
 
 from __future__ import annotations
 
-import contextlib
-import hmac
 import ipaddress
 import logging
-import os
-import secrets
 import socket
 import threading
 import time
 from collections import OrderedDict
-from collections.abc import Callable, Iterable
+from collections.abc import Awaitable, Callable, Iterable, MutableMapping
 from dataclasses import dataclass
-from pathlib import Path
-
-from holescan.errors import InputError
+from typing import Any
 
 __all__ = [
-    "TOKEN_FILE",
-    "BoundedReader",
-    "Deadlines",
+    "PAGE_CSP",
+    "GuardMiddleware",
     "Limits",
     "RateLimiter",
-    "StationToken",
     "default_names",
     "host_allowed",
     "origin_allowed",
@@ -61,19 +54,43 @@ __all__ = [
 
 _log = logging.getLogger(__name__)
 
-TOKEN_FILE = ".station-token"
-"""The station's secret in its folder (mode 0600); delete it to un-pair every browser."""
+Scope = MutableMapping[str, Any]
+Message = MutableMapping[str, Any]
+Receive = Callable[[], Awaitable[Message]]
+Send = Callable[[Message], Awaitable[None]]
+App = Callable[[Scope, Receive, Send], Awaitable[None]]
+
+PAGE_CSP = (
+    "default-src 'self'; img-src 'self' data:; style-src 'self'; script-src 'self'; "
+    "connect-src 'self'; object-src 'none'; frame-ancestors 'none'; base-uri 'none'; "
+    "form-action 'none'"
+)
+"""The page's scripts and styles are the station's own static files; nothing inline."""
+
+SECURITY_HEADERS = {
+    "x-content-type-options": "nosniff",
+    "x-frame-options": "DENY",
+    "referrer-policy": "no-referrer",
+    "cross-origin-resource-policy": "same-origin",
+    "content-security-policy": PAGE_CSP,
+}
 
 
 @dataclass(frozen=True)
 class Limits:
-    """Bounds of the live page's HTTP server.
+    """Bounds of the live page's server.
 
-    max_head_bytes : request line + headers. max_body_bytes : a POST body. rate_per_s,
-    burst : a client's token bucket (requests). max_connections, max_per_client : open
-    connections in all / from one address. max_event_clients : open ``/events`` streams.
-    request_s : seconds to send a whole request (head and body) after connecting.
-    io_timeout_s : a socket read or write that waits longer ends the connection.
+    max_head_bytes : request line + headers (h11's incomplete-event bound). max_body_bytes :
+    a POST body. rate_per_s, burst : a client's token bucket (requests). max_connections :
+    open connections and requests in all (uvicorn's ``limit_concurrency``: 503 past it).
+    max_per_client : open connections from one address (more are closed unanswered).
+    max_event_clients, max_events_per_client : open ``/events`` streams in all / from one
+    address (503 with ``Retry-After`` past them). events_s : an event stream is closed
+    after this long (the page's ``EventSource`` reconnects on its own), so no client holds
+    a slot for good. request_s : seconds to send a whole request (head and body) after
+    connecting or after the previous answer (a slow-loris client is cut). keep_alive_s :
+    an idle kept-alive connection is closed after this long. io_timeout_s : an event
+    stream whose client stops reading for this long is ended.
     """
 
     max_head_bytes: int = 8192
@@ -83,57 +100,11 @@ class Limits:
     max_connections: int = 64
     max_per_client: int = 16
     max_event_clients: int = 16
+    max_events_per_client: int = 4
+    events_s: float = 300.0
     request_s: float = 10.0
+    keep_alive_s: int = 5
     io_timeout_s: float = 15.0
-
-
-class StationToken:
-    """The station's secret: ``DIR/.station-token``, made on first start (mode 0600).
-
-    >>> import tempfile
-    >>> with tempfile.TemporaryDirectory() as d:
-    ...     t = StationToken.load_or_create(Path(d))
-    ...     t.check("Bearer " + t.value), t.check("Bearer nope"), t.check(None)
-    (True, False, False)
-    """
-
-    def __init__(self, value: str) -> None:
-        if len(value) < 16:
-            raise InputError("the station token must have at least 16 characters")
-        self.value = value
-
-    def __repr__(self) -> str:  # never in a log line
-        return "StationToken(***)"
-
-    @classmethod
-    def load_or_create(cls, folder: Path) -> StationToken:
-        """The token kept in ``folder`` (a new random one, 32 bytes, when none is)."""
-        path = folder / TOKEN_FILE
-        try:
-            text = path.read_text().strip()
-        except FileNotFoundError:
-            text = ""
-        except OSError as err:
-            raise InputError(f"cannot read {path}: {err.strerror}") from err
-        if text:
-            return cls(text)
-        value = secrets.token_urlsafe(32)
-        try:
-            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
-            with os.fdopen(fd, "w") as f:
-                f.write(value + "\n")
-        except OSError as err:
-            raise InputError(f"cannot write the station token {path}: {err.strerror}") from err
-        return cls(value)
-
-    def check(self, authorization: str | None) -> bool:
-        """True when an ``Authorization`` header carries this token (``Bearer TOKEN``)."""
-        if not authorization:
-            return False
-        scheme, _, given = authorization.strip().partition(" ")
-        if scheme.lower() != "bearer":
-            return False
-        return hmac.compare_digest(given.strip().encode(), self.value.encode())
 
 
 def default_names() -> tuple[str, ...]:
@@ -268,89 +239,108 @@ class RateLimiter:
             return ok
 
 
-class Deadlines:
-    """Connections that must finish sending their request by a deadline.
+def _header(scope: Scope, name: bytes) -> list[str]:
+    return [v.decode("latin-1") for k, v in scope["headers"] if k == name]
 
-    One thread checks every ``tick_s``; a connection past its deadline is shut down (its
-    handler's read then ends). Use as a context manager.
+
+async def refuse(send: Send, code: int, why: str, headers: dict[str, str] | None = None) -> None:
+    """Answer ``code`` with one line of text (and the security headers)."""
+    body = why.encode("utf-8") + b"\n"
+    raw = [
+        (b"content-type", b"text/plain; charset=utf-8"),
+        (b"content-length", str(len(body)).encode()),
+        (b"cache-control", b"no-store"),
+        *((k.encode(), v.encode()) for k, v in SECURITY_HEADERS.items()),
+        *((k.lower().encode(), v.encode()) for k, v in (headers or {}).items()),
+    ]
+    await send({"type": "http.response.start", "status": code, "headers": raw})
+    await send({"type": "http.response.body", "body": body})
+
+
+class GuardMiddleware:
+    """The policy every request passes first (see the module docstring); ASGI middleware.
+
+    app : the routes. names : host names served besides the addresses. rate : the
+    clients' buckets. on_refuse : called once per refused request (the station's counter).
+    max_head_bytes : the request line (414) and the whole head (431) over this are refused
+    (h11 bounds a head that arrives in pieces; one that arrives whole is measured here).
     """
 
-    def __init__(self, tick_s: float = 0.25) -> None:
-        self._due: dict[socket.socket, float] = {}
-        self._lock = threading.Lock()
-        self._stop = threading.Event()
-        self._tick_s = tick_s
-        self._thread = threading.Thread(target=self._run, name="web-deadlines", daemon=True)
-        self.cut = 0
-        """Connections cut off so far."""
+    def __init__(
+        self,
+        app: App,
+        *,
+        names: Iterable[str],
+        rate: RateLimiter,
+        on_refuse: Callable[[], None],
+        max_head_bytes: int = Limits.max_head_bytes,
+    ) -> None:
+        self.app = app
+        self.max_head_bytes = max_head_bytes
+        self.names = tuple(names)
+        self.rate = rate
+        self.on_refuse = on_refuse
 
-    def __enter__(self) -> Deadlines:
-        self._thread.start()
-        return self
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        why = self._check(scope)
+        if why is not None:
+            self.on_refuse()
+            code, text, extra = why
+            await refuse(send, code, text, extra)
+            return
 
-    def __exit__(self, *exc: object) -> None:
-        self._stop.set()
-        self._thread.join(timeout=5.0)
+        async def send_guarded(message: Message) -> None:
+            if message["type"] == "http.response.start":
+                have = {k.lower() for k, _ in message.get("headers", [])}
+                add = [
+                    (k.encode(), v.encode())
+                    for k, v in SECURITY_HEADERS.items()
+                    if k.encode() not in have
+                ]
+                if b"cache-control" not in have:
+                    add.append((b"cache-control", b"no-store"))
+                message["headers"] = [*message.get("headers", []), *add]
+                if message["status"] >= 400:
+                    self.on_refuse()
+            await send(message)
 
-    def watch(self, conn: socket.socket, within_s: float) -> None:
-        with self._lock:
-            self._due[conn] = time.monotonic() + within_s
+        await self.app(scope, receive, send_guarded)
 
-    def release(self, conn: socket.socket) -> None:
-        with self._lock:
-            self._due.pop(conn, None)
-
-    def _run(self) -> None:
-        while not self._stop.wait(self._tick_s):
-            now = time.monotonic()
-            with self._lock:
-                late = [c for c, t in self._due.items() if t <= now]
-                for c in late:
-                    del self._due[c]
-            for c in late:
-                self.cut += 1
-                with contextlib.suppress(OSError):
-                    c.shutdown(socket.SHUT_RDWR)
-
-
-class BoundedReader:
-    """A connection's input that gives out at most ``budget`` bytes (then end of file).
-
-    The request head is read with ``budget = max_head_bytes``; :attr:`exhausted` tells that
-    it was cut there. :meth:`allow` adds the bytes of an accepted body.
-    """
-
-    def __init__(self, raw: object, budget: int) -> None:
-        self._raw = raw
-        self.budget = budget
-        self.exhausted = False
-
-    def allow(self, n: int) -> None:
-        self.budget += n
-
-    def _take(self, want: int) -> int:
-        n = self.budget if want < 0 else min(want, self.budget)
-        if n <= 0 and want != 0:
-            self.exhausted = True
-        return max(n, 0)
-
-    def readline(self, limit: int = -1) -> bytes:
-        n = self._take(limit)
-        if n == 0:
-            return b""
-        line: bytes = self._raw.readline(n)  # type: ignore[attr-defined]
-        self.budget -= len(line)
-        if self.budget <= 0 and not line.endswith(b"\n"):
-            self.exhausted = True
-        return line
-
-    def read(self, size: int = -1) -> bytes:
-        n = self._take(size)
-        if n == 0:
-            return b""
-        data: bytes = self._raw.read(n)  # type: ignore[attr-defined]
-        self.budget -= len(data)
-        return data
-
-    def close(self) -> None:
-        self._raw.close()  # type: ignore[attr-defined]
+    def _check(self, scope: Scope) -> tuple[int, str, dict[str, str] | None] | None:
+        """None when the request may go on, else (status, why, extra headers)."""
+        client = str((scope.get("client") or ("-", 0))[0])
+        line = len(scope["method"]) + len(scope["raw_path"]) + len(scope["query_string"]) + 12
+        if line > self.max_head_bytes:
+            return 414, "request line too long", None
+        if line + sum(len(k) + len(v) + 4 for k, v in scope["headers"]) > self.max_head_bytes:
+            return 431, "request head too large", None
+        hosts, origins = _header(scope, b"host"), _header(scope, b"origin")
+        if len(hosts) != 1 or len(origins) > 1:
+            return 400, "one Host header (and at most one Origin) wanted", None
+        local, port = scope.get("server") or ("", 0)
+        if not host_allowed(hosts[0], str(local), int(port or 0), self.names):
+            _log.warning("web: %s refused: Host %r", client, hosts[0][:80])
+            return 403, "unknown Host: open the page by the station's address", None
+        modes = _header(scope, b"sec-fetch-mode")
+        navigation = (
+            scope["method"] == "GET" and bool(modes) and modes[0].strip().lower() == "navigate"
+        )
+        sites = _header(scope, b"sec-fetch-site")
+        if not origin_allowed(
+            origins[0] if origins else None,
+            sites[0] if sites else None,
+            hosts[0],
+            navigation=navigation,
+        ):
+            _log.warning(
+                "web: %s refused: cross-site request (Origin %r)",
+                client,
+                (origins or ["-"])[0][:80],
+            )
+            return 403, "cross-site requests are refused", None
+        if not self.rate.allow(client):
+            return 429, "too many requests", {"Retry-After": "1"}
+        return None

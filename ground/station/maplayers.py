@@ -1,11 +1,9 @@
 """The live page's map layers: orthophoto and coverage tiles, served from the map store.
 
-One route function, :func:`map_route`, that the page's HTTP handler calls first for every
-GET (kept apart from :mod:`ground.station.web` so that the map is one clearly separated
-piece of the server):
+One route function, :func:`map_route`, that the page's ``/map.json`` and ``/map/...``
+routes call (kept apart from :mod:`ground.station.web` so that the map is one clearly
+separated piece of the server; the page's script is ``static/maplayers.js``, no CDN):
 
-* ``GET /static/maplayers.js`` the page's map-layer script (``maplayers.js``, no CDN;
-  the path a generic ``/static/NAME.js`` route serves it under too);
 * ``GET /map.json?lat=..&lon=..`` every place of the combined map
   (:mod:`ground.station.mapcombine`: all flights on the first one's grid), its corners in
   the page's local metres (:class:`geotag.LocalFrame` at the page's origin ``lat``/``lon``,
@@ -27,7 +25,6 @@ from __future__ import annotations
 import json
 import math
 import re
-from importlib import resources
 from urllib.parse import parse_qs
 
 import cv2
@@ -125,10 +122,6 @@ def map_document(store: MapStore, origin: tuple[float, float] | None) -> dict[st
     return {"version": store.version, "origin": origin, "tiles": out}
 
 
-def _script() -> bytes:
-    return resources.files("holescan.ground.station").joinpath("maplayers.js").read_bytes()
-
-
 def map_route(
     store: MapStore | None, path: str, query: str = "", cache: CombinedCache | None = None
 ) -> Reply | None:
@@ -137,8 +130,6 @@ def map_route(
     cache : the store's combined map, kept between requests (None: combined for this one).
     Returns (status, body, content type).
     """
-    if path == "/static/maplayers.js":
-        return 200, _script(), "text/javascript; charset=utf-8"
     if path == "/map.json":
         if store is None:
             return 200, b'{"version": 0, "origin": null, "tiles": []}', "application/json"

@@ -170,7 +170,7 @@ class GroundHole:
         it is a real place that was checked, and it stays on every map); ``new`` -> the
         vehicle's tier (``announced`` or ``review``).
         """
-        if self.mark == "rejected":
+        if self.mark == "rejected":  # the rule marks.tier_with_mark states for reprocessing
             return "rejected"
         if self.mark in ("confirmed", "visited"):
             return "confirmed"

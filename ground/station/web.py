@@ -7,19 +7,12 @@ scale bar; beside the map, the review queue: each hole's picture, facts, the det
 "why", its tier and who marked it, and the operator's marks (confirmed / rejected /
 visited; keyboard shortcuts, see ``review.js``).
 
-Endpoints (stdlib :mod:`http.server`, one thread per connection, HTTP/1.0):
-
-* ``GET /`` the page; ``GET /static/NAME.js`` its scripts; ``GET /state.json`` everything
-  it draws (local metres included); ``GET /cards/hole-<id>.jpg`` a hole's picture;
-* ``GET /events`` Server-Sent Events: ``data: <version>`` after every change, so new holes
-  and other operators' marks appear without a reload (the page re-reads ``/state.json``);
-* ``POST /holes/<id>/mark`` with ``Authorization: Bearer TOKEN``, ``Content-Type:
-  application/json`` and ``{"mark": "confirmed|rejected|visited|new", "operator": NAME}``:
-  the operator's mark, written to the audit trail (:mod:`ground.station.audit`), then to
-  the state (then TAK and the files follow).
-
-Every request passes :mod:`ground.station.guard` first (Host, Origin, the token for
-changes, rate and size bounds, deadlines); a refused one gets a 4xx and touches nothing.
+Served by Starlette on uvicorn (:mod:`ground.station.webserver`); the routes are in
+:mod:`ground.station.webapp`, the policy every request passes first (Host, Origin, rate) in
+:mod:`ground.station.guard`, the event stream in :mod:`ground.station.events`. Marks need an
+operator's pairing (:mod:`ground.station.pairing`) and are written to the audit trail
+(:mod:`ground.station.audit`) under it, then to the state (TAK and the files follow on the
+station's own thread, never on the request's).
 """
 
 from __future__ import annotations
@@ -33,32 +26,30 @@ import math
 import socket
 import threading
 from collections.abc import Callable, Iterable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from holescan.errors import InputError
 from holescan.geotag import CIRCLE_95_PER_SIGMA, LocalFrame
-from holescan.ground.station.audit import AuditEntry, AuditTrail, check_operator
+from holescan.ground.station.audit import AuditEntry, AuditTrail
 from holescan.ground.station.files import hole_summary
-from holescan.ground.station.guard import (
-    Deadlines,
-    Limits,
-    RateLimiter,
-    StationToken,
-    default_names,
-)
+from holescan.ground.station.guard import GuardMiddleware, Limits, RateLimiter, default_names
 from holescan.ground.station.mapcombine import CombinedCache
 from holescan.ground.station.maplayers import Reply, map_route
 from holescan.ground.station.mapstore import MapStore
+from holescan.ground.station.pairing import Pairing, Pairings
 from holescan.ground.station.state import MARKS, GroundHole, StationState
-from holescan.ground.station.webserver import make_server
 from holescan.missions import XTION, Camera
 
-__all__ = ["StationWeb", "state_document"]
+if TYPE_CHECKING:
+    from holescan.ground.station.events import Changes, EventStream
+    from holescan.ground.station.webserver import WebServer
+
+__all__ = ["StationWeb", "state_document", "station_url"]
 
 _log = logging.getLogger(__name__)
 
-MarkedBy = dict[int, tuple[str, int]]
-"""hole id -> (operator, Unix clock ns) of its newest mark."""
+MarkedBy = dict[int, tuple[str, int, str]]
+"""hole id -> (operator, Unix clock ns, pairing id) of its newest mark."""
 
 
 def _footprint(
@@ -81,7 +72,8 @@ def state_document(
 
     Each hole has its fields (:meth:`GroundHole.to_json`, ``tier`` and ``vehicle_tier``
     included), ``x``/``y``/``r95`` in local metres, ``summary``, ``picture`` (its URL or
-    None) and ``marked_by`` (``{"operator", "t_unix_ns"}`` of its newest mark, or None).
+    None) and ``marked_by`` (``{"operator", "pairing", "t_unix_ns"}`` of its newest mark,
+    or None).
     """
     version, holes, track = state.snapshot()
     marked_by = marked_by or {}
@@ -106,7 +98,11 @@ def state_document(
             summary=hole_summary(h),
             picture=f"/cards/hole-{h.id}.jpg?rev={h.card_rev}" if h.has_picture else None,
             marked_by=(
-                {"operator": marked_by[h.id][0], "t_unix_ns": marked_by[h.id][1]}
+                {
+                    "operator": marked_by[h.id][0],
+                    "t_unix_ns": marked_by[h.id][1],
+                    "pairing": marked_by[h.id][2],
+                }
                 if h.id in marked_by
                 else None
             ),
@@ -121,6 +117,15 @@ def state_document(
             fps.append(_footprint(x, y, p.rel_alt_m, p.yaw))
     doc["footprints"] = fps[-400:]
     return doc
+
+
+def station_url(host: str, port: int) -> str:
+    """The page's address for a server bound to ``host:port``, as a browser opens it.
+
+    >>> station_url("127.0.0.1", 8080)
+    'http://127.0.0.1:8080/'
+    """
+    return f"http://{_shown_host(host)}:{port}/"
 
 
 def _shown_host(host: str) -> str:
@@ -138,14 +143,14 @@ def _shown_host(host: str) -> str:
 
 
 class StationWeb:
-    """The page's HTTP server on its own thread. Use as a context manager.
+    """The page's server on its own thread. Use as a context manager.
 
     on_mark(hole_id, mark) makes an operator's mark (default: set it in the state) after
     :meth:`mark` wrote it to the audit trail. port 0 picks a free port (see :attr:`url`).
-    token : the secret for changes (default: the folder's, :meth:`StationToken.load_or_create`).
-    names : host names the page is served as, besides its addresses (default: this
-    machine's hostname and HOSTNAME.local). limits : the request bounds. map_store : the
-    live map's tiles (:mod:`ground.station.maplayers`; None: no map).
+    pairings : who may mark (default: the folder's, :class:`Pairings`). names : host names
+    the page is served as, besides its addresses (default: this machine's hostname and
+    HOSTNAME.local). limits : the request bounds. map_store : the live map's tiles
+    (:mod:`ground.station.maplayers`; None: no map).
     """
 
     def __init__(
@@ -155,7 +160,7 @@ class StationWeb:
         port: int = 8080,
         on_mark: Callable[[int, str], Any] | None = None,
         *,
-        token: StationToken | None = None,
+        pairings: Pairings | None = None,
         names: Iterable[str] | None = None,
         limits: Limits | None = None,
         map_store: MapStore | None = None,
@@ -164,68 +169,83 @@ class StationWeb:
         self.map_store = map_store
         self._map_cache = CombinedCache(map_store) if map_store is not None else None
         self.on_mark = on_mark or state.mark
-        self.token = token or StationToken.load_or_create(state.folder)
+        self.pairings = pairings or Pairings(state.folder)
         self.names = tuple(default_names() if names is None else names)
         self.limits = limits = limits or Limits()
         self.audit = AuditTrail(state.folder)
         self.marked_by: MarkedBy = {}
         for e in self.audit.read():
             with contextlib.suppress(KeyError, TypeError, ValueError):
-                self.marked_by[int(e["hole"])] = (str(e["operator"]), int(e["t_unix_ns"]))
-        self.rate = RateLimiter(limits.rate_per_s, limits.burst)
-        self.deadlines = Deadlines()
+                self.marked_by[int(e["hole"])] = (
+                    str(e["operator"]),
+                    int(e["t_unix_ns"]),
+                    str(e.get("pairing", "")),
+                )
         self.refused = 0
-        """Requests answered 4xx so far."""
+        """Requests answered 4xx (or refused before any route) so far."""
+        self.errors = 0
+        """Requests whose handler raised (a bug: the fuzz tests want none)."""
         self._mark_lock = threading.Lock()
-        self._cond = threading.Condition()
-        self._version = state.version
-        self._closing = False
-        self._event_clients = 0
-        state.listeners.append(self._changed)
-        try:
-            self.httpd = make_server(self, host, port)
-        except OSError as err:
-            raise InputError(f"cannot serve the page on {host}:{port}: {err.strerror}") from err
-        self._thread = threading.Thread(target=self.httpd.serve_forever, name="web", daemon=True)
+        # the web stack (the ground extra) is imported when a page is served, not with
+        # holescan.ground: the flight install can import the ground package's names
+        from holescan.ground.station.events import Changes, EventStream
+        from holescan.ground.station.webapp import make_app
+        from holescan.ground.station.webserver import WebServer
+
+        self.changes: Changes = Changes(state.version)
+        self.events: EventStream = EventStream(self.changes, limits)
+        state.listeners.append(self.changes.set)
+        app = GuardMiddleware(
+            make_app(self),
+            names=self.names,
+            rate=RateLimiter(limits.rate_per_s, limits.burst),
+            on_refuse=self._count_refused,
+            max_head_bytes=limits.max_head_bytes,
+        )
+        self.server: WebServer = WebServer(app, host, port, limits)
+
+    def _count_refused(self) -> None:
+        self.refused += 1
 
     @property
     def port(self) -> int:
-        return int(self.httpd.server_address[1])
+        return int(self.server.address[1])
+
+    @property
+    def cut(self) -> int:
+        """Connections cut off for not sending a whole request in time."""
+        return self.server.counters.cut
 
     @property
     def url(self) -> str:
-        """The page, read-only (no token)."""
-        return f"http://{_shown_host(str(self.httpd.server_address[0]))}:{self.port}/"
+        """The page, read-only (no pairing)."""
+        return station_url(str(self.server.address[0]), self.port)
 
-    @property
-    def pair_url(self) -> str:
-        """The page with the token: opened once in a browser, it lets that browser mark."""
-        return f"{self.url}?token={self.token.value}"
+    def pair_url(self, token: str) -> str:
+        """The pairing link of ``token`` (:meth:`Pairings.issue`): opened once in an
+        operator's browser, it lets that browser mark under the pairing."""
+        return f"{self.url}?token={token}"
 
     def __enter__(self) -> StationWeb:
-        self.deadlines.__enter__()
-        self._thread.start()
+        self.server.__enter__()
         _log.info("live page on %s", self.url)
         return self
 
     def __exit__(self, *exc: object) -> None:
-        with self._cond:
-            self._closing = True
-            self._cond.notify_all()
-        self.httpd.shutdown()
-        self.httpd.server_close()
-        self._thread.join(timeout=5.0)
-        self.deadlines.__exit__()
+        self.changes.close()
+        self.server.__exit__()
+        if self.changes.set in self.state.listeners:
+            self.state.listeners.remove(self.changes.set)
 
-    @property
-    def closing(self) -> bool:
-        return self._closing
-
-    def state_json(self, can_mark: bool) -> bytes:
-        """:func:`state_document` as JSON, with ``can_mark`` (the asker has the token)."""
+    def state_json(self, paired: Pairing | None) -> bytes:
+        """:func:`state_document` as JSON, with ``can_mark`` and ``paired`` (the asker's
+        pairing: ``{"pairing", "operator"}``, or None)."""
         doc = state_document(self.state, marked_by=dict(self.marked_by))
-        doc["can_mark"] = can_mark
-        return json.dumps(doc).encode()
+        doc["can_mark"] = paired is not None
+        doc["paired"] = (
+            None if paired is None else {"pairing": paired.id, "operator": paired.operator}
+        )
+        return json.dumps(doc, allow_nan=False).encode()
 
     def card(self, hole_id: int) -> bytes:
         """A hole's picture (raises OSError when there is none)."""
@@ -235,28 +255,17 @@ class StationWeb:
         """The live map's answer to a GET of ``path`` (None: not a map path)."""
         return map_route(self.map_store, path, query, self._map_cache)
 
-    def _changed(self, version: int) -> None:
-        with self._cond:
-            self._version = version
-            self._cond.notify_all()
-
-    def wait_change(self, seen: int, timeout_s: float) -> int:
-        with self._cond:
-            self._cond.wait_for(lambda: self._version != seen or self._closing, timeout_s)
-            return self._version
-
-    def mark(self, hole_id: int, mark: str, operator: object, client: str) -> GroundHole:
+    def mark(self, hole_id: int, mark: str, pairing: Pairing, client: str) -> GroundHole:
         """An operator's mark: into the audit trail first (a change that cannot be audited
         is not made), then :attr:`on_mark`.
 
         Raises
         ------
-        LookupError : no such hole. InputError : a bad mark or name. AuditError : the
-            trail cannot be written (nothing is changed).
+        LookupError : no such hole. InputError : a bad mark. AuditError : the trail cannot
+            be written (nothing is changed).
         """
         if mark not in MARKS:
             raise InputError(f"mark must be one of {', '.join(MARKS)}, got {mark!r}")
-        operator = check_operator(operator)
         with self._mark_lock:
             before = next((h for h in self.state.snapshot()[1] if h.id == hole_id), None)
             if before is None:
@@ -264,23 +273,18 @@ class StationWeb:
             after = dataclasses.replace(before, mark=mark)
             t_ns = self.state.clock()
             entry = AuditEntry(
-                t_ns, operator, client, hole_id, before.mark, mark, before.tier, after.tier
+                t_ns,
+                pairing.id,
+                pairing.operator,
+                client,
+                hole_id,
+                before.mark,
+                mark,
+                before.tier,
+                after.tier,
             )
             self.audit.append(entry)
-            self.marked_by[hole_id] = (operator, t_ns)
+            self.marked_by[hole_id] = (pairing.operator, t_ns, pairing.id)
             h: GroundHole = self.on_mark(hole_id, mark)
-        _log.info("hole %d marked %s by %s (%s)", hole_id, mark, operator, client)
+        _log.info("hole %d marked %s by %s from %s", hole_id, mark, pairing, client)
         return h
-
-    def event_slot(self) -> bool:
-        """Take one of the ``/events`` slots (False: all taken); give it back with
-        :meth:`event_done`."""
-        with self._cond:
-            if self._event_clients >= self.limits.max_event_clients:
-                return False
-            self._event_clients += 1
-            return True
-
-    def event_done(self) -> None:
-        with self._cond:
-            self._event_clients -= 1

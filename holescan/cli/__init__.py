@@ -22,7 +22,7 @@ from holescan.errors import HolescanError
 
 GROUND_ONLY = frozenset(
     {"numba", "matplotlib", "dask", "distributed", "fsspec", "pytak", "takproto"}
-    | {"cryptography", "rasterio", "rosbags", "starlette", "uvicorn", "bokeh"}
+    | {"cryptography", "rasterio", "rosbags", "starlette", "uvicorn", "h11", "bokeh"}
 )
 """Import names of what pyproject's ``ground`` extra installs (the flight install lacks them)."""
 
@@ -40,6 +40,7 @@ _COMMAND_MODULES = (
     "holescan.cli._cmd_campaign",
     "holescan.cli._cmd_demo",
     "holescan.cli._cmd_ground",
+    "holescan.cli._cmd_pair",
 )
 
 

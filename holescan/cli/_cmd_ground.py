@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import argparse
 import signal
+import sys
 import threading
+from collections.abc import Callable
 from pathlib import Path
 from types import FrameType
 
@@ -34,7 +36,17 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "--http",
         default="127.0.0.1:8080",
         help="live page HOST:PORT, or 'off' (0.0.0.0:PORT: every network of the laptop; "
-        "marking always needs the station token, printed at start)",
+        "marking always needs an operator's pairing, see --pair)",
+    )
+    p.add_argument(
+        "--pair",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="issue a pairing link for operator NAME at start (repeatable), shown once on "
+        "the terminal and never logged; marks are recorded under it. Without any, a "
+        "folder with no pairing yet gets one for 'operator 1'. More while it runs: "
+        "holescan pair",
     )
     p.add_argument(
         "--http-name",
@@ -157,6 +169,7 @@ def run(args: argparse.Namespace) -> int:
         cot_stale_s=args.cot_stale,
         cot_refresh_s=args.cot_refresh,
         overlay=args.overlay,
+        pair=tuple(args.pair),
         signing=(
             SigningKey.from_file(args.mavlink_key_file)
             if args.mavlink_key_file is not None
@@ -172,5 +185,13 @@ def run(args: argparse.Namespace) -> int:
 
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
-    run_ground(opts, stop)
+    run_ground(opts, stop, show_on_terminal())
     return 0
+
+
+def show_on_terminal() -> Callable[[str], None] | None:
+    """Lines for the operator's eyes only: to the terminal, never to a log (None when
+    stderr is not a terminal, e.g. under systemd, whose journal is a log)."""
+    if not sys.stderr.isatty():
+        return None
+    return lambda line: print(line, file=sys.stderr, flush=True)

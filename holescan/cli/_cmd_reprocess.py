@@ -134,6 +134,12 @@ def add_engine_arguments(p: argparse.ArgumentParser, default_out: str) -> None:
         help="coverage below which the map's cells are gaps (default 0.5)",
     )
     p.add_argument(
+        "--station",
+        metavar="DIR",
+        help="a ground station's folder (holescan ground --out): its operators' marks "
+        "(confirmed, rejected, visited) carry into every output under the flight's hole ids",
+    )
+    p.add_argument(
         "--area",
         metavar="AREA.geojson",
         help="the planned area (as `holescan plan` takes it): gaps and the searched fraction "
@@ -162,6 +168,7 @@ def options(args: argparse.Namespace) -> ReprocessOptions:
 
     from holescan.detect import DEFAULT, PAPER
     from holescan.ground import ReprocessOptions
+    from holescan.ground.station.marks import read_station_marks
     from holescan.missions import read_area
 
     params = (PAPER if args.mode == "paper" else DEFAULT).with_searcher(args.searcher)
@@ -181,6 +188,9 @@ def options(args: argparse.Namespace) -> ReprocessOptions:
         map_every=args.map_every,
         gap_threshold=args.gap_threshold,
         area=read_area(args.area) if args.area else None,
+        marks={i: m.mark for i, m in read_station_marks(Path(args.station)).items()}
+        if args.station
+        else {},
     )
     if args.formats:
         opts = dataclasses.replace(opts, formats=tuple(dict.fromkeys(args.formats)))

@@ -140,7 +140,7 @@ def test_a_silent_autopilot_a_bad_mount_and_a_full_plan_are_no_go(tmp_path: Path
     assert "no autopilot heartbeat" in report.item("autopilot").detail
     assert report.item("mount and camera").status == "NO-GO"
     assert "90 deg from straight down" in report.item("mount and camera").detail
-    assert report.item("disk").status == "NO-GO" and "do not fit" in report.item("disk").detail
+    assert report.item("disk").status == "NO-GO" and "does NOT fit" in report.item("disk").detail
 
 
 def test_require_go_passes_a_flight_with_both_and_names_the_missing_one(tmp_path: Path) -> None:
@@ -211,3 +211,28 @@ def test_check_of_the_simulated_sortie_is_go(
     assert main(["check", "--sensor", "sim", "--log-dir", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     assert "pre-flight: GO" in out and "NO-GO" not in out
+
+
+def test_the_udev_rule_covers_every_xtion_for_the_service_group() -> None:
+    import configparser
+    import re
+
+    from holescan.capture._usb import XTION_PRODUCTS, XTION_VENDOR_ID
+
+    deploy = Path(__file__).resolve().parents[2] / "deploy"
+    rules = [
+        line
+        for line in (deploy / "99-xtion.rules").read_text().splitlines()
+        if line.strip() and not line.startswith("#")
+    ]
+    products = set()
+    for rule in rules:
+        keys = dict(re.findall(r'(\w+(?:\{[\w/]+\})?)=?="([^"]*)"', rule))
+        assert keys["SUBSYSTEM"] == "usb" and int(keys["ATTR{idVendor}"], 16) == XTION_VENDOR_ID
+        assert keys["MODE"] == "0660" and keys["ATTR{power/control}"] == "on"
+        products.add(int(keys["ATTR{idProduct}"], 16))
+        group = keys["GROUP"]
+    assert products == set(XTION_PRODUCTS)
+    unit = configparser.ConfigParser(strict=True, interpolation=None)
+    unit.read(deploy / "holescan.service")
+    assert group in unit["Service"]["SupplementaryGroups"].split()

@@ -26,6 +26,7 @@ from holescan.ground import read_flight_holes
 from holescan.sim import TrueHole, make_sortie_world, true_holes
 
 CHROMIUM = Path("/usr/bin/chromium")
+R95 = math.sqrt(math.log(0.05) / math.log(0.32))  # the 95 % circle per sigma (Rayleigh)
 SIZE = (6.0, 6.0)
 
 
@@ -79,7 +80,9 @@ def test_printed_score_is_the_truth(demo: tuple[Path, str]) -> None:
         t = truth[int(tid)]
         assert (float(x), float(y)) == (round(t.x_m, 1), round(t.y_m, 1))
         if status == "FOUND":
-            m = re.search(r"as hole (\d+) \(p_hole [\d.]+, score [\d.]+\), (\d+) cm off", rest)
+            m = re.search(
+                r"as hole (\d+) \(p_hole [\d.]+, best frame's score [\d.]+\), (\d+) cm off", rest
+            )
             assert m is not None
             h = confirmed[int(m[1])]  # a confirmed hole of the logged flight
             assert finds(h, t) and abs(100 * centre_m(h, t) - int(m[2])) <= 1
@@ -92,13 +95,18 @@ def test_printed_score_is_the_truth(demo: tuple[Path, str]) -> None:
             assert not any(finds(h, t) for h in confirmed.values() if h.id not in found_ids)
     false_ids = [int(i) for i in re.findall(r"hole (\d+): FALSE", text)]
     assert sorted(found_ids + false_ids) == sorted(confirmed)  # each confirmed hole scored once
-    m = re.search(r"=> found (\d+) of (\d+) in view, missed (\d+), false (\d+)", text)
+    m = re.search(
+        r"=> holes found \(announced \+ for review\): (\d+); true holes found (\d+) of (\d+) "
+        r"in view, missed (\d+), announced false (\d+)",
+        text,
+    )
     assert m is not None
-    found, in_view, missed, false = (int(v) for v in m.groups())
+    n_found, found, in_view, missed, false = (int(v) for v in m.groups())
     assert (found, missed, false) == (len(found_ids), in_view - found, len(false_ids))
     assert found >= 1  # the demo's short run over the small field finds holes
     doc = json.loads((out / "demo.json").read_text())
     assert (doc["found"], doc["missed"], doc["false"]) == (found, missed, false)
+    assert doc["holes_found"] == n_found == len(confirmed) + len(doc["review"])
     # The search map: the searched fraction, and why each true hole not found was missed.
     m = re.search(r"search map: ([\d.]+)% of the planned (\d+) m2 searched", text)
     assert m is not None and abs(float(m[1]) / 100 - doc["searched_fraction"]) < 1e-3
@@ -185,3 +193,116 @@ def test_bad_arguments(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> No
     (tmp_path / "flight_0000.mcap").write_bytes(b"x")
     assert cli.main(["demo", "--out", str(tmp_path), "--duration", "5"]) == 2
     assert "already holds a demo flight" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_every_output_agrees_on_ids_tiers_positions_and_sigma(demo: tuple[Path, str]) -> None:
+    """One flight's outputs read back with independent parsers (json, xml.etree, zipfile,
+    html.parser; none of holescan's readers): the same holes, ids, tiers, positions and
+    sigma everywhere, candidates in none, "holes found" the same number."""
+    import html.parser
+    import xml.etree.ElementTree as ET
+    import zipfile
+
+    out, _ = demo
+    doc = json.loads((out / "demo.json").read_text())
+    found_ids = set(doc["tiers"]["announced"]) | set(doc["tiers"]["review"])
+    tiers = dict.fromkeys(doc["tiers"]["announced"], "announced")
+    tiers |= dict.fromkeys(doc["tiers"]["review"], "review")
+    assert doc["holes_found"] == len(found_ids) == len(tiers)
+    assert found_ids  # the demo's short run finds holes (test_printed_score_is_the_truth)
+    gj = json.loads((out / "flight_holes.geojson").read_text())
+    ref = {}
+    for f in gj["features"]:
+        p = f["properties"]
+        lon, lat = f["geometry"]["coordinates"][:2]
+        ref[p["hole_id"]] = (p["tier"], lat, lon, p["sigma_h_m"])
+        assert p["r95_m"] == pytest.approx(p["sigma_h_m"] * R95, abs=2e-3)
+    assert {i: v[0] for i, v in ref.items()} == tiers  # no candidate, every tier the same
+
+    def same_place(hid: int, lat: float, lon: float, tol_m: float = 0.01) -> None:
+        assert distance_m(lat, lon, ref[hid][1], ref[hid][2]) < tol_m, hid
+
+    k = "{http://www.opengis.net/kml/2.2}"
+    kml = ET.parse(out / "flight_holes.kml").getroot()
+    for pm in kml.iter(f"{k}Placemark"):
+        data = {d.get("name"): d.findtext(f"{k}value") for d in pm.iter(f"{k}Data")}
+        hid = int(json.loads(data["hole_id"] or "0"))
+        assert json.loads(data["tier"] or '""') == tiers[hid]
+        lon, lat = (
+            float(v) for v in (pm.findtext(f"{k}Point/{k}coordinates") or "").split(",")[:2]
+        )
+        same_place(hid, lat, lon)
+    g = "{http://www.topografix.com/GPX/1/1}"
+    wpts = ET.parse(out / "flight_holes.gpx").getroot().findall(f"{g}wpt")
+    assert len(wpts) == len(tiers)
+    for w in wpts:
+        name = w.findtext(f"{g}name") or ""
+        hid = int(name.split()[-1])
+        assert name == (f"hole {hid}" if tiers[hid] == "announced" else f"review {hid}")
+        same_place(hid, float(w.get("lat", "nan")), float(w.get("lon", "nan")))
+        assert "(95 %)" in (w.findtext(f"{g}desc") or "")
+    plan = json.loads((out / "flight_holes.plan").read_text())
+    flown = {it["holescan"]["properties"]["hole_id"] for it in plan["mission"]["items"]}
+    assert flown == {i for i, t in tiers.items() if t == "announced"}  # review: never flown
+    with zipfile.ZipFile(out / "flight_map.kmz") as z:  # the search map: no candidate
+        names = [
+            pm.findtext(f"{k}name") for pm in ET.fromstring(z.read("doc.kml")).iter(f"{k}Placemark")
+        ]
+    assert sorted(names) == sorted(
+        f"hole {i}" if t == "announced" else f"review {i}" for i, t in tiers.items()
+    )
+    with zipfile.ZipFile(out / "flight_holes_datapackage.zip") as z:
+        cots = [ET.fromstring(z.read(n)) for n in z.namelist() if n.endswith(".cot")]
+    on_tak = {}
+    for ev in cots:
+        hid = int(ev.get("uid", "").rsplit("-", 1)[-1])
+        pt = ev.find("point")
+        assert pt is not None
+        same_place(hid, float(pt.get("lat", "nan")), float(pt.get("lon", "nan")))
+        assert float(pt.get("ce", "nan")) == pytest.approx(R95 * ref[hid][3], abs=0.01)
+        on_tak[hid] = ev.find("detail/holescan").get("tier")  # type: ignore[union-attr]
+    assert on_tak == {i: t for i, t in tiers.items() if t == "announced"}
+
+    class Table(html.parser.HTMLParser):
+        def __init__(self) -> None:
+            super().__init__()
+            self.rows: list[list[str]] = []
+            self.stats: list[str] = []
+            self._cell: list[str] | None = None
+            self._in_table = False
+
+        def handle_starttag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
+            if tag == "table" and ("class", "holes") in attrs:
+                self._in_table = True
+            elif self._in_table and tag == "tr":
+                self.rows.append([])
+            elif self._in_table and tag == "td":
+                self._cell = []
+
+        def handle_endtag(self, tag: str) -> None:
+            if tag == "td" and self._cell is not None:
+                self.rows[-1].append(" ".join(self._cell))
+                self._cell = None
+            elif tag == "table":
+                self._in_table = False
+
+        def handle_data(self, data: str) -> None:
+            if self._cell is not None and data.strip():
+                self._cell.append(data.strip())
+            self.stats.append(data.strip())
+
+    page = Table()
+    page.feed((out / "flight_report.html").read_text(encoding="utf-8"))
+    rows = [r for r in page.rows if r]
+    assert {int(r[0]): r[1] for r in rows} == tiers
+    for r in rows:
+        lat, lon = (float(v) for v in r[3].split()[:2])
+        same_place(int(r[0]), lat, lon, tol_m=0.02)
+    i = page.stats.index("holes found")
+    assert page.stats[i - 1] == str(doc["holes_found"])
+    station = json.loads((out / "ground" / "station.json").read_text())
+    at_ground = {h["id"]: h for h in station["holes"]}
+    for hid, t in tiers.items():  # the station knows every found hole by the same id
+        assert hid in at_ground and at_ground[hid]["tier"] == t, (hid, at_ground.get(hid))
+        same_place(hid, at_ground[hid]["lat_deg"], at_ground[hid]["lon_deg"], tol_m=0.6)

@@ -118,7 +118,7 @@ def test_p_hole_is_a_probability_in_default_mode_only() -> None:
     rgb, depth, _ = floor_with_unread_patch(15)
     dets = detect_holes(rgb, depth, CAM, DEFAULT)
     assert dets and all(d.p_hole is not None and 0.0 <= d.p_hole <= 1.0 for d in dets)
-    assert "p(hole)" in dets[0].explain()
+    assert "this frame's p_hole" in dets[0].explain()
     small = (rgb[::2, ::2].copy(), depth[::2, ::2].copy())
     paper = detect_holes(*small, CAM.scaled(0.5), PAPER)
     assert all(d.p_hole is None for d in paper)

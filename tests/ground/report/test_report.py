@@ -18,7 +18,7 @@ import pymap3d
 import pytest
 
 from holescan.errors import InputError
-from holescan.geotag import Hole, VehiclePose
+from holescan.geotag import CIRCLE_95_PER_SIGMA, Hole, VehiclePose
 from holescan.ground.report import SCORE_BANDS, render_report, score_band, thumbnails, write_report
 from holescan.outputs import part_path
 
@@ -175,21 +175,23 @@ def test_table_rows_thumbnails_and_escaping(flight: dict, tmp_path: Path) -> Non
     assert len(p.rows) == len(holes)
     for row, h in zip(p.rows, holes, strict=True):
         assert row[0] == str(h.id)
-        assert row[1].startswith(f"{h.score:.2f} {score_band(h.score).name}")
-        assert f"{h.lat_deg:.7f} {h.lon_deg:.7f}" in row[2]
-        assert f"1σ {h.sigma_h_m:.2f} m" in row[3]
+        assert row[1] == "announced"  # no tiers given: announced
+        p_hole = f"{h.p_hole:.2f}" if math.isfinite(h.p_hole) else "—"
+        assert row[2].startswith(f"{p_hole} {h.score:.2f} ({score_band(h.score).name})")
+        assert f"{h.lat_deg:.7f} {h.lon_deg:.7f}" in row[3]
         # sigma_h is the 68 % circle (issue 14): the 95 % one is 2.448 / 1.510 times it.
         r95 = math.sqrt(math.log(0.05) / math.log(0.32))
-        assert f"95 %: {r95 * h.sigma_h_m:.2f} m" in row[3]
-        assert row[4] == f"{h.major_m:.2f} × {h.minor_m:.2f} m"
-        assert row[5] == str(h.sightings)
+        assert row[4].startswith(f"{r95 * h.sigma_h_m:.2f} m")
+        assert f"1σ {h.sigma_h_m:.2f} m" in row[4]
+        assert row[5] == f"{h.major_m:.2f} × {h.minor_m:.2f} m"
+        assert row[6] == f"{h.sightings} / {h.views}"
         t0_ns = flight["track"][0].t_boot_ns
         first, last = ((t - t0_ns) / 1e9 for t in (h.t_first_boot_ns, h.t_last_boot_ns))
-        assert row[6] == f"{first:.1f} – {last:.1f}"
+        assert row[7] == f"{first:.1f} – {last:.1f}"
     # distance and bearing from the take-off point: hole 1 is 6 m north, 4 m east
     bearing = math.degrees(math.atan2(4, 6))
-    assert f"{math.hypot(6, 4):.1f} m at {bearing:03.0f}° from start" in p.rows[0][2]
-    assert p.rows[0][7] == "T1 <north & rubble> 0.32 m"  # nearest truth, unescaped on parse
+    assert f"{math.hypot(6, 4):.1f} m at {bearing:03.0f}° from start" in p.rows[0][3]
+    assert p.rows[0][8] == "T1 <north & rubble> 0.32 m"  # nearest truth, unescaped on parse
     assert p.rows[2][-1] == "no image"  # hole 3 has no view
     # everything is inside the file: no URL but data URIs, no script
     assert not re.search(r"https?://", page)
@@ -231,10 +233,11 @@ def test_map_is_to_scale(flight: dict) -> None:
     assert d_px / px_per_m == pytest.approx(math.hypot(26 - 6, 24.5 - 4), rel=2e-3)
     assert xy[3][1] < xy[0][1]
     assert xy[3][0] > xy[0][0]
-    # uncertainty circles: radius = 1 sigma, but never smaller than the visible minimum
+    # uncertainty circles: the 95 % circle, but never smaller than the visible minimum
     sig = [a for tag, a in p.svg if tag == "circle" and a.get("fill-opacity") == "0.16"]
     for a, h in zip(sig, holes, strict=True):
-        assert float(a["r"]) == pytest.approx(max(h.sigma_h_m * px_per_m, 7.0), abs=0.06)
+        r = max(CIRCLE_95_PER_SIGMA * h.sigma_h_m * px_per_m, 7.0)
+        assert float(a["r"]) == pytest.approx(r, abs=0.06)
     # an id badge per hole, in its band colour; the two truth markers with their names
     ids = [t for a, t in p.svg_text if a.get("class") == "id"]
     assert ids == [str(h.id) for h in holes]
@@ -312,8 +315,8 @@ def test_deterministic_output(flight: dict) -> None:
     holes: list[Hole] = flight["holes"]
     assert [row[0] for row in p.rows] == [str(h.id) for h in holes]
     for row, h in zip(p.rows, holes, strict=True):
-        assert row[1].startswith(f"{h.score:.2f}")
-        assert f"{h.lat_deg:.7f} {h.lon_deg:.7f}" in row[2]
+        assert f"{h.score:.2f}" in row[2]
+        assert f"{h.lat_deg:.7f} {h.lon_deg:.7f}" in row[3]
     # ... each colour thumbnail centred on its hole's dark opening (drawn in the box's middle)
     colour = [img for img in p.imgs if img["alt"].endswith(" colour")]
     assert [int(img["alt"].split()[1]) for img in colour] == sorted(flight["views"])

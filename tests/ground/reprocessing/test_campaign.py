@@ -64,7 +64,7 @@ def test_a_hole_seen_on_both_sorties_is_one_hole(
         seen_by = [
             name
             for name, f in by_name.items()
-            if any(dist_m(truth, (h.lat_deg, h.lon_deg)) < 1.0 for h in f.confirmed)
+            if any(dist_m(truth, (h.lat_deg, h.lon_deg)) < 1.0 for h in f.for_crew)
         ]
         near = [
             h for h in campaign.campaign if dist_m(truth, (h.hole.lat_deg, h.hole.lon_deg)) < 1.0

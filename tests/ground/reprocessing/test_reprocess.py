@@ -42,7 +42,7 @@ from holescan.flightlog import (
     read_flight_log,
     scan_records,
 )
-from holescan.geotag import AnnounceGate, Hole
+from holescan.geotag import FOUND_TIERS, AnnounceGate, Hole
 from holescan.ground import (
     Progress,
     ReprocessOptions,
@@ -108,9 +108,10 @@ def test_in_process_run_reads_every_frame_and_writes_a_sidecar(
     (f,) = reference.flights
     assert f.frames_read == f.frames_detected == summary.frames_logged
     assert f.partitions >= 6 and f.partitions_cached == 0
-    confirmed = [h for h in summary.holes if h.sightings >= 2]
-    assert len(f.flight_matches) == len(confirmed) >= 1
-    for m in f.flight_matches:  # every confirmed in-flight hole found again, in place
+    told = read_flight_holes(_files, thumbnails=False).tiers  # the flight's own tiers
+    found = [h for h in summary.holes if told[h.id] in FOUND_TIERS]
+    assert len(f.flight_matches) == len(found) >= 1
+    for m in f.flight_matches:  # every hole the flight found, found again, in place
         assert m.found is not None and m.distance_m < 0.3, m
     (path,) = f.outputs
     assert path.name == "sortie_reprocess.mcap"
@@ -121,19 +122,20 @@ def test_in_process_run_reads_every_frame_and_writes_a_sidecar(
     frames = [json.loads(d)["frame_index"] for _, _, d in new["/reprocess/detections"]]
     assert frames == sorted(frames) and len(frames) == summary.frames_logged
     last = json.loads(new["/reprocess/holes"][-1][2])["holes"]
-    assert [h["id"] for h in last] == [h.id for h in f.holes]
+    assert [h["id"] for h in last] == [h.id for h in f.holes]  # the flight's ids
     info = log_info(path)  # every CRC; summary counts against the content
     assert not info.truncated and info.metadata["ground.reprocess"]["frames"] == "all"
     kinds = dict(f.files)
     hole_files = {"gpx", "kml", "geojson", "plan", "datapackage", "report", "summary"}
     map_files = {"ortho", "dsm", "coverage", "map", "gaps"}
     assert hole_files | map_files <= set(kinds) <= hole_files | map_files | REFLY
-    assert kinds["kml"].read_text().count("data:image/jpeg;base64,") == len(f.confirmed)
-    with zipfile.ZipFile(kinds["datapackage"]) as z:  # every confirmed hole + its picture
+    assert kinds["kml"].read_text().count("data:image/jpeg;base64,") == len(f.for_crew)
+    for_tak = [h for h in f.for_crew if f.tiers[h.id] in ("announced", "confirmed")]
+    with zipfile.ZipFile(kinds["datapackage"]) as z:  # every announced hole + its picture
         names = z.namelist()
         assert "MANIFEST/manifest.xml" in names
         cots = [n for n in names if n.endswith(".cot")]
-        assert len(cots) == len(f.confirmed) == sum(n.endswith(".jpg") for n in names)
+        assert len(cots) == len(for_tak) == sum(n.endswith(".jpg") for n in names)
         ev = ET.fromstring(z.read(cots[0]))
         assert ev.get("uid", "").startswith("holescan-sortie-hole-")
     doc = json.loads(reference.summary_path.read_text())
@@ -160,7 +162,7 @@ def test_the_search_map_lies_under_the_flight(flight: Flown, reference: Reproces
             for rec in read_flight_log(files, kinds={LoggedFrame})
             if isinstance(rec, LoggedFrame) and rec.pose is not None
         }
-        placed = [h for h in f.confirmed if h.best_frame_index in posed]
+        placed = [h for h in f.for_crew if h.best_frame_index in posed]
         for h in placed:
             xs, ys = warp_transform("EPSG:4326", cov.crs, [h.lon_deg], [h.lat_deg])
             r, col = cov.index(xs[0], ys[0])
@@ -199,14 +201,15 @@ def test_the_flights_recorded_gate_gives_the_tiers(
         for h in summary.holes
     }
     (f,) = reference.flights
-    assert tiers_in(dict(f.files)["geojson"]) == tiers_of(f.confirmed, GATE)
+    announced = [i for i, t in logged.tiers.items() if t == "announced"]
+    assert tiers_in(dict(f.files)["geojson"]) == tiers_of(f.holes, GATE, announced)
     report = dict(f.files)["report"].read_text()
     assert "p_hole &gt;= 0.5" in report and "the flight&#x27;s" in report  # which gate
     # Thresholds given by the user replace the flight's.
     res = reprocess(files, tmp_path, opts(announce_min_p_hole=0.99, review_min_p_hole=0.0))
     (g,) = res.flights
     assert tiers_in(dict(g.files)["geojson"]) == tiers_of(
-        g.confirmed, AnnounceGate(min_p_hole=0.99, review_min_p_hole=0.0)
+        g.holes, AnnounceGate(min_p_hole=0.99, review_min_p_hole=0.0), announced
     )
     report = dict(g.files)["report"].read_text()
     assert "announced p_hole &gt;= 0.99 and review p_hole &gt;= 0 given" in report
@@ -275,7 +278,7 @@ def test_a_compressed_log_finds_the_holes_of_the_raw_log(
         assert f.holes == ref.holes
     else:
         same_holes(f.holes, ref.holes, tol_m)
-    assert tiers_of(f.confirmed, GATE) == tiers_of(ref.confirmed, GATE)
+    assert f.tiers == ref.tiers  # the same tiers (the one gate)
 
 
 def tiers_in(geojson: Path) -> dict[int, str]:
@@ -283,9 +286,11 @@ def tiers_in(geojson: Path) -> dict[int, str]:
     return {x["properties"]["hole_id"]: x["properties"]["tier"] for x in doc["features"]}
 
 
-def tiers_of(holes: tuple[Hole, ...], gate: AnnounceGate) -> dict[int, str]:
-    """The tiers of the holes a hole file holds (not candidates)."""
-    out = {h.id: gate.tier(h) for h in holes}
+def tiers_of(holes: tuple[Hole, ...], gate: AnnounceGate, announced: list[int]) -> dict[int, str]:
+    """The tiers of the holes a hole file holds (not candidates): the one gate, holes seen
+    once candidates."""
+    tiers = gate.tiers(holes, announced)
+    out = {h.id: tiers[h.id] if h.sightings >= 2 else "candidate" for h in holes}
     assert out
     return {k: v for k, v in out.items() if v != "candidate"}
 
@@ -531,7 +536,7 @@ def test_cli(flight: Flown, tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
     assert "frames/s" in text.out and "summary:" in text.out
     doc = json.loads((out / "summary.json").read_text())["flights"][0]
     # --map-cell 0: no search map, so no map files.
-    holes = {"gpx", "datapackage"} if doc["confirmed"] else set()  # the package: always
+    holes = {"gpx", "datapackage"} if doc["holes"] else set()  # the package: always
     assert set(doc["files"]) == {"report", "summary"} | holes
     assert doc["map"] == {}
     if "datapackage" in doc["files"]:

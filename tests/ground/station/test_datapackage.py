@@ -164,7 +164,7 @@ def test_cot_details_stale_age_tier() -> None:
     assert ev.get("time") == ev.get("start") == "2026-12-03T14:00:00.000Z"
     assert ev.get("stale") == "2026-12-03T14:05:00.000Z"  # from now, not from T0
     text = ev.findtext("detail/remarks") or ""
-    assert text.startswith("ANNOUNCED: hole 1, score 0.88")
+    assert text.startswith("ANNOUNCED: hole 1, best frame's score 0.88")
     assert text.endswith("(first seen 5.0 h ago (09:00Z), updated 4.5 h ago)")
     facts = ev.find("detail/holescan")
     assert facts is not None and facts.attrib == {
@@ -222,8 +222,10 @@ def test_station_keeps_the_datapackage_current(tmp_path: Path) -> None:
             station.state.on_card(facts | {"score": 0.9, "sigma": 0.3}, picture(hid))
         both = {"holescan-ground-hole-1", "holescan-ground-hole-2"}
         wait_for(lambda: holes_in_package() == both, 10.0, "both holes in the package")
-        station.mark(2, "rejected")  # the mark flushes the files at once
-        assert holes_in_package() == {"holescan-ground-hole-1"}
+        station.mark(2, "rejected")  # the station's own thread writes the files after it
+        wait_for(
+            lambda: holes_in_package() == {"holescan-ground-hole-1"}, 10.0, "the rejected one out"
+        )
     _, contents, z = manifest(path)
     assert z.read("holescan-ground-hole-1/hole-1.jpg") == picture(1)
     assert "overlay/area_map.kmz" in contents

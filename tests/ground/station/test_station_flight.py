@@ -279,9 +279,21 @@ def test_flight_mavproxy_ground_page_tak(tmp_path: Path) -> None:
     try:
         page = f"http://127.0.0.1:{http}/"
         wait_for(lambda: _up(page), 30.0, "the ground station's page")
-        token = (station_dir / ".station-token").read_text().strip()
-        assert f"?token={token}" in (tmp_path / "ground.log").read_text()  # the pairing link
-        browser = Chromium(f"{page}?token={token}", tmp_path / "profile")
+        # the operator's pairing link, issued while the station runs (never in its log)
+        pair = subprocess.run(
+            [
+                *(sys.executable, "-m", "holescan.cli", "pair", "-o", str(station_dir)),
+                *("flight test", "--http", f"127.0.0.1:{http}"),
+            ],
+            cwd=ROOT,
+            env={**os.environ, "PYTHONPATH": str(ROOT)},
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+        link = pair.stdout.strip().split(": ", 1)[1]
+        assert link.startswith(f"{page}?token=")
+        browser = Chromium(link, tmp_path / "profile")
         wait_for(lambda: browser.js("document.readyState") == "complete", 20.0, "page load")
         fly = holescan(
             "fly",
@@ -325,7 +337,7 @@ def test_flight_mavproxy_ground_page_tak(tmp_path: Path) -> None:
         # the operator confirms the first hole with a click on the page
         hid = min(announced)
         n_cot = len(rx.got)
-        browser.js("localStorage.setItem('holescan-operator', 'flight test')")
+        wait_for(lambda: browser.js("document.body.dataset.canMark") == "yes", 10.0, "paired")
         browser.js(
             f'document.querySelector(\'button[data-id="{hid}"][data-mark="confirmed"]\').click()'
         )
@@ -339,6 +351,9 @@ def test_flight_mavproxy_ground_page_tak(tmp_path: Path) -> None:
         )
         audit = [json.loads(x) for x in (station_dir / "audit.jsonl").read_text().splitlines()]
         assert audit[-1]["operator"] == "flight test" and audit[-1]["hole"] == hid
+        assert audit[-1]["pairing"] == "p2"  # p1: "operator 1", issued at the station's start
+        token = link.split("?token=", 1)[1]
+        assert token not in (tmp_path / "ground.log").read_text()
         wait_for(lambda: len(rx.got) > n_cot, 5.0, "CoT after the click")
         ev = [e for e in parse_tak(rx.got[n_cot:]) if e.uid == f"holescan-ground-hole-{hid}"][-1]
         assert "operator: confirmed" in ev.detail.xmlDetail

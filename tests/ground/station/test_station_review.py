@@ -1,8 +1,8 @@
 """The review flow on the live page, in headless Chromium (issue 21, item 5).
 
 One Chromium, three separate browser contexts (their own storage, as three browsers):
-operators Ana and Bea, each paired with the station's token and named once, and a viewer
-without the token. Holes 2 and 3 are "for review" (the vehicle's tier), 1 and 4
+operators Ana and Bea, each paired by a pairing link of their own (the station names
+them), and a viewer without one. Holes 2 and 3 are "for review" (the vehicle's tier), 1 and 4
 announced. Checked: the queue order (review first by confidence), the large picture and
 the "why" line of the current hole, keyboard shortcuts (c, x, j) sent as real key events,
 each operator seeing the other's mark without a reload, a rejected hole kept and shown as
@@ -115,7 +115,7 @@ class Browser:
             self.proc.kill()
 
 
-def _station(folder: Path) -> StationState:
+def review_station(folder: Path) -> StationState:
     state = StationState.open(folder)
     holes = {1: 0.91, 2: 0.52, 3: 0.74, 4: 0.63}  # id -> score
     for hid, score in holes.items():
@@ -141,7 +141,7 @@ def _station(folder: Path) -> StationState:
 
 @pytest.fixture
 def site(tmp_path: Path) -> Iterator[tuple[StationState, StationWeb]]:
-    state = _station(tmp_path / "st")
+    state = review_station(tmp_path / "st")
     with StationWeb(state, "127.0.0.1", 0) as web:
         yield state, web
 
@@ -156,25 +156,20 @@ def test_two_operators_review_the_queue_live(
     art.mkdir(parents=True, exist_ok=True)
     browser = Browser(tmp_path / "profile")
     try:
-        ana = browser.page(web.pair_url)
-        bea = browser.page(web.pair_url)
+        _, ana_token = web.pairings.issue("Ana")
+        _, bea_token = web.pairings.issue("Bea")
+        ana = browser.page(web.pair_url(ana_token))
+        bea = browser.page(web.pair_url(bea_token))
         viewer = browser.page(web.url)
         for p in (ana, bea, viewer):
             wait_for(lambda p=p: len(p.ids()) == 4, 20.0, "the queue")
         assert "token" not in ana.js("location.href")  # taken out of the address bar
-        # no name yet: a mark asks for it (the name field) and nothing is sent
-        version = state.version
-        ana.key("c")
-        wait_for(lambda: ana.js("document.activeElement.id") == "operator", 5.0, "the name field")
-        assert ana.js("document.getElementById('operator').classList.contains('wanted')")
-        assert state.version == version and state.holes[3].mark == "new"
-        ana.js("document.activeElement.blur()")
-        for p, name in ((ana, "Ana"), (bea, "Bea")):
-            p.js(
-                f"(() => {{ const f = document.getElementById('operator'); f.value = '{name}';"
-                " f.dispatchEvent(new Event('change')); })()"
-            )
+        # each page says who it marks as: the pairing, named by the station
+        for p, who in ((ana, "Ana (p1)"), (bea, "Bea (p2)")):
+            wait_for(lambda p=p: p.js("document.body.dataset.canMark") == "yes", 10.0, "pairing")
+            assert p.js("document.getElementById('pairing').textContent") == f"paired as {who}"
             p.js("window.__same_page = true")  # gone if the page were reloaded
+        assert "read-only" in viewer.js("document.getElementById('pairing').textContent")
         # the queue: for review first by confidence (3: 0.74, 2: 0.52), then the rest
         assert ana.ids() == [3, 2, 1, 4]
         assert ana.js("document.getElementById('current').dataset.id") == "3"
@@ -194,7 +189,7 @@ def test_two_operators_review_the_queue_live(
             10.0,
             "Ana's mark on Bea's page",
         )
-        assert "by Ana" in bea.js("document.getElementById('hole-3').textContent")
+        assert "by Ana (p1)" in bea.js("document.getElementById('hole-3').textContent")
         assert bea.js("window.__same_page") is True
         # Bea picks hole 2 on the list and rejects it: x
         bea.js("document.getElementById('hole-2').click()")
@@ -223,7 +218,6 @@ def test_two_operators_review_the_queue_live(
         assert viewer.js("document.body.dataset.canMark") == "no"
         assert viewer.js("document.querySelector('#current button[data-mark]').disabled")
         version = state.version
-        viewer.js("localStorage.setItem('holescan-operator', 'Eve')")
         viewer.key("c")
         wait_for(
             lambda: (
@@ -235,8 +229,13 @@ def test_two_operators_review_the_queue_live(
         assert state.version == version and state.holes[1].mark == "new"
         # the audit trail: who, what, from which tier to which
         trail = AuditTrail(state.folder).read()
-        got = [(e["operator"], e["hole"], e["tier_from"], e["tier_to"]) for e in trail]
-        assert got == [("Ana", 3, "review", "confirmed"), ("Bea", 2, "review", "rejected")]
+        got = [
+            (e["pairing"], e["operator"], e["hole"], e["tier_from"], e["tier_to"]) for e in trail
+        ]
+        assert got == [
+            ("p1", "Ana", 3, "review", "confirmed"),
+            ("p2", "Bea", 2, "review", "rejected"),
+        ]
         shot = ana.call("Page.captureScreenshot", format="png")["data"]
         (art / "ground-station-review.png").write_bytes(base64.b64decode(shot))
     finally:

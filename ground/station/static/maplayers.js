@@ -18,14 +18,12 @@ window.holescanMap = (function () {
     if (!map) return;
     const box = document.createElement("div");
     box.id = "maplayers";
-    box.style.cssText = "position:absolute;top:8px;left:8px;background:rgba(255,255,255,.85);"
-      + "padding:4px 8px;font:12px system-ui,sans-serif;border:1px solid #bbb;border-radius:3px";
     box.innerHTML =
       '<label><input type="checkbox" id="layer-ortho" checked> orthophoto</label><br>'
       + '<label><input type="checkbox" id="layer-cov" checked> coverage: '
-      + '<span style="color:#2e7d32">&#9632; seen</span> '
-      + '<span style="color:#d32f2f">&#9632; not seen</span></label>'
-      + '<div id="map-tiles" style="color:#666"></div>';
+      + '<span class="seen">&#9632; seen</span> '
+      + '<span class="unseen">&#9632; not seen</span></label>'
+      + '<div id="map-tiles"></div>';
     map.appendChild(box);
     for (const layer of ["ortho", "cov"]) {
       document.getElementById("layer-" + layer).addEventListener("change", ev => {
@@ -82,7 +80,7 @@ window.holescanMap = (function () {
         if (t.layer !== layer) continue;
         const w = (t.x1 - t.x0) * s, h = (t.y1 - t.y0) * s;
         parts.push(`<image href="${t.href}" x="${X(t.x0)}" y="${Y(t.y1)}" width="${w}" height="${h}"`
-          + ` preserveAspectRatio="none" style="image-rendering:pixelated"/>`);
+          + ` preserveAspectRatio="none"/>`);
       }
       parts.push("</g>");
     }

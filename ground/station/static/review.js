@@ -3,10 +3,10 @@
 //
 // Keys (not while typing in a field): c = confirmed, x or r = rejected, v = visited,
 // u = back to new, n / j / ArrowDown = next, p / k / ArrowUp = previous.
-// A mark needs the station token (the pairing link, kept in localStorage "holescan-token")
-// and the operator's name (typed once in this browser, localStorage "holescan-operator");
-// it is sent with the name, which goes to the station's audit trail. Other operators'
-// marks arrive through the page's event stream (the page calls Review.render again).
+// A mark needs this browser's pairing (the operator's pairing link, checked by station.js;
+// the station keeps it in an HttpOnly cookie the page's script never sees): the station
+// records the mark under that pairing's operator. Other operators' marks arrive through
+// the page's event stream (the page calls Review.render again).
 "use strict";
 
 const Review = (() => {
@@ -27,20 +27,17 @@ const Review = (() => {
       (TIER_ORDER[a.tier] ?? 9) - (TIER_ORDER[b.tier] ?? 9) || conf(b) - conf(a) || a.id - b.id);
   }
 
-  function token() { return localStorage.getItem("holescan-token"); }
-  function auth() { const t = token(); return t ? { "Authorization": "Bearer " + t } : {}; }
-  function operator() { return (localStorage.getItem("holescan-operator") || "").trim(); }
-
   function byLine(h) {
     if (!h.marked_by) return "";
     const t = new Date(h.marked_by.t_unix_ns / 1e6).toLocaleTimeString();
-    return `${esc(h.mark)} by ${esc(h.marked_by.operator)} at ${t}`;
+    const p = h.marked_by.pairing ? ` (${esc(h.marked_by.pairing)})` : "";
+    return `${esc(h.mark)} by ${esc(h.marked_by.operator)}${p} at ${t}`;
   }
 
   function facts(h) {
     const size = h.major_m != null && h.minor_m != null ? ` &middot; ${h.major_m.toFixed(2)} x ${h.minor_m.toFixed(2)} m` : "";
-    const seen = h.sightings ? ` &middot; seen ${h.sightings}x` : "";
-    return `p ${conf(h).toFixed(2)}${size}${seen}`;
+    const seen = h.sightings ? ` &middot; seen in ${h.sightings} frames` : "";
+    return `p_hole ${conf(h).toFixed(2)}${size}${seen}`;
   }
 
   function buttons(h) {
@@ -84,7 +81,7 @@ const Review = (() => {
     document.getElementById("holes").innerHTML = queue.map(row).join("") || "";
     const nReview = queue.filter(x => x.tier === "review").length;
     document.getElementById("queue-head").textContent =
-      `${queue.length} holes, ${nReview} for review` + (canMark ? "" : " (read-only: open the pairing link to mark)");
+      `${queue.length} holes, ${nReview} for review` + (canMark ? "" : " (read-only: open your pairing link to mark)");
     document.body.dataset.canMark = canMark ? "yes" : "no";
     document.body.dataset.current = current === null ? "" : String(current);
   }
@@ -107,18 +104,17 @@ const Review = (() => {
   function select(id) { current = id; show(); }
 
   async function mark(id, m) {
-    const who = operator();
-    if (!who) {
-      const f = document.getElementById("operator");
-      f.classList.add("wanted");
-      f.focus();
+    let r;
+    try {
+      r = await fetch(`/holes/${id}/mark`, {
+        method: "POST",
+        headers: { "Content-Type": "application/json" },
+        body: JSON.stringify({ mark: m }),
+      });
+    } catch (e) {
+      document.getElementById("queue-head").textContent = "mark not sent: the station did not answer";
       return false;
     }
-    const r = await fetch(`/holes/${id}/mark`, {
-      method: "POST",
-      headers: Object.assign({ "Content-Type": "application/json" }, auth()),
-      body: JSON.stringify({ mark: m, operator: who }),
-    });
     if (!r.ok) {
       document.getElementById("queue-head").textContent = `mark refused (${r.status}): ${await r.text()}`;
       return false;
@@ -139,13 +135,6 @@ const Review = (() => {
   }
 
   function init() {
-    // the operator's name: typed once in this browser
-    const f = document.getElementById("operator");
-    f.value = operator();
-    f.addEventListener("change", () => {
-      localStorage.setItem("holescan-operator", f.value.trim());
-      f.classList.toggle("wanted", !f.value.trim());
-    });
     document.getElementById("side").addEventListener("click", async ev => {
       const b = ev.target.closest("button[data-mark]");
       if (b) {
@@ -167,5 +156,5 @@ const Review = (() => {
     });
   }
 
-  return { render, select, init, auth, current: () => current };
+  return { render, select, init, current: () => current };
 })();
