@@ -74,7 +74,9 @@ from holescan.detect._regions import (
     basin_depth,
     basin_regions,
     block_depth,
+    border_is_bridged,
     no_reading_regions,
+    unread_bands,
 )
 from holescan.detect._scores import contrast_score, darkness_score, ramp, width_score
 from holescan.detect._types import CameraIntrinsics, Detection, DetectParams, FeatureScores
@@ -115,6 +117,15 @@ DARK_SPLIT = True
 # noise in dark frames) below DARK_CUT.
 DARK_CUT = 0.75
 DARK_SMOOTH_PX = 5
+# Unread border bands (registered structured-light depth) are found and cut off the frame;
+# wider than this (frame pixels) an unread border area is the scene's, not a band.
+BANDS = True
+BAND_MAX_PX = 64
+# A basin cut by the frame border (or a band) is closed there, not spilled ...
+CLOSED_BORDER = True
+# ... and, with a read floor, counts from this depth score (0 at the first, 1 at the second;
+# Sd 0.2 = 0.55 m below the bridged rim for a human searcher).
+BRIDGED_SD = (0.2, 0.35)
 
 
 def _nms(dets: list[Detection], iou_max: float) -> list[Detection]:
@@ -151,6 +162,11 @@ def _unique(regions: list[Candidate]) -> list[Candidate]:
     return out
 
 
+def _touches_border(region: Candidate, shape: tuple[int, ...]) -> bool:
+    x, y, w, h = region[1]
+    return x == 0 or y == 0 or x + w == shape[1] or y + h == shape[0]
+
+
 def box_iou(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> float:
     """Intersection over union of two (x, y, w, h) boxes."""
     return overlap(a, b, "iou")
@@ -166,6 +182,8 @@ class _FrameData:
     z_far: float
     range_m: float
     factor: int
+    #: The read area's place in the work grid: unread bands (left, top, right, bottom).
+    bands: tuple[int, int, int, int] = (0, 0, 0, 0)
 
 
 _RING_KERNEL = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * RING_PX + 1, 2 * RING_PX + 1))
@@ -173,12 +191,18 @@ _TERRAIN_KERNEL = disk(RING_PX + TERRAIN_PX)
 
 
 def _measure(
-    region: Candidate, f: _FrameData, params: DetectParams, dark_cut: bool = False
+    region: Candidate,
+    f: _FrameData,
+    params: DetectParams,
+    dark_cut: bool = False,
+    bridged: bool = False,
 ) -> Detection | None:
     """Measure one candidate region and score it; None when it cannot be a hole.
 
     A no-reading blob (not enclosed) must show enough valid rim (not border, not more
-    no-reading) around it.
+    no-reading) around it. A ``bridged`` basin (closed only by bridging its cut at the
+    border) with a read floor must be clearly deep: its depth is measured against a rim
+    partly assumed, and a shallow dip running into the border is closed that way too.
     """
     mask, (x, y, w, h), enclosed = region
     hh, ww = f.z.shape
@@ -239,9 +263,23 @@ def _measure(
         opening.rim_depth_m,
     )
     # Passable width: diameter of the largest disk inside the region (metres at the rim).
-    dist = cv2.distanceTransform(np.pad(big, 1), cv2.DIST_L2, 5)
+    # Where an unread band cuts it, the opening runs on under the band: the disk may too
+    # (the region's cut edge extruded across the band), and the ellipse's minor axis,
+    # measured on the visible part only, is no bound.
+    cut_sides = (
+        f.bands[0] if gx0 == 0 else 0,
+        f.bands[1] if gy0 == 0 else 0,
+        f.bands[2] if gx1 == ww else 0,
+        f.bands[3] if gy1 == hh else 0,
+    )
+    dist = cv2.distanceTransform(np.pad(_extrude(big, cut_sides), 1), cv2.DIST_L2, 5)
     inscribed = 2.0 * float(dist.max()) * rim_z / f.cam.fx
-    minor = min(minor_pca, inscribed) if PASSABLE_WIDTH else minor_pca
+    if not PASSABLE_WIDTH:
+        minor = minor_pca
+    elif any(cut_sides):
+        minor = inscribed
+    else:
+        minor = min(minor_pca, inscribed)
     floor_valid = inside & ~inv_c
     no_read = float((inside & inv_c).sum()) / float(inside.sum())
     seen = float(np.percentile(zc[floor_valid], 90) - rim_z) if floor_valid.any() else 0.0
@@ -272,11 +310,13 @@ def _measure(
     if beyond:
         # No reading: a void only if it looks like one (dark against the rubble around it).
         score *= 0.2 + 0.8 * void_evidence(rel_in)
+    elif bridged:
+        score *= ramp(sd, BRIDGED_SD[0], BRIDGED_SD[1])
     if score < params.min_score:
         return None
-    k = f.factor
+    box = _frame_box((gx0, gy0, gx1, gy1), (ww, hh), f)
     return Detection(
-        box=(gx0 * k, gy0 * k, (gx1 - gx0) * k, (gy1 - gy0) * k),
+        box=box,
         score=float(score),
         features=FeatureScores(sd, sw, sr, sb, sc),
         depth_rel_m=float(depth_rel),
@@ -288,7 +328,38 @@ def _measure(
         opening_m=_xyz(centre),
         rim_normal=_xyz(placed.normal),
         rim_seen=round(max(rim_seen, 0.0), 3),
+        border_cut=bool(open_px),
     )
+
+
+def _extrude(
+    mask: npt.NDArray[np.uint8], sides: tuple[int, int, int, int]
+) -> npt.NDArray[np.uint8]:
+    """``mask`` with its edge rows/columns repeated outward (left, top, right, bottom)."""
+    left, top, right, bottom = sides
+    if not any(sides):
+        return mask
+    out = np.concatenate(
+        [np.repeat(mask[:, :1], left, 1), mask, np.repeat(mask[:, -1:], right, 1)], 1
+    )
+    return np.concatenate([np.repeat(out[:1], top, 0), out, np.repeat(out[-1:], bottom, 0)], 0)
+
+
+def _frame_box(
+    read_box: tuple[int, int, int, int], read_size: tuple[int, int], f: _FrameData
+) -> tuple[int, int, int, int]:
+    """(x, y, w, h) in frame pixels of a box ``(x0, y0, x1, y1)`` on the read area.
+
+    Where the box reaches an unread band, the opening runs on under it (its rim there is
+    unknown): the box extends across the band to the frame's edge.
+    """
+    x0, y0, x1, y1 = read_box
+    left, top, right, bottom = f.bands
+    ww, hh = read_size
+    x0, x1 = (0 if x0 == 0 else x0 + left), (x1 + left + right if x1 == ww else x1 + left)
+    y0, y1 = (0 if y0 == 0 else y0 + top), (y1 + top + bottom if y1 == hh else y1 + top)
+    k = f.factor
+    return (x0 * k, y0 * k, (x1 - x0) * k, (y1 - y0) * k)
 
 
 def _xyz(v: npt.NDArray[np.float64]) -> tuple[float, float, float]:
@@ -316,14 +387,25 @@ def detect_default(
     """
     check_frame(rgb, depth, camera)
     factor = max(1, round(1.0 / params.work_scale))
-    z, _ = block_depth(depth, factor, camera.depth_unit_m)
-    if np.isnan(z).all():
+    z_full, _ = block_depth(depth, factor, camera.depth_unit_m)
+    if np.isnan(z_full).all():
         return []
-    cam = camera.scaled(1.0 / factor)
+    # The read area: the frame without its unread border bands (a hole the band cuts is
+    # cut by the read area's border, its rim there unknown).
+    bands = unread_bands(z_full, max(1, round(BAND_MAX_PX / factor))) if BANDS else (0, 0, 0, 0)
+    left, top, right, bottom = bands
+    hf, wf = z_full.shape
+    z = z_full[top : hf - bottom, left : wf - right]
+    if min(z.shape) < 3 or np.isnan(z).all():
+        return []
+    full = camera.scaled(1.0 / factor)
+    cam = CameraIntrinsics(
+        z.shape[1], z.shape[0], full.fx, full.fy, full.cx - left, full.cy - top, full.depth_unit_m
+    )
     grey = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)  # BT.601 Y, as the paper's YUV
-    small = cv2.resize(grey, (z.shape[1], z.shape[0]), interpolation=cv2.INTER_AREA)
-    y_img = np.asarray(small, np.float64) / 255.0
-    pit, invalid, z_far = basin_depth(z)
+    small = cv2.resize(grey, (wf, hf), interpolation=cv2.INTER_AREA)
+    y_img = np.asarray(small, np.float64)[top : hf - bottom, left : wf - right] / 255.0
+    pit, invalid, z_far = basin_depth(z, closed_border=False)
     rel = relative_luminance(y_img, ~invalid)
     range_m = max(params.max_range_m, z_far)
     s = params.searcher
@@ -332,6 +414,12 @@ def detect_default(
     min_side_px = s.min_fraction * s.minor_m * cam.fx / max(z_far, 0.5)
     min_px = max(2, int(0.25 * min_side_px**2))
     regions = _unique(basin_regions(pit, min_px) + no_reading_regions(invalid, pit, min_px))
+    # Basins the border cuts, closed there (their rim beyond is unknown): candidates beside
+    # the spilled view's (the better-scoring one of a pair wins in NMS).
+    bridged: list[Candidate] = []
+    if CLOSED_BORDER and border_is_bridged(z):
+        closed, _, _ = basin_depth(z, closed_border=True)
+        bridged = [r for r in basin_regions(closed, min_px) if _touches_border(r, z.shape)]
     # The dark part of each spilled no-reading blob: a hole's interior cut from the bright
     # terrain beyond range (or a bright no-return surface) it runs into.
     dark: list[Candidate] = []
@@ -339,9 +427,10 @@ def detect_default(
         rel_smooth = cv2.blur(rel.astype(np.float32), (DARK_SMOOTH_PX, DARK_SMOOTH_PX))
         dark = _unique(no_reading_regions(invalid & (rel_smooth < DARK_CUT), pit, min_px))
 
-    frame = _FrameData(z, invalid, y_img, rel, cam, z_far, range_m, factor)
+    frame = _FrameData(z, invalid, y_img, rel, cam, z_far, range_m, factor, bands)
     dets = [d for r in regions if (d := _measure(r, frame, params)) is not None]
     dets += [d for r in dark if (d := _measure(r, frame, params, dark_cut=True)) is not None]
+    dets += [d for r in bridged if (d := _measure(r, frame, params, bridged=True)) is not None]
     return [replace(d, p_hole=p_hole_of_score(d.score)) for d in _nms(dets, params.nms_iou)]
 
 

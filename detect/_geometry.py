@@ -23,6 +23,8 @@ PLANE_TOL_M = 0.02
 PLANE_TOL_PER_M2 = 3e-3
 # The terrain around an opening is its rim's surface only if this share of the rim lies on it.
 TERRAIN_RIM_SHARE = 0.3
+# RANSAC scores its candidate planes on at most this many points.
+RANSAC_SCORED = 400
 
 
 def rays_of(
@@ -84,12 +86,18 @@ def fit_plane_ransac(
     normals, a = normals[facing], a[facing]
     if not len(normals):
         return fit_plane(points)
-    tol = _depth_tol(points)
-    dist = np.abs(normals @ points.T - np.einsum("kj,kj->k", normals, a)[:, None])
+    # Candidates are scored on at most RANSAC_SCORED points spread evenly over the set
+    # (the plane most points lie on is the same; the cost no longer grows with the band).
+    scored = points[:: max(1, n // RANSAC_SCORED)]
+    tol = _depth_tol(scored)
+    dist = np.abs(normals @ scored.T - np.einsum("kj,kj->k", normals, a)[:, None])
     # MSAC: outliers cost a constant, inliers their squared residual, so of two planes
     # that hold the same points the closer one wins (not one tilted to reach a few more).
     cost = np.minimum(dist / tol, 1.0) ** 2
-    inliers = dist[int(np.argmin(cost.sum(axis=1)))] < tol
+    best = int(np.argmin(cost.sum(axis=1)))
+    inliers = on_plane(points, (normals[best], a[best]))
+    if inliers.sum() < 3:
+        return fit_plane(points)
     plane = fit_plane(points[inliers])
     refit = on_plane(points, plane)  # once more, with the refitted plane's own inliers
     return fit_plane(points[refit]) if refit.sum() >= 6 else plane

@@ -20,6 +20,12 @@ NECK_RADII_PX = (0, 3, 6)
 MIN_VALID_FRACTION = 0.05
 # A basin this many times larger than its no-reading part is a depression holding holes.
 DEPRESSION_RATIO = 5.0
+# A border column (row) this unread belongs to an unread band of the registered frame.
+BAND_UNREAD = 0.95
+# Dips along a border line up to this fraction of its length are bridged (basin_depth).
+BORDER_BRIDGE = 0.5
+# ... and at least this many pixels long.
+BRIDGE_MIN_PX = 3
 
 
 def block_depth(
@@ -41,10 +47,82 @@ def block_depth(
     return z, frac
 
 
+def unread_bands(z: npt.NDArray[np.float32], max_px: int) -> tuple[int, int, int, int]:
+    """Widths ``(left, top, right, bottom)`` of the unread bands at the frame border.
+
+    A registered structured-light frame has no reading in bands along its border (right
+    24-43 px, top 8-14, bottom 6-12, left 0-11 at 640x480): a band is the run of border
+    columns (rows) of ``z`` (NaN = no reading) at least :data:`BAND_UNREAD` unread, at most
+    ``max_px`` wide (wider unread areas are the scene's, e.g. terrain beyond range).
+
+    >>> z = np.ones((20, 30), np.float32); z[:, 26:] = np.nan; z[:2] = np.nan
+    >>> unread_bands(z, 8)
+    (0, 2, 4, 0)
+    """
+    unread = np.isnan(z)
+    cols, rows = unread.mean(axis=0), unread.mean(axis=1)
+
+    def run(frac: npt.NDArray[np.float64]) -> int:
+        n = 0
+        while n < min(max_px, frac.size - 1) and frac[n] >= BAND_UNREAD:
+            n += 1
+        return n
+
+    return run(cols), run(rows), run(cols[::-1]), run(rows[::-1])
+
+
+def _closed_profile(profile: npt.NDArray[np.float64], length: int) -> npt.NDArray[np.float64]:
+    """Dips along a border line shorter than ``length`` bridged: each point raised to the
+    lower of the highest points within ``length`` on its two sides (itself included).
+
+    >>> _closed_profile(np.array([3.0, 1.0, 0.0, 2.0, 1.0, 0.5]), 3).tolist()
+    [3.0, 2.0, 2.0, 2.0, 1.0, 0.5]
+    """
+    n = max(1, length)
+    pad_l = np.concatenate([np.full(n, profile[0]), profile])
+    pad_r = np.concatenate([profile, np.full(n, profile[-1])])
+    win = np.lib.stride_tricks.sliding_window_view
+    left = win(pad_l, n + 1).max(axis=1)
+    right = win(pad_r, n + 1).max(axis=1)
+    return np.asarray(np.minimum(left, right), np.float64)
+
+
+def _bridged(profile: npt.NDArray[np.float64], length: int) -> npt.NDArray[np.float64]:
+    """The border line with its deep dips bridged: where the closed profile stands more
+    than :data:`DEEP_M` above it (a hole or its unread floor crossing the border), not at
+    shallow undulations of the terrain (those drain there as before)."""
+    closed = _closed_profile(profile, length)
+    deep = (closed - profile > DEEP_M).astype(np.uint8)[None, :]
+    # Runs shorter than BRIDGE_MIN_PX (stray unread pixels at the border) are left alone.
+    k = np.ones((1, BRIDGE_MIN_PX), np.uint8)
+    deep = np.asarray(cv2.morphologyEx(deep, cv2.MORPH_OPEN, k), np.uint8)[0].astype(bool)
+    return np.where(deep, closed, profile)
+
+
+def border_is_bridged(z: npt.NDArray[np.float32]) -> bool:
+    """Whether a deep dip crosses the border (so ``basin_depth(z, closed_border=True)``
+    differs from the spilled view)."""
+    if min(z.shape) < 3:
+        return False
+    height = -z.astype(np.float64)
+    height[np.isnan(z)] = -(float(np.nanmax(z)) + 1.0)
+    hh, ww = z.shape
+    lw, lh = round(BORDER_BRIDGE * ww), round(BORDER_BRIDGE * hh)
+    lines = ((height[0, :], lw), (height[-1, :], lw), (height[:, 0], lh), (height[:, -1], lh))
+    return any(bool((_bridged(line, n) > line).any()) for line, n in lines)
+
+
 def basin_depth(
-    z: npt.NDArray[np.float32],
+    z: npt.NDArray[np.float32], closed_border: bool = False
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_], float]:
     """Depth of every pixel below the spill level of its basin (metres; inf for no reading).
+
+    The frame's border is where basins drain. With ``closed_border`` a basin the border
+    cuts does not drain through the cut: the rim beyond the border is unknown, not absent,
+    so along each border line, dips shorter than :data:`BORDER_BRIDGE` of its length and
+    deeper than :data:`DEEP_M` (a hole or its unread floor crossing the border) are bridged
+    at the height of the rim on their two sides. Without it (the default) such a basin
+    spills there and is no pit.
 
     Returns ``(pit, invalid, z_far)`` where ``z_far`` is the farthest reading in the image.
     """
@@ -55,6 +133,13 @@ def basin_depth(
     height[invalid] = floor
     seed = height.copy()
     seed[1:-1, 1:-1] = height.max()
+    if closed_border and min(z.shape) >= 3:
+        hh, ww = z.shape
+        lw, lh = round(BORDER_BRIDGE * ww), round(BORDER_BRIDGE * hh)
+        seed[0, :] = _bridged(height[0, :], lw)
+        seed[-1, :] = _bridged(height[-1, :], lw)
+        seed[:, 0] = np.maximum(seed[:, 0], _bridged(height[:, 0], lh))
+        seed[:, -1] = np.maximum(seed[:, -1], _bridged(height[:, -1], lh))
     filled = np.asarray(reconstruction(seed, height, method="erosion"), np.float64)  # type: ignore[no-untyped-call]
     pit = filled - height
     pit[invalid & (pit > 0)] = np.inf

@@ -197,6 +197,8 @@ class Detection:
     rim_seen : fraction of the opening's outline bordered by rim the sensor saw (not the
         image border, no unread pixels, no nearer edge in front): 1 = the whole rim seen;
         None when not measured.
+    border_cut : the opening is cut by the frame's border or an unread band along it: its
+        rim there is unknown (not open), its box runs to the frame's edge.
     """
 
     box: tuple[int, int, int, int]
@@ -212,6 +214,7 @@ class Detection:
     opening_m: tuple[float, float, float] | None = None
     rim_normal: tuple[float, float, float] | None = None
     rim_seen: float | None = None
+    border_cut: bool = False
 
     @property
     def centre_px(self) -> tuple[float, float]:
