@@ -47,6 +47,7 @@ from holescan.errors import InputError
 from holescan.geotag import AnnounceGate, Hole, HoleView, Tier
 from holescan.ground import GroundOptions, GroundStation, ReprocessOptions, write_hole_outputs
 from holescan.missions import HoleMissionServer
+from holescan.outputs import atomic_output
 from holescan.sim import SimSortie, SortieParams, loop_length_m
 
 __all__ = [
@@ -261,6 +262,10 @@ class _Ground:
 # --------------------------------------------------------------------------- the flight
 
 
+_RESULT = "demo.json"
+"""The demo's numbers, in its output folder."""
+
+
 def default_demo_out(data_home: Path | None = None) -> Path:
     """A new folder for one demo: ``DATA/holescan/demo/YYYYmmdd-HHMMSS`` in the user's data
     folder (``data_home``; None: ``$XDG_DATA_HOME``, else ``~/.local/share``), never the
@@ -302,7 +307,7 @@ def run_demo(
         out.mkdir(parents=True, exist_ok=True)
     except OSError as err:
         raise InputError(f"cannot create {out}: {err.strerror}") from err
-    if any(out.glob("flight_*.mcap")):
+    if any(out.glob("flight_*.mcap")) or (out / _RESULT).exists():
         raise InputError(f"{out} already holds a demo flight: choose another --out folder")
     stop = stop or threading.Event()
 
@@ -493,6 +498,7 @@ def run_demo(
         match_m=opts.match_m,
         search=search,
     )
-    path = out / "demo.json"
-    path.write_text(json.dumps(result.numbers(), indent=1) + "\n")
+    path = out / _RESULT
+    with atomic_output(path) as f:
+        f.write((json.dumps(result.numbers(), indent=1) + "\n").encode())
     return dataclasses.replace(result, files=(*result.files, ("result", path)))

@@ -37,10 +37,11 @@ the *basins* of the depth image instead, found at every scale at once:
    outline bordered by rim the sensor saw (not the border, no unread pixels, no nearer
    edge).
 5. The five attribute scores of the paper are kept (so a rescuer sees *why*), but combined so
-   that geometry is necessary: ``score = sqrt(Sd) * Sw * (0.35 + 0.65 Sr) * (0.85 + 0.15
-   max(Sb, Sc))``, times ``0.2 + 0.8 V`` for a region without floor readings, V the
-   photometric void evidence (1 when its unread pixels are much darker than the rubble
-   around them, 0 when as bright or brighter: sheet metal, a puddle, a tarp). A dark stain or
+   that geometry is necessary (:func:`detect._scores.combined_score`: ``sqrt(Sd) * Sw *
+   (0.35 + 0.65 Sr) * (0.85 + 0.15 max(Sb, Sc))``), times ``0.2 + 0.8 V`` for a region
+   without floor readings, V the photometric void evidence (1 when its unread pixels are
+   much darker than the rubble around them, 0 when as bright or brighter: sheet metal, a
+   puddle, a tarp). A dark stain or
    a shadow has no depth and never becomes a candidate; a shallow dip scores low on Sd, a
    crack or a small hole low on Sw. Overlapping boxes, and boxes holding a better one, are
    suppressed (NMS). ``p_hole`` maps the score to a probability (:mod:`detect._calibration`).
@@ -57,7 +58,6 @@ import numpy.typing as npt
 from holescan.detect._calibration import p_hole_of_score
 from holescan.detect._evaluate import overlap
 from holescan.detect._geometry import (
-    GROW_PX,
     disk,
     grow_walls,
     measure_opening,
@@ -74,9 +74,17 @@ from holescan.detect._regions import (
     basin_depth,
     basin_regions,
     block_depth,
+    border_is_bridged,
     no_reading_regions,
+    unread_bands,
 )
-from holescan.detect._scores import contrast_score, darkness_score, ramp, width_score
+from holescan.detect._scores import (
+    combined_score,
+    contrast_score,
+    darkness_score,
+    ramp,
+    width_score,
+)
 from holescan.detect._types import CameraIntrinsics, Detection, DetectParams, FeatureScores
 from holescan.detect._validate import check_frame
 
@@ -91,33 +99,32 @@ __all__ = [
 
 # A candidate needs this fraction of its rim to be valid readings (not border, not no-reading).
 MIN_RIM_VALID = 0.6
-# Switches for the ablation study (benchmarks/ablation.py); all on in holescan.
-PASSABLE_WIDTH = True  # minor axis = min(ellipse axis, largest inscribed disk)
-RANGE_LIMIT_LIGHT = True  # no-reading regions at the range limit: darkness as depth evidence
-# Score = Sd^DEPTH_EXPONENT * Sw * shape * light (see the module docstring).
-DEPTH_EXPONENT = 0.5
+# The design choices the ablation study switches off are fields of DetectParams.options
+# (detect._options.DefaultOptions), passed down the call.
 # Openings larger than this (major axis, m) are broad terrain, not holes: width score fades.
 OVERSIZE_START_M = 3.5
 OVERSIZE_END_M = 6.0
 RING_PX = 2
 # An opening cut by the image border is placed at the centre of the circle through its seen
-# rim rather than at the centroid of its visible part (benchmarks/bench_geotag.py).
-CUT_CIRCLE = True
-# ... on the plane of the terrain read this many work pixels beyond its ring (the ring alone
-# runs along the near rim and the top of the far wall: two lines, and a plane leaning into
-# the hole through both).
+# rim (options.cut_circle; benchmarks/bench_geotag.py) on the plane of the terrain read this
+# many work pixels beyond its ring (the ring alone runs along the near rim and the top of
+# the far wall: two lines, and a plane leaning into the hole through both).
 TERRAIN_PX = 6
-# NMS: a detection is dropped when this much of a better one's box lies inside its box.
-CONTAINED = 0.8
-# Also measure the dark part of spilled no-reading blobs (see detect_default).
-DARK_SPLIT = True
-# The cut: relative luminance (box-averaged over DARK_SMOOTH_PX work pixels against shot
-# noise in dark frames) below DARK_CUT.
+# The dark part of spilled no-reading blobs (options.dark_split): relative luminance
+# (box-averaged over DARK_SMOOTH_PX work pixels against shot noise in dark frames) below
+# DARK_CUT.
 DARK_CUT = 0.75
 DARK_SMOOTH_PX = 5
+# Unread border bands (options.bands: registered structured-light depth) are cut off the
+# frame; wider than this (frame pixels) an unread border area is the scene's, not a band.
+BAND_MAX_PX = 64
+# A basin cut by the frame border (or a band) is also looked at closed there
+# (options.closed_border), and, with a read floor, counts from this depth score (0 at the
+# first, 1 at the second; Sd 0.2 = 0.55 m below the bridged rim for a human searcher).
+BRIDGED_SD = (0.2, 0.35)
 
 
-def _nms(dets: list[Detection], iou_max: float) -> list[Detection]:
+def _nms(dets: list[Detection], iou_max: float, contained: float) -> list[Detection]:
     """Suppress overlaps (IoU > ``iou_max``) and containers of a better detection.
 
     A region that holds a higher-scoring one (most of it inside) is a depression or a
@@ -126,7 +133,7 @@ def _nms(dets: list[Detection], iou_max: float) -> list[Detection]:
     keep: list[Detection] = []
     for d in sorted(dets, key=lambda d: -d.score):
         if all(box_iou(d.box, k.box) <= iou_max for k in keep) and not any(
-            _inside(k.box, d.box) > CONTAINED for k in keep
+            _inside(k.box, d.box) > contained for k in keep
         ):
             keep.append(d)
     return keep
@@ -144,11 +151,16 @@ def _unique(regions: list[Candidate]) -> list[Candidate]:
     seen: set[tuple[tuple[int, int, int, int], int, bool]] = set()
     out: list[Candidate] = []
     for r in regions:
-        key = (r[1], int(r[0].sum()), r[2])
+        key = (r.box, int(r.mask.sum()), r.enclosed)
         if key not in seen:
             seen.add(key)
             out.append(r)
     return out
+
+
+def _touches_border(region: Candidate, shape: tuple[int, ...]) -> bool:
+    x, y, w, h = region.box
+    return x == 0 or y == 0 or x + w == shape[1] or y + h == shape[0]
 
 
 def box_iou(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> float:
@@ -166,6 +178,8 @@ class _FrameData:
     z_far: float
     range_m: float
     factor: int
+    #: The read area's place in the work grid: unread bands (left, top, right, bottom).
+    bands: tuple[int, int, int, int] = (0, 0, 0, 0)
 
 
 _RING_KERNEL = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * RING_PX + 1, 2 * RING_PX + 1))
@@ -173,22 +187,30 @@ _TERRAIN_KERNEL = disk(RING_PX + TERRAIN_PX)
 
 
 def _measure(
-    region: Candidate, f: _FrameData, params: DetectParams, dark_cut: bool = False
+    region: Candidate,
+    f: _FrameData,
+    params: DetectParams,
+    dark_cut: bool = False,
+    bridged: bool = False,
 ) -> Detection | None:
     """Measure one candidate region and score it; None when it cannot be a hole.
 
     A no-reading blob (not enclosed) must show enough valid rim (not border, not more
-    no-reading) around it.
+    no-reading) around it. A ``bridged`` basin (closed only by bridging its cut at the
+    border) with a read floor must be clearly deep: its depth is measured against a rim
+    partly assumed, and a shallow dip running into the border is closed that way too.
     """
-    mask, (x, y, w, h), enclosed = region
+    mask, enclosed = region.mask, region.enclosed
+    x, y, w, h = region.box
     hh, ww = f.z.shape
-    pad = RING_PX + GROW_PX + 4 + TERRAIN_PX
+    o = params.options
+    pad = RING_PX + o.grow_px + 4 + TERRAIN_PX
     x0, y0 = max(0, x - pad), max(0, y - pad)
     x1, y1 = min(ww, x + w + pad), min(hh, y + h + pad)
     zc, inv_c = f.z[y0:y1, x0:x1], f.invalid[y0:y1, x0:x1]
     inside = np.zeros((y1 - y0, x1 - x0), bool)
     inside[y - y0 : y - y0 + h, x - x0 : x - x0 + w] = mask
-    inside = grow_walls(inside, zc, ~inv_c, (x0, y0), f.cam, RING_PX)
+    inside = grow_walls(inside, zc, ~inv_c, (x0, y0), f.cam, RING_PX, o.grow_px)
     big = inside.astype(np.uint8)
     vs, us = np.nonzero(inside)
     bx0, by0, bx1, by1 = int(us.min()), int(vs.min()), int(us.max()) + 1, int(vs.max()) + 1
@@ -211,7 +233,7 @@ def _measure(
     rv, ru = np.nonzero(ring)
     rim_u, rim_v = ru.astype(np.float64) + x0, rv.astype(np.float64) + y0
     rim_zs = zc[ring].astype(np.float64)
-    occ = occluders(rim_u, rim_v, rim_zs, f.cam)
+    occ = occluders(rim_u, rim_v, rim_zs, f.cam, o.occluder_step_m)
     if occ.any() and (~occ).sum() >= 3:
         rim_u, rim_v, rim_zs = rim_u[~occ], rim_v[~occ], rim_zs[~occ]
     # How much of the opening's outline is bordered by rim we saw: not the image border,
@@ -222,7 +244,7 @@ def _measure(
     # Sizes (and so the score) come from the rim's plane; where the opening is, from the
     # terrain's when the border cuts it.
     placed, centre = opening, opening.centre
-    if open_px and CUT_CIRCLE:  # cut by the border: the circle through the rim it shows
+    if open_px and o.cut_circle:  # cut by the border: the circle through the rim it shows
         band = (cv2.dilate(big, _TERRAIN_KERNEL) > 0) & ~inside & ~inv_c
         bv, bu = np.nonzero(band)
         uv_band = (bu.astype(np.float64) + x0, bv.astype(np.float64) + y0)
@@ -239,9 +261,23 @@ def _measure(
         opening.rim_depth_m,
     )
     # Passable width: diameter of the largest disk inside the region (metres at the rim).
-    dist = cv2.distanceTransform(np.pad(big, 1), cv2.DIST_L2, 5)
+    # Where an unread band cuts it, the opening runs on under the band: the disk may too
+    # (the region's cut edge extruded across the band), and the ellipse's minor axis,
+    # measured on the visible part only, is no bound.
+    cut_sides = (
+        f.bands[0] if gx0 == 0 else 0,
+        f.bands[1] if gy0 == 0 else 0,
+        f.bands[2] if gx1 == ww else 0,
+        f.bands[3] if gy1 == hh else 0,
+    )
+    dist = cv2.distanceTransform(np.pad(_extrude(big, cut_sides), 1), cv2.DIST_L2, 5)
     inscribed = 2.0 * float(dist.max()) * rim_z / f.cam.fx
-    minor = min(minor_pca, inscribed) if PASSABLE_WIDTH else minor_pca
+    if not o.passable_width:
+        minor = minor_pca
+    elif any(cut_sides):
+        minor = inscribed
+    else:
+        minor = min(minor_pca, inscribed)
     floor_valid = inside & ~inv_c
     no_read = float((inside & inv_c).sum()) / float(inside.sum())
     seen = float(np.percentile(zc[floor_valid], 90) - rim_z) if floor_valid.any() else 0.0
@@ -259,7 +295,7 @@ def _measure(
         # light can tell a hole (dark inside) from terrain fading out of range.
         depth_rel = max(seen, f.range_m - rim_z)
         within = ramp(f.z_far - rim_z, 0.1, 0.6)
-        light = max(sb, sc) if RANGE_LIMIT_LIGHT else 0.0
+        light = max(sb, sc) if o.range_limit_light else 0.0
         sd = max(ramp(depth_rel, s.depth_low_m, s.depth_high_m), 0.6 * within + 0.4 * light)
     else:
         depth_rel = seen
@@ -268,15 +304,17 @@ def _measure(
     sw *= 1.0 - ramp(major, OVERSIZE_START_M, OVERSIZE_END_M)
     fill = area / (major * minor_pca) if major * minor_pca > 0 else 0.0
     sr = ramp(fill, 0.3, 0.7)
-    score = sd**DEPTH_EXPONENT * sw * (0.35 + 0.65 * sr) * (0.85 + 0.15 * max(sb, sc))
+    score = combined_score(sd, sw, sr, sb, sc, o.depth_exponent)
     if beyond:
         # No reading: a void only if it looks like one (dark against the rubble around it).
-        score *= 0.2 + 0.8 * void_evidence(rel_in)
+        score *= 0.2 + 0.8 * (void_evidence(rel_in) if o.photometric_evidence else 1.0)
+    elif bridged:
+        score *= ramp(sd, BRIDGED_SD[0], BRIDGED_SD[1])
     if score < params.min_score:
         return None
-    k = f.factor
+    box = _frame_box((gx0, gy0, gx1, gy1), (ww, hh), f)
     return Detection(
-        box=(gx0 * k, gy0 * k, (gx1 - gx0) * k, (gy1 - gy0) * k),
+        box=box,
         score=float(score),
         features=FeatureScores(sd, sw, sr, sb, sc),
         depth_rel_m=float(depth_rel),
@@ -288,7 +326,38 @@ def _measure(
         opening_m=_xyz(centre),
         rim_normal=_xyz(placed.normal),
         rim_seen=round(max(rim_seen, 0.0), 3),
+        border_cut=bool(open_px),
     )
+
+
+def _extrude(
+    mask: npt.NDArray[np.uint8], sides: tuple[int, int, int, int]
+) -> npt.NDArray[np.uint8]:
+    """``mask`` with its edge rows/columns repeated outward (left, top, right, bottom)."""
+    left, top, right, bottom = sides
+    if not any(sides):
+        return mask
+    out = np.concatenate(
+        [np.repeat(mask[:, :1], left, 1), mask, np.repeat(mask[:, -1:], right, 1)], 1
+    )
+    return np.concatenate([np.repeat(out[:1], top, 0), out, np.repeat(out[-1:], bottom, 0)], 0)
+
+
+def _frame_box(
+    read_box: tuple[int, int, int, int], read_size: tuple[int, int], f: _FrameData
+) -> tuple[int, int, int, int]:
+    """(x, y, w, h) in frame pixels of a box ``(x0, y0, x1, y1)`` on the read area.
+
+    Where the box reaches an unread band, the opening runs on under it (its rim there is
+    unknown): the box extends across the band to the frame's edge.
+    """
+    x0, y0, x1, y1 = read_box
+    left, top, right, bottom = f.bands
+    ww, hh = read_size
+    x0, x1 = (0 if x0 == 0 else x0 + left), (x1 + left + right if x1 == ww else x1 + left)
+    y0, y1 = (0 if y0 == 0 else y0 + top), (y1 + top + bottom if y1 == hh else y1 + top)
+    k = f.factor
+    return (x0 * k, y0 * k, (x1 - x0) * k, (y1 - y0) * k)
 
 
 def _xyz(v: npt.NDArray[np.float64]) -> tuple[float, float, float]:
@@ -316,14 +385,26 @@ def detect_default(
     """
     check_frame(rgb, depth, camera)
     factor = max(1, round(1.0 / params.work_scale))
-    z, _ = block_depth(depth, factor, camera.depth_unit_m)
-    if np.isnan(z).all():
+    o = params.options
+    z_full, _ = block_depth(depth, factor, camera.depth_unit_m, o.min_valid_fraction)
+    if np.isnan(z_full).all():
         return []
-    cam = camera.scaled(1.0 / factor)
+    # The read area: the frame without its unread border bands (a hole the band cuts is
+    # cut by the read area's border, its rim there unknown).
+    bands = unread_bands(z_full, max(1, round(BAND_MAX_PX / factor))) if o.bands else (0, 0, 0, 0)
+    left, top, right, bottom = bands
+    hf, wf = z_full.shape
+    z = z_full[top : hf - bottom, left : wf - right]
+    if min(z.shape) < 3 or np.isnan(z).all():
+        return []
+    full = camera.scaled(1.0 / factor)
+    cam = CameraIntrinsics(
+        z.shape[1], z.shape[0], full.fx, full.fy, full.cx - left, full.cy - top, full.depth_unit_m
+    )
     grey = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)  # BT.601 Y, as the paper's YUV
-    small = cv2.resize(grey, (z.shape[1], z.shape[0]), interpolation=cv2.INTER_AREA)
-    y_img = np.asarray(small, np.float64) / 255.0
-    pit, invalid, z_far = basin_depth(z)
+    small = cv2.resize(grey, (wf, hf), interpolation=cv2.INTER_AREA)
+    y_img = np.asarray(small, np.float64)[top : hf - bottom, left : wf - right] / 255.0
+    pit, invalid, z_far = basin_depth(z, closed_border=False)
     rel = relative_luminance(y_img, ~invalid)
     range_m = max(params.max_range_m, z_far)
     s = params.searcher
@@ -331,18 +412,35 @@ def detect_default(
     # farthest depth in view, in work pixels.
     min_side_px = s.min_fraction * s.minor_m * cam.fx / max(z_far, 0.5)
     min_px = max(2, int(0.25 * min_side_px**2))
-    regions = _unique(basin_regions(pit, min_px) + no_reading_regions(invalid, pit, min_px))
+    regions = _unique(
+        basin_regions(pit, min_px, o.depression_ratio)
+        + no_reading_regions(invalid, pit, min_px, o.neck_radii_px)
+    )
+    # Basins the border cuts, closed there (their rim beyond is unknown): candidates beside
+    # the spilled view's (the better-scoring one of a pair wins in NMS).
+    bridged: list[Candidate] = []
+    if o.closed_border and border_is_bridged(z):
+        closed, _, _ = basin_depth(z, closed_border=True)
+        bridged = [
+            r
+            for r in basin_regions(closed, min_px, o.depression_ratio)
+            if _touches_border(r, z.shape)
+        ]
     # The dark part of each spilled no-reading blob: a hole's interior cut from the bright
     # terrain beyond range (or a bright no-return surface) it runs into.
     dark: list[Candidate] = []
-    if DARK_SPLIT:
+    if o.dark_split:
         rel_smooth = cv2.blur(rel.astype(np.float32), (DARK_SMOOTH_PX, DARK_SMOOTH_PX))
-        dark = _unique(no_reading_regions(invalid & (rel_smooth < DARK_CUT), pit, min_px))
+        dark_blobs = invalid & (rel_smooth < DARK_CUT)
+        dark = _unique(no_reading_regions(dark_blobs, pit, min_px, o.neck_radii_px))
 
-    frame = _FrameData(z, invalid, y_img, rel, cam, z_far, range_m, factor)
+    frame = _FrameData(z, invalid, y_img, rel, cam, z_far, range_m, factor, bands)
     dets = [d for r in regions if (d := _measure(r, frame, params)) is not None]
     dets += [d for r in dark if (d := _measure(r, frame, params, dark_cut=True)) is not None]
-    return [replace(d, p_hole=p_hole_of_score(d.score)) for d in _nms(dets, params.nms_iou)]
+    dets += [d for r in bridged if (d := _measure(r, frame, params, bridged=True)) is not None]
+    return [
+        replace(d, p_hole=p_hole_of_score(d.score)) for d in _nms(dets, params.nms_iou, o.contained)
+    ]
 
 
 def basin_labels(
@@ -353,7 +451,7 @@ def basin_labels(
     For display: nearest-neighbour upsampling of the work-resolution basin components.
     """
     factor = max(1, round(1.0 / params.work_scale))
-    z, _ = block_depth(depth, factor, camera.depth_unit_m)
+    z, _ = block_depth(depth, factor, camera.depth_unit_m, params.options.min_valid_fraction)
     if np.isnan(z).all():
         return np.zeros(depth.shape, np.int32)
     pit, _, _ = basin_depth(z)

@@ -5,30 +5,37 @@ See :mod:`detect._default` for the method. Pure: arrays in, masks and boxes out.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import cv2
 import numpy as np
 import numpy.typing as npt
 from skimage.morphology import reconstruction
 
+from holescan.detect._options import DefaultOptions
+
 # Region thresholds (metres below the spill level). SHALLOW is a few block-averaged noise
 # sigmas at 4 m (Xtion: 1.425e-6 Z^2 mm per pixel -> 23 mm, /4 after 4x4 averaging).
 SHALLOW_M = 0.05
 DEEP_M = 0.25
-# Radii (work pixels) at which necks between no-reading blobs are cut.
-NECK_RADII_PX = (0, 3, 6)
-# A block counts as read when at least this fraction of its pixels have a reading.
-MIN_VALID_FRACTION = 0.05
-# A basin this many times larger than its no-reading part is a depression holding holes.
-DEPRESSION_RATIO = 5.0
+# A border column (row) this unread belongs to an unread band of the registered frame.
+BAND_UNREAD = 0.95
+# Dips along a border line up to this fraction of its length are bridged (basin_depth).
+BORDER_BRIDGE = 0.5
+# ... and at least this many pixels long.
+BRIDGE_MIN_PX = 3
 
 
 def block_depth(
-    depth: npt.NDArray[np.uint16], factor: int, unit_m: float
+    depth: npt.NDArray[np.uint16],
+    factor: int,
+    unit_m: float,
+    min_valid_fraction: float = DefaultOptions.min_valid_fraction,
 ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]:
     """Mean of the valid readings in each ``factor`` x ``factor`` block.
 
     Returns ``(z, valid_fraction)``: z (h, w) float32 metres, NaN where fewer than
-    :data:`MIN_VALID_FRACTION` of the block's pixels had a reading.
+    ``min_valid_fraction`` of the block's pixels had a reading.
     """
     size = (depth.shape[1] // factor, depth.shape[0] // factor)
     total = cv2.resize(depth.astype(np.float32), size, interpolation=cv2.INTER_AREA)
@@ -37,14 +44,86 @@ def block_depth(
     )
     with np.errstate(invalid="ignore", divide="ignore"):
         z = np.asarray(total / frac * np.float32(unit_m), np.float32)
-    z[frac < MIN_VALID_FRACTION] = np.nan
+    z[frac < min_valid_fraction] = np.nan
     return z, frac
 
 
+def unread_bands(z: npt.NDArray[np.float32], max_px: int) -> tuple[int, int, int, int]:
+    """Widths ``(left, top, right, bottom)`` of the unread bands at the frame border.
+
+    A registered structured-light frame has no reading in bands along its border (right
+    24-43 px, top 8-14, bottom 6-12, left 0-11 at 640x480): a band is the run of border
+    columns (rows) of ``z`` (NaN = no reading) at least :data:`BAND_UNREAD` unread, at most
+    ``max_px`` wide (wider unread areas are the scene's, e.g. terrain beyond range).
+
+    >>> z = np.ones((20, 30), np.float32); z[:, 26:] = np.nan; z[:2] = np.nan
+    >>> unread_bands(z, 8)
+    (0, 2, 4, 0)
+    """
+    unread = np.isnan(z)
+    cols, rows = unread.mean(axis=0), unread.mean(axis=1)
+
+    def run(frac: npt.NDArray[np.float64]) -> int:
+        n = 0
+        while n < min(max_px, frac.size - 1) and frac[n] >= BAND_UNREAD:
+            n += 1
+        return n
+
+    return run(cols), run(rows), run(cols[::-1]), run(rows[::-1])
+
+
+def _closed_profile(profile: npt.NDArray[np.float64], length: int) -> npt.NDArray[np.float64]:
+    """Dips along a border line shorter than ``length`` bridged: each point raised to the
+    lower of the highest points within ``length`` on its two sides (itself included).
+
+    >>> _closed_profile(np.array([3.0, 1.0, 0.0, 2.0, 1.0, 0.5]), 3).tolist()
+    [3.0, 2.0, 2.0, 2.0, 1.0, 0.5]
+    """
+    n = max(1, length)
+    pad_l = np.concatenate([np.full(n, profile[0]), profile])
+    pad_r = np.concatenate([profile, np.full(n, profile[-1])])
+    win = np.lib.stride_tricks.sliding_window_view
+    left = win(pad_l, n + 1).max(axis=1)
+    right = win(pad_r, n + 1).max(axis=1)
+    return np.asarray(np.minimum(left, right), np.float64)
+
+
+def _bridged(profile: npt.NDArray[np.float64], length: int) -> npt.NDArray[np.float64]:
+    """The border line with its deep dips bridged: where the closed profile stands more
+    than :data:`DEEP_M` above it (a hole or its unread floor crossing the border), not at
+    shallow undulations of the terrain (those drain there as before)."""
+    closed = _closed_profile(profile, length)
+    deep = (closed - profile > DEEP_M).astype(np.uint8)[None, :]
+    # Runs shorter than BRIDGE_MIN_PX (stray unread pixels at the border) are left alone.
+    k = np.ones((1, BRIDGE_MIN_PX), np.uint8)
+    deep = np.asarray(cv2.morphologyEx(deep, cv2.MORPH_OPEN, k), np.uint8)[0].astype(bool)
+    return np.where(deep, closed, profile)
+
+
+def border_is_bridged(z: npt.NDArray[np.float32]) -> bool:
+    """Whether a deep dip crosses the border (so ``basin_depth(z, closed_border=True)``
+    differs from the spilled view)."""
+    if min(z.shape) < 3:
+        return False
+    height = -z.astype(np.float64)
+    height[np.isnan(z)] = -(float(np.nanmax(z)) + 1.0)
+    hh, ww = z.shape
+    lw, lh = round(BORDER_BRIDGE * ww), round(BORDER_BRIDGE * hh)
+    lines = ((height[0, :], lw), (height[-1, :], lw), (height[:, 0], lh), (height[:, -1], lh))
+    return any(bool((_bridged(line, n) > line).any()) for line, n in lines)
+
+
 def basin_depth(
-    z: npt.NDArray[np.float32],
+    z: npt.NDArray[np.float32], closed_border: bool = False
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_], float]:
     """Depth of every pixel below the spill level of its basin (metres; inf for no reading).
+
+    The frame's border is where basins drain. With ``closed_border`` a basin the border
+    cuts does not drain through the cut: the rim beyond the border is unknown, not absent,
+    so along each border line, dips shorter than :data:`BORDER_BRIDGE` of its length and
+    deeper than :data:`DEEP_M` (a hole or its unread floor crossing the border) are bridged
+    at the height of the rim on their two sides. Without it (the default) such a basin
+    spills there and is no pit.
 
     Returns ``(pit, invalid, z_far)`` where ``z_far`` is the farthest reading in the image.
     """
@@ -55,6 +134,13 @@ def basin_depth(
     height[invalid] = floor
     seed = height.copy()
     seed[1:-1, 1:-1] = height.max()
+    if closed_border and min(z.shape) >= 3:
+        hh, ww = z.shape
+        lw, lh = round(BORDER_BRIDGE * ww), round(BORDER_BRIDGE * hh)
+        seed[0, :] = _bridged(height[0, :], lw)
+        seed[-1, :] = _bridged(height[-1, :], lw)
+        seed[:, 0] = np.maximum(seed[:, 0], _bridged(height[:, 0], lh))
+        seed[:, -1] = np.maximum(seed[:, -1], _bridged(height[:, -1], lh))
     filled = np.asarray(reconstruction(seed, height, method="erosion"), np.float64)  # type: ignore[no-untyped-call]
     pit = filled - height
     pit[invalid & (pit > 0)] = np.inf
@@ -62,8 +148,20 @@ def basin_depth(
 
 
 Region = tuple[npt.NDArray[np.bool_], tuple[int, int, int, int]]
-# (mask, box, enclosed): enclosed = a pit of the basin analysis; else a no-reading blob.
-Candidate = tuple[npt.NDArray[np.bool_], tuple[int, int, int, int], bool]
+
+
+class Candidate(NamedTuple):
+    """A candidate region of the work grid.
+
+    mask : (h, w) bool, the region inside its box.
+    box : (x, y, w, h) work pixels.
+    enclosed : a pit of the basin analysis (its rim holds all round); False for a
+        no-reading blob that spills (its rim is checked when it is measured).
+    """
+
+    mask: npt.NDArray[np.bool_]
+    box: tuple[int, int, int, int]
+    enclosed: bool
 
 
 def components(
@@ -80,7 +178,11 @@ def _crop(lab: npt.NDArray[np.int32], stats: npt.NDArray[np.int32], i: int) -> R
     return lab[y : y + h, x : x + w] == i, (x, y, w, h)
 
 
-def basin_regions(pit: npt.NDArray[np.float64], min_px: int) -> list[Candidate]:
+def basin_regions(
+    pit: npt.NDArray[np.float64],
+    min_px: int,
+    depression_ratio: float = DefaultOptions.depression_ratio,
+) -> list[Candidate]:
     """Regions around each deep core, cut from its basin at a depth that suits the core.
 
     A core is a component of ``pit > DEEP_M``. Its region is the connected part of its basin
@@ -108,8 +210,8 @@ def basin_regions(pit: npt.NDArray[np.float64], min_px: int) -> list[Candidate]:
         mask, box = _crop(lab, stats, i)
         if box not in seen:
             seen.add(box)
-            regions.append((mask, box, True))
-            regions += _voids_in_depression(mask, box, pit, min_px)
+            regions.append(Candidate(mask, box, True))
+            regions += _voids_in_depression(mask, box, pit, min_px, depression_ratio)
     return regions
 
 
@@ -118,6 +220,7 @@ def _voids_in_depression(
     box: tuple[int, int, int, int],
     pit: npt.NDArray[np.float64],
     min_px: int,
+    ratio: float,
 ) -> list[Candidate]:
     """The no-reading blobs of a basin much larger than them: holes in a broad depression.
 
@@ -127,14 +230,14 @@ def _voids_in_depression(
     x, y, w, h = box
     void = mask & np.isinf(pit[y : y + h, x : x + w])
     n_void = int(void.sum())
-    if n_void < min_px or mask.sum() <= DEPRESSION_RATIO * n_void:
+    if n_void < min_px or mask.sum() <= ratio * n_void:
         return []
     n, lab, stats = components(void)
     out: list[Candidate] = []
     for i in range(1, n):
         if stats[i, cv2.CC_STAT_AREA] >= min_px:
             m, (bx, by, bw, bh) = _crop(lab, stats, i)
-            out.append((m, (bx + x, by + y, bw, bh), True))
+            out.append(Candidate(m, (bx + x, by + y, bw, bh), True))
     return out
 
 
@@ -142,6 +245,7 @@ def no_reading_regions(
     invalid: npt.NDArray[np.bool_],
     pit: npt.NDArray[np.float64],
     min_px: int,
+    neck_radii_px: tuple[int, ...] = DefaultOptions.neck_radii_px,
 ) -> list[Candidate]:
     """Blobs of no reading that the basin analysis cannot see as pits.
 
@@ -158,7 +262,7 @@ def no_reading_regions(
     if spilled.sum() < min_px:
         return regions
     inv_u8 = invalid.astype(np.uint8)
-    for r in NECK_RADII_PX:
+    for r in neck_radii_px:
         if r:
             k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
             opened = np.asarray(cv2.morphologyEx(inv_u8, cv2.MORPH_OPEN, k), np.uint8)
@@ -175,5 +279,5 @@ def no_reading_regions(
                 continue  # an enclosed pit: basin_regions has it
             _, lab2, stats2 = components(blob)
             j = int(np.argmax(stats2[1:, cv2.CC_STAT_AREA])) + 1
-            regions.append((*_crop(lab2, stats2, j), False))
+            regions.append(Candidate(*_crop(lab2, stats2, j), False))
     return regions

@@ -9,6 +9,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from holescan.detect._options import DefaultOptions
 from holescan.errors import InputError
 
 
@@ -139,6 +140,8 @@ class DetectParams:
     max_range_m: float = 4.0
     min_score: float = 0.05
     nms_iou: float = 0.3
+    #: The default detector's design choices (the ablation study switches them off).
+    options: DefaultOptions = DefaultOptions()  # noqa: RUF009 (frozen: one shared instance)
     extra: dict[str, float] = field(default_factory=dict, compare=False, hash=False)
 
     def with_searcher(self, searcher: Searcher | str) -> DetectParams:
@@ -197,6 +200,8 @@ class Detection:
     rim_seen : fraction of the opening's outline bordered by rim the sensor saw (not the
         image border, no unread pixels, no nearer edge in front): 1 = the whole rim seen;
         None when not measured.
+    border_cut : the opening is cut by the frame's border or an unread band along it: its
+        rim there is unknown (not open), its box runs to the frame's edge.
     """
 
     box: tuple[int, int, int, int]
@@ -212,6 +217,7 @@ class Detection:
     opening_m: tuple[float, float, float] | None = None
     rim_normal: tuple[float, float, float] | None = None
     rim_seen: float | None = None
+    border_cut: bool = False
 
     @property
     def centre_px(self) -> tuple[float, float]:

@@ -27,7 +27,7 @@ def detection_json(det: Detection) -> dict[str, Any]:
 def decode_detection(obj: Mapping[str, Any]) -> Detection:
     """Inverse of :func:`detection_json`; logs written before ``p_hole``,
     ``relative_brightness``, ``opening_m``, ``rim_normal`` and ``rim_seen`` existed (or in
-    paper mode) give None for them."""
+    paper mode) give None for them, and False for ``border_cut``."""
     f = obj["features"]
     x, y, w, h = (int(v) for v in obj["box"])
     return Detection(
@@ -46,6 +46,7 @@ def decode_detection(obj: Mapping[str, Any]) -> Detection:
         opening_m=_opt_xyz(obj.get("opening_m")),
         rim_normal=_opt_xyz(obj.get("rim_normal")),
         rim_seen=float_or_none(obj.get("rim_seen")),
+        border_cut=bool(obj.get("border_cut", False)),
     )
 
 

@@ -3,8 +3,9 @@
 :class:`McapFile` wraps ``mcap``'s :class:`~mcap.writer.Writer`: it creates the file (never
 over an existing one), registers each topic's schema and channel on its first message,
 syncs to disk on request, and on close finishes the summary, fsyncs and closes. An output
-written ``via_part`` (the default) lives as ``.STEM.part.mcap`` until it is complete and is
-then renamed into place (:func:`outputs.commit_part`); a failure removes it. The flight
+written ``via_part`` (the default) goes through the output-path rule (an
+:class:`outputs.PartFile`): checked, ``.STEM.part.mcap`` until it is complete, fsynced and
+renamed into place; a failure removes it. The flight
 log's own files are written in place instead: while the flight goes on, the file is the
 record, and a crash leaves it readable up to its last chunk (``recover_log`` repairs it).
 
@@ -29,7 +30,7 @@ from mcap_protobuf.schema import build_file_descriptor_set
 from holescan.flightlog.errors import FlightLogError
 from holescan.flightlog.format import compression_type
 from holescan.flightlog.schemas import to_json
-from holescan.outputs import commit_part, part_path
+from holescan.outputs import PartFile
 
 __all__ = ["JsonSchema", "McapFile", "mcap_version"]
 
@@ -48,15 +49,14 @@ class McapFile:
 
     Parameters
     ----------
-    path : the file to write; it must not exist (:class:`FlightLogError`). Callers that
-        refuse other outputs check the path first (:func:`outputs.check_output`).
+    path : the file to write; it must not exist (in place: :class:`FlightLogError`;
+        ``via_part``: :class:`outputs.OutputPathError`, as :func:`outputs.check_output`).
     library, profile : the Header record's fields.
     compression : ``"zstd"``, ``"lz4"`` or ``"none"`` (also a chunk's ``""``).
     chunk_size : bytes of messages per chunk.
     via_part : write ``.STEM.part.mcap`` and rename it to ``path`` when closed.
     replace : with ``via_part``, replace an existing ``path`` on close (an output this
-        program wrote before and writes again); otherwise an existing one is kept and this
-        output discarded.
+        program wrote before and writes again); otherwise an existing one is refused.
     """
 
     def __init__(
@@ -71,16 +71,17 @@ class McapFile:
         replace: bool = False,
     ) -> None:
         self.path = Path(path)
-        self._written = part_path(self.path) if via_part else self.path
-        self._via_part = via_part
-        self._replace = replace
-        try:
-            # A leftover .part of an output that was never completed is not kept.
-            self._stream: IO[bytes] | None = open(self._written, "wb" if via_part else "xb")  # noqa: SIM115
-        except FileExistsError as err:
-            raise FlightLogError(f"{self._written} exists: choose another log name") from err
-        except OSError as err:
-            raise FlightLogError(f"cannot create {self._written}: {err.strerror}") from err
+        self._part: PartFile | None = None
+        if via_part:
+            self._part = PartFile(self.path, replace=replace)
+            self._stream: IO[bytes] | None = self._part.file
+        else:
+            try:
+                self._stream = open(self.path, "xb")  # noqa: SIM115
+            except FileExistsError as err:
+                raise FlightLogError(f"{self.path} exists: choose another log name") from err
+            except OSError as err:
+                raise FlightLogError(f"cannot create {self.path}: {err.strerror}") from err
         self._writer = Writer(
             self._stream,
             chunk_size=chunk_size,
@@ -181,28 +182,26 @@ class McapFile:
 
     def close(self) -> None:
         """Finish the file (summary, indexes), fsync, close, and rename a ``.part`` into
-        place. On an error (disk full...) the ``.part`` is removed and the error raised
-        (an ``OSError`` as it is, :class:`OutputPathError` when the output appeared
-        meanwhile). Idempotent."""
+        place. On an error (disk full...) a ``.part`` is removed and the error raised (an
+        ``OSError`` of the writer as it is, :class:`OutputPathError` from the rename).
+        Idempotent."""
         stream, self._stream = self._stream, None
         if stream is None:
             return
-        try:
+        if self._part is not None:
             try:
                 self._writer.finish()  # type: ignore[no-untyped-call]
-                stream.flush()
-                os.fsync(stream.fileno())
-            finally:
-                stream.close()
-        except BaseException:
-            if self._via_part:
-                self._written.unlink(missing_ok=True)
-            raise
-        if self._via_part:
-            if self._replace:
-                os.replace(self._written, self.path)
-            else:
-                commit_part(self._written, self.path)
+            except BaseException:
+                self._part.discard()
+                raise
+            self._part.commit()
+            return
+        try:
+            self._writer.finish()  # type: ignore[no-untyped-call]
+            stream.flush()
+            os.fsync(stream.fileno())
+        finally:
+            stream.close()
 
     def abort(self) -> None:
         """Close without finishing: a ``.part`` output is removed; a file written in place
@@ -210,6 +209,7 @@ class McapFile:
         stream, self._stream = self._stream, None
         if stream is None:
             return
-        stream.close()
-        if self._via_part:
-            self._written.unlink(missing_ok=True)
+        if self._part is not None:
+            self._part.discard()
+        else:
+            stream.close()

@@ -23,6 +23,8 @@ Two applications and what they share, each a subpackage:
 
 from holescan.ground.datasets import (
     CATEGORY,
+    JSON_SUFFIXES,
+    PLOT_SUFFIXES,
     Dataset,
     DatasetImage,
     EvalReport,
@@ -115,7 +117,9 @@ __all__ = [
     "COT_TYPE",
     "DATAPACKAGE_NAME",
     "DEFAULT_COT_URL",
+    "JSON_SUFFIXES",
     "MARKS",
+    "PLOT_SUFFIXES",
     "SCORE_BANDS",
     "CampaignHole",
     "CotError",

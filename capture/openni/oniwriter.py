@@ -27,7 +27,7 @@ import struct
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from types import TracebackType
-from typing import BinaryIO
+from typing import IO
 
 import numpy as np
 
@@ -48,7 +48,7 @@ from holescan.capture.openni.oniformat import (
 )
 from holescan.detect import CameraIntrinsics, Frame
 from holescan.errors import InputError
-from holescan.outputs import check_output, commit_part, part_path
+from holescan.outputs import PartFile, check_output
 
 __all__ = ["OniWriter", "export_oni", "write_oni"]
 
@@ -70,7 +70,7 @@ class OniWriter:
 
     Use as a context manager; the file appears under ``path`` when the writer is closed,
     also when the ``with`` block ends with an exception (the frames written so far are
-    kept). Until then it is ``.STEM.part.oni`` beside it (:func:`outputs.part_path`).
+    kept). Until then it is ``.STEM.part.oni`` beside it (an :class:`outputs.PartFile`).
 
     Parameters
     ----------
@@ -104,26 +104,22 @@ class OniWriter:
             raise InputError(
                 f"{camera.width}x{camera.height} is too large for OpenNI playback (max 1600x1200)"
             )
-        self.path = check_output(path, inputs=inputs, force=force)
-        self._force = force
         self.camera = camera
         self.fps = fps
-        self._partial = part_path(self.path)
         self._nodes = [_NodeState(spec) for spec in NODES]
         self._frames = 0
         self._min_ts_us = 0
         self._last_ts_us = -1
-        try:
-            self._file: BinaryIO | None = open(self._partial, "wb")  # noqa: SIM115
-        except OSError as err:
-            raise InputError(f"cannot write {self._partial}: {err.strerror}") from err
+        self._out = PartFile(path, inputs=inputs, force=force)
+        self.path = self._out.path
+        self._partial = self._out.part
+        self._file: IO[bytes] | None = self._out.file
         self._pos = 0  # end of the last complete record
         try:
             self._write_preamble()
         except OSError as err:
-            self._file.close()
             self._file = None
-            self._partial.unlink(missing_ok=True)
+            self._out.discard()
             raise InputError(f"cannot write {self._partial}: {err.strerror}") from err
 
     @property
@@ -155,7 +151,7 @@ class OniWriter:
             f.write(chunk)
         self._pos = f.tell()
 
-    def _require_open(self) -> BinaryIO:
+    def _require_open(self) -> IO[bytes]:
         if self._file is None:
             raise InputError(f"{self.path}: writer is closed")
         return self._file
@@ -254,8 +250,7 @@ class OniWriter:
             return
         self._file = None
         if self._frames == 0:
-            f.close()
-            self._partial.unlink(missing_ok=True)
+            self._out.discard()
             if raise_on_empty:
                 raise InputError(f"{self.path}: no frames to write")
             return
@@ -287,15 +282,12 @@ class OniWriter:
                 )
             f.seek(0)
             f.write(FILE_HEADER.pack(FILE_MAGIC, *FILE_VERSION, self._last_ts_us, len(NODES)))
-            f.flush()
-            os.fsync(f.fileno())
         except OSError as err:
+            self._out.discard()
             raise InputError(
                 f"{self._partial}: cannot finish the recording: {err.strerror}"
             ) from err
-        finally:
-            f.close()
-        commit_part(self._partial, self.path, force=self._force)
+        self._out.commit()  # flush, fsync, rename (OutputPathError, an InputError, on failure)
         _log.info("wrote %s: %d frames", self.path, self._frames)
 
 

@@ -18,6 +18,8 @@ from holescan.ground.datasets.csvimport import (
     read_box_csv,
 )
 from holescan.ground.datasets.evaluation import (
+    JSON_SUFFIXES,
+    PLOT_SUFFIXES,
     EvalReport,
     brier_score,
     calibration_outcomes,
@@ -33,6 +35,8 @@ from holescan.ground.datasets.evaluation import (
 
 __all__ = [
     "CATEGORY",
+    "JSON_SUFFIXES",
+    "PLOT_SUFFIXES",
     "Dataset",
     "DatasetImage",
     "EvalReport",

@@ -30,6 +30,7 @@ import numpy.typing as npt
 from holescan.detect import CameraIntrinsics
 from holescan.errors import InputError
 from holescan.ground.images.files import read_camera, read_depth, read_rgb, write_depth, write_rgb
+from holescan.outputs import atomic_output
 
 __all__ = [
     "CATEGORY",
@@ -247,7 +248,8 @@ def load_image_pair(
 
 
 def write_dataset(root: Path | str, camera: CameraIntrinsics, samples: Iterable[Sample]) -> Path:
-    """Write samples as a dataset folder (created; existing files are replaced)."""
+    """Write samples as a dataset folder (created; existing files are replaced, each
+    image through the output-path rule, so an interrupted run leaves no half image)."""
     root = Path(root)
     (root / "rgb").mkdir(parents=True, exist_ok=True)
     (root / "depth").mkdir(parents=True, exist_ok=True)
@@ -256,8 +258,8 @@ def write_dataset(root: Path | str, camera: CameraIntrinsics, samples: Iterable[
     for image_id, s in enumerate(samples, start=1):
         if s.depth.shape != (camera.height, camera.width):
             raise InputError(f"{s.name}: depth {s.depth.shape} does not match the camera")
-        write_rgb(root / "rgb" / f"{s.name}.png", s.rgb)
-        write_depth(root / "depth" / f"{s.name}.png", s.depth)
+        write_rgb(root / "rgb" / f"{s.name}.png", s.rgb, force=True)
+        write_depth(root / "depth" / f"{s.name}.png", s.depth, force=True)
         images.append(
             {
                 "id": image_id,
@@ -280,10 +282,9 @@ def write_dataset(root: Path | str, camera: CameraIntrinsics, samples: Iterable[
                     "iscrowd": int(bool(crowd)),
                 }
             )
-    (root / "annotations.json").write_text(
-        json.dumps(
-            {"images": images, "annotations": annotations, "categories": [CATEGORY]}, indent=1
-        )
-    )
-    (root / "camera.json").write_text(json.dumps(camera.to_dict(), indent=1))
+    doc = {"images": images, "annotations": annotations, "categories": [CATEGORY]}
+    with atomic_output(root / "camera.json", force=True) as f:
+        f.write(json.dumps(camera.to_dict(), indent=1).encode())
+    with atomic_output(root / "annotations.json", force=True) as f:  # last: marks it complete
+        f.write(json.dumps(doc, indent=1).encode())
     return root

@@ -27,8 +27,11 @@ from holescan.detect import (
 )
 from holescan.errors import InputError
 from holescan.ground.datasets.coco import Dataset, DatasetImage, load_dataset, load_image_pair
+from holescan.outputs import atomic_output, output_via_part
 
 __all__ = [
+    "JSON_SUFFIXES",
+    "PLOT_SUFFIXES",
     "EvalReport",
     "brier_score",
     "calibration_outcomes",
@@ -136,8 +139,14 @@ def evaluate_dataset(path: Path, params: DetectParams | None, name: str) -> Eval
     return run_detector(dataset, params, name)
 
 
-def write_coco_results(path: Path, detections: Sequence[ScoredBox]) -> None:
-    """COCO results list: ``[{image_id, category_id: 1, bbox: [x, y, w, h], score}]``."""
+JSON_SUFFIXES = frozenset({".json"})
+PLOT_SUFFIXES = frozenset({".png", ".pdf", ".svg"})
+"""The extensions of the files :func:`write_coco_results` and the plots write."""
+
+
+def write_coco_results(path: Path, detections: Sequence[ScoredBox], *, force: bool = False) -> None:
+    """COCO results list: ``[{image_id, category_id: 1, bbox: [x, y, w, h], score}]``,
+    written through the output-path rule (an existing ``path`` refused unless ``force``)."""
     rows = [
         {
             "image_id": d.image_id,
@@ -147,7 +156,8 @@ def write_coco_results(path: Path, detections: Sequence[ScoredBox]) -> None:
         }
         for d in detections
     ]
-    path.write_text(json.dumps(rows))
+    with atomic_output(path, suffixes=JSON_SUFFIXES, force=force) as f:
+        f.write(json.dumps(rows).encode())
 
 
 def format_table(reports: Sequence[EvalReport]) -> str:
@@ -167,7 +177,7 @@ def format_table(reports: Sequence[EvalReport]) -> str:
     return "\n".join(lines)
 
 
-def plot_pr(path: Path, reports: Sequence[EvalReport], title: str) -> None:
+def plot_pr(path: Path, reports: Sequence[EvalReport], title: str, *, force: bool = False) -> None:
     """Precision-recall curves (both overlap rules) of each report as a PNG."""
     import matplotlib
 
@@ -195,8 +205,11 @@ def plot_pr(path: Path, reports: Sequence[EvalReport], title: str) -> None:
     axes[0].set_ylabel("precision")
     fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    try:
+        with output_via_part(path, suffixes=PLOT_SUFFIXES, force=force) as tmp:
+            fig.savefig(tmp, dpi=110)
+    finally:
+        plt.close(fig)
 
 
 def calibration_outcomes(
@@ -224,6 +237,8 @@ def plot_reliability(
     label: npt.NDArray[np.float64],
     title: str,
     bins: int = 10,
+    *,
+    force: bool = False,
 ) -> None:
     """Reliability diagram: observed frequency of true holes per bin of predicted ``p``.
 
@@ -268,5 +283,8 @@ def plot_reliability(
     axn.set_xlabel("p_hole (predicted)")
     axn.set_ylabel("detections")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    try:
+        with output_via_part(path, suffixes=PLOT_SUFFIXES, force=force) as tmp:
+            fig.savefig(tmp, dpi=110)
+    finally:
+        plt.close(fig)

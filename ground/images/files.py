@@ -2,7 +2,9 @@
 
 Files are read and written as bytes here and decoded/encoded in memory (``cv2.imdecode`` /
 ``cv2.imencode``): OpenCV's own file functions crash on a file name that is not UTF-8, and
-libpng's warnings, written straight to the process's stderr, are kept off it.
+libpng's warnings, written straight to the process's stderr, are kept off it. Written
+through the output-path rule (:func:`outputs.atomic_output`): an existing file is refused
+unless ``force``, an input is never written, a crash leaves no half-written image.
 """
 
 from __future__ import annotations
@@ -10,7 +12,7 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +22,7 @@ import numpy.typing as npt
 
 from holescan.detect import CameraIntrinsics
 from holescan.errors import InputError
+from holescan.outputs import PathLike, atomic_output
 
 __all__ = ["read_camera", "read_depth", "read_rgb", "write_depth", "write_rgb"]
 
@@ -101,7 +104,9 @@ def read_depth(path: Path) -> npt.NDArray[np.uint16]:
     return np.asarray(img, dtype=np.uint16)
 
 
-def _encode_to(path: Path, img: npt.NDArray[Any]) -> None:
+def _encode_to(
+    path: Path, img: npt.NDArray[Any], *, inputs: Iterable[PathLike] = (), force: bool = False
+) -> None:
     p = Path(path)
     suffix = p.suffix.lower() or ".png"
     try:
@@ -111,20 +116,26 @@ def _encode_to(path: Path, img: npt.NDArray[Any]) -> None:
         raise InputError(f"{_shown(p)}: cannot encode the image as {suffix!r}") from err
     if not ok:
         raise InputError(f"{_shown(p)}: cannot encode the image as {suffix!r}")
-    try:
-        p.write_bytes(buf.tobytes())
-    except OSError as err:
-        raise InputError(f"cannot write {_shown(p)}: {err.strerror}") from err
+    with atomic_output(p, inputs=inputs, force=force) as f:
+        f.write(buf.tobytes())
 
 
-def write_rgb(path: Path, rgb: npt.NDArray[np.uint8]) -> None:
-    _encode_to(path, cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
+def write_rgb(
+    path: Path,
+    rgb: npt.NDArray[np.uint8],
+    *,
+    inputs: Iterable[PathLike] = (),
+    force: bool = False,
+) -> None:
+    """(H, W, 3) uint8 RGB to an image file (format by extension; PNG if none)."""
+    _encode_to(path, cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), inputs=inputs, force=force)
 
 
-def write_depth(path: Path, depth: npt.NDArray[np.uint16]) -> None:
+def write_depth(path: Path, depth: npt.NDArray[np.uint16], *, force: bool = False) -> None:
+    """(H, W) uint16 depth in millimetres to a 16-bit PNG."""
     if depth.dtype != np.uint16 or depth.ndim != 2:
         raise InputError(f"depth to write must be (H, W) uint16, got {depth.shape} {depth.dtype}")
-    _encode_to(path, depth)
+    _encode_to(path, depth, force=force)
 
 
 def read_camera(path: Path) -> CameraIntrinsics:

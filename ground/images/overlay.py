@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from pathlib import Path
 
 import cv2
@@ -10,6 +11,7 @@ import numpy.typing as npt
 
 from holescan.detect import CameraIntrinsics, Detection, DetectParams, Mode
 from holescan.ground.images.files import write_rgb
+from holescan.outputs import PathLike
 
 __all__ = ["depth_colour", "draw_detections", "render_detections", "segmentation"]
 
@@ -90,6 +92,11 @@ def draw_detections(
     camera: CameraIntrinsics,
     params: DetectParams,
     dets: list[Detection],
+    *,
+    inputs: Iterable[PathLike] = (),
+    force: bool = False,
 ) -> None:
-    """Write :func:`render_detections` with the detector's segmentation to ``path`` (PNG)."""
-    write_rgb(path, render_detections(rgb, depth, segmentation(depth, camera, params), dets))
+    """Write :func:`render_detections` with the detector's segmentation to ``path`` (PNG or
+    JPEG by extension; an existing file refused unless ``force``, never one of ``inputs``)."""
+    image = render_detections(rgb, depth, segmentation(depth, camera, params), dets)
+    write_rgb(path, image, inputs=inputs, force=force)

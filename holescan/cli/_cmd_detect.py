@@ -11,7 +11,7 @@ from pathlib import Path
 from holescan.detect import DEFAULT, PAPER, SEARCHERS, CameraIntrinsics, DetectParams, detect_holes
 from holescan.errors import InputError
 from holescan.ground import draw_detections, read_camera, read_depth, read_rgb
-from holescan.outputs import atomic_output, check_output, output_via_part
+from holescan.outputs import atomic_output, check_output
 
 
 def add_detector_options(p: argparse.ArgumentParser) -> None:
@@ -105,10 +105,9 @@ def run(args: argparse.Namespace) -> int:
         with atomic_output(args.json, inputs=inputs, force=args.force) as f:
             f.write(json.dumps([asdict(d) for d in dets], indent=1).encode())
     if args.overlay:
-        with output_via_part(
-            args.overlay, inputs=inputs, suffixes=_OVERLAY_SUFFIXES, force=args.force
-        ) as tmp:
-            draw_detections(tmp, rgb, depth, camera, params, dets)
+        draw_detections(
+            args.overlay, rgb, depth, camera, params, dets, inputs=inputs, force=args.force
+        )
         print(f"overlay: {args.overlay}")
     return 0
 

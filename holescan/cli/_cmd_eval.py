@@ -12,6 +12,8 @@ from holescan.cli._args import Progress
 from holescan.cli._cmd_detect import add_detector_options, params_from_args
 from holescan.errors import InputError
 from holescan.ground import (
+    JSON_SUFFIXES,
+    PLOT_SUFFIXES,
     EvalReport,
     brier_score,
     calibration_outcomes,
@@ -24,7 +26,7 @@ from holescan.ground import (
     write_coco_results,
 )
 from holescan.ground.recordings import recording_dataset
-from holescan.outputs import check_output, output_via_part
+from holescan.outputs import check_output
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -104,18 +106,15 @@ def _parse_ks(text: str) -> list[int]:
     return ks
 
 
-_PLOT_SUFFIXES = {".png", ".pdf", ".svg"}
-
-
 def run(args: argparse.Namespace) -> int:
     if args.reliability is None and args.plot:
         args.reliability = args.plot.with_name(f"{args.plot.stem}-reliability{args.plot.suffix}")
-    outputs = {
-        "detections": ({".json"}, args.detections),
-        "plot": (_PLOT_SUFFIXES, args.plot),
-        "reliability": (_PLOT_SUFFIXES, args.reliability),
-    }
-    for suffixes, path in outputs.values():  # before minutes of detection
+    outputs = (
+        (JSON_SUFFIXES, args.detections),
+        (PLOT_SUFFIXES, args.plot),
+        (PLOT_SUFFIXES, args.reliability),
+    )
+    for suffixes, path in outputs:  # before minutes of detection
         if path is not None:
             check_output(path, suffixes=suffixes, force=args.force)
     if args.synthetic is not None:
@@ -135,7 +134,7 @@ def run(args: argparse.Namespace) -> int:
     if args.dataset is None:
         raise InputError("give a DATASET folder or --synthetic")
     if args.boxes is None:
-        return _evaluate(args, outputs, args.dataset)
+        return _evaluate(args, args.dataset)
     if (args.dataset / "annotations.json").is_file():
         raise InputError(
             f"{args.dataset}: a dataset folder has its boxes: --boxes goes with a RECORDING"
@@ -147,12 +146,10 @@ def run(args: argparse.Namespace) -> int:
         recording_dataset(args.dataset, args.boxes, tmp, camera=camera, origin=origin)
         shown = args.dataset
         args.dataset = Path(tmp)
-        return _evaluate(args, outputs, shown)
+        return _evaluate(args, shown)
 
 
-def _evaluate(
-    args: argparse.Namespace, outputs: dict[str, tuple[set[str], Path | None]], shown: Path
-) -> int:
+def _evaluate(args: argparse.Namespace, shown: Path) -> int:
     """Run and print the evaluation of the dataset folder ``args.dataset`` (``shown``: what
     the user gave, for the printed lines)."""
     dataset = load_dataset(args.dataset)
@@ -190,13 +187,11 @@ def _evaluate(
     print(f"{shown}: {n} images, {n_gt} access holes (crowd boxes ignored)")
     print(format_table(reports))
     if args.detections:
-        suffixes = outputs["detections"][0]
-        with output_via_part(args.detections, suffixes=suffixes, force=args.force) as tmp:
-            write_coco_results(tmp, reports[0].detections)
+        write_coco_results(args.detections, reports[0].detections, force=args.force)
         print(f"detections ({reports[0].name}): {args.detections}")
     if args.plot:
-        with output_via_part(args.plot, suffixes=_PLOT_SUFFIXES, force=args.force) as tmp:
-            plot_pr(tmp, reports, f"{shown.name}: {n} images, {n_gt} holes")
+        title = f"{shown.name}: {n} images, {n_gt} holes"
+        plot_pr(args.plot, reports, title, force=args.force)
         print(f"precision-recall plot: {args.plot}")
     reliability = args.reliability
     default = next((r for r in reports if r.name == "default"), None)
@@ -205,7 +200,6 @@ def _evaluate(
         brier = brier_score(p, is_true)
         print(f"default mode p_hole: Brier score {brier:.4f} over {len(p)} detections")
         title = f"{shown.name}: {len(p)} detections, Brier {brier:.3f}"
-        with output_via_part(reliability, suffixes=_PLOT_SUFFIXES, force=args.force) as tmp:
-            plot_reliability(tmp, p, is_true, title)
+        plot_reliability(reliability, p, is_true, title, force=args.force)
         print(f"reliability diagram (p_hole): {reliability}")
     return 0

@@ -113,6 +113,41 @@ def test_hole_cut_by_border_is_found_when_its_rim_is_mostly_seen() -> None:
     assert iou(d.box, clipped) > 0.8
 
 
+def test_basin_cut_by_the_border_is_closed_there_not_spilled() -> None:
+    z = np.full((40, 50), 2.0, np.float32)
+    z[10:20, 0:10] = 2.7  # a pit the left border cuts
+    spilled, _, _ = basin_depth(z)
+    closed, _, _ = basin_depth(z, closed_border=True)
+    assert float(spilled[15, 3]) == pytest.approx(0.0, abs=1e-6)
+    assert float(closed[15, 3]) == pytest.approx(0.7, abs=1e-5)
+    assert float(closed[30, 30]) == pytest.approx(0.0, abs=1e-6)  # the floor stays a floor
+
+
+def _banded(depth: np.ndarray, ltrb: tuple[int, int, int, int]) -> np.ndarray:
+    """A registered structured-light frame's unread border bands."""
+    left, top, right, bottom = ltrb
+    out = depth.copy()
+    out[:, :left], out[:top], out[:, 640 - right :], out[480 - bottom :] = 0, 0, 0, 0
+    return out
+
+
+@pytest.mark.parametrize("floor_m", [3.7, 5.0])  # a read floor 0.9 m down; a void
+def test_hole_running_under_the_unread_band_is_cut_not_open(floor_m: float) -> None:
+    # The opening runs from u = 527 to past the frame's edge; the right band (36 px) hides
+    # its last 77 px: its rim there is unknown, its box runs to the frame's edge.
+    rgb, depth, boxes = scene(holes=((610, 250, 0.6, 0.8, floor_m),))
+    depth = _banded(depth, (4, 10, 36, 8))
+    d = top(detect_holes(rgb, depth, CAM))
+    x, y, _, h = boxes[0]
+    clipped = (x, y, 640.0 - x, h)
+    assert d.border_cut and d.box[0] + d.box[2] == 640
+    assert iou(d.box, clipped) > 0.75
+    assert d.p_hole is not None and d.p_hole > 0.5  # its width is not the visible part's
+    assert d.rim_seen is not None and d.rim_seen < 0.9
+    inside = top(detect_holes(*scene(holes=((320, 250, 0.6, 0.8, floor_m),))[:2], CAM))
+    assert not inside.border_cut
+
+
 def test_range_fade_is_not_a_hole() -> None:
     # A floor tilting away until it passes the sensor's range: no reading at the far side.
     rgb, depth, _ = scene(z0=3.0)

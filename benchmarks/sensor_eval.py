@@ -1,0 +1,184 @@
+"""The default detector on scene sets, per failure mode of a structured-light sensor.
+
+    python benchmarks/sensor_eval.py DATASET [DATASET ...] [--workers N]
+
+For each dataset (a COCO-style folder from ``benchmarks/hard_scenes``, ``benchmarks/
+alien_scenes`` or ``holescan dataset synth``): AP under IoU > 0.5, recall, false positives
+at ``p_hole >= 0.3``, and by failure mode:
+
+* **border**: holes within 2 px of the read area's edge (the frame's border or the unread
+  band along it, from the scene record's ``bands_ltrb_px``) against the others; and the
+  recall of every hole at least half inside the read area (crowd boxes included: a hole the
+  frame cuts is still one to find);
+* **absorbing**: detections with ``p_hole >= 0.3`` lying on a stain (hard_scenes distractor
+  ``stain``; those in ``absorbing_stains`` return no infrared) and those announced
+  (``p_hole >= 0.9``, the announce tier);
+* **shadow**: detections with ``p_hole >= 0.3`` on a cast shadow (distractor
+  ``cast_shadow``).
+
+A detection lies on a distractor when half of its box is inside the distractor's box and it
+matches no hole.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing
+import sys
+from pathlib import Path
+from typing import Any
+
+# Measure the checkout this script lives in, not whichever copy is installed.
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+P_SHOWN = 0.3
+P_ANNOUNCED = 0.9
+EDGE_PX = 2.0
+
+Det = tuple[tuple[float, float, float, float], float, float]
+
+
+def _detect(job: tuple[Path, int]) -> tuple[int, list[Det]]:
+    from holescan.detect import DEFAULT, detect_holes
+    from holescan.ground import load_dataset, load_image_pair
+
+    root, i = job
+    ds = _cache.get(root) or _cache.setdefault(root, load_dataset(root))
+    img = ds.images[i]
+    rgb, depth = load_image_pair(ds, img)
+    dets = detect_holes(rgb, depth, ds.camera, DEFAULT)
+    return img.id, [
+        (tuple(float(v) for v in d.box), d.score, float(d.p_hole or 0.0))  # type: ignore[misc]
+        for d in dets
+    ]
+
+
+_cache: dict[Path, Any] = {}
+
+
+def _inside(a: tuple[float, ...], b: tuple[float, ...]) -> float:
+    ix = max(0.0, min(a[0] + a[2], b[0] + b[2]) - max(a[0], b[0]))
+    iy = max(0.0, min(a[1] + a[3], b[1] + b[3]) - max(a[1], b[1]))
+    return ix * iy / max(a[2] * a[3], 1e-9)
+
+
+def _iou(a: tuple[float, ...], b: tuple[float, ...]) -> float:
+    ix = max(0.0, min(a[0] + a[2], b[0] + b[2]) - max(a[0], b[0]))
+    iy = max(0.0, min(a[1] + a[3], b[1] + b[3]) - max(a[1], b[1]))
+    inter = ix * iy
+    return inter / max(a[2] * a[3] + b[2] * b[3] - inter, 1e-9)
+
+
+def evaluate(root: Path, workers: int) -> dict[str, Any]:
+    from holescan.detect import ScoredBox, evaluate_detections
+    from holescan.ground import ground_truth, load_dataset
+
+    ds = load_dataset(root)
+    raw = json.loads((root / "annotations.json").read_text())
+    jobs = [(root, i) for i in range(len(ds.images))]
+    ctx = multiprocessing.get_context("spawn")
+    with ctx.Pool(workers) as pool:
+        found = dict(pool.map(_detect, jobs, chunksize=2))
+    gt = ground_truth(ds)
+    scored = [ScoredBox(i, b, s) for i, ds_ in found.items() for b, s, _ in ds_]
+    iou = evaluate_detections(scored, gt, "iou")
+    shown = [ScoredBox(i, b, p) for i, ds_ in found.items() for b, _, p in ds_ if p >= P_SHOWN]
+    fp_shown = evaluate_detections(shown, gt, "iou").n_fp if shown else 0
+
+    images = {im["id"]: im for im in raw["images"]}
+    anns: dict[int, list[dict[str, Any]]] = {}
+    for a in raw["annotations"]:
+        anns.setdefault(a["image_id"], []).append(a)
+    counts = {
+        "border": [0, 0, 0],  # holes, found (any score), found at p >= 0.3
+        "interior": [0, 0, 0],
+        "half_read": [0, 0, 0],
+    }
+    on = {"stain": 0, "absorbing": 0, "absorbing_announced": 0, "cast_shadow": 0}
+    for image_id, im in images.items():
+        w, h = float(im["width"]), float(im["height"])
+        sensor = (im.get("scene") or {}).get("sensor") or {}
+        left, top, right, bottom = sensor.get("bands_ltrb_px") or (0, 0, 0, 0)
+        read = (float(left), float(top), w - left - right, h - top - bottom)
+        dets = found.get(image_id, [])
+        holes = [a for a in anns.get(image_id, []) if a.get("category_id", 1) == 1]
+        for a in holes:
+            box = tuple(float(v) for v in a["bbox"])
+            near_edge = (
+                box[0] <= read[0] + EDGE_PX
+                or box[1] <= read[1] + EDGE_PX
+                or box[0] + box[2] >= read[0] + read[2] - EDGE_PX
+                or box[1] + box[3] >= read[1] + read[3] - EDGE_PX
+            )
+            hit_any = any(_iou(d[0], box) > 0.5 for d in dets)
+            hit_shown = any(_iou(d[0], box) > 0.5 and d[2] >= P_SHOWN for d in dets)
+            rows = []
+            if not a.get("iscrowd"):
+                rows.append("border" if near_edge else "interior")
+            if _inside(box, read) >= 0.5:
+                rows.append("half_read")
+            for r in rows:
+                counts[r][0] += 1
+                counts[r][1] += hit_any
+                counts[r][2] += hit_shown
+        absorbing_ids = set(map(str, (sensor.get("absorbing_stains") or {}).keys()))
+        for d in dets:
+            if d[2] < P_SHOWN or any(_iou(d[0], tuple(a["bbox"])) > 0.5 for a in holes):
+                continue
+            for dist in im.get("distractors") or []:
+                if dist["kind"] not in ("stain", "cast_shadow"):
+                    continue
+                if _inside(d[0], tuple(float(v) for v in dist["bbox"])) < 0.5:
+                    continue
+                on[dist["kind"]] += 1
+                if dist["kind"] == "stain" and str(dist.get("feature_id")) in absorbing_ids:
+                    on["absorbing"] += 1
+                    on["absorbing_announced"] += d[2] >= P_ANNOUNCED
+                break
+    return {
+        "dataset": root.name,
+        "images": len(ds.images),
+        "holes": iou.n_gt,
+        "ap_iou": round(iou.ap, 3),
+        "recall": round(iou.recall, 3),
+        "fp_p03": fp_shown,
+        "modes": {k: tuple(v) for k, v in counts.items()},
+        "on_distractors_p03": on,
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("datasets", nargs="+", type=Path)
+    ap.add_argument("--workers", type=int, default=2)
+    args = ap.parse_args(argv)
+    print(
+        "| set | frames | holes | AP IoU | recall | FP p>=0.3 | border recall (p>=0.3) | "
+        "interior recall (p>=0.3) | >= half in read area: recall (p>=0.3) | on stain / "
+        "absorbing / announced | on shadow |"
+    )
+    print("|---|" + "---|" * 10)
+    for root in args.datasets:
+        if not (root / "annotations.json").is_file():
+            print(f"{root}: not a dataset folder (no annotations.json)", file=sys.stderr)
+            return 2
+        r = evaluate(root, args.workers)
+        m, on = r["modes"], r["on_distractors_p03"]
+
+        def rec(k: str, m: dict[str, tuple[int, int, int]] = m) -> str:
+            n, a, s = m[k]
+            return f"{a}/{n} ({s}/{n})" if n else "-"
+
+        print(
+            f"| {r['dataset']} | {r['images']} | {r['holes']} | {r['ap_iou']:.3f} | "
+            f"{r['recall']:.3f} | {r['fp_p03']} | {rec('border')} | {rec('interior')} | "
+            f"{rec('half_read')} | {on['stain']} / {on['absorbing']} / "
+            f"{on['absorbing_announced']} | {on['cast_shadow']} |",
+            flush=True,
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
