@@ -9,6 +9,9 @@ rate limit lifted) on loopback and measures:
   opening a new connection per request (as the old HTTP/1.0 server needed), and, when the
   server keeps connections alive, once more over one kept-alive connection per client;
   requests/s and latency (median, 95th percentile) over ``--requests`` per client;
+The server runs in a child process (the clients' threads would otherwise take turns with
+it on the interpreter lock).
+
 * idle: a station in a child process with one open event stream (a page left open), CPU
   seconds and resident memory over ``--idle-s``.
 
@@ -121,6 +124,15 @@ def idle_child(seconds: float) -> None:
     print(json.dumps({"cpu_s": cpu, "rss_mb": rss_kb / 1024}))
 
 
+def serve_child() -> None:
+    """Serve the station; print the port; stop when stdin closes."""
+    with tempfile.TemporaryDirectory() as tmp:
+        state = station(Path(tmp) / "st")
+        with StationWeb(state, "127.0.0.1", 0, limits=LIMITS, names=()) as web:
+            print(web.port, flush=True)
+            sys.stdin.read()
+
+
 def idle(seconds: float) -> dict[str, float]:
     out = subprocess.run(
         [sys.executable, __file__, "--idle-child", str(seconds)],
@@ -138,24 +150,37 @@ def main() -> int:
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--idle-s", type=float, default=20.0)
     ap.add_argument("--idle-child", type=float, help=argparse.SUPPRESS)
+    ap.add_argument("--serve-child", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.serve_child:
+        serve_child()
+        return 0
     if args.idle_child is not None:
         idle_child(args.idle_child)
         return 0
     rows: dict[str, list[tuple[float, float, float]]] = {}
-    with tempfile.TemporaryDirectory() as tmp:
-        state = station(Path(tmp) / "st")
-        with StationWeb(state, "127.0.0.1", 0, limits=LIMITS, names=()) as web:
-            modes = [("new connection per request", False)]
-            if keeps_alive(web.port):
-                modes.append(("kept-alive connections", True))
-            for _ in range(args.runs):
-                for path in ("/state.json", "/static/review.js"):
-                    for name, alive in modes:
-                        rps, lat = load(web.port, path, args.clients, args.requests, alive)
-                        q = statistics.quantiles(lat, n=20)
-                        key = f"{path}, {name}"
-                        rows.setdefault(key, []).append((rps, statistics.median(lat), q[18]))
+    # the server in a process of its own, as in the field (in one process the clients'
+    # threads and the server would take turns on the interpreter lock)
+    with subprocess.Popen(
+        [sys.executable, __file__, "--serve-child"],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    ) as server:
+        assert server.stdout is not None and server.stdin is not None
+        port = int(server.stdout.readline())
+        modes = [("new connection per request", False)]
+        if keeps_alive(port):
+            modes.append(("kept-alive connections", True))
+        for _ in range(args.runs):
+            for path in ("/state.json", "/static/review.js"):
+                for name, alive in modes:
+                    rps, lat = load(port, path, args.clients, args.requests, alive)
+                    q = statistics.quantiles(lat, n=20)
+                    key = f"{path}, {name}"
+                    rows.setdefault(key, []).append((rps, statistics.median(lat), q[18]))
+        server.stdin.close()
+        server.wait(timeout=30)
     print(
         f"{args.clients} clients x {args.requests} requests each (20 holes, 600 track points), "
         f"median of {args.runs} runs:"
