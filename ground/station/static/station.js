@@ -83,7 +83,7 @@ async function pair() {
     const r = await fetch("/pair", { method: "POST", cache: "no-store", headers: { "Authorization": "Bearer " + t } });
     if (r.ok) {
       const d = await r.json();
-      notice(`Paired: marks from this browser are recorded as ${d.operator} (${d.pairing}).`, "");
+      notice(`Paired: marks from this browser are recorded as ${d.operator} (${d.pairing}).`, "ok");
     } else if (r.status === 401) {
       notice(bad, "error");
     } else {
