@@ -71,6 +71,10 @@ function notice(text, kind) {
 }
 
 async function pair() {
+  // what earlier versions of this page kept in the browser's storage (a station token and
+  // a typed name): gone, the cookie and the pairing replace them
+  localStorage.removeItem("holescan-token");
+  localStorage.removeItem("holescan-operator");
   const u = new URL(location.href);
   if (!u.searchParams.has("token")) return;
   const t = u.searchParams.get("token");
