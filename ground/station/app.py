@@ -56,12 +56,13 @@ _log = logging.getLogger(__name__)
 class GroundOptions:
     """What ``holescan ground`` does.
 
-    mavlink : connection to the vehicle's stream. out : the station's folder (state,
-    pictures, files). sysid : the vehicle (None: first heard). http_host, http_port :
-    the live page (port 0: any free one; None: no page). http_names : host names the page
-    is served as besides its addresses (None: this machine's hostname and HOSTNAME.local;
-    see :func:`ground.station.guard.host_allowed`). cot_url : pytak COT_URL (None:
-    no TAK). cot_tls : the client certificate for a ``tls://`` TAK server. cot_proto :
+    mavlink : connection to the vehicles' stream; more_mavlink : further links (each
+    vehicle heard on any is followed; one picture). out : the station's folder (state,
+    pictures, files). sysid : follow this vehicle only (None: every vehicle heard).
+    http_host, http_port : the live page (port 0: any free one; None: no page).
+    http_names : host names the page is served as besides its addresses (None: this
+    machine's hostname and HOSTNAME.local; see
+    :func:`ground.station.guard.host_allowed`). cot_url : pytak COT_URL (None: no TAK). cot_tls : the client certificate for a ``tls://`` TAK server. cot_proto :
     0 = CoT XML, 1 = TAK protocol v1 (protobuf, via takproto). station : name in the CoT
     uids. cot_stale_s, cot_refresh_s : CoT stale time (from each sending) and re-send
     period, s. kml_refresh_s : Google Earth's NetworkLink reload period. overlay : a map
@@ -74,6 +75,7 @@ class GroundOptions:
     mavlink: str
     out: Path
     sysid: int | None = None
+    more_mavlink: tuple[str, ...] = ()
     baud: int = 57600
     http_host: str = "127.0.0.1"
     http_port: int | None = 8080
@@ -102,6 +104,11 @@ class GroundOptions:
                 "--cot-proto 1 (TAK protocol v1) is for mesh udp:// only: a TAK server's "
                 "stream starts in CoT XML (--cot-proto 0)"
             )
+        links = (self.mavlink, *self.more_mavlink)
+        if len(set(links)) != len(links):
+            raise InputError(f"a MAVLink link is given twice: {', '.join(links)}")
+        if self.sysid is not None and not 1 <= self.sysid <= 255:
+            raise InputError(f"--sysid must be 1..255, got {self.sysid}")
         if self.overlay is not None and not self.overlay.is_file():
             raise InputError(f"map overlay {self.overlay}: no such file")
         for name in self.pair:
@@ -130,6 +137,8 @@ class GroundStation:
         self.web: StationWeb | None = None
         self.cot: CotPublisher | None = None
         self.link: VehicleLink | None = None
+        """The first link (``opts.mavlink``); :attr:`links` has them all."""
+        self.links: list[VehicleLink] = []
         self._worker = threading.Thread(target=self._follow, name="ground-follow", daemon=True)
 
     def __enter__(self) -> GroundStation:
@@ -156,17 +165,20 @@ class GroundStation:
             self._dirty.set()
             self._worker.start()
             self._stack.callback(self._halt)
-            self.link = self._stack.enter_context(
-                VehicleLink(
-                    o.mavlink,
-                    self.state,
-                    sysid=o.sysid,
-                    baud=o.baud,
-                    silence_s=o.silence_s,
-                    map_store=self.map_store,
-                    signing=o.signing,
+            for conn in (o.mavlink, *o.more_mavlink):
+                link = self._stack.enter_context(
+                    VehicleLink(
+                        conn,
+                        self.state,
+                        sysid=o.sysid,
+                        baud=o.baud,
+                        silence_s=o.silence_s,
+                        map_store=self.map_store,
+                        signing=o.signing,
+                    )
                 )
-            )
+                self.links.append(link)
+            self.link = self.links[0]
         except BaseException:
             self._stack.close()
             raise
@@ -216,6 +228,10 @@ class GroundStation:
             if self.cot is None:
                 return
             events: list[bytes] = []
+            for gone in self._on_tak - {h.id for h in holes}:  # folded into another's
+                events += withdraw_cot(gone, station=self.opts.station)
+                self._on_tak.discard(gone)
+                self._sent.pop(gone, None)
             for h in holes:
                 tier = hole_tier(h)
                 key = (h.lat_deg, h.lon_deg, h.score, tier, h.mark, h.card_rev, h.sigma_h_m)

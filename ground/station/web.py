@@ -33,11 +33,13 @@ from holescan.geotag import CIRCLE_95_PER_SIGMA, LocalFrame
 from holescan.ground.station.audit import AuditEntry, AuditTrail
 from holescan.ground.station.files import hole_summary
 from holescan.ground.station.guard import GuardMiddleware, Limits, RateLimiter, default_names
+from holescan.ground.station.locate import bearing_name, mgrs_text, range_bearing
 from holescan.ground.station.mapcombine import CombinedCache
 from holescan.ground.station.maplayers import Reply, map_route
 from holescan.ground.station.mapstore import MapStore
 from holescan.ground.station.pairing import Pairing, Pairings
-from holescan.ground.station.state import MARKS, GroundHole, StationState
+from holescan.ground.station.state import MARKS, GroundHole, StationState, TrackPoint
+from holescan.ground.station.vehicles import camera_footprint
 from holescan.missions import XTION, Camera
 
 if TYPE_CHECKING:
@@ -65,17 +67,99 @@ def _footprint(
     return out
 
 
+VEHICLE_COLOURS = ("#1565c0", "#e65100", "#00897b", "#6a1b9a", "#ad1457", "#558b2f")
+"""The vehicles' colours on the page, by their order of system id."""
+
+
+def _place(frame: LocalFrame, lat: float, lon: float) -> list[float]:
+    e, n = frame.to_en(lat, lon)
+    return [round(float(e), 2), round(float(n), 2)]
+
+
+def _range(ref: tuple[float, float] | None, lat: float, lon: float) -> dict[str, Any] | None:
+    if ref is None:
+        return None
+    d, b = range_bearing(ref[0], ref[1], lat, lon)
+    return {"distance_m": round(d, 1), "bearing_deg": round(b, 1), "compass": bearing_name(b)}
+
+
+def _vehicles_document(
+    state: StationState,
+    frame: LocalFrame,
+    track: list[TrackPoint],
+    now_ns: int,
+    footprint_every: int,
+) -> list[dict[str, Any]]:
+    """Each vehicle heard: its status, place, track, footprints and colour."""
+    status = {v.sysid: v for v in state.vehicle_snapshot()}
+    primary = state.primary_sysid
+    points: dict[int, list[TrackPoint]] = {}
+    for p in track:  # points of an older state file (no system id): the first vehicle's
+        sid = p.sysid if p.sysid or primary is None else primary
+        points.setdefault(sid, []).append(p)
+    out = []
+    for k, sid in enumerate(sorted(set(status) | set(points))):
+        v = status.get(sid)
+        d: dict[str, Any] = v.to_json(now_ns) if v is not None else {"sysid": sid}
+        d["colour"] = VEHICLE_COLOURS[k % len(VEHICLE_COLOURS)]
+        d["track"] = [_place(frame, p.lat_deg, p.lon_deg) for p in points.get(sid, [])]
+        fps = []
+        for i, p in enumerate(points.get(sid, [])):
+            if i % footprint_every == 0 and p.rel_alt_m > 0.2:
+                x, y = d["track"][i]
+                fps.append(_footprint(x, y, p.rel_alt_m, p.yaw))
+        d["footprints"] = fps[-400:]
+        d["xy"] = d["footprint_now"] = None
+        if v is not None and v.lat_deg is not None and v.lon_deg is not None:
+            x, y = d["xy"] = _place(frame, v.lat_deg, v.lon_deg)
+            if v.rel_alt_m is not None and v.yaw is not None:
+                fp = camera_footprint(
+                    v.rel_alt_m, v.roll or 0.0, v.pitch or 0.0, v.yaw, v.mount_deg
+                )
+                if fp is not None:
+                    d["footprint_now"] = [[round(x + e, 2), round(y + n, 2)] for e, n in fp]
+            d["camera"] = "mount" if v.mount_deg is not None else "nadir"
+        if v is not None and v.home is not None:
+            d["home_xy"] = _place(frame, v.home[0], v.home[1])
+        out.append(d)
+    return out
+
+
+def _home(state: StationState, track: list[TrackPoint]) -> tuple[tuple[float, float], str] | None:
+    """The launch point distances are given from: the first vehicle's HOME_POSITION, else
+    its first position heard."""
+    vehicles = {v.sysid: v for v in state.vehicle_snapshot()}
+    order = sorted(vehicles, key=lambda s: (s != state.primary_sysid, s))
+    for sid in order:
+        home = vehicles[sid].home
+        if home is not None:
+            return (home[0], home[1]), f"vehicle {sid}'s home position"
+    for p in track:
+        if p.sysid in (0, state.primary_sysid) or state.primary_sysid is None:
+            who = p.sysid or state.primary_sysid
+            return (p.lat_deg, p.lon_deg), f"vehicle {who}'s first position"
+    return None
+
+
 def state_document(
     state: StationState, footprint_every: int = 3, marked_by: MarkedBy | None = None
 ) -> dict[str, Any]:
     """What the page draws, with positions in local metres (east, north).
 
-    Each hole has its fields (:meth:`GroundHole.to_json`, ``tier`` and ``vehicle_tier``
-    included), ``x``/``y``/``r95`` in local metres, ``summary``, ``picture`` (its URL or
-    None) and ``marked_by`` (``{"operator", "pairing", "t_unix_ns"}`` of its newest mark,
-    or None).
+    Each hole has its fields (:meth:`GroundHole.to_json`, ``tier``, ``vehicle_tier`` and
+    ``vehicles`` included), ``x``/``y``/``r95`` in local metres, ``mgrs`` (its grid
+    reference, :func:`~ground.station.locate.mgrs_text`), ``from_home`` and
+    ``from_vehicles`` (``{"distance_m", "bearing_deg", "compass"}`` from the launch point
+    and from each vehicle's position now), ``summary``, ``picture`` (its URL or None) and
+    ``marked_by`` (``{"operator", "pairing", "t_unix_ns"}`` of its newest mark, or None).
+    ``vehicles``: each vehicle heard (:meth:`VehicleStatus.to_json`, with ``colour``,
+    ``xy``, ``track``, ``footprints``, ``footprint_now``); ``home``: the launch point
+    (``{"lat_deg", "lon_deg", "xy", "source"}``) or None; ``now_unix_ns``: the station's
+    clock (ages on the page count from it). ``track`` and ``footprints``: every vehicle's
+    together (the page draws each vehicle's own).
     """
     version, holes, track = state.snapshot()
+    now_ns = state.clock()
     marked_by = marked_by or {}
     origin = (
         (holes[0].lat_deg, holes[0].lon_deg)
@@ -84,10 +168,36 @@ def state_document(
         if track
         else None
     )
-    doc: dict[str, Any] = {"version": version, "origin": origin, "holes": [], "track": []}
+    if origin is None:
+        placed = [v for v in state.vehicle_snapshot() if v.lat_deg is not None]
+        if placed and placed[0].lat_deg is not None and placed[0].lon_deg is not None:
+            origin = (placed[0].lat_deg, placed[0].lon_deg)
+    doc: dict[str, Any] = {
+        "version": version,
+        "origin": origin,
+        "now_unix_ns": now_ns,
+        "holes": [],
+        "track": [],
+        "vehicles": [],
+        "home": None,
+    }
     if origin is None:
         return doc
     frame = LocalFrame(*origin)
+    home = _home(state, track)
+    if home is not None:
+        doc["home"] = {
+            "lat_deg": home[0][0],
+            "lon_deg": home[0][1],
+            "xy": _place(frame, *home[0]),
+            "source": home[1],
+        }
+    doc["vehicles"] = _vehicles_document(state, frame, track, now_ns, footprint_every)
+    here = [
+        (v["sysid"], (v["lat_deg"], v["lon_deg"]))
+        for v in doc["vehicles"]
+        if v.get("lat_deg") is not None
+    ]
     for h in holes:
         e, n = frame.to_en(h.lat_deg, h.lon_deg)
         d = h.to_json()
@@ -95,6 +205,11 @@ def state_document(
             x=round(float(e), 3),
             y=round(float(n), 3),
             r95=round(CIRCLE_95_PER_SIGMA * h.sigma_h_m, 3) if h.sigma_h_m is not None else None,
+            mgrs=mgrs_text(h.lat_deg, h.lon_deg),
+            from_home=_range(home[0] if home else None, h.lat_deg, h.lon_deg),
+            from_vehicles=[
+                {"sysid": sid, **(_range(at, h.lat_deg, h.lon_deg) or {})} for sid, at in here
+            ],
             summary=hole_summary(h),
             picture=f"/cards/hole-{h.id}.jpg?rev={h.card_rev}" if h.has_picture else None,
             marked_by=(

@@ -26,12 +26,18 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument(
         "--mavlink",
         required=True,
-        help="the vehicle's stream: udpin:0.0.0.0:PORT, udpout:HOST:PORT, tcp:HOST:PORT, "
-        "or a serial device",
+        action="append",
+        help="the vehicles' stream: udpin:0.0.0.0:PORT, udpout:HOST:PORT, tcp:HOST:PORT, "
+        "or a serial device; repeat for several links (every vehicle heard on any of them "
+        "is followed, their holes merged into one id per opening)",
     )
     p.add_argument("--baud", type=int, default=57600, help="serial links only (default 57600)")
     p.add_argument("-o", "--out", type=Path, required=True, help="station folder")
-    p.add_argument("--sysid", type=int, help="the vehicle's system id (default: first heard)")
+    p.add_argument(
+        "--sysid",
+        type=int,
+        help="follow this vehicle's system id only (default: every vehicle heard)",
+    )
     p.add_argument(
         "--http",
         default="127.0.0.1:8080",
@@ -155,7 +161,8 @@ def run(args: argparse.Namespace) -> int:
     ):
         raise InputError("--tak-key, --tak-ca, --tak-password-file go with --tak-cert")
     opts = GroundOptions(
-        mavlink=args.mavlink,
+        mavlink=args.mavlink[0],
+        more_mavlink=tuple(args.mavlink[1:]),
         out=args.out,
         sysid=args.sysid,
         baud=args.baud,

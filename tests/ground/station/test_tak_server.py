@@ -83,7 +83,7 @@ def test_holes_through_taky_over_tcp(tmp_path: Path) -> None:
             vehicle.update_holes([h])
             link = station.link
             assert link is not None  # a STATUSTEXT is sent once: to a link that hears us
-            wait_for(lambda: link.sysid is not None, 30.0, "the station hearing the vehicle")
+            wait_for(lambda: bool(link.peers), 30.0, "the station hearing the vehicle")
             vehicle.announce(h)
             wait_for(lambda: reader.of(UID), 30.0, "hole 1 through taky")
             first = reader.of(UID)[0]
