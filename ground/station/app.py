@@ -62,8 +62,8 @@ class GroundOptions:
     http_host, http_port : the live page (port 0: any free one; None: no page).
     http_names : host names the page is served as besides its addresses (None: this
     machine's hostname and HOSTNAME.local; see
-    :func:`ground.station.guard.host_allowed`). cot_url : pytak COT_URL (None: no TAK). cot_tls : the client certificate for a ``tls://`` TAK server. cot_proto :
-    0 = CoT XML, 1 = TAK protocol v1 (protobuf, via takproto). station : name in the CoT
+    :func:`ground.station.guard.host_allowed`). cot_url : pytak COT_URL (None: no TAK).
+    cot_tls : the client certificate for a ``tls://`` TAK server. cot_proto : 0 = CoT XML, 1 = TAK protocol v1 (protobuf, via takproto). station : name in the CoT
     uids. cot_stale_s, cot_refresh_s : CoT stale time (from each sending) and re-send
     period, s. kml_refresh_s : Google Earth's NetworkLink reload period. overlay : a map
     overlay (``.kmz``) for the data package. signing : MAVLink 2 signing key shared with
