@@ -56,20 +56,20 @@ _log = logging.getLogger(__name__)
 class GroundOptions:
     """What ``holescan ground`` does.
 
-    mavlink : connection to the vehicles' stream; more_mavlink : further links (each
-    vehicle heard on any is followed; one picture). out : the station's folder (state,
-    pictures, files). sysid : follow this vehicle only (None: every vehicle heard).
-    http_host, http_port : the live page (port 0: any free one; None: no page).
-    http_names : host names the page is served as besides its addresses (None: this
-    machine's hostname and HOSTNAME.local; see
-    :func:`ground.station.guard.host_allowed`). cot_url : pytak COT_URL (None: no TAK).
-    cot_tls : the client certificate for a ``tls://`` TAK server. cot_proto : 0 = CoT XML, 1 = TAK protocol v1 (protobuf, via takproto). station : name in the CoT
+    mavlink : connection to the vehicles' stream; more_mavlink : further links (each vehicle
+    heard on any is followed; one picture). out : the station's folder (state, pictures,
+    files). sysid : follow this vehicle only (None: every vehicle heard). http_host,
+    http_port : the live page (port 0: any free one; None: no page). http_names : host names
+    the page is served as besides its addresses (None: this machine's hostname and
+    HOSTNAME.local; see :func:`ground.station.guard.host_allowed`). cot_url : pytak COT_URL
+    (None: no TAK). cot_tls : the client certificate for a ``tls://`` TAK server. cot_proto
+    : 0 = CoT XML, 1 = TAK protocol v1 (protobuf, via takproto). station : name in the CoT
     uids. cot_stale_s, cot_refresh_s : CoT stale time (from each sending) and re-send
     period, s. kml_refresh_s : Google Earth's NetworkLink reload period. overlay : a map
-    overlay (``.kmz``) for the data package. signing : MAVLink 2 signing key shared with
-    the vehicle (None: unsigned link). pair : operators to issue a pairing for at start
-    (:mod:`ground.station.pairing`; when the folder has none and none is asked for, one
-    for "operator 1").
+    overlay (``.kmz``) for the data package. signing : MAVLink 2 signing key shared with the
+    vehicle (None: unsigned link). pair : operators to issue a pairing for at start
+    (:mod:`ground.station.pairing`; when the folder has none and none is asked for, one for
+    "operator 1").
     """
 
     mavlink: str
