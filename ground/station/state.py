@@ -684,9 +684,7 @@ class StationState:
         h.score = max(v.score for v in h.vehicles)
         known = [v.p_hole for v in h.vehicles if v.p_hole is not None]
         h.p_hole = max(known) if known else None
-        h.vehicle_tier = (
-            "announced" if any(v.tier == "announced" for v in h.vehicles) else "review"
-        )
+        h.vehicle_tier = "announced" if any(v.tier == "announced" for v in h.vehicles) else "review"
         h.sightings = sum(v.sightings for v in h.vehicles)
         h.card_rev = sum(v.card_rev for v in h.vehicles)
         h.t_updated_unix_ns = self.clock()
