@@ -163,6 +163,8 @@ def fly(
                     log_message(msg, t_mono_ns)
                 if shared is not None:
                     shared.feed(msg)
+                elif server is not None:  # its own link: the vehicle's status goes along
+                    server.relay(msg)
 
             if shared is not None and cfg.signing is not None:
                 # One link carries the holes too: signed as the hole server's own link

@@ -160,6 +160,19 @@ def radio_budget(current: float, ceiling: float, txbuf_pct: int) -> float:
     return max(min(new, ceiling), min(_MIN_CARD_BYTES_PER_S, ceiling))
 
 
+RELAYED_S: dict[str, float] = {
+    "HEARTBEAT": 1.0,
+    "GLOBAL_POSITION_INT": 0.5,
+    "ATTITUDE": 0.5,
+    "SYS_STATUS": 2.0,
+    "BATTERY_STATUS": 2.0,
+    "HOME_POSITION": 10.0,
+    "MOUNT_ORIENTATION": 1.0,
+}
+"""The autopilot's messages :meth:`HoleMissionServer.relay` forwards on the server's own
+link, each at most once per this many seconds (about 250 B/s in all)."""
+
+
 class HoleMissionServer(MissionServer):
     """Live MAVLink mission server for found holes (a background thread).
 
@@ -230,6 +243,8 @@ class HoleMissionServer(MissionServer):
         self._card_revs: dict[int, int] = {}
         self.card_ceiling_bytes_per_s = card_bytes_per_s
         self.radio_status_seen = 0
+        self.relayed = 0
+        self._relayed_at: dict[tuple[int, int, str], float] = {}
         self._rebuild()
 
     # -- lifecycle -----------------------------------------------------------------------
@@ -329,6 +344,30 @@ class HoleMissionServer(MissionServer):
                     return True
             time.sleep(0.1)
         return False
+
+    def relay(self, msg: Any) -> bool:
+        """Forward an autopilot message (:data:`RELAYED_S`, at most that often) unchanged
+        on the server's own link (``connection_string``), so that a ground station on that
+        link sees the vehicle (position, attitude, mode, battery, home) without the
+        autopilot's radio, as the autopilot's routing would; True when sent. A server on
+        the autopilot's link (no own link) relays nothing: the autopilot routes."""
+        kind = msg.get_type()
+        period = RELAYED_S.get(kind)
+        if period is None or self.connection_string is None:
+            return False
+        key = (msg.get_srcSystem(), msg.get_srcComponent(), kind)
+        now = time.monotonic()
+        if now - self._relayed_at.get(key, -math.inf) < period:
+            return False
+        self._relayed_at[key] = now
+        buf = bytes(msg.get_msgbuf())
+        try:
+            self.send_with(lambda mav: mav.file.write(buf))
+        except (MissionError, OSError) as err:
+            _log.debug("relay of %s failed: %s", kind, err)
+            return False
+        self.relayed += 1
+        return True
 
     def _send_or_fail(self, fn: Any) -> None:
         try:

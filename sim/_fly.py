@@ -136,7 +136,9 @@ def fly_sim(
         report = fly(cfg, setup, stop=stop)
         return _report(report, cam.sources, cam.truth)
     key = cfg.signing.key if cfg.signing is not None else None  # the autopilot holds it
-    with SimSortie(params, mount=cfg.flight.mount, mavlink=cfg.mavlink, signing_key=key) as sortie:
+    with SimSortie(
+        params, mount=cfg.flight.mount, mavlink=cfg.mavlink, signing_key=key, sysid=cfg.sysid
+    ) as sortie:
         setup = SensorSetup(sortie.source, sortie.camera, sortie.mavlink)
         if not bench:
             require_go(cfg, setup)
@@ -159,7 +161,9 @@ def check_sim(
         setup = SensorSetup(cam.source, cam.camera, cfg.mavlink, on_telemetry=cam.attach)
         return preflight(cfg, setup, items=items)
     key = cfg.signing.key if cfg.signing is not None else None
-    with SimSortie(params, mount=cfg.flight.mount, mavlink=cfg.mavlink, signing_key=key) as sortie:
+    with SimSortie(
+        params, mount=cfg.flight.mount, mavlink=cfg.mavlink, signing_key=key, sysid=cfg.sysid
+    ) as sortie:
         setup = SensorSetup(sortie.source, sortie.camera, sortie.mavlink)
         return preflight(cfg, setup, items=items)
 

@@ -302,6 +302,7 @@ class SimSortie:
     world, path : reuse an already built world / path (they take seconds to build).
     signing_key : the simulated autopilot's MAVLink 2 signing key (32 bytes; None: unsigned),
         as a real autopilot holding the flight's key.
+    sysid : the simulated autopilot's MAVLink system id (``holescan fly --sysid``).
     """
 
     params: SortieParams = field(default_factory=SortieParams)
@@ -314,6 +315,7 @@ class SimSortie:
     sources: list[SimSource] = field(default_factory=list)
     autopilot: SimAutopilot | None = None
     signing_key: bytes | None = field(default=None, repr=False)
+    sysid: int = 1
 
     def __post_init__(self) -> None:
         if self.mavlink is None:
@@ -344,6 +346,7 @@ class SimSortie:
             eph_m=p.eph_m,
             seed=p.noise_seed,
             signing_key=self.signing_key,
+            sysid=self.sysid,
         )
         self.autopilot.__enter__()
         return self

@@ -34,6 +34,13 @@ def add_flight_arguments(p: argparse.ArgumentParser) -> None:
         help="serve found holes as a mission (component 191) and announce them by STATUSTEXT "
         "on this link, e.g. udpout:192.168.1.10:14550",
     )
+    p.add_argument(
+        "--sysid",
+        type=int,
+        help="the vehicle's MAVLink system id (1..255; the hole server is component 191 of "
+        "it; with --sensor sim also the simulated autopilot's, so two sorties can fly into "
+        "one ground station at once); default 1 or the config file's",
+    )
     p.add_argument("--duration", type=positive_float, help="stop after this many seconds")
     p.add_argument("--max-frames", type=int, help="stop after this many frames")
 
@@ -49,6 +56,7 @@ def fly_config(args: argparse.Namespace) -> FlyConfig:
             "mavlink": args.mavlink,
             "log_dir": args.log_dir,
             "gcs": args.gcs,
+            "sysid": args.sysid,
             "duration_s": args.duration,
             "max_frames": args.max_frames,
         },

@@ -67,6 +67,7 @@ const Review = (() => {
     return `<div class="hole mark-${h.mark} tier-${h.tier}${sel}" id="hole-${h.id}" data-id="${h.id}" data-mark="${h.mark}" data-tier="${h.tier}">${pic}<div>`
       + `<h3>hole ${h.id} &middot; <span class="badge tier-${h.tier}">${TIER_TEXT[h.tier] || esc(h.tier)}</span></h3>`
       + `<p>${facts(h)}</p>`
+      + `<p class="coord">${esc(h.mgrs || `${h.lat_deg.toFixed(7)}, ${h.lon_deg.toFixed(7)}`)}</p>`
       + `<p class="by">${byLine(h)}</p>`
       + `<div>${buttons(h)}</div></div></div>`;
   }

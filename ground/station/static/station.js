@@ -20,6 +20,11 @@ function draw() {
   for (const h of doc.holes) pts.push([h.x, h.y]);
   for (const t of doc.track) pts.push(t);
   for (const f of (doc.footprints || [])) for (const c of f) pts.push(c);
+  for (const v of (doc.vehicles || [])) {
+    if (v.xy) pts.push(v.xy);
+    for (const c of (v.footprint_now || [])) pts.push(c);
+  }
+  if (doc.home) pts.push(doc.home.xy);
   const ML = window.holescanMap;  // map layers (maplayers.js)
   if (ML) for (const c of ML.corners()) pts.push(c);
   let parts = [];
@@ -32,13 +37,40 @@ function draw() {
     const ox = (W - s * (x1 - x0)) / 2, oy = (H - s * (y1 - y0)) / 2;
     const X = x => ox + (x - x0) * s, Y = y => H - oy - (y - y0) * s;
     if (ML) parts.push(ML.svg(X, Y, s, doc, draw));
-    for (const f of (doc.footprints || [])) {
-      parts.push(`<polygon points="${f.map(c => X(c[0]) + "," + Y(c[1])).join(" ")}" fill="#90caf9" fill-opacity="0.12" stroke="#64b5f6" stroke-opacity="0.3" stroke-width="0.5"/>`);
+    const vehicles = doc.vehicles || [];
+    if (!vehicles.length) {  // a state document of an older station: one track
+      for (const f of (doc.footprints || [])) {
+        parts.push(`<polygon points="${f.map(c => X(c[0]) + "," + Y(c[1])).join(" ")}" fill="#90caf9" fill-opacity="0.12" stroke="#64b5f6" stroke-opacity="0.3" stroke-width="0.5"/>`);
+      }
+      if (doc.track.length > 1) {
+        parts.push(`<polyline class="track" points="${doc.track.map(p => X(p[0]) + "," + Y(p[1])).join(" ")}" fill="none" stroke="#1565c0" stroke-width="1.5"/>`);
+      }
     }
-    if (doc.track.length > 1) {
-      parts.push(`<polyline points="${doc.track.map(p => X(p[0]) + "," + Y(p[1])).join(" ")}" fill="none" stroke="#1565c0" stroke-width="1.5"/>`);
-      const last = doc.track[doc.track.length - 1];
-      parts.push(`<circle cx="${X(last[0])}" cy="${Y(last[1])}" r="5" fill="#1565c0"/>`);
+    const pts2 = cs => cs.map(c => X(c[0]) + "," + Y(c[1])).join(" ");
+    for (const v of vehicles) {  // each vehicle in its colour: where it looked, its track
+      for (const f of (v.footprints || [])) {
+        parts.push(`<polygon class="seen" points="${pts2(f)}" fill="${v.colour}" fill-opacity="0.08" stroke="${v.colour}" stroke-opacity="0.25" stroke-width="0.5"/>`);
+      }
+      if (v.track.length > 1) {
+        parts.push(`<polyline class="track" data-sysid="${v.sysid}" points="${pts2(v.track)}" fill="none" stroke="${v.colour}" stroke-width="1.5"/>`);
+      }
+    }
+    if (doc.home) {
+      const [hx, hy] = [X(doc.home.xy[0]), Y(doc.home.xy[1])];
+      parts.push(`<g class="home"><rect x="${hx - 7}" y="${hy - 7}" width="14" height="14" fill="#fff" stroke="#333"/>`
+        + `<text class="label" x="${hx - 4}" y="${hy + 4}">H</text></g>`);
+    }
+    for (const v of vehicles) {  // now: the camera's footprint and the vehicle, heading up
+      if (v.footprint_now) {
+        parts.push(`<polygon class="footprint-now" data-sysid="${v.sysid}" points="${pts2(v.footprint_now)}" fill="${v.colour}" fill-opacity="0.15" stroke="${v.colour}" stroke-width="1.5" stroke-dasharray="4 2"/>`);
+      }
+      if (v.xy) {
+        const [vx, vy] = [X(v.xy[0]), Y(v.xy[1])];
+        const hd = v.heading_deg || 0;
+        parts.push(`<g class="vehicle" data-sysid="${v.sysid}" transform="translate(${vx},${vy}) rotate(${hd})">`
+          + `<polygon points="0,-11 7,8 0,4 -7,8" fill="${v.colour}" stroke="#fff" stroke-width="1.5"/></g>`
+          + `<text class="label" x="${vx + 10}" y="${vy + 14}">${v.sysid}</text>`);
+      }
     }
     for (const h of doc.holes) {
       const c = h.mark === "new" && h.tier === "review" ? COL.review : (COL[h.mark] || COL.new);
@@ -57,6 +89,7 @@ function draw() {
   parts.push(`<g transform="translate(${W - 36},46)"><polygon points="0,-26 9,6 0,0 -9,6" fill="#333"/>`
     + `<text class="label" x="-5" y="22" font-weight="bold">N</text></g>`);
   svg.innerHTML = parts.join("");
+  if (typeof Locate !== "undefined") Locate.render(doc, Review.current());
 }
 
 // The pairing link (?token=...): taken out of the address bar and the tab's history at
@@ -114,8 +147,9 @@ async function refreshOnce() {
   document.getElementById("pairing").textContent = doc.paired
     ? `paired as ${doc.paired.operator} (${doc.paired.pairing})`
     : "read-only: open your pairing link to mark";
-  status.textContent = (doc.holes.length || doc.track.length)
-    ? `${doc.holes.length} holes, track ${doc.track.length} points, updated ${new Date().toLocaleTimeString()}`
+  const nv = (doc.vehicles || []).length;
+  status.textContent = (doc.holes.length || doc.track.length || nv)
+    ? `${doc.holes.length} holes, ${nv} vehicle${nv === 1 ? "" : "s"}, track ${doc.track.length} points, updated ${new Date().toLocaleTimeString()}`
     : "connected; waiting for the vehicle ...";
 }
 
@@ -153,5 +187,6 @@ document.getElementById("svg").addEventListener("click", ev => {
   if (g) Review.select(Number(g.dataset.hole));
 });
 Review.init();
+Locate.init();
 window.addEventListener("resize", () => doc && draw());
 pair().finally(() => { refresh(); listen(); });

@@ -1,0 +1,162 @@
+"""Two simulated drones, one station, one picture.
+
+Two ``holescan fly --sensor sim --sysid N --gcs udpout:...`` processes (system ids 1 and
+2, the same simulated world, each its own simulated autopilot; the hole server of each is
+component 191 of its system id and relays its autopilot's position, attitude and
+heartbeat on its own link) fly into one :class:`ground.GroundStation` listening on two
+links (``--mavlink`` twice). Checked, on the station's state and on the page in headless
+Chromium (1280 px):
+
+* both vehicles are followed, each with its own track, drawn in two colours;
+* the holes of both are on the page; every opening both reported is one hole whose
+  ``vehicles`` name both, with each one's own id; the station's ids are those the
+  class docstring of :class:`ground.StationState` gives (the first reporting vehicle's
+  ids; the other's first-found holes ``sysid * 1000000 + its id``);
+* no two station holes lie at one opening by the campaign's rule.
+
+The screenshot goes to ``HOLESCAN_ARTEFACTS`` (else the test's folder).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import urllib.request
+from pathlib import Path
+
+import pytest
+from test_station import wait_for
+from test_station_review import CHROMIUM, Browser
+
+from holescan.geotag import carry_ids
+from holescan.ground import GroundOptions, GroundStation
+from tests._support import free_udp_port
+
+ROOT = Path(__file__).resolve().parents[3]
+SIM_TOML = """
+sensor = "sim"
+[capture]
+startup_sync_s = 3.0
+[sim]
+size_m = [4.0, 4.0]
+world_seed = 15
+n_access_holes = 2
+fps = 8.0
+"""
+
+
+def _fly(cfg: Path, sysid: int, port: int, logs: Path, log: Path) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [
+            *(sys.executable, "-m", "holescan.cli", "fly", "--config", str(cfg)),
+            *("--sysid", str(sysid), "--gcs", f"udpout:127.0.0.1:{port}"),
+            *("--log-dir", str(logs), "--duration", "24", "--bench"),
+        ],
+        cwd=ROOT,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+        stdout=subprocess.PIPE,
+        stderr=open(log, "w"),  # noqa: SIM115 - closed with the process
+        text=True,
+    )
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(240)
+@pytest.mark.skipif(not CHROMIUM.exists(), reason="needs Debian chromium (/usr/bin/chromium)")
+def test_two_drones_one_station(tmp_path: Path) -> None:
+    art = Path(os.environ.get("HOLESCAN_ARTEFACTS", tmp_path))
+    art.mkdir(parents=True, exist_ok=True)
+    ports = free_udp_port(), free_udp_port()
+    opts = GroundOptions(
+        mavlink=f"udpin:127.0.0.1:{ports[0]}",
+        more_mavlink=(f"udpin:127.0.0.1:{ports[1]}",),
+        out=tmp_path / "station",
+        http_port=0,
+        cot_url=None,
+    )
+    cfg = tmp_path / "fly.toml"
+    cfg.write_text(SIM_TOML)
+    flies: list[subprocess.Popen[str]] = []
+    with GroundStation(opts) as station:
+        assert station.web is not None
+        try:
+            for sysid, port in zip((1, 2), ports, strict=True):
+                log = tmp_path / f"fly{sysid}.log"
+                flies.append(_fly(cfg, sysid, port, tmp_path / f"logs{sysid}", log))
+            for sysid, f in enumerate(flies, 1):
+                out, _ = f.communicate(timeout=180)
+                assert f.returncode == 0, (tmp_path / f"fly{sysid}.log").read_text()[-3000:]
+        finally:
+            for f in flies:
+                if f.poll() is None:
+                    f.send_signal(signal.SIGINT)
+                    f.wait(timeout=30)
+
+        def both_reported() -> bool:
+            _, holes, _ = station.state.snapshot()
+            return {v.sysid for h in holes for v in h.vehicles} == {1, 2}
+
+        wait_for(both_reported, 30.0, "holes of both vehicles")
+        _, holes, track = station.state.snapshot()
+        # both vehicles followed, each on its own link, each with its own track
+        assert {p.sysid for p in track} == {1, 2}
+        vehicles = {v.sysid: v for v in station.state.vehicle_snapshot()}
+        assert set(vehicles) == {1, 2}
+        assert vehicles[1].links == [opts.mavlink] and vehicles[2].links == list(opts.more_mavlink)
+        assert vehicles[1].mode and vehicles[1].armed is True
+        # one id per opening: the campaign's rule finds no two station holes at one opening
+        as_holes = [h.vehicles[0].as_hole(h.id) for h in holes]
+        for i, h in enumerate(as_holes):
+            others = as_holes[:i] + as_holes[i + 1 :]
+            m = carry_ids(others, [h])
+            assert not m.from_reference, f"hole {h.id} is at hole {m.ids[h.id]}'s opening"
+        shared = [h for h in holes if {v.sysid for v in h.vehicles} == {1, 2}]
+        assert shared, [(h.id, [(v.sysid, v.hole_id) for v in h.vehicles]) for h in holes]
+        primary = station.state.primary_sysid  # the first vehicle that reported a hole
+        assert primary in (1, 2)
+        for h in holes:
+            first = h.vehicles[0]
+            own = first.hole_id
+            want = own if first.sysid == primary else first.sysid * 1_000_000 + own
+            assert h.id == want, (h.id, h.vehicles)
+        # the page: holes of both, each vehicle's track in its own colour
+        with urllib.request.urlopen(station.web.url + "state.json", timeout=5) as r:
+            doc = json.loads(r.read())
+        colours = {v["sysid"]: v["colour"] for v in doc["vehicles"]}
+        assert set(colours) == {1, 2} and colours[1] != colours[2]
+        browser = Browser(tmp_path / "profile")
+        try:
+            page = browser.page(station.web.url)
+            wait_for(lambda: len(page.ids()) == len(holes), 20.0, "every hole on the page")
+            drawn = page.js(
+                "[...document.querySelectorAll('polyline.track')]"
+                ".map(e => e.dataset.sysid + ' ' + e.getAttribute('stroke'))"
+            )
+            assert sorted(drawn) == [f"1 {colours[1]}", f"2 {colours[2]}"]
+            listed = page.js(
+                "[...document.querySelectorAll('#vehicles .vehicle')].map(e => e.dataset.sysid)"
+            )
+            assert listed == ["1", "2"]
+            sid = shared[0].id
+            page.js(f"Review.select({sid})")
+            wait_for(
+                lambda: "vehicle 1" in page.js("document.getElementById('locate').textContent"),
+                10.0,
+                "the shared hole's vehicles in its panel",
+            )
+            text = page.js("document.getElementById('locate').textContent")
+            assert "vehicle 2" in text
+            page.screenshot(art / "ground-station-two-drones.png")
+        finally:
+            browser.close()
+    print(
+        "two drones:",
+        len(holes),
+        "holes,",
+        len(shared),
+        "seen by both:",
+        [(h.id, [(v.sysid, v.hole_id) for v in h.vehicles]) for h in holes],
+    )
