@@ -58,7 +58,7 @@ def _fly(cfg: Path, sysid: int, port: int, logs: Path, log: Path) -> subprocess.
         cwd=ROOT,
         env={**os.environ, "PYTHONPATH": str(ROOT)},
         stdout=subprocess.PIPE,
-        stderr=open(log, "w"),  # noqa: SIM115 - closed with the process
+        stderr=open(log, "w"),
         text=True,
     )
 
@@ -87,7 +87,7 @@ def test_two_drones_one_station(tmp_path: Path) -> None:
                 log = tmp_path / f"fly{sysid}.log"
                 flies.append(_fly(cfg, sysid, port, tmp_path / f"logs{sysid}", log))
             for sysid, f in enumerate(flies, 1):
-                out, _ = f.communicate(timeout=180)
+                f.communicate(timeout=180)
                 assert f.returncode == 0, (tmp_path / f"fly{sysid}.log").read_text()[-3000:]
         finally:
             for f in flies:
