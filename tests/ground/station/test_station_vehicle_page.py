@@ -63,7 +63,8 @@ class Autopilot:
             lat = HOME[0] + 2e-5 + 0.3e-5 * math.sin(t / 5)
             lon = HOME[1] + 3e-5
             if k % 4 == 0:
-                base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+                base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+                base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
                 mav.heartbeat_send(
                     mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, base, 4, 4
                 )
