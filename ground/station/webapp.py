@@ -6,6 +6,8 @@
   asker's pairing, or null); ``GET /cards/hole-<id>.jpg`` a hole's picture;
 * ``GET /events`` Server-Sent Events (:mod:`ground.station.events`);
 * ``GET /map.json``, ``GET /map/...`` the live map's layers (:mod:`ground.station.maplayers`);
+* ``GET /holes.geojson``, ``/gaps.geojson``, ``/holes.kml``, ``/holes_live.kml`` the live
+  layers for QGIS, CalTopo and Google Earth (:mod:`ground.station.feeds`), read-only;
 * ``POST /pair`` with ``Authorization: Bearer TOKEN``: the page checks a pairing link's
   token before it keeps anything; 200 ``{"pairing", "operator"}`` and the cookie
   ``holescan_pairing`` (``HttpOnly; SameSite=Strict``), or 401 with the reason;
@@ -36,6 +38,7 @@ from starlette.staticfiles import StaticFiles
 from holescan.errors import InputError
 from holescan.ground.station.audit import AuditError
 from holescan.ground.station.events import EventStream
+from holescan.ground.station.feeds import FEEDS
 from holescan.ground.station.guard import Limits
 from holescan.ground.station.maplayers import Reply
 from holescan.ground.station.pairing import Pairing, Pairings
@@ -64,6 +67,8 @@ class Site(Protocol):
     def card(self, hole_id: int) -> bytes: ...
 
     def map_reply(self, path: str, query: str) -> Reply | None: ...
+
+    def feed(self, path: str) -> bytes | None: ...
 
     def mark(self, hole_id: int, mark: str, pairing: Pairing, client: str) -> GroundHole: ...
 
@@ -131,6 +136,13 @@ def make_app(site: Site) -> Starlette:
         if code >= 400:
             return _text(code, body.decode("utf-8", "replace"))
         return Response(body, code, media_type=ctype)
+
+    async def feed(request: Request) -> Response:
+        path = request.url.path
+        body = await run_in_threadpool(site.feed, path)
+        if body is None:
+            return _text(404, "not found")
+        return Response(body, media_type=FEEDS[path])
 
     async def pair(request: Request) -> Response:
         p = site.pairings.check(_bearer(request))
@@ -205,6 +217,7 @@ def make_app(site: Site) -> Starlette:
         Route("/cards/hole-{hole_id}.jpg", card),
         Route("/map.json", map_layers),
         Route("/map/{rest:path}", map_layers),
+        *(Route(path, feed) for path in FEEDS),
         Route("/pair", pair, methods=["POST"]),
         Route("/holes/{hole_id}/mark", mark, methods=["POST"]),
     ]
