@@ -37,6 +37,7 @@ from pathlib import Path
 from urllib.parse import urlsplit
 
 from holescan.errors import InputError
+from holescan.ground.station.basemap import Basemap, open_basemap
 from holescan.ground.station.cot import hole_cot, hole_tier, on_tak, withdraw_cot
 from holescan.ground.station.datapackage import DATAPACKAGE_NAME, write_datapackage
 from holescan.ground.station.files import write_station_files
@@ -73,6 +74,7 @@ class GroundOptions:
     for "operator 1"). public_url : the station's address as the crew's devices reach it,
     ``http://HOST:PORT`` (the picture links in CoT and in the live feeds; None: the
     address the page is bound to, the primary LAN address when bound to 0.0.0.0).
+    basemaps : offline basemaps for the page (MBTiles, GeoTIFF; :mod:`ground.station.basemap`).
     """
 
     mavlink: str
@@ -94,6 +96,7 @@ class GroundOptions:
     overlay: Path | None = None
     pair: tuple[str, ...] = ()
     public_url: str | None = None
+    basemaps: tuple[Path, ...] = ()
 
     def check(self) -> None:
         """Raise InputError for options that cannot work together."""
@@ -131,6 +134,14 @@ class GroundStation:
     def __init__(self, opts: GroundOptions) -> None:
         self.opts = opts
         opts.check()  # the options first: a bad one creates nothing
+        self.basemaps: list[Basemap] = []
+        try:
+            for path in opts.basemaps:
+                self.basemaps.append(open_basemap(path))
+        except InputError:
+            for b in self.basemaps:
+                b.close()
+            raise
         self._tak = tak_settings(opts.cot_url, opts.cot_tls) if opts.cot_url is not None else None
         self.state = StationState.open(opts.out)
         self.map_store = MapStore.open(opts.out / "map")
@@ -151,6 +162,8 @@ class GroundStation:
 
     def __enter__(self) -> GroundStation:
         o = self.opts
+        for b in self.basemaps:
+            self._stack.callback(b.close)
         try:
             if o.http_port is not None:
                 self.web = self._stack.enter_context(
@@ -165,6 +178,7 @@ class GroundStation:
                         public_url=o.public_url,
                         vehicles=self._vehicles,
                         kml_refresh_s=o.kml_refresh_s,
+                        basemaps=self.basemaps,
                     )
                 )
                 names = list(o.pair) or ([] if self.pairings.all() else ["operator 1"])

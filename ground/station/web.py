@@ -25,17 +25,18 @@ import logging
 import math
 import socket
 import threading
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from typing import TYPE_CHECKING, Any
 from urllib.parse import urlsplit
 
 from holescan.errors import InputError
 from holescan.geotag import CIRCLE_95_PER_SIGMA, LocalFrame
 from holescan.ground.station.audit import AuditEntry, AuditTrail
+from holescan.ground.station.basemap import Basemap
 from holescan.ground.station.files import hole_summary
 from holescan.ground.station.guard import GuardMiddleware, Limits, RateLimiter, default_names
 from holescan.ground.station.mapcombine import CombinedCache
-from holescan.ground.station.maplayers import Reply, map_route
+from holescan.ground.station.maplayers import Reply, basemap_route, map_route
 from holescan.ground.station.mapstore import MapStore
 from holescan.ground.station.pairing import Pairing, Pairings
 from holescan.ground.station.state import MARKS, GroundHole, StationState
@@ -168,11 +169,13 @@ class StationWeb:
         public_url: str | None = None,
         vehicles: Callable[[GroundHole], list[int]] | None = None,
         kml_refresh_s: float = 5.0,
+        basemaps: Sequence[Basemap] = (),
     ) -> None:
         self.state = state
         self._public_url = public_url
         self.vehicles = vehicles or (lambda _h: [])
         self.kml_refresh_s = kml_refresh_s
+        self.basemaps = tuple(basemaps)
         self.map_store = map_store
         self._map_cache = CombinedCache(map_store) if map_store is not None else None
         self.on_mark = on_mark or state.mark
@@ -291,7 +294,10 @@ class StationWeb:
         return self.state.card_path(hole_id).read_bytes()
 
     def map_reply(self, path: str, query: str) -> Reply | None:
-        """The live map's answer to a GET of ``path`` (None: not a map path)."""
+        """The live map's or a basemap's answer to a GET of ``path`` (None: neither)."""
+        got = basemap_route(self.basemaps, path, query)
+        if got is not None:
+            return got
         return map_route(self.map_store, path, query, self._map_cache)
 
     def mark(self, hole_id: int, mark: str, pairing: Pairing, client: str) -> GroundHole:

@@ -57,6 +57,16 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "default: this machine's hostname and HOSTNAME.local); other names are refused",
     )
     p.add_argument(
+        "--basemap",
+        action="append",
+        default=[],
+        type=Path,
+        metavar="FILE",
+        help="an offline basemap for the live page (repeatable, switchable there): raster "
+        "tiles in an MBTiles file (.mbtiles), or a GeoTIFF (.tif) such as an earlier sortie's "
+        "or campaign's NAME_ortho.tif",
+    )
+    p.add_argument(
         "--public-url",
         metavar="URL",
         help="the station's address as the team's handhelds and laptops reach it, "
@@ -179,6 +189,7 @@ def run(args: argparse.Namespace) -> int:
         overlay=args.overlay,
         pair=tuple(args.pair),
         public_url=args.public_url,
+        basemaps=tuple(args.basemap),
         signing=(
             SigningKey.from_file(args.mavlink_key_file)
             if args.mavlink_key_file is not None
