@@ -69,6 +69,7 @@ from holescan.detect._geometry import (
 )
 from holescan.detect._photometry import relative_luminance, void_evidence
 from holescan.detect._regions import (
+    BAND_MAX_PX,
     SHALLOW_M,
     Candidate,
     basin_depth,
@@ -115,9 +116,8 @@ TERRAIN_PX = 6
 # DARK_CUT.
 DARK_CUT = 0.75
 DARK_SMOOTH_PX = 5
-# Unread border bands (options.bands: registered structured-light depth) are cut off the
-# frame; wider than this (frame pixels) an unread border area is the scene's, not a band.
-BAND_MAX_PX = 64
+# Unread border bands (options.bands: registered structured-light depth, at most
+# BAND_MAX_PX wide) are cut off the frame.
 # A basin cut by the frame border (or a band) is also looked at closed there
 # (options.closed_border), and, with a read floor, counts from this depth score (0 at the
 # first, 1 at the second; Sd 0.2 = 0.55 m below the bridged rim for a human searcher).
@@ -391,7 +391,8 @@ def detect_default(
         return []
     # The read area: the frame without its unread border bands (a hole the band cuts is
     # cut by the read area's border, its rim there unknown).
-    bands = unread_bands(z_full, max(1, round(BAND_MAX_PX / factor))) if o.bands else (0, 0, 0, 0)
+    max_px = max(1, round(BAND_MAX_PX / factor))
+    bands = unread_bands(np.isnan(z_full), max_px) if o.bands else (0, 0, 0, 0)
     left, top, right, bottom = bands
     hf, wf = z_full.shape
     z = z_full[top : hf - bottom, left : wf - right]
