@@ -43,7 +43,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 RANGE_EDGES = [1.5, 2.5, 3.0, 3.5, 4.0, 4.5]
 ANGLE_EDGES = [0.0, 15.0, 30.0, 45.0, 60.0]
-BORDER_EDGES = [0.0, 60.0, 140.0, float("inf")]
+BORDER_EDGES = [0.0, 80.0, float("inf")]
 RING = 0.3
 MIN_RING_PX = 200
 
