@@ -22,7 +22,7 @@ cannot be measured (counted and printed). Recall per (range, angle) bin is print
 count, per border bin; ``--write`` stores it as ``mapping/recall_table.json`` with its
 provenance (the command, datasets, counts and date). A bin measured on fewer than
 ``--min-holes`` views (default 15) takes the lower of its own recall and that of itself
-and its neighbours (range, angle and border) pooled; a bin with no view the lowest
+and its 8 range/angle neighbours at the same image position pooled; a bin with no view the lowest
 measured neighbour; both only when the neighbourhood holds ``--min-holes`` views, else 0:
 the map claims no coverage it has not measured. ``--rows FILE`` keeps the
 per-view measurements (a second run with the same file re-bins without detecting).
@@ -194,7 +194,9 @@ def main() -> None:
     # hold enough; a bin outside everything measured stays 0.
     table = np.zeros((nr, na, nb))
     for idx in np.ndindex(nr, na, nb):
-        sl = tuple(slice(max(0, i - 1), i + 2) for i in idx)
+        # Neighbours in range and angle, at the same image position (pooling across it
+        # would lend the interior's recall to the border).
+        sl = (slice(max(0, idx[0] - 1), idx[0] + 2), slice(max(0, idx[1] - 1), idx[1] + 2), idx[2])
         pn, pk = int(n[sl].sum()), int(k[sl].sum())
         pooled = pk / pn if pn >= a.min_holes else 0.0
         if n[idx] >= a.min_holes:
