@@ -23,7 +23,6 @@ once decompressed within bounds and its CRC checked, by mcap's
 from __future__ import annotations
 
 import dataclasses
-import datetime
 import io
 import os
 import struct
@@ -57,6 +56,7 @@ from holescan.flightlog.format import (
     parse_record,
     read_summary,
 )
+from holescan.utc import utc_text
 
 __all__ = ["DamagedRegion", "ScanState", "scan_records"]
 
@@ -104,10 +104,9 @@ class DamagedRegion:
 
 def _utc(t_unix_ns: int) -> str:
     try:
-        t = datetime.datetime.fromtimestamp(t_unix_ns / 1e9, datetime.UTC)
-    except (OverflowError, OSError, ValueError):
+        return utc_text(t_unix_ns)
+    except ValueError:
         return f"{t_unix_ns} ns"
-    return t.strftime("%Y-%m-%dT%H:%M:%S.%fZ")[:-4] + "Z"
 
 
 @dataclasses.dataclass

@@ -6,6 +6,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from holescan.errors import InputError
+from holescan.geotag import unit_quaternion
 from holescan.link._connection import mavlink
 from holescan.link._posebuffer import AttitudeSample, quat_from_euler
 from holescan.link._posevalidity import GpsFix, NavStatus, PositionSample
@@ -56,13 +58,13 @@ def attitude_from_attitude(msg: Any) -> AttitudeSample:
 def attitude_from_quaternion(msg: Any) -> AttitudeSample:
     """ATTITUDE_QUATERNION (ms, q1..q4 = w, x, y, z) -> :class:`AttitudeSample`."""
     q = (float(msg.q1), float(msg.q2), float(msg.q3), float(msg.q4))
-    norm = math.sqrt(sum(v * v for v in q))
-    if not norm > 0.0:
-        raise ValueError("ATTITUDE_QUATERNION with a zero quaternion")
-    w, x, y, z = (v / norm for v in q)
+    try:
+        unit = unit_quaternion(q)
+    except InputError as err:
+        raise ValueError(f"ATTITUDE_QUATERNION: {err}") from err
     return AttitudeSample(
         t_boot_ns=int(msg.time_boot_ms) * _NS_PER_MS,
-        quat_wxyz=(w, x, y, z),
+        quat_wxyz=unit,
         rate_frd=(float(msg.rollspeed), float(msg.pitchspeed), float(msg.yawspeed)),
     )
 
