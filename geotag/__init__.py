@@ -1,11 +1,13 @@
 """Geotagging (pure): detections + camera + vehicle pose -> hole positions; merging sightings."""
 
+from holescan.geotag._announce import AnnouncePolicy, HoleNews, Told
 from holescan.geotag._camera import (
     CameraMount,
     GimbalAttitude,
     dcm_from_euler,
     dcm_from_quaternion,
     rotation_ned_from_optical,
+    unit_quaternion,
 )
 from holescan.geotag._campose import R_ENU_NED, LocalCameraPose, camera_pose_local
 from holescan.geotag._confidence import (
@@ -59,6 +61,7 @@ __all__ = [
     "TIERS",
     "VEHICLE_TIERS",
     "AnnounceGate",
+    "AnnouncePolicy",
     "BestViews",
     "CameraMount",
     "ConfidenceModel",
@@ -67,6 +70,7 @@ __all__ = [
     "GimbalAttitude",
     "Hole",
     "HoleEvidence",
+    "HoleNews",
     "HolePipeline",
     "HoleSighting",
     "HoleTier",
@@ -78,6 +82,7 @@ __all__ = [
     "MergeParams",
     "PoseOf",
     "Tier",
+    "Told",
     "VehiclePose",
     "VehicleTier",
     "box_cut_by_border",
@@ -95,6 +100,7 @@ __all__ = [
     "project_to_pixel",
     "rotation_ned_from_optical",
     "same_opening_gate_m",
+    "unit_quaternion",
     "view_jpeg",
     "viewpoint_of",
 ]
