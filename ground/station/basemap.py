@@ -344,9 +344,8 @@ def view_tiles(
             lon_e, lat_n = lonlat_of_mercator(te, tn)
             e_sw, n_sw = frame.to_en(lat_s, lon_w)
             e_ne, n_ne = frame.to_en(lat_n, lon_e)
-            box = (round(float(e_sw), 3), round(float(n_sw), 3))
-            box += (round(float(e_ne), 3), round(float(n_ne), 3))
-            out.append((z, tx, ty, box))
+            x0_, y0_, x1_, y1_ = (round(float(v), 3) for v in (e_sw, n_sw, e_ne, n_ne))
+            out.append((z, tx, ty, (x0_, y0_, x1_, y1_)))
     return out
 
 
