@@ -4,7 +4,7 @@
 component 191 (MAV_COMP_ID_ONBOARD_COMPUTER) of the vehicle's system, so a ground station
 targeting that component (MAVProxy: ``--target-component 191``, then ``wp list`` /
 ``wp save FILE``) downloads one waypoint per hole, and announces each new or updated hole
-with a STATUSTEXT ``HOLE <id> <score> <lat> <lon>`` that every GCS shows. Holes for
+with a STATUSTEXT ``HOLE <id> p<p_hole> <lat> <lon>`` that every GCS shows. Holes for
 review (:meth:`geotag.AnnounceGate.tier`) are not in the mission: they get a STATUSTEXT
 ``REVIEW <id> ...`` and a card whose facts say ``"tier": "review"``, sent after the
 announced holes' cards under the same byte budget.
@@ -126,15 +126,17 @@ def hole_waypoints(
 
 
 def hole_statustext(hole: Hole, tier: str = "announced") -> str:
-    """``HOLE <id> <score> <lat> <lon>`` (``REVIEW ...`` for a hole sent for review) of
-    ``hole``, through the link's one codec (:func:`link.hole_text`).
+    """``HOLE <id> p<p_hole> <lat> <lon>`` (``REVIEW ...`` for a hole sent for review) of
+    ``hole``, with its hole-level ``p_hole``, through the link's one codec
+    (:func:`link.hole_text`).
 
     >>> from holescan.geotag import Hole
-    >>> h = Hole(3, 43.65331, -79.38312, 120.0, 0.5, 0.88, 4, 0, 10, 1, (0, 0, 9, 9), 1.0, 0.7)
+    >>> h = Hole(3, 43.65331, -79.38312, 120.0, 0.5, 0.88, 4, 0, 10, 1, (0, 0, 9, 9), 1.0, 0.7,
+    ...          p_hole=0.97)
     >>> hole_statustext(h), hole_statustext(h, "review")
-    ('HOLE 3 0.88 43.6533100 -79.3831200', 'REVIEW 3 0.88 43.6533100 -79.3831200')
+    ('HOLE 3 p0.97 43.6533100 -79.3831200', 'REVIEW 3 p0.97 43.6533100 -79.3831200')
     """
-    return hole_text(hole.id, hole.score, hole.lat_deg, hole.lon_deg, tier)
+    return hole_text(hole.id, hole.p_hole, hole.lat_deg, hole.lon_deg, tier)
 
 
 _MIN_CARD_BYTES_PER_S = 50.0
@@ -290,7 +292,7 @@ class HoleMissionServer(MissionServer):
             return self.receiver.mission
 
     def announce(self, hole: Hole, tier: str = "announced") -> str:
-        """Send STATUSTEXT ``HOLE <id> <score> <lat> <lon>`` (severity NOTICE), or for a
+        """Send STATUSTEXT ``HOLE <id> p<p_hole> <lat> <lon>`` (severity NOTICE), or for a
         hole for review ``REVIEW ...`` (severity INFO); return it."""
         text = hole_statustext(hole, tier)
         severity = mavlink.MAV_SEVERITY_NOTICE if tier == "announced" else mavlink.MAV_SEVERITY_INFO
