@@ -2,9 +2,9 @@
 
     python benchmarks/ablation.py DATASET [DATASET ...] [--workers N]
 
-Each row switches one design choice of the default detector (``detect/_default.py``,
-``_regions.py``, ``_geometry.py``, ``_photometry.py``) back to the simpler option
-(module constants, set in the worker processes) and evaluates every dataset.
+Each row switches one design choice of the default detector back to the simpler option (a
+field of ``DetectParams.options``, :class:`holescan.detect.DefaultOptions`, passed with the
+call) and evaluates every dataset.
 """
 
 from __future__ import annotations
@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import multiprocessing
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -20,52 +21,39 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 VARIANTS: dict[str, dict[str, Any]] = {
     "holescan default": {},
-    "no wall growing (box = deep region only)": {"GROW_PX": 0},
-    "no no-reading blobs (basins only)": {"NECK_RADII_PX": ()},
-    "no neck cutting (blobs as they are)": {"NECK_RADII_PX": (0,)},
-    "block valid at >= 25 % readings (not 5 %)": {"MIN_VALID_FRACTION": 0.25},
-    "minor axis = ellipse axis (no passable width)": {"PASSABLE_WIDTH": False},
-    "no light evidence at the range limit": {"RANGE_LIMIT_LIGHT": False},
-    "linear depth score (not sqrt)": {"DEPTH_EXPONENT": 1.0},
-    "no photometric evidence for no-reading regions": {"PHOTOMETRIC_EVIDENCE": False},
-    "no dark cut of spilled no-reading blobs": {"DARK_SPLIT": False},
-    "no hole-in-depression candidates": {"DEPRESSION_RATIO": 1e9},
-    "NMS without containment": {"CONTAINED": 9.0},
-    "occluding edges kept as rim": {"OCCLUDER_STEP_M": 1e9},
+    "no wall growing (box = deep region only)": {"grow_px": 0},
+    "no no-reading blobs (basins only)": {"neck_radii_px": ()},
+    "no neck cutting (blobs as they are)": {"neck_radii_px": (0,)},
+    "block valid at >= 25 % readings (not 5 %)": {"min_valid_fraction": 0.25},
+    "minor axis = ellipse axis (no passable width)": {"passable_width": False},
+    "no light evidence at the range limit": {"range_limit_light": False},
+    "linear depth score (not sqrt)": {"depth_exponent": 1.0},
+    "no photometric evidence for no-reading regions": {"photometric_evidence": False},
+    "no dark cut of spilled no-reading blobs": {"dark_split": False},
+    "no hole-in-depression candidates": {"depression_ratio": 1e9},
+    "NMS without containment": {"contained": 9.0},
+    "occluding edges kept as rim": {"occluder_step_m": 1e9},
+    "unread border bands not cut off (frame = read area)": {"bands": False},
+    "basins cut by the border spill (not closed)": {"closed_border": False},
 }
-
-
-def _init(overrides: dict[str, Any]) -> None:
-    import holescan.detect._default
-    import holescan.detect._geometry
-    import holescan.detect._photometry
-    import holescan.detect._regions
-
-    # The ablation switches are private module constants on purpose; set each where it lives.
-    d = holescan.detect
-    modules = (d._default, d._geometry, d._photometry, d._regions)
-    for k, v in overrides.items():
-        homes = [m for m in modules if hasattr(m, k)]
-        if not homes:
-            raise AttributeError(f"no detector module has the switch {k}")
-        for m in homes:
-            setattr(m, k, v)
-
 
 _DATASETS: dict[Path, Any] = {}
 
 
-def _one(job: tuple[Path, int]) -> tuple[int, list[tuple[int, tuple[float, ...], float]]]:
+def _one(
+    job: tuple[Path, int, dict[str, Any]],
+) -> tuple[int, list[tuple[int, tuple[float, ...], float]]]:
     from holescan.detect import DEFAULT, detect_holes
     from holescan.ground import load_dataset, load_image_pair
 
-    root, i = job
+    root, i, overrides = job
     if root not in _DATASETS:
         _DATASETS[root] = load_dataset(root)
     ds = _DATASETS[root]
     img = ds.images[i]
     rgb, depth = load_image_pair(ds, img)
-    dets = detect_holes(rgb, depth, ds.camera, DEFAULT)
+    params = replace(DEFAULT, options=replace(DEFAULT.options, **overrides))
+    dets = detect_holes(rgb, depth, ds.camera, params)
     return img.id, [(img.id, tuple(float(v) for v in d.box), d.score) for d in dets]
 
 
@@ -84,9 +72,9 @@ def main(argv: list[str] | None = None) -> int:
     ctx = multiprocessing.get_context("spawn")
     for name, overrides in VARIANTS.items():
         cells = []
-        with ctx.Pool(args.workers, initializer=_init, initargs=(overrides,)) as pool:
+        with ctx.Pool(args.workers) as pool:
             for root, ds in sets:
-                jobs = [(root, i) for i in range(len(ds.images))]
+                jobs = [(root, i, overrides) for i in range(len(ds.images))]
                 rows_all = pool.map(_one, jobs, chunksize=4)
                 dets = [ScoredBox(i, b, s) for _, rows in rows_all for i, b, s in rows]
                 gt = ground_truth(ds)

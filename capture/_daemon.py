@@ -24,29 +24,32 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import math
 import threading
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import replace
 from typing import Any
 
-from holescan.capture._flightrecords import (
-    FlightConfig,
-    FlightCounters,
-    FlightSummary,
-    close_quietly,
-    frames_with_timeout,
-)
+from holescan.capture._flightrecords import FlightConfig, FlightCounters, FlightSummary
+from holescan.capture._health import AutopilotSilent, FlightHealth, SensorFailed
 from holescan.capture._mavlink import Telemetry
+from holescan.capture._sensorloop import SensorRetry
+from holescan.capture._telemetrysupervisor import TelemetryFactory, TelemetrySupervisor
 from holescan.capture._worker import DetectionWorker, WorkerResult
-from holescan.capture.errors import ClockUnavailable, SensorError
 from holescan.detect import CameraIntrinsics, Frame, FrameSource
 from holescan.flightlog import FlightLogError
 from holescan.flightlog.diskspace import DiskSpace
 from holescan.flightlog.writer import FlightLogWriter
-from holescan.geotag import BestViews, Hole, HolePipeline, HoleView, Tier, VehiclePose, local_en_m
-from holescan.link import PoseInvalid, PoseUnavailable, TelemetryTimeoutError
+from holescan.geotag import (
+    AnnouncePolicy,
+    BestViews,
+    Hole,
+    HolePipeline,
+    HoleView,
+    Tier,
+    VehiclePose,
+)
+from holescan.link import PoseUnavailable
 
 log = logging.getLogger(__name__)
 
@@ -62,7 +65,15 @@ the tier of each hole in ``news`` (``announced``/``review``, :meth:`geotag.Annou
 
 
 class Flight:
-    """One capture run; see the module docstring. ``run()`` blocks until the end."""
+    """One capture run; see the module docstring. ``run()`` blocks until the end.
+
+    Its parts: the sensor and its retries (:class:`~capture._sensorloop.SensorRetry`), the
+    autopilot link, its clocks and poses
+    (:class:`~capture._telemetrysupervisor.TelemetrySupervisor`), what the ground is told
+    (:class:`geotag.AnnouncePolicy`), the ``/health`` records
+    (:class:`~capture._health.FlightHealth`). The flight wires them together and runs them
+    from start to end.
+    """
 
     def __init__(
         self,
@@ -71,7 +82,7 @@ class Flight:
         camera: CameraIntrinsics,
         *,
         mavlink: str | None = None,
-        telemetry_factory: Callable[..., Telemetry] = Telemetry,
+        telemetry_factory: TelemetryFactory = Telemetry,
         usb_reset: Callable[[], None] | None = None,
         on_holes: HoleListener | None = None,
         before_close: Callable[[], None] | None = None,
@@ -82,10 +93,6 @@ class Flight:
         self._disk = disk
         self._on_frame_hook = on_frame
         self.camera = camera
-        self._source_factory = source_factory
-        self._mavlink = mavlink
-        self._telemetry_factory = telemetry_factory
-        self._usb_reset = usb_reset
         self._on_holes = on_holes
         self._before_close = before_close  # e.g. the last pictures out on the shared link
         self.counters = FlightCounters()
@@ -93,52 +100,46 @@ class Flight:
         self.tracker = self.hole_pipeline.tracker
         self.stop = threading.Event()
         self._writer: FlightLogWriter | None = None
-        self._telemetry: Telemetry | None = None
         self._worker: DetectionWorker | None = None
-        self._announced: dict[int, tuple[float, float, float]] = {}
-        self._reviewed: dict[int, tuple[float, float, float]] = {}
+        self._link = TelemetrySupervisor(
+            mavlink,
+            telemetry_factory,
+            on_message=self._on_mavlink,
+            on_silent=self._on_autopilot_silent,
+        )
+        self._sensor = SensorRetry(
+            source_factory,
+            frame_timeout_s=config.frame_timeout_s,
+            backoff_s=config.retry_backoff_s,
+            usb_reset=usb_reset,
+            on_failure=self._on_sensor_failed,
+            on_reopen=self._on_sensor_reopen,
+        )
         self._gate = config.gate
+        self._policy = AnnouncePolicy(self._gate)
         self._views = BestViews()
         self._lock = threading.Lock()
-        self._unix_minus_mono = time.time_ns() - time.monotonic_ns()
         self._finished = False  # ended by a limit or the source's end, not by a stop
-        self.invalid = ""  # why the last frame refused as PoseInvalid was
 
-    # -- clocks ---------------------------------------------------------------------------
+    # -- clocks (the autopilot link's) --------------------------------------------------------
+
+    @property
+    def invalid(self) -> str:
+        """Why the last frame refused as :class:`link.PoseInvalid` was."""
+        return self._link.invalid
 
     def unix_ns(self, t_mono_ns: int) -> int:
         """Unix time of a companion monotonic time: the autopilot's UTC when known."""
-        tel = self._telemetry
-        if tel is not None:
-            try:
-                return tel.clock.mono_to_unix_ns(t_mono_ns)
-            except ClockUnavailable:
-                pass
-        return t_mono_ns + self._unix_minus_mono
+        return self._link.unix_ns(t_mono_ns)
 
     def pose(
         self, t_mono_ns: int, wait_s: float = 0.0, invalid: list[str] | None = None
     ) -> VehiclePose | None:
-        """The vehicle pose at a frame time, or None: no telemetry, not synchronised, or a
-        position the autopilot does not have (:class:`PoseInvalid`: no fix, EKF without a
-        position, 0/0, a jump; the reason appended to ``invalid``, kept in :attr:`invalid`)."""
-        tel = self._telemetry
-        if tel is None:
-            return None
-        try:
-            return tel.pose_at_mono(t_mono_ns, wait_s=wait_s)
-        except PoseInvalid as err:
-            if str(err) != self.invalid:
-                log.info("frames not posed: %s", err)
-            self.invalid = str(err)
-            if invalid is not None:
-                invalid.append(str(err))
-            return None
-        except PoseUnavailable as err:
-            log.debug("frame at mono %d not posed: %s", t_mono_ns, err)
-            return None
+        """The vehicle pose at a frame time, or None
+        (:meth:`~capture._telemetrysupervisor.TelemetrySupervisor.pose`)."""
+        return self._link.pose(t_mono_ns, wait_s=wait_s, invalid=invalid)
 
-    # -- telemetry --------------------------------------------------------------------------
+    # -- events of the parts, to the log ------------------------------------------------------
 
     def _on_mavlink(self, msg: Any, t_mono_ns: int) -> None:
         writer = self._writer
@@ -149,12 +150,25 @@ class Flight:
             writer.write_mavlink(msg.get_msgbuf(), t_unix, msg.get_type())
         except Exception as err:  # never let logging kill the receiver thread
             log.debug("raw MAVLink not logged: %s", err)
-        if msg.get_type() == "GLOBAL_POSITION_INT" and self._telemetry is not None:
+        tel = self._link.telemetry
+        if msg.get_type() == "GLOBAL_POSITION_INT" and tel is not None:
             try:
-                pose = self._telemetry.pose_at(int(msg.time_boot_ms) * 1_000_000)
+                pose = tel.pose_at(int(msg.time_boot_ms) * 1_000_000)
             except PoseUnavailable:
                 return
             writer.write_pose(pose, t_unix)
+
+    def _on_autopilot_silent(self, event: AutopilotSilent) -> None:
+        if self._writer is not None:
+            self._writer.write_health(event.record())
+
+    def _on_sensor_failed(self, event: SensorFailed) -> None:
+        self.counters.sensor_failures += 1
+        if self._writer is not None:
+            self._writer.write_health(event.record())
+
+    def _on_sensor_reopen(self) -> None:
+        self.counters.sensor_reopens += 1
 
     # -- results ----------------------------------------------------------------------------
 
@@ -163,11 +177,6 @@ class Flight:
         # time, so the tracker sees (and the log records) the results in one order.
         with self._lock:
             self._handle_result_locked(r)
-
-    def _tiers(self, holes: list[Hole]) -> tuple[list[Hole], dict[int, Tier]]:
-        """The holes to serve, and every hole's tier (the gate's select and review)."""
-        served = self._gate.select(holes, announced=self._announced)
-        return served, self._gate.tiers(holes, announced=self._announced)
 
     def _handle_result_locked(self, r: WorkerResult) -> None:
         assert self._writer is not None
@@ -197,77 +206,31 @@ class Flight:
         if not changed:
             return
         holes = self.tracker.holes()
-        served, now = self._tiers(holes)
+        served, now = self._policy.tiers(holes)
         self._writer.write_holes(holes, self.unix_ns(r.t_mono_ns), now, self._gate)
         self._views.update(r.frame_index, r.detections, changed)
-        tiers: dict[int, Tier] = {}
-        news = []
-        for h in changed:
-            tier = now[h.id]
-            if tier != "candidate" and self._worth_telling(h, tier):
-                tiers[h.id] = tier
-                news.append(h)
-        for h in news:
-            if tiers[h.id] == "announced":
-                self._announced[h.id] = (h.lat_deg, h.lon_deg, h.score)
+        news = self._policy.tell(changed, now)
+        for n in news:
+            if n.tier == "announced":
                 c.announcements += 1
             else:
-                self._reviewed[h.id] = (h.lat_deg, h.lon_deg, h.score)
                 c.reviews += 1
         if self._on_holes is not None and news:
-            views = {h.id: v for h in news if (v := self._views.get(h.id)) is not None}
-            self._on_holes(served, news, views, tiers)
+            told = [n.hole for n in news]
+            views = {h.id: v for h in told if (v := self._views.get(h.id)) is not None}
+            tiers: dict[int, Tier] = {n.hole.id: n.tier for n in news}
+            self._on_holes(served, told, views, tiers)
 
-    def _worth_telling(self, h: Hole, tier: Tier) -> bool:
-        """New to the ground in this tier, moved more than 0.5 m or its score rose by 0.05
-        since the ground was last told (a hole for review that becomes announced is told
-        again)."""
-        last = (self._announced if tier == "announced" else self._reviewed).get(h.id)
-        if last is None:
-            return True
-        east, north = local_en_m(h.lat_deg, h.lon_deg, last[0], last[1])
-        return bool(math.hypot(east, north) > 0.5 or h.score > last[2] + 0.05)
-
-    def _health(self) -> dict[str, Any]:
+    def _health(self) -> FlightHealth:
         assert self._writer is not None and self._worker is not None
-        ws = self._worker.stats()
-        ls = self._writer.stats()
-        c = self.counters
-        out: dict[str, Any] = {
-            "frames_captured": c.frames_captured,
-            "frames_logged": ls.written.get("frames", 0),
-            "frames_log_dropped": ls.dropped.get("frames", 0),
-            "log_queue_depth": ls.queue_depth,
-            "detect_offered": ws.offered,
-            "detect_skipped": ws.skipped,
-            "detect_done": ws.done,
-            "detect_ms_mean": c.detect_ms_total / max(c.frames_detected, 1),
-            "detect_errors": c.detect_errors,
-            "frames_no_depth": c.frames_no_depth,
-            "frames_unposed": c.frames_unposed,
-            "pose_refusals": c.pose_refusals,
-            "pose_invalid": c.pose_invalid,
-            "pose_invalid_why": self.invalid,
-            "sensor_failures": c.sensor_failures,
-            "holes": len(self.tracker.holes()),
-        }
-        tel = self._telemetry
-        if tel is not None:
-            ts = tel.stats()
-            out.update(
-                mavlink_bad_bytes=ts.bad_bytes,
-                mavlink_bad_packets=ts.bad_packets,
-                mavlink_age_s=tel.last_message_age_s(),
-                clock_source=tel.clock.source,
-                # autopilot_mode, _armed, _mode_changes: recorded; no behaviour depends on them
-                **{f"autopilot_{k}": v for k, v in ts.vehicle.items()},
-            )
-            with contextlib.suppress(ClockUnavailable):
-                out.update(
-                    clock_offset_ns=tel.clock.offset_ns,
-                    clock_uncertainty_ns=tel.clock.uncertainty_ns,
-                )
-        return out
+        return FlightHealth.of(
+            self.counters,
+            self._writer.stats(),
+            self._worker.stats(),
+            holes=len(self.tracker.holes()),
+            pose_invalid_why=self.invalid,
+            telemetry=self._link.telemetry,
+        )
 
     def _results_loop(self, done: threading.Event) -> None:
         assert self._worker is not None and self._writer is not None
@@ -280,7 +243,7 @@ class Flight:
                 except Exception:  # a bad record must not stop the flight
                     log.exception("handling detections of frame %d failed", r.frame_index)
             if time.monotonic() >= next_health:
-                self._writer.write_health(self._health())
+                self._writer.write_health(self._health().record())
                 next_health += self.config.health_period_s
             if finished:
                 return
@@ -295,12 +258,7 @@ class Flight:
         pose = self.pose(frame.t_mono_ns)
         if pose is None:
             c.frames_unposed += 1
-        t_boot = None
-        if self._telemetry is not None:
-            try:
-                t_boot = self._telemetry.clock.mono_to_boot_ns(frame.t_mono_ns)
-            except ClockUnavailable:
-                t_boot = None
+        t_boot = self._link.boot_ns(frame.t_mono_ns)
         if not self._writer.write_frame(
             frame, self.unix_ns(frame.t_mono_ns), pose=pose, t_boot_ns=t_boot
         ):
@@ -315,37 +273,15 @@ class Flight:
 
     def _capture(self, t_end: float | None) -> None:
         cfg = self.config
-        attempt = 0
-        while not self.stop.is_set():
-            try:
-                source = self._source_factory()
-                source.__enter__()
-            except SensorError as err:
-                self._sensor_failed(err, attempt)
-                attempt += 1
-                continue
-            try:
-                for frame in frames_with_timeout(source, cfg.frame_timeout_s, self.stop):
-                    attempt = 0
-                    self._on_frame(frame)
-                    if (
-                        cfg.max_frames is not None
-                        and self.counters.frames_captured >= cfg.max_frames
-                    ):
-                        self._finish()
-                    if t_end is not None and time.monotonic() >= t_end:
-                        self._finish()
-                close_quietly(source)
-                if not self.stop.is_set():
-                    self._finished = True  # the recording ended by itself
-                return  # end of the recording
-            except SensorError as err:
-                close_quietly(source)
-                self._sensor_failed(err, attempt)
-                attempt += 1
-            except BaseException:
-                close_quietly(source)
-                raise
+        with contextlib.closing(self._sensor.frames(self.stop)) as frames:
+            for frame in frames:
+                self._on_frame(frame)
+                if cfg.max_frames is not None and self.counters.frames_captured >= cfg.max_frames:
+                    self._finish()
+                if t_end is not None and time.monotonic() >= t_end:
+                    self._finish()
+        if not self.stop.is_set():
+            self._finished = True  # the recording ended by itself
 
     def _finish(self) -> None:
         """A limit was reached: the flight ends normally (the detector gets time to catch
@@ -353,63 +289,7 @@ class Flight:
         self._finished = True
         self.stop.set()
 
-    def _sensor_failed(self, err: SensorError, attempt: int) -> None:
-        c = self.counters
-        c.sensor_failures += 1
-        wait = self.config.retry_backoff_s[min(attempt, len(self.config.retry_backoff_s) - 1)]
-        log.warning("sensor failure (%s); reopening in %.1f s", err, wait)
-        if self._writer is not None:
-            self._writer.write_health(
-                {"event": "sensor_failure", "error": str(err), "retry_in_s": wait}
-            )
-        if self._usb_reset is not None:
-            try:
-                self._usb_reset()
-            except SensorError as reset_err:
-                log.warning("USB reset failed: %s", reset_err)
-        self.stop.wait(wait)
-        c.sensor_reopens += 1
-
-    def _start_telemetry(self, sync_s: float) -> None:
-        """Connect to the autopilot; if it is silent, capture anyway and keep trying (a link
-        that cannot be opened at all, e.g. a bad connection string, is an error)."""
-        assert self._mavlink is not None
-        try:
-            tel = self._telemetry_factory(self._mavlink, on_message=self._on_mavlink)
-            tel.__enter__()
-        except TelemetryTimeoutError as err:
-            log.warning("%s; capturing unposed frames and retrying the link", err)
-            if self._writer is not None:
-                self._writer.write_health({"event": "autopilot_silent", "error": str(err)})
-            threading.Thread(
-                target=self._retry_telemetry, name="telemetry-retry", daemon=True
-            ).start()
-            return
-        self._telemetry = tel
-        self._wait_for_sync(sync_s)
-
-    def _retry_telemetry(self) -> None:
-        assert self._mavlink is not None
-        while not self.stop.is_set():
-            try:
-                tel = self._telemetry_factory(self._mavlink, on_message=self._on_mavlink)
-                tel.__enter__()
-            except TelemetryTimeoutError:
-                continue  # each attempt already waited for a heartbeat
-            if self.stop.is_set():
-                tel.close()
-                return
-            self._telemetry = tel
-            log.info("autopilot link up: frames are posed from now on")
-            return
-
-    def _wait_for_sync(self, timeout_s: float) -> None:
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline and not self.stop.is_set():
-            if self.pose(time.monotonic_ns()) is not None:
-                return
-            time.sleep(0.05)
-        log.warning("no synchronised pose after %.1f s; capturing anyway", timeout_s)
+    # -- lifecycle --------------------------------------------------------------------------
 
     def run(self) -> FlightSummary:
         """Capture until the source ends, a limit is reached or :attr:`stop` is set."""
@@ -436,8 +316,7 @@ class Flight:
         results_thread: threading.Thread | None = None
         telemetry_stats: dict[str, Any] = {}
         try:
-            if self._mavlink:
-                self._start_telemetry(cfg.startup_sync_s)
+            self._link.start(self.stop, cfg.startup_sync_s)
             with DetectionWorker(self.camera, cfg.params) as worker:
                 self._worker = worker
                 results_thread = threading.Thread(
@@ -455,17 +334,9 @@ class Flight:
                     results_thread.join(timeout=5.0)
                     stats = worker.stats()
                     log.debug("capture ended; results drained in %.2f s", time.monotonic() - t_stop)
-            if self._telemetry is not None:
-                ts = self._telemetry.stats()
-                telemetry_stats = {
-                    "messages": dict(ts.messages),
-                    "bad_bytes": ts.bad_bytes,
-                    "bad_packets": ts.bad_packets,
-                    "rate_method": ts.rate_method,
-                    "clock_source": self._telemetry.clock.source,
-                }
+            telemetry_stats = self._link.summary()
             final = self.tracker.holes()
-            writer.write_holes(final, time.time_ns(), self._tiers(final)[1], self._gate)
+            writer.write_holes(final, time.time_ns(), self._policy.tiers(final)[1], self._gate)
         finally:
             if deadline is not None:
                 deadline.cancel()
@@ -476,8 +347,7 @@ class Flight:
                     self._before_close()
                 except Exception:  # the flight's end must not fail on it
                     log.exception("before-close hook failed")
-            if self._telemetry is not None:
-                self._telemetry.close()
+            self._link.close()
             try:
                 writer.close()
             except FlightLogError as err:  # disk full, I/O error: the summary says so

@@ -1,24 +1,15 @@
-"""The flight daemon's records (settings, counters, summary) and the frame pump that
-turns a silent sensor into a :class:`SensorError`."""
+"""The flight daemon's records: its settings, counters and summary."""
 
 from __future__ import annotations
 
-import logging
 import math
-import queue
-import threading
-import time
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from holescan.capture.errors import SensorError
-from holescan.detect import DEFAULT, DetectParams, Frame, FrameSource
+from holescan.detect import DEFAULT, DetectParams
 from holescan.flightlog.options import LogOptions, WriterStats
 from holescan.geotag import AnnounceGate, CameraMount, ErrorModel, Hole
-
-log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -109,64 +100,3 @@ class FlightSummary:
     @property
     def frames_logged(self) -> int:
         return int(self.log.written.get("frames", 0))
-
-
-_END = object()
-
-
-def frames_with_timeout(
-    source: FrameSource, timeout_s: float, stop: threading.Event
-) -> Iterator[Frame]:
-    """Iterate ``source`` in a pump thread; raise :class:`SensorError` on a stall or fault."""
-    q: queue.Queue[Any] = queue.Queue(maxsize=8)
-
-    def pump() -> None:
-        try:
-            for frame in source:
-                while not stop.is_set():
-                    try:
-                        q.put(frame, timeout=0.1)
-                        break
-                    except queue.Full:
-                        continue
-                if stop.is_set():
-                    return
-            q.put(_END)
-        except BaseException as exc:  # handed to the capture thread, which decides
-            q.put(exc)
-
-    threading.Thread(target=pump, name="frame-pump", daemon=True).start()
-    last = time.monotonic()
-    while not stop.is_set():
-        try:
-            item = q.get(timeout=0.1)
-        except queue.Empty:
-            if time.monotonic() - last > timeout_s:
-                raise SensorError(f"no frame from the sensor for {timeout_s:.1f} s") from None
-            continue
-        last = time.monotonic()
-        if item is _END:
-            return
-        if isinstance(item, SensorError):
-            raise item
-        if isinstance(item, Exception) and not isinstance(item, ValueError):
-            raise SensorError(f"sensor failed: {type(item).__name__}: {item}") from item
-        if isinstance(item, BaseException):
-            raise item
-        yield item
-
-
-def close_quietly(source: FrameSource, timeout_s: float = 3.0) -> None:
-    """Close a (possibly hung) source without letting it hang the flight."""
-
-    def close() -> None:
-        try:
-            source.__exit__(None, None, None)
-        except Exception as err:
-            log.warning("closing the sensor failed: %s", err)
-
-    t = threading.Thread(target=close, name="sensor-close", daemon=True)
-    t.start()
-    t.join(timeout_s)
-    if t.is_alive():
-        log.warning("sensor did not close in %.0f s; abandoning it", timeout_s)

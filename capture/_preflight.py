@@ -46,7 +46,6 @@ from typing import Any, Final
 
 import numpy as np
 
-from holescan.capture._flightrecords import close_quietly, frames_with_timeout
 from holescan.capture._flyconfig import FlyConfig
 from holescan.capture._mavlink import COMPANION_COMPONENT, Telemetry
 from holescan.capture._preflightitems import (
@@ -56,6 +55,7 @@ from holescan.capture._preflightitems import (
     mount_item,
     signing_item,
 )
+from holescan.capture._sensorloop import close_quietly, frames_with_timeout
 from holescan.capture._sensorsetup import SensorSetup, open_sensor
 from holescan.capture.errors import CaptureError, SensorError
 from holescan.errors import HolescanError

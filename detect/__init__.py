@@ -18,8 +18,9 @@ from holescan.detect._evaluate import (
     match_image,
 )
 from holescan.detect._frame import Frame, FrameSource
+from holescan.detect._options import DefaultOptions
 from holescan.detect._paper import detect_paper, paper_superpixels
-from holescan.detect._scores import luminance, ramp
+from holescan.detect._scores import combined_score, luminance, ramp
 from holescan.detect._types import (
     DEFAULT,
     DOG,
@@ -43,6 +44,7 @@ __all__ = [
     "ROBOT",
     "SEARCHERS",
     "CameraIntrinsics",
+    "DefaultOptions",
     "DetectParams",
     "Detection",
     "FeatureScores",
@@ -55,6 +57,7 @@ __all__ = [
     "Searcher",
     "basin_labels",
     "box_iou",
+    "combined_score",
     "detect_baseline",
     "detect_holes",
     "detect_paper",

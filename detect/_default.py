@@ -37,10 +37,11 @@ the *basins* of the depth image instead, found at every scale at once:
    outline bordered by rim the sensor saw (not the border, no unread pixels, no nearer
    edge).
 5. The five attribute scores of the paper are kept (so a rescuer sees *why*), but combined so
-   that geometry is necessary: ``score = sqrt(Sd) * Sw * (0.35 + 0.65 Sr) * (0.85 + 0.15
-   max(Sb, Sc))``, times ``0.2 + 0.8 V`` for a region without floor readings, V the
-   photometric void evidence (1 when its unread pixels are much darker than the rubble
-   around them, 0 when as bright or brighter: sheet metal, a puddle, a tarp). A dark stain or
+   that geometry is necessary (:func:`detect._scores.combined_score`: ``sqrt(Sd) * Sw *
+   (0.35 + 0.65 Sr) * (0.85 + 0.15 max(Sb, Sc))``), times ``0.2 + 0.8 V`` for a region
+   without floor readings, V the photometric void evidence (1 when its unread pixels are
+   much darker than the rubble around them, 0 when as bright or brighter: sheet metal, a
+   puddle, a tarp). A dark stain or
    a shadow has no depth and never becomes a candidate; a shallow dip scores low on Sd, a
    crack or a small hole low on Sw. Overlapping boxes, and boxes holding a better one, are
    suppressed (NMS). ``p_hole`` maps the score to a probability (:mod:`detect._calibration`).
@@ -57,7 +58,6 @@ import numpy.typing as npt
 from holescan.detect._calibration import p_hole_of_score
 from holescan.detect._evaluate import overlap
 from holescan.detect._geometry import (
-    GROW_PX,
     disk,
     grow_walls,
     measure_opening,
@@ -78,7 +78,13 @@ from holescan.detect._regions import (
     no_reading_regions,
     unread_bands,
 )
-from holescan.detect._scores import contrast_score, darkness_score, ramp, width_score
+from holescan.detect._scores import (
+    combined_score,
+    contrast_score,
+    darkness_score,
+    ramp,
+    width_score,
+)
 from holescan.detect._types import CameraIntrinsics, Detection, DetectParams, FeatureScores
 from holescan.detect._validate import check_frame
 
@@ -93,42 +99,32 @@ __all__ = [
 
 # A candidate needs this fraction of its rim to be valid readings (not border, not no-reading).
 MIN_RIM_VALID = 0.6
-# Switches for the ablation study (benchmarks/ablation.py); all on in holescan.
-PASSABLE_WIDTH = True  # minor axis = min(ellipse axis, largest inscribed disk)
-RANGE_LIMIT_LIGHT = True  # no-reading regions at the range limit: darkness as depth evidence
-# Score = Sd^DEPTH_EXPONENT * Sw * shape * light (see the module docstring).
-DEPTH_EXPONENT = 0.5
+# The design choices the ablation study switches off are fields of DetectParams.options
+# (detect._options.DefaultOptions), passed down the call.
 # Openings larger than this (major axis, m) are broad terrain, not holes: width score fades.
 OVERSIZE_START_M = 3.5
 OVERSIZE_END_M = 6.0
 RING_PX = 2
 # An opening cut by the image border is placed at the centre of the circle through its seen
-# rim rather than at the centroid of its visible part (benchmarks/bench_geotag.py).
-CUT_CIRCLE = True
-# ... on the plane of the terrain read this many work pixels beyond its ring (the ring alone
-# runs along the near rim and the top of the far wall: two lines, and a plane leaning into
-# the hole through both).
+# rim (options.cut_circle; benchmarks/bench_geotag.py) on the plane of the terrain read this
+# many work pixels beyond its ring (the ring alone runs along the near rim and the top of
+# the far wall: two lines, and a plane leaning into the hole through both).
 TERRAIN_PX = 6
-# NMS: a detection is dropped when this much of a better one's box lies inside its box.
-CONTAINED = 0.8
-# Also measure the dark part of spilled no-reading blobs (see detect_default).
-DARK_SPLIT = True
-# The cut: relative luminance (box-averaged over DARK_SMOOTH_PX work pixels against shot
-# noise in dark frames) below DARK_CUT.
+# The dark part of spilled no-reading blobs (options.dark_split): relative luminance
+# (box-averaged over DARK_SMOOTH_PX work pixels against shot noise in dark frames) below
+# DARK_CUT.
 DARK_CUT = 0.75
 DARK_SMOOTH_PX = 5
-# Unread border bands (registered structured-light depth) are found and cut off the frame;
-# wider than this (frame pixels) an unread border area is the scene's, not a band.
-BANDS = True
+# Unread border bands (options.bands: registered structured-light depth) are cut off the
+# frame; wider than this (frame pixels) an unread border area is the scene's, not a band.
 BAND_MAX_PX = 64
-# A basin cut by the frame border (or a band) is closed there, not spilled ...
-CLOSED_BORDER = True
-# ... and, with a read floor, counts from this depth score (0 at the first, 1 at the second;
-# Sd 0.2 = 0.55 m below the bridged rim for a human searcher).
+# A basin cut by the frame border (or a band) is also looked at closed there
+# (options.closed_border), and, with a read floor, counts from this depth score (0 at the
+# first, 1 at the second; Sd 0.2 = 0.55 m below the bridged rim for a human searcher).
 BRIDGED_SD = (0.2, 0.35)
 
 
-def _nms(dets: list[Detection], iou_max: float) -> list[Detection]:
+def _nms(dets: list[Detection], iou_max: float, contained: float) -> list[Detection]:
     """Suppress overlaps (IoU > ``iou_max``) and containers of a better detection.
 
     A region that holds a higher-scoring one (most of it inside) is a depression or a
@@ -137,7 +133,7 @@ def _nms(dets: list[Detection], iou_max: float) -> list[Detection]:
     keep: list[Detection] = []
     for d in sorted(dets, key=lambda d: -d.score):
         if all(box_iou(d.box, k.box) <= iou_max for k in keep) and not any(
-            _inside(k.box, d.box) > CONTAINED for k in keep
+            _inside(k.box, d.box) > contained for k in keep
         ):
             keep.append(d)
     return keep
@@ -155,7 +151,7 @@ def _unique(regions: list[Candidate]) -> list[Candidate]:
     seen: set[tuple[tuple[int, int, int, int], int, bool]] = set()
     out: list[Candidate] = []
     for r in regions:
-        key = (r[1], int(r[0].sum()), r[2])
+        key = (r.box, int(r.mask.sum()), r.enclosed)
         if key not in seen:
             seen.add(key)
             out.append(r)
@@ -163,7 +159,7 @@ def _unique(regions: list[Candidate]) -> list[Candidate]:
 
 
 def _touches_border(region: Candidate, shape: tuple[int, ...]) -> bool:
-    x, y, w, h = region[1]
+    x, y, w, h = region.box
     return x == 0 or y == 0 or x + w == shape[1] or y + h == shape[0]
 
 
@@ -204,15 +200,17 @@ def _measure(
     border) with a read floor must be clearly deep: its depth is measured against a rim
     partly assumed, and a shallow dip running into the border is closed that way too.
     """
-    mask, (x, y, w, h), enclosed = region
+    mask, enclosed = region.mask, region.enclosed
+    x, y, w, h = region.box
     hh, ww = f.z.shape
-    pad = RING_PX + GROW_PX + 4 + TERRAIN_PX
+    o = params.options
+    pad = RING_PX + o.grow_px + 4 + TERRAIN_PX
     x0, y0 = max(0, x - pad), max(0, y - pad)
     x1, y1 = min(ww, x + w + pad), min(hh, y + h + pad)
     zc, inv_c = f.z[y0:y1, x0:x1], f.invalid[y0:y1, x0:x1]
     inside = np.zeros((y1 - y0, x1 - x0), bool)
     inside[y - y0 : y - y0 + h, x - x0 : x - x0 + w] = mask
-    inside = grow_walls(inside, zc, ~inv_c, (x0, y0), f.cam, RING_PX)
+    inside = grow_walls(inside, zc, ~inv_c, (x0, y0), f.cam, RING_PX, o.grow_px)
     big = inside.astype(np.uint8)
     vs, us = np.nonzero(inside)
     bx0, by0, bx1, by1 = int(us.min()), int(vs.min()), int(us.max()) + 1, int(vs.max()) + 1
@@ -235,7 +233,7 @@ def _measure(
     rv, ru = np.nonzero(ring)
     rim_u, rim_v = ru.astype(np.float64) + x0, rv.astype(np.float64) + y0
     rim_zs = zc[ring].astype(np.float64)
-    occ = occluders(rim_u, rim_v, rim_zs, f.cam)
+    occ = occluders(rim_u, rim_v, rim_zs, f.cam, o.occluder_step_m)
     if occ.any() and (~occ).sum() >= 3:
         rim_u, rim_v, rim_zs = rim_u[~occ], rim_v[~occ], rim_zs[~occ]
     # How much of the opening's outline is bordered by rim we saw: not the image border,
@@ -246,7 +244,7 @@ def _measure(
     # Sizes (and so the score) come from the rim's plane; where the opening is, from the
     # terrain's when the border cuts it.
     placed, centre = opening, opening.centre
-    if open_px and CUT_CIRCLE:  # cut by the border: the circle through the rim it shows
+    if open_px and o.cut_circle:  # cut by the border: the circle through the rim it shows
         band = (cv2.dilate(big, _TERRAIN_KERNEL) > 0) & ~inside & ~inv_c
         bv, bu = np.nonzero(band)
         uv_band = (bu.astype(np.float64) + x0, bv.astype(np.float64) + y0)
@@ -274,7 +272,7 @@ def _measure(
     )
     dist = cv2.distanceTransform(np.pad(_extrude(big, cut_sides), 1), cv2.DIST_L2, 5)
     inscribed = 2.0 * float(dist.max()) * rim_z / f.cam.fx
-    if not PASSABLE_WIDTH:
+    if not o.passable_width:
         minor = minor_pca
     elif any(cut_sides):
         minor = inscribed
@@ -297,7 +295,7 @@ def _measure(
         # light can tell a hole (dark inside) from terrain fading out of range.
         depth_rel = max(seen, f.range_m - rim_z)
         within = ramp(f.z_far - rim_z, 0.1, 0.6)
-        light = max(sb, sc) if RANGE_LIMIT_LIGHT else 0.0
+        light = max(sb, sc) if o.range_limit_light else 0.0
         sd = max(ramp(depth_rel, s.depth_low_m, s.depth_high_m), 0.6 * within + 0.4 * light)
     else:
         depth_rel = seen
@@ -306,10 +304,10 @@ def _measure(
     sw *= 1.0 - ramp(major, OVERSIZE_START_M, OVERSIZE_END_M)
     fill = area / (major * minor_pca) if major * minor_pca > 0 else 0.0
     sr = ramp(fill, 0.3, 0.7)
-    score = sd**DEPTH_EXPONENT * sw * (0.35 + 0.65 * sr) * (0.85 + 0.15 * max(sb, sc))
+    score = combined_score(sd, sw, sr, sb, sc, o.depth_exponent)
     if beyond:
         # No reading: a void only if it looks like one (dark against the rubble around it).
-        score *= 0.2 + 0.8 * void_evidence(rel_in)
+        score *= 0.2 + 0.8 * (void_evidence(rel_in) if o.photometric_evidence else 1.0)
     elif bridged:
         score *= ramp(sd, BRIDGED_SD[0], BRIDGED_SD[1])
     if score < params.min_score:
@@ -387,12 +385,13 @@ def detect_default(
     """
     check_frame(rgb, depth, camera)
     factor = max(1, round(1.0 / params.work_scale))
-    z_full, _ = block_depth(depth, factor, camera.depth_unit_m)
+    o = params.options
+    z_full, _ = block_depth(depth, factor, camera.depth_unit_m, o.min_valid_fraction)
     if np.isnan(z_full).all():
         return []
     # The read area: the frame without its unread border bands (a hole the band cuts is
     # cut by the read area's border, its rim there unknown).
-    bands = unread_bands(z_full, max(1, round(BAND_MAX_PX / factor))) if BANDS else (0, 0, 0, 0)
+    bands = unread_bands(z_full, max(1, round(BAND_MAX_PX / factor))) if o.bands else (0, 0, 0, 0)
     left, top, right, bottom = bands
     hf, wf = z_full.shape
     z = z_full[top : hf - bottom, left : wf - right]
@@ -413,25 +412,35 @@ def detect_default(
     # farthest depth in view, in work pixels.
     min_side_px = s.min_fraction * s.minor_m * cam.fx / max(z_far, 0.5)
     min_px = max(2, int(0.25 * min_side_px**2))
-    regions = _unique(basin_regions(pit, min_px) + no_reading_regions(invalid, pit, min_px))
+    regions = _unique(
+        basin_regions(pit, min_px, o.depression_ratio)
+        + no_reading_regions(invalid, pit, min_px, o.neck_radii_px)
+    )
     # Basins the border cuts, closed there (their rim beyond is unknown): candidates beside
     # the spilled view's (the better-scoring one of a pair wins in NMS).
     bridged: list[Candidate] = []
-    if CLOSED_BORDER and border_is_bridged(z):
+    if o.closed_border and border_is_bridged(z):
         closed, _, _ = basin_depth(z, closed_border=True)
-        bridged = [r for r in basin_regions(closed, min_px) if _touches_border(r, z.shape)]
+        bridged = [
+            r
+            for r in basin_regions(closed, min_px, o.depression_ratio)
+            if _touches_border(r, z.shape)
+        ]
     # The dark part of each spilled no-reading blob: a hole's interior cut from the bright
     # terrain beyond range (or a bright no-return surface) it runs into.
     dark: list[Candidate] = []
-    if DARK_SPLIT:
+    if o.dark_split:
         rel_smooth = cv2.blur(rel.astype(np.float32), (DARK_SMOOTH_PX, DARK_SMOOTH_PX))
-        dark = _unique(no_reading_regions(invalid & (rel_smooth < DARK_CUT), pit, min_px))
+        dark_blobs = invalid & (rel_smooth < DARK_CUT)
+        dark = _unique(no_reading_regions(dark_blobs, pit, min_px, o.neck_radii_px))
 
     frame = _FrameData(z, invalid, y_img, rel, cam, z_far, range_m, factor, bands)
     dets = [d for r in regions if (d := _measure(r, frame, params)) is not None]
     dets += [d for r in dark if (d := _measure(r, frame, params, dark_cut=True)) is not None]
     dets += [d for r in bridged if (d := _measure(r, frame, params, bridged=True)) is not None]
-    return [replace(d, p_hole=p_hole_of_score(d.score)) for d in _nms(dets, params.nms_iou)]
+    return [
+        replace(d, p_hole=p_hole_of_score(d.score)) for d in _nms(dets, params.nms_iou, o.contained)
+    ]
 
 
 def basin_labels(
@@ -442,7 +451,7 @@ def basin_labels(
     For display: nearest-neighbour upsampling of the work-resolution basin components.
     """
     factor = max(1, round(1.0 / params.work_scale))
-    z, _ = block_depth(depth, factor, camera.depth_unit_m)
+    z, _ = block_depth(depth, factor, camera.depth_unit_m, params.options.min_valid_fraction)
     if np.isnan(z).all():
         return np.zeros(depth.shape, np.int32)
     pit, _, _ = basin_depth(z)

@@ -9,14 +9,11 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from holescan.detect._options import DefaultOptions
 from holescan.detect._types import CameraIntrinsics
 
-# Walls: grow regions by up to this many work pixels into readings this far below the
-# opening plane.
-GROW_PX = 4
+# Walls: regions grow (DefaultOptions.grow_px) into readings this far below the opening plane.
 WALL_MARGIN_M = 0.06
-# A rim reading this much nearer than the rim's plane is an occluding edge, not rim.
-OCCLUDER_STEP_M = 0.25
 # A reading lies on a plane when within the structured-light depth noise of it, which grows
 # with the square of range: PLANE_TOL_M + PLANE_TOL_PER_M2 * z**2 (4.5 cm at 2.7 m).
 PLANE_TOL_M = 0.02
@@ -247,12 +244,13 @@ def grow_walls(
     uv0: tuple[int, int],
     cam: CameraIntrinsics,
     ring_px: int,
+    grow_px: int = DefaultOptions.grow_px,
 ) -> npt.NDArray[np.bool_]:
     """Add the hole's walls: readings next to the region that lie below the opening plane.
 
     The plane is fitted to the readings of a ring a few pixels out (the surrounding
     terrain); pixels connected to the region and deeper than the plane by ``WALL_MARGIN_M``
-    are wall or floor. Up to ``GROW_PX`` pixels of growth, so a tilted view's visible far
+    are wall or floor. Up to ``grow_px`` pixels of growth, so a tilted view's visible far
     wall joins the opening (its box is the rim's).
     """
     u8 = inside.astype(np.uint8)
@@ -271,7 +269,7 @@ def grow_walls(
     below = valid & (zc > z_plane + WALL_MARGIN_M)
     region = inside.copy()
     k3 = np.ones((3, 3), np.uint8)
-    for _ in range(GROW_PX):
+    for _ in range(grow_px):
         add = (cv2.dilate(region.astype(np.uint8), k3) > 0) & below & ~region
         if not add.any():
             break
@@ -284,12 +282,13 @@ def occluders(
     rv: npt.NDArray[np.float64],
     rz: npt.NDArray[np.float64],
     cam: CameraIntrinsics,
+    step_m: float = DefaultOptions.occluder_step_m,
 ) -> npt.NDArray[np.bool_]:
     """Rim points that stand well in front of the plane of the others: a nearer edge.
 
     ru, rv : pixel coordinates of the rim; rz : their depth (m). A slab lying across the
     opening hides its near part; its edge borders the visible part of the hole and is no
-    rim. Points more than ``OCCLUDER_STEP_M`` nearer than the plane fitted to the rim
+    rim. Points more than ``step_m`` nearer than the plane fitted to the rim
     (refitted once without them) are flagged.
     """
     near = np.zeros(len(rz), bool)
@@ -300,7 +299,7 @@ def occluders(
         rays = rays_of(ru, rv, cam)
         normal, centre = fit_plane(rays[keep] * rz[keep, None])
         z_plane = (centre @ normal) / (rays @ normal)
-        now = rz < z_plane - OCCLUDER_STEP_M
+        now = rz < z_plane - step_m
         if not now.any() or np.array_equal(now, near):
             return now
         near = now

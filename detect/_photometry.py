@@ -31,8 +31,6 @@ REFERENCE_SIGMA_PX = 12.0
 # Evidence ramps from 1 (a void) at VOID_RATIO to 0 (a surface) at SURFACE_RATIO.
 VOID_RATIO = 0.6
 SURFACE_RATIO = 1.0
-# Switch for the ablation study.
-PHOTOMETRIC_EVIDENCE = True
 
 
 def relative_luminance(
@@ -66,6 +64,4 @@ def void_evidence(rel_in: float) -> float:
 
     rel_in : median relative luminance (:func:`relative_luminance`) of its no-reading pixels.
     """
-    if not PHOTOMETRIC_EVIDENCE:
-        return 1.0
     return 1.0 - ramp(rel_in, VOID_RATIO, SURFACE_RATIO)

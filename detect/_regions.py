@@ -5,21 +5,19 @@ See :mod:`detect._default` for the method. Pure: arrays in, masks and boxes out.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import cv2
 import numpy as np
 import numpy.typing as npt
 from skimage.morphology import reconstruction
 
+from holescan.detect._options import DefaultOptions
+
 # Region thresholds (metres below the spill level). SHALLOW is a few block-averaged noise
 # sigmas at 4 m (Xtion: 1.425e-6 Z^2 mm per pixel -> 23 mm, /4 after 4x4 averaging).
 SHALLOW_M = 0.05
 DEEP_M = 0.25
-# Radii (work pixels) at which necks between no-reading blobs are cut.
-NECK_RADII_PX = (0, 3, 6)
-# A block counts as read when at least this fraction of its pixels have a reading.
-MIN_VALID_FRACTION = 0.05
-# A basin this many times larger than its no-reading part is a depression holding holes.
-DEPRESSION_RATIO = 5.0
 # A border column (row) this unread belongs to an unread band of the registered frame.
 BAND_UNREAD = 0.95
 # Dips along a border line up to this fraction of its length are bridged (basin_depth).
@@ -29,12 +27,15 @@ BRIDGE_MIN_PX = 3
 
 
 def block_depth(
-    depth: npt.NDArray[np.uint16], factor: int, unit_m: float
+    depth: npt.NDArray[np.uint16],
+    factor: int,
+    unit_m: float,
+    min_valid_fraction: float = DefaultOptions.min_valid_fraction,
 ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]:
     """Mean of the valid readings in each ``factor`` x ``factor`` block.
 
     Returns ``(z, valid_fraction)``: z (h, w) float32 metres, NaN where fewer than
-    :data:`MIN_VALID_FRACTION` of the block's pixels had a reading.
+    ``min_valid_fraction`` of the block's pixels had a reading.
     """
     size = (depth.shape[1] // factor, depth.shape[0] // factor)
     total = cv2.resize(depth.astype(np.float32), size, interpolation=cv2.INTER_AREA)
@@ -43,7 +44,7 @@ def block_depth(
     )
     with np.errstate(invalid="ignore", divide="ignore"):
         z = np.asarray(total / frac * np.float32(unit_m), np.float32)
-    z[frac < MIN_VALID_FRACTION] = np.nan
+    z[frac < min_valid_fraction] = np.nan
     return z, frac
 
 
@@ -147,8 +148,20 @@ def basin_depth(
 
 
 Region = tuple[npt.NDArray[np.bool_], tuple[int, int, int, int]]
-# (mask, box, enclosed): enclosed = a pit of the basin analysis; else a no-reading blob.
-Candidate = tuple[npt.NDArray[np.bool_], tuple[int, int, int, int], bool]
+
+
+class Candidate(NamedTuple):
+    """A candidate region of the work grid.
+
+    mask : (h, w) bool, the region inside its box.
+    box : (x, y, w, h) work pixels.
+    enclosed : a pit of the basin analysis (its rim holds all round); False for a
+        no-reading blob that spills (its rim is checked when it is measured).
+    """
+
+    mask: npt.NDArray[np.bool_]
+    box: tuple[int, int, int, int]
+    enclosed: bool
 
 
 def components(
@@ -165,7 +178,11 @@ def _crop(lab: npt.NDArray[np.int32], stats: npt.NDArray[np.int32], i: int) -> R
     return lab[y : y + h, x : x + w] == i, (x, y, w, h)
 
 
-def basin_regions(pit: npt.NDArray[np.float64], min_px: int) -> list[Candidate]:
+def basin_regions(
+    pit: npt.NDArray[np.float64],
+    min_px: int,
+    depression_ratio: float = DefaultOptions.depression_ratio,
+) -> list[Candidate]:
     """Regions around each deep core, cut from its basin at a depth that suits the core.
 
     A core is a component of ``pit > DEEP_M``. Its region is the connected part of its basin
@@ -193,8 +210,8 @@ def basin_regions(pit: npt.NDArray[np.float64], min_px: int) -> list[Candidate]:
         mask, box = _crop(lab, stats, i)
         if box not in seen:
             seen.add(box)
-            regions.append((mask, box, True))
-            regions += _voids_in_depression(mask, box, pit, min_px)
+            regions.append(Candidate(mask, box, True))
+            regions += _voids_in_depression(mask, box, pit, min_px, depression_ratio)
     return regions
 
 
@@ -203,6 +220,7 @@ def _voids_in_depression(
     box: tuple[int, int, int, int],
     pit: npt.NDArray[np.float64],
     min_px: int,
+    ratio: float,
 ) -> list[Candidate]:
     """The no-reading blobs of a basin much larger than them: holes in a broad depression.
 
@@ -212,14 +230,14 @@ def _voids_in_depression(
     x, y, w, h = box
     void = mask & np.isinf(pit[y : y + h, x : x + w])
     n_void = int(void.sum())
-    if n_void < min_px or mask.sum() <= DEPRESSION_RATIO * n_void:
+    if n_void < min_px or mask.sum() <= ratio * n_void:
         return []
     n, lab, stats = components(void)
     out: list[Candidate] = []
     for i in range(1, n):
         if stats[i, cv2.CC_STAT_AREA] >= min_px:
             m, (bx, by, bw, bh) = _crop(lab, stats, i)
-            out.append((m, (bx + x, by + y, bw, bh), True))
+            out.append(Candidate(m, (bx + x, by + y, bw, bh), True))
     return out
 
 
@@ -227,6 +245,7 @@ def no_reading_regions(
     invalid: npt.NDArray[np.bool_],
     pit: npt.NDArray[np.float64],
     min_px: int,
+    neck_radii_px: tuple[int, ...] = DefaultOptions.neck_radii_px,
 ) -> list[Candidate]:
     """Blobs of no reading that the basin analysis cannot see as pits.
 
@@ -243,7 +262,7 @@ def no_reading_regions(
     if spilled.sum() < min_px:
         return regions
     inv_u8 = invalid.astype(np.uint8)
-    for r in NECK_RADII_PX:
+    for r in neck_radii_px:
         if r:
             k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
             opened = np.asarray(cv2.morphologyEx(inv_u8, cv2.MORPH_OPEN, k), np.uint8)
@@ -260,5 +279,5 @@ def no_reading_regions(
                 continue  # an enclosed pit: basin_regions has it
             _, lab2, stats2 = components(blob)
             j = int(np.argmax(stats2[1:, cv2.CC_STAT_AREA])) + 1
-            regions.append((*_crop(lab2, stats2, j), False))
+            regions.append(Candidate(*_crop(lab2, stats2, j), False))
     return regions

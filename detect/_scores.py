@@ -31,6 +31,24 @@ def contrast_score(region_y: float, neighbour_y: float, threshold: float) -> flo
     return float(min(1.0, max(0.0, (neighbour_y - region_y) / (threshold + 0.091))))
 
 
+def combined_score(
+    sd: float, sw: float, sr: float, sb: float, sc: float, depth_exponent: float = 0.5
+) -> float:
+    """The default detector's score from the five attribute scores (each in [0, 1]).
+
+    ``Sd^e * Sw * (0.35 + 0.65 Sr) * (0.85 + 0.15 max(Sb, Sc))`` with ``e`` =
+    ``depth_exponent`` (0.5): geometry is necessary (no depth or no width, no hole), shape
+    and light only refine it. The one place this formula is written.
+
+    >>> round(combined_score(1.0, 1.0, 1.0, 0.0, 0.0), 2)
+    0.85
+    >>> combined_score(0.0, 1.0, 1.0, 1.0, 1.0)
+    0.0
+    """
+    light = 0.85 + 0.15 * max(sb, sc)
+    return float(sd**depth_exponent * sw * (0.35 + 0.65 * sr) * light)
+
+
 def width_score(
     major_m: float,
     minor_m: float,

@@ -9,6 +9,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from holescan.detect._options import DefaultOptions
 from holescan.errors import InputError
 
 
@@ -139,6 +140,8 @@ class DetectParams:
     max_range_m: float = 4.0
     min_score: float = 0.05
     nms_iou: float = 0.3
+    #: The default detector's design choices (the ablation study switches them off).
+    options: DefaultOptions = DefaultOptions()  # noqa: RUF009 (frozen: one shared instance)
     extra: dict[str, float] = field(default_factory=dict, compare=False, hash=False)
 
     def with_searcher(self, searcher: Searcher | str) -> DetectParams:

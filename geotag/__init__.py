@@ -1,5 +1,6 @@
 """Geotagging (pure): detections + camera + vehicle pose -> hole positions; merging sightings."""
 
+from holescan.geotag._announce import AnnouncePolicy, HoleNews, Told
 from holescan.geotag._camera import (
     CameraMount,
     GimbalAttitude,
@@ -59,6 +60,7 @@ __all__ = [
     "TIERS",
     "VEHICLE_TIERS",
     "AnnounceGate",
+    "AnnouncePolicy",
     "BestViews",
     "CameraMount",
     "ConfidenceModel",
@@ -67,6 +69,7 @@ __all__ = [
     "GimbalAttitude",
     "Hole",
     "HoleEvidence",
+    "HoleNews",
     "HolePipeline",
     "HoleSighting",
     "HoleTier",
@@ -78,6 +81,7 @@ __all__ = [
     "MergeParams",
     "PoseOf",
     "Tier",
+    "Told",
     "VehiclePose",
     "VehicleTier",
     "box_cut_by_border",
