@@ -90,10 +90,12 @@ def read_hole_text(text: str) -> HoleText | None:
     p_hole or score in [0, 1], a position on the Earth). Reads this form and the old one
     (module docstring).
 
-    >>> read_hole_text("HOLE 12 p0.99 43.6532005 -79.3831433")
-    HoleText(hole_id=12, tier='announced', lat_deg=43.6532005, lon_deg=-79.3831433, p_hole=0.99, score=None)
-    >>> read_hole_text("REVIEW 4 0.30 43.6533100 -79.3831200")  # the old form: a score
-    HoleText(hole_id=4, tier='review', lat_deg=43.65331, lon_deg=-79.38312, p_hole=None, score=0.3)
+    >>> said = read_hole_text("HOLE 12 p0.99 43.6532005 -79.3831433")
+    >>> said.hole_id, said.tier, said.p_hole, said.score, said.lat_deg, said.lon_deg
+    (12, 'announced', 0.99, None, 43.6532005, -79.3831433)
+    >>> said = read_hole_text("REVIEW 4 0.30 43.6533100 -79.3831200")  # the old form: a score
+    >>> said.tier, said.p_hole, said.score
+    ('review', None, 0.3)
     >>> read_hole_text("PreArm: GPS") is None
     True
     """

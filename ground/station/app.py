@@ -218,7 +218,8 @@ class GroundStation:
             events: list[bytes] = []
             for h in holes:
                 tier = hole_tier(h)
-                key = (h.lat_deg, h.lon_deg, h.p_hole, h.score, tier, h.mark, h.card_rev, h.sigma_h_m)
+                key = (h.lat_deg, h.lon_deg, h.p_hole, h.score, tier, h.mark, h.card_rev)
+                key += (h.sigma_h_m,)
                 if self._sent.get(h.id) == key:
                     continue
                 self._sent[h.id] = key

@@ -128,8 +128,8 @@ def test_flight_log_ground_station_and_files(demo: tuple[Path, str]) -> None:
     texts = [t for t in doc["announcements"] if t.startswith("HOLE ")]
     told = [t for t in doc["announcements"] if not t.startswith("HOLE ")]
     assert len({t.split()[1] for t in texts}) == confirmed
-    assert all(re.fullmatch(r"HOLE \d+ [\d.]+ -?[\d.]+ -?[\d.]+", t) for t in texts)
-    assert all(re.fullmatch(r"REVIEW \d+ [\d.]+ -?[\d.]+ -?[\d.]+", t) for t in told)
+    assert all(re.fullmatch(r"HOLE \d+ p[01]\.\d\d -?[\d.]+ -?[\d.]+", t) for t in texts)
+    assert all(re.fullmatch(r"REVIEW \d+ p[01]\.\d\d -?[\d.]+ -?[\d.]+", t) for t in told)
     review = doc["review"]
     assert {int(t.split()[1]) for t in told} >= set(review)
     assert doc["mission_items"] == confirmed

@@ -124,3 +124,27 @@ def test_the_vehicles_tier_from_statustext_and_card_and_in_the_files(tmp_path: P
     assert state.holes[4].tier == "confirmed"
     again = StationState.open(tmp_path / "st")
     assert again.holes[4].vehicle_tier == "announced" and again.holes[4].p_hole == 0.42
+
+
+def test_each_statustext_number_is_kept_as_what_it_is(tmp_path: Path) -> None:
+    """``p0.68``: the hole-level p_hole; an old vehicle's bare ``0.99``: the best frame's
+    score. One never becomes the other, on the state or in the files."""
+    from holescan.ground.station.files import hole_summary, hole_waypoint
+
+    state = StationState.open(tmp_path / "st")
+    state.clock = lambda: T_NS
+    new = state.on_statustext("REVIEW 7 p0.68 43.6533100 -79.3831200")
+    assert new is not None and (new.vehicle_tier, new.p_hole, new.score) == ("review", 0.68, None)
+    props = hole_waypoint(new).properties
+    assert (props["p_hole"], props["score"]) == (0.68, None)
+    assert "score" not in hole_summary(new)
+    old = state.on_statustext("HOLE 8 0.99 43.6533400 -79.3831500")
+    assert old is not None
+    assert (old.vehicle_tier, old.p_hole, old.score) == ("announced", None, 0.99)
+    assert "best frame's score 0.99" in hole_summary(old)
+    # the next line of hole 7 changes p_hole only; what the card told of the score stays
+    state.holes[7].score = 0.42
+    again = state.on_statustext("REVIEW 7 p0.71 43.6533100 -79.3831200")
+    assert again is not None and (again.p_hole, again.score) == (0.71, 0.42)
+    back = StationState.open(tmp_path / "st").holes
+    assert (back[7].p_hole, back[8].score, back[8].p_hole) == (0.71, 0.99, None)
