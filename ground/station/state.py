@@ -66,6 +66,7 @@ from holescan.link import (
     read_hole_text,
     xml_text,
 )
+from holescan.missions import NO_PICTURE, card_picture, with_picture
 from holescan.outputs import atomic_output
 
 __all__ = [
@@ -492,8 +493,10 @@ class StationState:
         return h
 
     def on_card(self, facts: dict[str, Any], jpeg: bytes) -> GroundHole | None:
-        """Take a card's facts (:func:`missions.read_card`) and picture; an older revision
-        than kept is ignored."""
+        """Take a card's facts (:func:`missions.read_card`) and picture (``jpeg``: the
+        card's bytes); an older revision than kept is ignored. A facts-only card
+        (:data:`missions.NO_PICTURE`) updates the facts and keeps the picture held (its
+        file then carries the new facts)."""
         try:
             v = card_values(facts)
         except LinkValueError as err:
@@ -506,16 +509,19 @@ class StationState:
                 return h
             if not self._room_for(hid):
                 return None
-            with atomic_output(self.card_path(hid), force=True) as f:
-                f.write(jpeg)
+            picture = card_picture(jpeg) != NO_PICTURE
+            if not picture and h is not None and h.has_picture:
+                try:
+                    jpeg, picture = with_picture(jpeg, self.card_path(hid).read_bytes()), True
+                except OSError as err:  # the kept picture is gone: facts only, ask again
+                    _log.warning("hole %d: kept picture unreadable (%s)", hid, err)
+                    h.has_picture = False
+            if picture:
+                with atomic_output(self.card_path(hid), force=True) as f:
+                    f.write(jpeg)
             h = self._hole(hid, v.lat_deg, v.lon_deg)
-            h.lat_deg, h.lon_deg, h.score, h.card_rev, h.has_picture = (
-                v.lat_deg,
-                v.lon_deg,
-                v.score,
-                rev,
-                True,
-            )
+            h.lat_deg, h.lon_deg, h.score, h.card_rev = v.lat_deg, v.lon_deg, v.score, rev
+            h.has_picture = h.has_picture or picture
             h.alt_m, h.sigma_h_m = v.alt_m, v.sigma_h_m
             h.major_m, h.minor_m = v.major_m, v.minor_m
             if v.sightings is not None:
