@@ -132,6 +132,7 @@ def child(args: argparse.Namespace) -> int:
         "detections": c.detections,
         "detect_ms_mean": c.detect_ms_total / max(c.frames_detected, 1),
         "detect_skipped": s.detect_skipped,
+        "shed": c.frames_shed,
         "late": sum(r.late_frames for r in replays),
         "max_late_ms": max((r.max_late_ms for r in replays), default=0.0),
         "files": [str(f) for f in s.log.files],
@@ -207,7 +208,25 @@ def cpu_quota(name: str, quota: float | None) -> Iterator[Path | None]:
             (group / "cpu.cfs_quota_us").write_text(str(round(quota * PERIOD_US)))
         yield group
     finally:
-        group.rmdir()
+        _remove_group(group)
+
+
+def _remove_group(group: Path) -> None:
+    """Remove the cgroup once its last member (a detection worker ending after its parent)
+    has gone; a straggler after 10 s is moved to the root group first."""
+    deadline = time.monotonic() + 10.0
+    while True:
+        try:
+            group.rmdir()
+            return
+        except OSError:
+            if time.monotonic() < deadline:
+                time.sleep(0.2)
+                continue
+            for pid in (group / "cgroup.procs").read_text().split():
+                (group.parent / "cgroup.procs").write_text(pid)
+            group.rmdir()
+            return
 
 
 def _throttled(group: Path | None) -> str:
@@ -326,8 +345,8 @@ def report(res: dict[str, Any], sortie: SimSortie, in_view: set[int]) -> list[st
         f"{res['logged']}, dropped from the log {res['log_dropped']}; sensor late "
         f"{res['late']} (max {res['max_late_ms']:.0f} ms); unposed {res['unposed']}",
         f"detector: {res['detected'] / dur:.1f} frames/s (mean {res['detect_ms_mean']:.0f} ms, "
-        f"{res['detect_skipped']} skipped for newer frames), {res['detections'] / dur:.1f} "
-        "detections/s",
+        f"{res['detect_skipped']} skipped for newer frames, {res['shed']} not offered while "
+        f"the log caught up), {res['detections'] / dur:.1f} detections/s",
         f"holes: recall announced {len(found['announced'])}/{len(truth)}, announced or for "
         f"review {len(either)}/{len(truth)} (true access holes in view in >= 3 lap frames); "
         f"first sighting -> announcement at the ground: {lat}",

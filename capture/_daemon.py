@@ -4,7 +4,8 @@ Threads and processes of one flight:
 
 - **capture** (the caller's thread): reads frames from the source through a pump thread
   with a timeout, stamps each on the autopilot's clock, queues it to the log writer and
-  offers it to the detection worker. Neither ever makes it wait.
+  offers it to the detection worker and the live map. Nothing makes it wait; when the log
+  falls behind (short of CPU), the frame is logged and not offered: detection sheds first.
 - **log writer** thread (:class:`flightlog.FlightLogWriter`); **detection worker**
   process (:class:`capture._worker.DetectionWorker`); **telemetry** receiver thread
   (:class:`capture._mavlink.Telemetry`): each message logged raw, each position also as a pose.
@@ -96,6 +97,8 @@ class Flight:
         self.config = config
         self._disk = disk
         self._on_frame_hook = on_frame
+        # Frames queued for the log above which capture sheds the detector and the live map.
+        self._shed_above = max(2, config.log_options.max_queued_frames // 4)
         self.camera = camera
         self._on_holes = on_holes
         self._before_close = before_close  # e.g. the last pictures out on the shared link
@@ -289,6 +292,9 @@ class Flight:
         ):
             c.frames_log_dropped += 1
         self._views.add_frame(frame.index, frame.rgb)
+        if self._writer.frames_queued > self._shed_above:  # short of CPU: log first
+            c.frames_shed += 1
+            return
         self._worker.offer(frame)
         if self._on_frame_hook is not None:
             try:

@@ -85,6 +85,7 @@ class FlightCounters:
     sensor_reopens: int = 0
     announcements: int = 0
     reviews: int = 0
+    frames_shed: int = 0  # logged, not offered to the detector or the live map: log behind
 
 
 @dataclass(frozen=True)

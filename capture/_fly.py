@@ -238,7 +238,8 @@ def format_report(report: FlyReport, gate: AnnounceGate | None = None) -> str:
         f"{c.frames_log_dropped}, unposed {c.frames_unposed}",
         f"detector: {c.frames_detected} frames ({c.frames_detected / dur:.1f}/s, mean "
         f"{c.detect_ms_total / max(c.frames_detected, 1):.1f} ms), {s.detect_skipped} of "
-        f"{s.detect_offered} skipped for newer frames, {c.detect_errors} errors, "
+        f"{s.detect_offered} skipped for newer frames, {c.frames_shed} not offered while the "
+        f"log caught up, {c.detect_errors} errors, "
         f"{c.frames_no_depth} without depth (closer than the sensor's range or nothing "
         "ranged), "
         f"{c.detections} detections, {c.pose_refusals} not posed ({c.pose_invalid} the "

@@ -91,7 +91,8 @@ class FlightHealth:
     detected frames never placed; pose_invalid : of them, because the autopilot had no
     position (pose_invalid_why : the last reason). sensor_failures : sensor faults (each
     followed by a reopen). holes : holes tracked. link : the autopilot link, None without
-    one.
+    one. frames_shed : frames logged but not offered to the detector or the live map
+    because the log writer was behind (short of CPU).
     """
 
     frames_captured: int
@@ -111,6 +112,7 @@ class FlightHealth:
     sensor_failures: int
     holes: int
     link: LinkHealth | None = None
+    frames_shed: int = 0
 
     @classmethod
     def of(
@@ -143,6 +145,7 @@ class FlightHealth:
             sensor_failures=c.sensor_failures,
             holes=holes,
             link=None if telemetry is None else LinkHealth.of(telemetry),
+            frames_shed=c.frames_shed,
         )
 
     def record(self) -> dict[str, Any]:
@@ -164,6 +167,7 @@ class FlightHealth:
             "pose_invalid_why": self.pose_invalid_why,
             "sensor_failures": self.sensor_failures,
             "holes": self.holes,
+            "frames_shed": self.frames_shed,
         }
         if self.link is not None:
             out.update(self.link.record())

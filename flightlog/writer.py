@@ -207,6 +207,11 @@ class FlightLogWriter:
         t = time.time_ns() if t_unix_ns is None else int(t_unix_ns)
         return self._put(sch.TOPIC_HEALTH, "health", record, t)
 
+    @property
+    def frames_queued(self) -> int:
+        """Frames queued and not written yet (how far the writer is behind capture)."""
+        return self._frames_queued
+
     def stats(self) -> WriterStats:
         with self._lock:
             frames = self._written["frames"]

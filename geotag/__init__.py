@@ -7,6 +7,7 @@ from holescan.geotag._camera import (
     dcm_from_euler,
     dcm_from_quaternion,
     rotation_ned_from_optical,
+    unit_quaternion,
 )
 from holescan.geotag._campose import R_ENU_NED, LocalCameraPose, camera_pose_local
 from holescan.geotag._confidence import (
@@ -99,6 +100,7 @@ __all__ = [
     "project_to_pixel",
     "rotation_ned_from_optical",
     "same_opening_gate_m",
+    "unit_quaternion",
     "view_jpeg",
     "viewpoint_of",
 ]

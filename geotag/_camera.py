@@ -60,17 +60,34 @@ def dcm_from_euler(roll: float, pitch: float, yaw: float) -> FloatArray:
     return np.asarray(Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix(), np.float64)
 
 
+def unit_quaternion(
+    q_wxyz: tuple[float, float, float, float],
+) -> tuple[float, float, float, float]:
+    """The quaternion ``(w, x, y, z)`` scaled to unit length: the project's one normaliser
+    (the MAVLink adapter's ATTITUDE_QUATERNION, the camera and gimbal rotations).
+
+    Raises :class:`InputError` unless it is 4 finite numbers, not all (nearly) zero.
+
+    >>> unit_quaternion((2.0, 0.0, 0.0, 0.0))
+    (1.0, 0.0, 0.0, 0.0)
+    """
+    q = np.asarray(q_wxyz, dtype=np.float64)
+    n = float(np.linalg.norm(q)) if q.shape == (4,) else math.nan
+    if not math.isfinite(n) or n < 1e-9:
+        raise InputError(f"quaternion must be 4 finite numbers, not all zero; got {q_wxyz!r}")
+    w, x, y, z = (float(v) for v in q / n)
+    return (w, x, y, z)
+
+
 def dcm_from_quaternion(q_wxyz: tuple[float, float, float, float]) -> FloatArray:
     """Rotation matrix of a unit quaternion ``(w, x, y, z)`` (Hamilton, as MAVLink).
 
-    The quaternion is normalised first; a zero quaternion raises :class:`InputError`.
-    Returns a (3, 3) float64 ndarray mapping the rotated frame into the reference frame.
+    The quaternion is normalised first (:func:`unit_quaternion`); a zero quaternion raises
+    :class:`InputError`. Returns a (3, 3) float64 ndarray mapping the rotated frame into
+    the reference frame.
     """
-    q = np.asarray(q_wxyz, dtype=np.float64)
-    n = float(np.linalg.norm(q))
-    if q.shape != (4,) or not math.isfinite(n) or n < 1e-9:
-        raise InputError(f"quaternion must be 4 finite numbers, not all zero; got {q_wxyz!r}")
-    return np.asarray(Rotation.from_quat(q / n, scalar_first=True).as_matrix(), np.float64)
+    q = unit_quaternion(q_wxyz)
+    return np.asarray(Rotation.from_quat(q, scalar_first=True).as_matrix(), np.float64)
 
 
 def _as_matrix3(m: FloatArray) -> Matrix3:

@@ -1,7 +1,8 @@
 """Local metres: the tangent plane at a reference point (WGS84, through pymap3d).
 
-The project's one east/north/up helper: survey planning, the report map, the simulator's
-world anchor, the flight log's ``/tf`` and the matching of holes all use it.
+The project's one east/north/up (and north/east/down) helper: survey planning, the report
+map, the simulator's world anchor, the flight log's ``/tf``, the geotag projection, the
+merging and matching of holes all use it.
 """
 
 from __future__ import annotations
@@ -54,6 +55,25 @@ class LocalFrame:
         f = np.float64
         return np.asarray(e, dtype=f), np.asarray(n, dtype=f), np.asarray(u, dtype=f)
 
+    def to_ned(
+        self, lat_deg: npt.ArrayLike, lon_deg: npt.ArrayLike, alt_m: npt.ArrayLike
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Geodetic degrees and ellipsoid height -> (north, east, down) metres, the
+        autopilot's and the camera mount's axes.
+
+        >>> f = LocalFrame(47.0, 8.0, 400.0)
+        >>> [round(float(v), 3) + 0.0 for v in f.to_ned(47.0001, 8.0, 390.0)]
+        [11.118, 0.0, 10.0]
+        """
+        e, n, u = self.to_enu(lat_deg, lon_deg, alt_m)
+        return n, e, -u
+
+    def ned_to_geodetic(
+        self, north_m: npt.ArrayLike, east_m: npt.ArrayLike, down_m: npt.ArrayLike
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """(north, east, down) metres -> geodetic (lat, lon, ellipsoid height)."""
+        return self.to_geodetic_alt(east_m, north_m, -np.asarray(down_m, dtype=np.float64))
+
     def to_geodetic(
         self, east_m: npt.ArrayLike, north_m: npt.ArrayLike, up_m: npt.ArrayLike = 0.0
     ) -> tuple[FloatArray, FloatArray]:
@@ -78,7 +98,7 @@ def local_en_m(
 ) -> tuple[float, float]:
     """(east, north) metres of one point from a reference point, both on the ellipsoid.
 
-    >>> [round(v, 2) for v in local_en_m(47.0001, 8.0, 47.0, 8.0)]
+    >>> [round(v, 2) + 0.0 for v in local_en_m(47.0001, 8.0, 47.0, 8.0)]  # + 0.0: no -0.0
     [0.0, 11.12]
     """
     e, n = LocalFrame(lat0_deg, lon0_deg).to_en(lat_deg, lon_deg)

@@ -56,8 +56,6 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-import pymap3d
-
 from holescan.errors import InputError
 from holescan.geotag._confidence import (
     DEFAULT_CONFIDENCE,
@@ -65,6 +63,7 @@ from holescan.geotag._confidence import (
     EvidenceAccumulator,
     HoleEvidence,
 )
+from holescan.geotag._local import LocalFrame
 from holescan.geotag._project import HoleSighting
 
 __all__ = ["Hole", "HoleTracker", "MergeParams"]
@@ -302,12 +301,12 @@ class HoleTracker:
         self._tracks: list[_Track] = []
         self._next_id = 1
         self._merged: dict[int, int] = {}
-        self._origin: tuple[float, float, float] | None = None
+        self._origin: LocalFrame | None = None
 
     def _local(self, s: HoleSighting) -> tuple[float, float, float]:
         if self._origin is None:
-            self._origin = (s.lat_deg, s.lon_deg, s.alt_m)
-        n, e, d = pymap3d.geodetic2ned(s.lat_deg, s.lon_deg, s.alt_m, *self._origin)
+            self._origin = LocalFrame(s.lat_deg, s.lon_deg, s.alt_m)
+        n, e, d = self._origin.to_ned(s.lat_deg, s.lon_deg, s.alt_m)
         return (float(n), float(e), float(d))
 
     def update(self, sightings: Sequence[HoleSighting], source: str | None = None) -> list[Hole]:
@@ -423,7 +422,7 @@ class HoleTracker:
     def _hole(self, t: _Track) -> Hole:
         assert self._origin is not None
         n, e, d = t.wn / t.w_sum, t.we / t.w_sum, t.wd / t.w_sum
-        lat, lon, alt = pymap3d.ned2geodetic(n, e, d, *self._origin)
+        lat, lon, alt = self._origin.ned_to_geodetic(n, e, d)
         span_s = (t.t_last - t.t_first) * 1e-9
         independent = min(float(t.count), 1.0 + span_s / self.params.gps_decorrelation_s)
         gps = (t.gps_sum / t.count) / math.sqrt(independent)

@@ -5,7 +5,7 @@ The point is the opening's centre on its rim plane as the detector measured it
 toward the camera. Detections without it (paper mode, the baseline, logs from before) use
 the box centre's ray at the rim depth (``Detection.rim_depth_m``, axial Z). The point is rotated
 optical -> NED (mount or gimbal, then the vehicle's roll/pitch/yaw), shifted by the camera's
-offset on the vehicle, and converted to WGS84 with :func:`pymap3d.ned2geodetic`.
+offset on the vehicle, and converted to WGS84 in the pose's :class:`LocalFrame`.
 
 Altitudes are MSL as in :class:`VehiclePose`; pymap3d treats the vehicle's altitude as the
 ellipsoidal height of the local origin. Over the few metres between camera and hole the
@@ -21,7 +21,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import pymap3d
 
 from holescan.detect import CameraIntrinsics, Detection, FeatureScores
 from holescan.errors import InputError
@@ -31,6 +30,7 @@ from holescan.geotag._camera import (
     dcm_from_euler,
     rotation_ned_from_optical,
 )
+from holescan.geotag._local import LocalFrame
 from holescan.geotag._types import VehiclePose
 
 __all__ = [
@@ -67,6 +67,11 @@ class ErrorModel:
         * major * tan(view angle), opening_unseen * major * (1 - rim_seen))``; the view
         angle is the line of sight's angle to the rim plane's normal. Calibrated with
         ``benchmarks/bench_geotag.py`` so that 68 % of sightings fall within it.
+    cut_unseen : an opening the frame's border or an unread band cuts
+        (:attr:`detect.Detection.border_cut`) has at least this fraction of its major axis
+        unseen (how far it runs on beyond the cut is unknown; its centre, placed on the
+        circle through the rim it shows, was 0.12-0.18 m off in the median in the simulated
+        sortie of ``tests/geotag/test_sim_accuracy.py``, against 0.03-0.04 m uncut).
     box_oblique : detections without an opening centre (paper mode, older logs) are placed
         at their box centre, which moves toward the camera as the view turns oblique:
         ``hypot(opening_base_m, box_oblique * major * tan(view angle))``.
@@ -78,6 +83,7 @@ class ErrorModel:
     opening_base_m: float = 0.018
     opening_oblique: float = 0.03
     opening_unseen: float = 0.5
+    cut_unseen: float = 0.5
     box_oblique: float = 0.35
 
     def __post_init__(self) -> None:
@@ -195,8 +201,8 @@ def geotag_detection(
         normal_ned = r_ned_opt @ np.array([0.0, 0.0, -1.0])
     los_ned = r_ned_opt @ p_opt
     p_ned = los_ned + _offset_ned(mount, pose)
-    lat, lon, alt = pymap3d.ned2geodetic(
-        float(p_ned[0]), float(p_ned[1]), float(p_ned[2]), pose.lat_deg, pose.lon_deg, pose.alt_m
+    lat, lon, alt = LocalFrame(pose.lat_deg, pose.lon_deg, pose.alt_m).ned_to_geodetic(
+        float(p_ned[0]), float(p_ned[1]), float(p_ned[2])
     )
 
     # Horizontal error: independent sources added in quadrature.
@@ -270,6 +276,8 @@ def _opening_sigma(det: Detection, view_rad: float, measured: bool, em: ErrorMod
         return math.hypot(em.opening_base_m, em.box_oblique * oblique) if oblique > 0 else 0.0
     seen = det.rim_seen if det.rim_seen is not None and math.isfinite(det.rim_seen) else 1.0
     unseen = major * (1.0 - min(max(seen, 0.0), 1.0))
+    if det.border_cut:  # its rim beyond the frame's border or band is unknown, not seen
+        unseen = max(unseen, em.cut_unseen * major)
     return math.hypot(em.opening_base_m, em.opening_oblique * oblique, em.opening_unseen * unseen)
 
 
@@ -326,7 +334,7 @@ def project_to_pixel(
         When the point is behind the camera (axial depth <= 0).
     """
     _check_pose(pose)
-    n, e, d = pymap3d.geodetic2ned(lat_deg, lon_deg, alt_m, pose.lat_deg, pose.lon_deg, pose.alt_m)
+    n, e, d = LocalFrame(pose.lat_deg, pose.lon_deg, pose.alt_m).to_ned(lat_deg, lon_deg, alt_m)
     p_ned = np.array([float(n), float(e), float(d)]) - _offset_ned(mount, pose)
     p_opt = rotation_ned_from_optical(mount, pose).T @ p_ned
     if p_opt[2] <= 1e-9:

@@ -10,10 +10,9 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Literal, get_args
 
-import pymap3d
-
 from holescan.detect import p_hole_of_score
 from holescan.errors import InputError
+from holescan.geotag._local import LocalFrame
 from holescan.geotag._merge import Hole
 
 __all__ = [
@@ -90,7 +89,7 @@ class AnnounceGate:
     >>> gate = AnnounceGate(min_p_hole=0.5, min_sightings=2, min_span_s=0.3)
     >>> gate.min_p_hole
     0.5
-    >>> from detect import p_hole_of_score  # p_hole 0.5 is a best score of 0.368
+    >>> from holescan.detect import p_hole_of_score  # p_hole 0.5 is a best score of 0.368
     >>> p_hole_of_score(0.37) >= gate.min_p_hole > p_hole_of_score(0.36)
     True
     """
@@ -190,5 +189,5 @@ class AnnounceGate:
 
 def _duplicate(a: Hole, b: Hole, gate: AnnounceGate) -> bool:
     radius = max(gate.min_separation_m, gate.separation_fraction * max(a.major_m, b.major_m))
-    n, e, _ = pymap3d.geodetic2ned(a.lat_deg, a.lon_deg, b.alt_m, b.lat_deg, b.lon_deg, b.alt_m)
+    e, n = LocalFrame(b.lat_deg, b.lon_deg, b.alt_m).to_en(a.lat_deg, a.lon_deg)
     return bool(math.hypot(float(n), float(e)) < radius)

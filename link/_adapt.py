@@ -6,6 +6,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from holescan.errors import InputError
+from holescan.geotag import unit_quaternion
 from holescan.link._connection import mavlink
 from holescan.link._posebuffer import AttitudeSample, quat_from_euler
 from holescan.link._posevalidity import GpsFix, NavStatus, PositionSample
@@ -56,13 +58,13 @@ def attitude_from_attitude(msg: Any) -> AttitudeSample:
 def attitude_from_quaternion(msg: Any) -> AttitudeSample:
     """ATTITUDE_QUATERNION (ms, q1..q4 = w, x, y, z) -> :class:`AttitudeSample`."""
     q = (float(msg.q1), float(msg.q2), float(msg.q3), float(msg.q4))
-    norm = math.sqrt(sum(v * v for v in q))
-    if not norm > 0.0:
-        raise ValueError("ATTITUDE_QUATERNION with a zero quaternion")
-    w, x, y, z = (v / norm for v in q)
+    try:
+        unit = unit_quaternion(q)
+    except InputError as err:
+        raise ValueError(f"ATTITUDE_QUATERNION: {err}") from err
     return AttitudeSample(
         t_boot_ns=int(msg.time_boot_ms) * _NS_PER_MS,
-        quat_wxyz=(w, x, y, z),
+        quat_wxyz=unit,
         rate_frd=(float(msg.rollspeed), float(msg.pitchspeed), float(msg.yawspeed)),
     )
 
@@ -89,9 +91,14 @@ def gps_from_gps_raw_int(msg: Any, t_boot_ns: int) -> GpsFix:
 
 
 # ArduPilot's EKF_STATUS_FLAGS and PX4's ESTIMATOR_STATUS_FLAGS share the low bits.
-_POS_HORIZ_ABS = 16
-_CONST_POS_MODE = 128
-_GPS_GLITCH = {"EKF_STATUS_REPORT": 32768, "ESTIMATOR_STATUS": 1024}
+_POS_HORIZ_ABS = {
+    "EKF_STATUS_REPORT": mavlink.EKF_POS_HORIZ_ABS,
+    "ESTIMATOR_STATUS": mavlink.ESTIMATOR_POS_HORIZ_ABS,
+}
+_NO_POSITION = {  # constant-position mode (no aiding) or a GPS glitch
+    "EKF_STATUS_REPORT": mavlink.EKF_CONST_POS_MODE | mavlink.EKF_GPS_GLITCHING,
+    "ESTIMATOR_STATUS": mavlink.ESTIMATOR_CONST_POS_MODE | mavlink.ESTIMATOR_GPS_GLITCH,
+}
 
 
 def nav_from_ekf_status(msg: Any, t_boot_ns: int) -> NavStatus:
@@ -104,7 +111,7 @@ def nav_from_ekf_status(msg: Any, t_boot_ns: int) -> NavStatus:
     """
     mtype = msg.get_type()
     flags = int(msg.flags)
-    ok = bool(flags & _POS_HORIZ_ABS) and not flags & (_CONST_POS_MODE | _GPS_GLITCH[mtype])
+    ok = bool(flags & _POS_HORIZ_ABS[mtype]) and not flags & _NO_POSITION[mtype]
     return NavStatus(t_boot_ns=t_boot_ns, horizontal_ok=ok, flags=flags, source=mtype)
 
 
@@ -130,7 +137,7 @@ def telemetry_sample(msg: Any, gps_t_boot_ns: int) -> TelemetrySample | None:
         return attitude_from_quaternion(msg)
     if mtype == "GPS_RAW_INT":
         return gps_from_gps_raw_int(msg, gps_t_boot_ns)
-    if mtype in _GPS_GLITCH:
+    if mtype in _NO_POSITION:
         return nav_from_ekf_status(msg, gps_t_boot_ns)
     return None
 

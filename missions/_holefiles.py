@@ -45,7 +45,6 @@ from __future__ import annotations
 
 import base64
 import dataclasses
-import datetime as dt
 import html
 import math
 import tempfile
@@ -60,6 +59,7 @@ from holescan.missions._geofiles import write_geojson, write_gpx, write_kml
 from holescan.missions._holeserver import hole_waypoints
 from holescan.missions._qgcfiles import write_plan, write_wpl
 from holescan.missions._waypoint import MAV_FRAME_GLOBAL, MAV_FRAME_GLOBAL_RELATIVE_ALT, Waypoint
+from holescan.utc import utc_text
 
 __all__ = [
     "HOLE_FORMATS",
@@ -105,8 +105,7 @@ def rank_holes(holes: Iterable[Hole]) -> list[Hole]:
 def _utc(t_boot_ns: int, boot_to_unix_ns: int | None) -> str | None:
     if boot_to_unix_ns is None:
         return None
-    t = dt.datetime.fromtimestamp((t_boot_ns + boot_to_unix_ns) / 1e9, tz=dt.UTC)
-    return t.isoformat(timespec="milliseconds").replace("+00:00", "Z")
+    return utc_text(t_boot_ns + boot_to_unix_ns)
 
 
 def _r(value: float, digits: int) -> float | None:

@@ -346,7 +346,9 @@ def download_mission(
     m = mavlink  # the dialect's message classes
     try:
         _wait_vehicle(conn, name, target_system, heartbeat_timeout_s)
-        request: Any = m.MAVLink_mission_request_list_message(target_system, target_component, 0)
+        request: Any = m.MAVLink_mission_request_list_message(
+            target_system, target_component, m.MAV_MISSION_TYPE_MISSION
+        )
         expect = ["MISSION_COUNT"]
         count: int | None = None
         items: list[Waypoint] = []

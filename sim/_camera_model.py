@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+from scipy.spatial.transform import Rotation
 
 from holescan.detect import CameraIntrinsics
 from holescan.errors import InputError
@@ -38,10 +39,9 @@ FloatArray = npt.NDArray[np.float64]
 
 
 def _rotation_about(axis: FloatArray, angle: float) -> FloatArray:
-    """Rodrigues: (3, 3) rotation by ``angle`` rad about the unit vector ``axis``."""
-    k = axis / np.linalg.norm(axis)
-    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.asarray(np.eye(3) + math.sin(angle) * kx + (1.0 - math.cos(angle)) * (kx @ kx))
+    """(3, 3) rotation by ``angle`` rad about ``axis`` (any length; scipy's rotation vector)."""
+    k = np.asarray(axis, dtype=np.float64) / np.linalg.norm(axis)
+    return np.asarray(Rotation.from_rotvec(angle * k).as_matrix(), dtype=np.float64)
 
 
 @dataclass(frozen=True, eq=False)

@@ -46,6 +46,7 @@ from holescan.geotag import CIRCLE_95_PER_SIGMA
 from holescan.ground.station.files import hole_summary
 from holescan.ground.station.state import TIERS, GroundHole, Tier
 from holescan.link import xml_safe_tree
+from holescan.utc import utc_datetime, utc_text
 
 __all__ = [
     "COT_TYPE",
@@ -61,7 +62,6 @@ __all__ = [
 
 COT_TYPE = "b-m-p-s-p-i"
 _UNKNOWN = "9999999.0"
-_NS_PER_S = 1_000_000_000
 _COLOURS: dict[Tier, int] = {  # ARGB as TAK writes it (signed 32-bit)
     "announced": -256,  # yellow
     "review": -23296,  # orange
@@ -89,14 +89,6 @@ def on_tak(tier: Tier) -> bool:
 def cot_uid(station: str, hole_id: int) -> str:
     """The hole's CoT uid (one per station and hole id)."""
     return f"holescan-{station}-hole-{hole_id}"
-
-
-def _time(t: dt.datetime) -> str:
-    return t.strftime("%Y-%m-%dT%H:%M:%S.") + f"{t.microsecond // 1000:03d}Z"
-
-
-def _utc(t_unix_ns: int) -> dt.datetime:
-    return dt.datetime.fromtimestamp(t_unix_ns / _NS_PER_S, dt.UTC)
 
 
 def _span(seconds: float) -> str:
@@ -127,10 +119,10 @@ def point_age(h: GroundHole, now: dt.datetime) -> str:
     """
     if h.t_first_unix_ns <= 0:
         return ""
-    first = _utc(h.t_first_unix_ns)
+    first = utc_datetime(h.t_first_unix_ns)
     text = f"first seen {_span((now - first).total_seconds())} ago ({first:%H:%MZ})"
     if h.t_updated_unix_ns > h.t_first_unix_ns:
-        text += f", updated {_span((now - _utc(h.t_updated_unix_ns)).total_seconds())} ago"
+        text += f", updated {_span((now - utc_datetime(h.t_updated_unix_ns)).total_seconds())} ago"
     return text
 
 
@@ -162,9 +154,9 @@ def hole_cot(
             "uid": cot_uid(station, h.id),
             "type": COT_TYPE,
             "how": "m-g",
-            "time": _time(now),
-            "start": _time(now),
-            "stale": _time(now + dt.timedelta(seconds=stale_s)),
+            "time": utc_text(now),
+            "start": utc_text(now),
+            "stale": utc_text(now + dt.timedelta(seconds=stale_s)),
         },
     )
     ce = f"{CIRCLE_95_PER_SIGMA * h.sigma_h_m:.2f}" if h.sigma_h_m is not None else _UNKNOWN
@@ -184,9 +176,9 @@ def hole_cot(
     if h.sigma_h_m is not None:
         facts["sigma_h_m"] = f"{h.sigma_h_m:.3f}"
     if h.t_first_unix_ns > 0:
-        facts["first_seen"] = _time(_utc(h.t_first_unix_ns))
+        facts["first_seen"] = utc_text(h.t_first_unix_ns)
     if h.t_updated_unix_ns > 0:
-        facts["updated"] = _time(_utc(h.t_updated_unix_ns))
+        facts["updated"] = utc_text(h.t_updated_unix_ns)
     ET.SubElement(detail, "holescan", facts)
     ET.SubElement(detail, "color", {"argb": str(_COLOURS[tier])})
     ET.SubElement(detail, "precisionlocation", {"geopointsrc": "GPS", "altsrc": "GPS"})
@@ -206,7 +198,7 @@ def withdraw_cot(
     """Events that take a hole off TAK maps: stale now, then a ``t-x-d-d`` delete."""
     now = now or dt.datetime.now(dt.UTC)
     uid = cot_uid(station, hole_id)
-    stamp = {"time": _time(now), "start": _time(now), "stale": _time(now)}
+    stamp = {"time": utc_text(now), "start": utc_text(now), "stale": utc_text(now)}
     stale = ET.Element(
         "event", {"version": "2.0", "uid": uid, "type": COT_TYPE, "how": "m-g", **stamp}
     )
@@ -221,9 +213,9 @@ def withdraw_cot(
             "uid": f"{uid}-delete",
             "type": "t-x-d-d",
             "how": "h-g-i-g-o",
-            "time": _time(now),
-            "start": _time(now),
-            "stale": _time(now + dt.timedelta(seconds=20)),
+            "time": utc_text(now),
+            "start": utc_text(now),
+            "stale": utc_text(now + dt.timedelta(seconds=20)),
         },
     )
     ET.SubElement(

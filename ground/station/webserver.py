@@ -117,7 +117,9 @@ class WebServer:
     def __init__(self, app: App, host: str, port: int, limits: Limits) -> None:
         self.counters = ServerCounters()
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
-        self._sock = socket.socket(family, socket.SOCK_STREAM)
+        # IPPROTO_TCP named: asyncio sets TCP_NODELAY only on sockets that say it (else each
+        # answer on a kept-alive connection waits ~40 ms for a delayed ACK)
+        self._sock = socket.socket(family, socket.SOCK_STREAM, socket.IPPROTO_TCP)
         try:
             self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             self._sock.bind((host, port))

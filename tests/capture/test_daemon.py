@@ -135,3 +135,44 @@ def test_silent_autopilot_at_start_still_logs_unposed_frames(tmp_path: Path) -> 
     ).run()
     assert summary.frames_logged == 45
     assert summary.counters.frames_unposed == 45
+
+
+class BurstSource:
+    """Frames in bursts of ``burst`` at once, then a pause: the log writer falls behind for a
+    moment, as it does on a computer short of CPU, and catches up in the pause."""
+
+    camera = CAM
+
+    def __init__(self, bursts: int, burst: int = 8, pause_s: float = 0.6) -> None:
+        self.bursts, self.burst, self.pause_s = bursts, burst, pause_s
+
+    def __enter__(self) -> BurstSource:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        pass
+
+    def __iter__(self) -> Iterator[Frame]:
+        rng = np.random.default_rng(0)
+        depth = rng.integers(2000, 3000, size=(480, 640), dtype=np.uint16)  # hard to compress
+        rgb = rng.integers(0, 255, size=(480, 640, 3), dtype=np.uint8)
+        i = 0
+        for _ in range(self.bursts):
+            for _ in range(self.burst):
+                yield Frame(i, rgb, depth, time.monotonic_ns(), i * 33_333_333)
+                i += 1
+            time.sleep(self.pause_s)
+
+
+def test_a_log_behind_sheds_detection_never_log_frames(tmp_path: Path) -> None:
+    from holescan.flightlog import LogOptions
+
+    options = LogOptions(max_queued_frames=16)  # sheds above 4 queued
+    cfg = FlightConfig(log_prefix=tmp_path / "flight", log_options=options)
+    flight = Flight(cfg, lambda: BurstSource(5), CAM)
+    summary = flight.run()
+    c = summary.counters
+    assert c.frames_captured == 40
+    assert c.frames_log_dropped == 0 and summary.frames_logged == 40
+    assert c.frames_shed > 0, "the writer never fell behind: the test proves nothing"
+    assert summary.detect_offered == 40 - c.frames_shed

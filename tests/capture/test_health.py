@@ -16,7 +16,7 @@ DAEMON_KEYS = [
     "frames_captured", "frames_logged", "frames_log_dropped", "log_queue_depth",
     "detect_offered", "detect_skipped", "detect_done", "detect_ms_mean", "detect_errors",
     "frames_no_depth", "frames_unposed", "pose_refusals", "pose_invalid", "pose_invalid_why",
-    "sensor_failures", "holes",
+    "sensor_failures", "holes", "frames_shed",
 ]  # fmt: skip
 LINK_KEYS = ["mavlink_bad_bytes", "mavlink_bad_packets", "mavlink_age_s", "clock_source"]
 VEHICLE_KEYS = ["autopilot_mode", "autopilot_armed", "autopilot_mode_changes"]

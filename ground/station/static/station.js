@@ -71,6 +71,10 @@ function notice(text, kind) {
 }
 
 async function pair() {
+  // what earlier versions of this page kept in the browser's storage (a station token and
+  // a typed name): gone, the cookie and the pairing replace them
+  localStorage.removeItem("holescan-token");
+  localStorage.removeItem("holescan-operator");
   const u = new URL(location.href);
   if (!u.searchParams.has("token")) return;
   const t = u.searchParams.get("token");
@@ -83,7 +87,7 @@ async function pair() {
     const r = await fetch("/pair", { method: "POST", cache: "no-store", headers: { "Authorization": "Bearer " + t } });
     if (r.ok) {
       const d = await r.json();
-      notice(`Paired: marks from this browser are recorded as ${d.operator} (${d.pairing}).`, "");
+      notice(`Paired: marks from this browser are recorded as ${d.operator} (${d.pairing}).`, "ok");
     } else if (r.status === 401) {
       notice(bad, "error");
     } else {

@@ -32,7 +32,7 @@ from holescan.ground.station.maplayers import map_document
 from holescan.ground.station.mapstore import MapStore
 from holescan.link import HOLE_ID_MAX, mavlink, open_link
 from holescan.missions import TileFacts, card_facts, encode_coverage_tile, read_tile
-from tests._support import free_udp_port as free_port
+from tests._support import free_udp_port
 
 JPEG = picture(1)
 
@@ -217,7 +217,7 @@ def _send_attitude_and_position(sender: Any, yaw: float) -> None:
 
 
 def test_a_nan_yaw_never_reaches_the_track(tmp_path: Path) -> None:
-    port = free_port()
+    port = free_udp_port()
     state = StationState.open(tmp_path)
     clock = iter(range(10**18, 10**18 + 10**15, 2 * 10**9))
     state.clock = lambda: next(clock)
@@ -247,7 +247,7 @@ def _heartbeat(sender: Any) -> bool:
 def test_a_flood_of_forged_holes_does_not_lose_the_genuine_one(tmp_path: Path) -> None:
     """2,000 forged HOLE STATUSTEXTs at 200/s on an unsigned link, then the genuine hole:
     it is kept; the state file is written in batches, not once per forged hole."""
-    port = free_port()
+    port = free_udp_port()
     state = StationState.open(tmp_path)
     writes = 0
     save = state._save
