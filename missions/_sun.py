@@ -19,6 +19,7 @@ from typing import Literal
 
 from holescan.errors import InputError
 from holescan.missions.errors import SunWindowError
+from holescan.utc import utc_datetime
 
 __all__ = [
     "SUNRISE_ELEVATION_DEG",
@@ -116,7 +117,7 @@ class FlightCheck:
 
 
 def _to_dt(t_unix_ns: int, tz: dt.tzinfo = dt.UTC) -> dt.datetime:
-    return dt.datetime.fromtimestamp(t_unix_ns / _NS, tz=dt.UTC).astimezone(tz)
+    return utc_datetime(t_unix_ns).astimezone(tz)
 
 
 def _tzname(t: dt.datetime) -> str:

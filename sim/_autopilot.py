@@ -132,7 +132,7 @@ class SimAutopilot:
         path: SimPath | None = None,
         *,
         sysid: int = 1,
-        compid: int = 1,
+        compid: int = mavlink.MAV_COMP_ID_AUTOPILOT1,
         uptime_at_start_s: float = 37.25,
         drift_ppm: float = 15.0,
         jitter_ns: int = 20_000,
