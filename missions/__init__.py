@@ -14,6 +14,8 @@
 
 from holescan.missions._files import read_area, read_waypoints, write_waypoints
 from holescan.missions._geofiles import (
+    geojson_document,
+    kml_document,
     read_geojson,
     read_gpx,
     read_kml,
@@ -180,6 +182,7 @@ __all__ = [
     "encode_inventory",
     "encode_ortho_tile",
     "frame_around",
+    "geojson_document",
     "held_by",
     "hole_description",
     "hole_mission",
@@ -188,6 +191,7 @@ __all__ = [
     "hole_statustext",
     "hole_waypoints",
     "is_map_tile",
+    "kml_document",
     "local_solar_day",
     "make_card",
     "plan_survey",

@@ -5,6 +5,7 @@ docs/measurements.md quotes (run with ``-s``)."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import signal
@@ -19,7 +20,14 @@ import pytest
 
 from holescan.capture import Flight, FlightConfig, FlightSummary, Telemetry
 from holescan.detect import CameraIntrinsics, Frame
-from holescan.flightlog import LoggedFrame, LoggedHealth, log_info, read_flight_log, recover_log
+from holescan.flightlog import (
+    LoggedFrame,
+    LoggedHealth,
+    LogOptions,
+    log_info,
+    read_flight_log,
+    recover_log,
+)
 from holescan.sim import SimAutopilot, SimPath
 from tests._support import free_udp_port, wait_for
 from tests.capture.test_shutdown import group_members, start_sim_flight
@@ -161,8 +169,10 @@ def test_sensor_stops_and_comes_back(tmp_path: Path) -> None:
 
 
 @pytest.mark.skipif(os.geteuid() != 0 or shutil.which("mount") is None, reason="needs root")
-@pytest.mark.slow
-def test_disk_full_while_logging(tmp_path: Path) -> None:
+@contextlib.contextmanager
+def _fly_onto_a_small_disk(tmp_path: Path, image_reserve_bytes: int) -> Iterator[FlightSummary]:
+    """A 14 s flight of incompressible frames logged onto a 20 MB tmpfs (mounted while the
+    caller reads the log back)."""
     logs = tmp_path / "small"
     logs.mkdir()
     if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=20m", "tmpfs", str(logs)]).returncode:
@@ -183,10 +193,25 @@ def test_disk_full_while_logging(tmp_path: Path) -> None:
                     time.sleep(max(0.0, (target - time.monotonic_ns()) / 1e9))
                     yield Frame(i, rgb, depth, time.monotonic_ns(), i * 100_000_000)
 
-        cfg = FlightConfig(log_prefix=logs / "f", max_duration_s=14.0, startup_sync_s=5.0)
+        options = LogOptions(color="raw", depth="raw", image_reserve_bytes=image_reserve_bytes)
+        cfg = FlightConfig(
+            log_prefix=logs / "f", max_duration_s=14.0, startup_sync_s=5.0, log_options=options
+        )
         with SimAutopilot(f"udpout:127.0.0.1:{port}", PATH):
             flight = Flight(cfg, Big, cam, mavlink=f"udpin:127.0.0.1:{port}")
             summary = flight.run()
+        out = tmp_path / "recovered.mcap"  # what was written can be repaired elsewhere
+        got = sum(1 for _ in read_flight_log(summary.log.files, kinds={LoggedFrame}))
+        assert recover_log(summary.log.files[0], out).frames == got
+        yield summary
+    finally:
+        subprocess.run(["umount", "-l", str(logs)], check=False)
+
+
+@pytest.mark.slow
+def test_disk_full_while_logging(tmp_path: Path) -> None:
+    """No reserve: the disk fills; the error is reported, capture and detection go on."""
+    with _fly_onto_a_small_disk(tmp_path, image_reserve_bytes=0) as summary:
         c = summary.counters
         files = summary.log.files
         got = sum(1 for _ in read_flight_log(files, kinds={LoggedFrame}))
@@ -200,10 +225,24 @@ def test_disk_full_while_logging(tmp_path: Path) -> None:
         assert got > 0 and info.frames == got  # what was written stays readable
         assert c.frames_captured > got  # capture went on after the disk filled
         assert c.frames_detected > 0 and len(summary.holes) >= 1
-        out = tmp_path / "recovered.mcap"  # and it can be repaired elsewhere
-        assert recover_log(files[0], out).frames == got
-    finally:
-        subprocess.run(["umount", "-l", str(logs)], check=False)
+
+
+@pytest.mark.slow
+def test_disk_reserve_stops_images_first(tmp_path: Path) -> None:
+    """A 12 MB reserve on a 20 MB disk: frames stop being logged before the disk is full;
+    telemetry, health and holes go on being logged, and the log closes without an error."""
+    with _fly_onto_a_small_disk(tmp_path, image_reserve_bytes=12 << 20) as summary:
+        c = summary.counters
+        records = list(read_flight_log(summary.log.files, kinds={LoggedFrame, LoggedHealth}))
+        frames = [r for r in records if isinstance(r, LoggedFrame)]
+        health = [r for r in records if isinstance(r, LoggedHealth)]
+        stopped = [h for h in health if h.values.get("event") == "images_stopped"]
+        assert summary.log.error is None  # never ran out of disk
+        assert summary.log.images_stopped_t_unix_ns is not None and len(stopped) == 1
+        assert 0 < len(frames) < c.frames_captured
+        assert summary.log.frames_not_logged > 0
+        assert any(h.t_unix_ns > stopped[0].t_unix_ns for h in health)  # health kept after it
+        assert c.frames_detected > 0 and len(summary.holes) >= 1  # detection went on
 
 
 @pytest.mark.slow
