@@ -25,12 +25,15 @@ from holescan.missions._geofiles import (
 )
 from holescan.missions._holecards import (
     CARD_PAYLOAD,
+    NO_PICTURE,
     CardAssembler,
     CardSender,
     TileSource,
     card_facts,
+    card_picture,
     make_card,
     read_card,
+    with_picture,
 )
 from holescan.missions._holefiles import (
     HOLE_FORMATS,
@@ -141,6 +144,7 @@ __all__ = [
     "MAV_FRAME_GLOBAL_RELATIVE_ALT",
     "MAV_FRAME_MISSION",
     "MAV_MISSION_ACCEPTED",
+    "NO_PICTURE",
     "SUNRISE_ELEVATION_DEG",
     "TILE_CELLS_RANGE",
     "TYPE_COVERAGE",
@@ -173,6 +177,7 @@ __all__ = [
     "UploadReport",
     "Waypoint",
     "card_facts",
+    "card_picture",
     "check_flight",
     "connect",
     "coverage_from_levels",
@@ -217,6 +222,7 @@ __all__ = [
     "tiles_per_hectare",
     "upload_mission",
     "waypoint_from_mission_item",
+    "with_picture",
     "write_geojson",
     "write_gpx",
     "write_hole_file",

@@ -258,7 +258,8 @@ class GroundStation:
             events: list[bytes] = []
             for h in holes:
                 tier = hole_tier(h)
-                key = (h.lat_deg, h.lon_deg, h.score, tier, h.mark, h.card_rev, h.sigma_h_m)
+                key: tuple[object, ...] = (h.lat_deg, h.lon_deg, h.p_hole, h.score, h.sigma_h_m)
+                key += (tier, h.mark, h.card_rev)
                 if self._sent.get(h.id) == key:
                     continue
                 self._sent[h.id] = key

@@ -46,7 +46,9 @@ __all__ = [
 
 def hole_summary(h: GroundHole) -> str:
     """One line: size, depth reason, score, sightings, uncertainty, operator's mark."""
-    parts = [f"hole {h.id}", f"best frame's score {h.score:.2f}"]
+    parts = [f"hole {h.id}"]
+    if h.score is not None:
+        parts.append(f"best frame's score {h.score:.2f}")
     if h.major_m is not None and h.minor_m is not None:
         parts.append(f"opening {h.major_m:.2f} x {h.minor_m:.2f} m")
     if h.sightings:
@@ -64,7 +66,7 @@ def hole_waypoint(h: GroundHole, image_src: str | None = None) -> Waypoint:
         "hole_id": h.id,
         "tier": h.tier,
         "p_hole": h.p_hole,
-        "score": round(h.score, 3),
+        "score": None if h.score is None else round(h.score, 3),
         "mark": h.mark,
         "sightings": h.sightings,
         "sigma_h_m": h.sigma_h_m,

@@ -66,6 +66,7 @@ from holescan.link import (
     read_hole_text,
     xml_text,
 )
+from holescan.missions import NO_PICTURE, card_picture, with_picture
 from holescan.outputs import atomic_output
 
 __all__ = [
@@ -106,21 +107,27 @@ _OLD_SECONDS = {"first_unix": "t_first_unix_ns", "updated_unix": "t_updated_unix
 
 
 def parse_hole_statustext(text: str) -> tuple[int, float, float, float] | None:
-    """``HOLE <id> <score> <lat> <lon>`` (an announced hole) or ``REVIEW <id> ...`` (a hole
-    for review) -> (id, score, lat_deg, lon_deg); None for other texts. The link's one codec
-    (:func:`link.read_hole_text`, which also gives the tier).
+    """``HOLE <id> p<p_hole> <lat> <lon>`` (an announced hole) or ``REVIEW <id> ...`` (a
+    hole for review) -> (id, confidence, lat_deg, lon_deg); None for other texts. The
+    confidence is the hole-level p_hole, or the best frame's detector score from a vehicle
+    that sent the old form (``HOLE <id> <score> ...``). The link's one codec
+    (:func:`link.read_hole_text`, which says which of the two it was and the tier).
 
-    >>> parse_hole_statustext("HOLE 3 0.88 43.6533100 -79.3831200")
-    (3, 0.88, 43.65331, -79.38312)
+    >>> parse_hole_statustext("HOLE 3 p0.97 43.6533100 -79.3831200")
+    (3, 0.97, 43.65331, -79.38312)
     >>> parse_hole_statustext("REVIEW 4 0.30 43.6533100 -79.3831200")
     (4, 0.3, 43.65331, -79.38312)
     >>> parse_hole_statustext("PreArm: GPS") is None
     True
-    >>> parse_hole_statustext("HOLE 1000000000 0.88 43.6533100 -79.3831200") is None
+    >>> parse_hole_statustext("HOLE 1000000000 p0.88 43.6533100 -79.3831200") is None
     True
     """
     said = read_hole_text(text)
-    return None if said is None else (said.hole_id, said.score, said.lat_deg, said.lon_deg)
+    if said is None:
+        return None
+    value = said.p_hole if said.p_hole is not None else said.score
+    assert value is not None  # the codec sets one of the two
+    return (said.hole_id, value, said.lat_deg, said.lon_deg)
 
 
 @dataclass
@@ -129,7 +136,8 @@ class GroundHole:
 
     id : the vehicle's hole id. lat_deg, lon_deg : WGS84; alt_m : m MSL (None: unknown).
     sigma_h_m : 1-sigma horizontal uncertainty, m (None until the card came).
-    score, sightings, major_m, minor_m : the detector's. why : its explanation.
+    score : the best frame's detector score (None until a card or an old-form STATUSTEXT
+    told it). sightings, major_m, minor_m : the detector's. why : its explanation.
     card_rev : revision of the newest card (0: no card yet). has_picture : a JPEG is kept.
     mark : the operator's (``new`` until set). vehicle_tier : what the vehicle said of it
     (``announced``: sure enough to send to the crews; ``review``: plausible, for an
@@ -145,7 +153,7 @@ class GroundHole:
     id: int
     lat_deg: float
     lon_deg: float
-    score: float
+    score: float | None = None
     alt_m: float | None = None
     sigma_h_m: float | None = None
     sightings: int = 0
@@ -209,9 +217,9 @@ class GroundHole:
         unknown and named in the list returned."""
         self.id = check_hole_id(self.id)
         self.lat_deg, self.lon_deg = link_lat_lon(self.lat_deg, self.lon_deg)
-        self.score = link_float(self.score, 0.0, 1.0, "score")
         forgotten = []
         optional = {
+            "score": (0.0, 1.0),
             "alt_m": _ALT_M,
             "sigma_h_m": _SIZE_M,
             "major_m": _SIZE_M,
@@ -444,45 +452,51 @@ class StationState:
         self.reject(f"hole {hole_id}", LinkValueError(f"{self.max_holes} holes kept already"))
         return False
 
-    def _hole(self, hole_id: int, lat_deg: float, lon_deg: float, score: float) -> GroundHole:
+    def _hole(self, hole_id: int, lat_deg: float, lon_deg: float) -> GroundHole:
         now = self.clock()
         h = self.holes.get(hole_id)
         if h is None:
-            h = GroundHole(hole_id, lat_deg, lon_deg, score, t_first_unix_ns=now)
+            h = GroundHole(hole_id, lat_deg, lon_deg, t_first_unix_ns=now)
             self.holes[hole_id] = h
         h.t_updated_unix_ns = now
         return h
 
     def on_statustext(self, text: str) -> GroundHole | None:
         """Take a ``HOLE ...`` STATUSTEXT; return the hole when it was one (a text that
-        starts as one but whose values are out of range is counted in ``rejected``)."""
+        starts as one but whose values are out of range is counted in ``rejected``). Its
+        number is kept as what it is: ``p_hole`` (``p0.97``), or ``score`` from a vehicle
+        that sent the old form (:func:`link.read_hole_text`)."""
         said = read_hole_text(text)
         if said is None:
             if text.lstrip().startswith(("HOLE ", "REVIEW ")):
                 self.reject("a hole STATUSTEXT", LinkValueError(repr(xml_text(text, 60))))
             return None
-        hid, score, lat, lon, tier = (
-            said.hole_id, said.score, said.lat_deg, said.lon_deg, said.tier,
-        )  # fmt: skip
+        hid, lat, lon, tier = said.hole_id, said.lat_deg, said.lon_deg, said.tier
         with self._lock:
             if not self._room_for(hid):
                 return None
             h = self.holes.get(hid)
-            if h is not None and (h.lat_deg, h.lon_deg, h.score, h.vehicle_tier) == (
+            p_hole = said.p_hole if said.p_hole is not None else (h.p_hole if h else None)
+            score = said.score if said.score is not None else (h.score if h else None)
+            if h is not None and (h.lat_deg, h.lon_deg, h.p_hole, h.score, h.vehicle_tier) == (
                 lat,
                 lon,
+                p_hole,
                 score,
                 tier,
             ):
                 return h
-            h = self._hole(hid, lat, lon, score)
-            h.lat_deg, h.lon_deg, h.score, h.vehicle_tier = lat, lon, score, tier
+            h = self._hole(hid, lat, lon)
+            h.lat_deg, h.lon_deg, h.vehicle_tier = lat, lon, tier
+            h.p_hole, h.score = p_hole, score
         self._changed()
         return h
 
     def on_card(self, facts: dict[str, Any], jpeg: bytes) -> GroundHole | None:
-        """Take a card's facts (:func:`missions.read_card`) and picture; an older revision
-        than kept is ignored."""
+        """Take a card's facts (:func:`missions.read_card`) and picture (``jpeg``: the
+        card's bytes); an older revision than kept is ignored. A facts-only card
+        (:data:`missions.NO_PICTURE`) updates the facts and keeps the picture held (its
+        file then carries the new facts)."""
         try:
             v = card_values(facts)
         except LinkValueError as err:
@@ -495,16 +509,19 @@ class StationState:
                 return h
             if not self._room_for(hid):
                 return None
-            with atomic_output(self.card_path(hid), force=True) as f:
-                f.write(jpeg)
-            h = self._hole(hid, v.lat_deg, v.lon_deg, v.score)
-            h.lat_deg, h.lon_deg, h.score, h.card_rev, h.has_picture = (
-                v.lat_deg,
-                v.lon_deg,
-                v.score,
-                rev,
-                True,
-            )
+            picture = card_picture(jpeg) != NO_PICTURE
+            if not picture and h is not None and h.has_picture:
+                try:
+                    jpeg, picture = with_picture(jpeg, self.card_path(hid).read_bytes()), True
+                except OSError as err:  # the kept picture is gone: facts only, ask again
+                    _log.warning("hole %d: kept picture unreadable (%s)", hid, err)
+                    h.has_picture = False
+            if picture:
+                with atomic_output(self.card_path(hid), force=True) as f:
+                    f.write(jpeg)
+            h = self._hole(hid, v.lat_deg, v.lon_deg)
+            h.lat_deg, h.lon_deg, h.score, h.card_rev = v.lat_deg, v.lon_deg, v.score, rev
+            h.has_picture = h.has_picture or picture
             h.alt_m, h.sigma_h_m = v.alt_m, v.sigma_h_m
             h.major_m, h.minor_m = v.major_m, v.minor_m
             if v.sightings is not None:

@@ -110,8 +110,9 @@ def test_a_poisoned_station_json_is_read_safely(tmp_path: Path) -> None:
     }
     (tmp_path / "station.json").write_text(json.dumps(doc))
     state = StationState.open(tmp_path)
-    assert set(state.holes) == {1}
+    assert set(state.holes) == {1, 3}  # a bad position loses the hole, a bad score the score
     assert state.holes[1].sigma_h_m is None and state.holes[1].p_hole is None
+    assert state.holes[3].score is None
     assert state.holes[1].why == "dark"
     assert [p.yaw for p in state.track] == [0.5]
     assert list(tmp_path.glob("station.rejected-*.json"))  # the evidence kept
