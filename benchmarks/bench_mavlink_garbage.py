@@ -10,6 +10,7 @@ import argparse
 import socket
 import threading
 import time
+from typing import Any
 
 import numpy as np
 
@@ -24,8 +25,9 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def run(seconds: float, garbage_hz: float, seed: int = 1) -> dict[str, float]:
-    """Messages received and share of 30 Hz sample times that could be posed."""
+def run(seconds: float, garbage_hz: float, seed: int = 1) -> dict[str, Any]:
+    """Messages received, share of 30 Hz sample times that could be posed, and each
+    stream's rate measured at the receiver against the one asked (``measured/asked`` Hz)."""
     port = free_port()
     rng = np.random.default_rng(seed)
     path = SimPath(waypoints_enu=((0.0, 0.0, 2.5), (3.0, 0.0, 2.5), (3.0, 3.0, 2.5)), speed_m_s=0.5)
@@ -57,7 +59,12 @@ def run(seconds: float, garbage_hz: float, seed: int = 1) -> dict[str, float]:
             stop.set()
             t.join()
             st = tel.stats()
+            measured = tel.message_rates_hz(window_s=seconds)
+            asked = ap.rates_hz()
     return {
+        "rates_hz": {
+            k: f"{measured.get(k, 0.0):.1f}/{hz:g}" for k, hz in sorted(asked.items()) if hz > 0
+        },
         "messages": sum(st.messages.values()) - before,
         "unposed": tried - posed,
         "samples": tried,

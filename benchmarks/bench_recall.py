@@ -10,18 +10,21 @@ For every access hole labelled in every frame of the datasets (our simulator's
 * the terrain around the hole: the read pixels of a ring around its box (the box grown by
   30 % a side, the box itself left out), back-projected, a plane fitted (SVD);
 * **range**: distance from the camera to where the box centre's ray meets that plane;
-* **view angle**: between that ray and the plane's normal (0 = looking straight at it).
+* **view angle**: between that ray and the plane's normal (0 = looking straight at it);
+* **image position**: the box centre's distance from the edge of the frame's read area
+  (the frame without its unread border bands, found as the detector finds them), pixels at
+  640 px wide (negative inside a band).
 
 A hole is **detected** when a default-mode detection with ``p_hole >= --min-p-hole``
 (default 0.5) matches it: IoU > 0.5 or, for a hole cut by the image border (a crowd box),
 covering at least half of its visible part. Holes whose ring has under 200 read pixels
 cannot be measured (counted and printed). Recall per (range, angle) bin is printed with its
-count; ``--write`` stores it as ``mapping/recall_table.json`` with its provenance (the
-command, datasets, counts and date). A bin measured on fewer than ``--min-holes`` views
-(default 15) takes the lower of its own recall and that of itself and its 8 neighbours
-pooled; a bin with no view the lowest measured neighbour; both only when the
-neighbourhood holds ``--min-holes`` views, else 0: the map claims no coverage it has not
-measured. ``--rows FILE`` keeps the
+count, per border bin; ``--write`` stores it as ``mapping/recall_table.json`` with its
+provenance (the command, datasets, counts and date). A bin measured on fewer than
+``--min-holes`` views (default 15) takes the lower of its own recall and that of itself
+and its 8 range/angle neighbours at the same image position pooled; a bin with no view the lowest
+measured neighbour; both only when the neighbourhood holds ``--min-holes`` views, else 0:
+the map claims no coverage it has not measured. ``--rows FILE`` keeps the
 per-view measurements (a second run with the same file re-bins without detecting).
 """
 
@@ -40,6 +43,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 RANGE_EDGES = [1.5, 2.5, 3.0, 3.5, 4.0, 4.5]
 ANGLE_EDGES = [0.0, 15.0, 30.0, 45.0, 60.0]
+BORDER_EDGES = [0.0, 80.0, float("inf")]
 RING = 0.3
 MIN_RING_PX = 200
 
@@ -94,7 +98,17 @@ def _geometry(depth: np.ndarray, cam, box: tuple[float, ...]) -> tuple[float, fl
     return range_m, float(np.degrees(np.arccos(min(1.0, cosang))))
 
 
-def _one(job: tuple[str, int, float]) -> list[tuple[float, float, int, int]]:
+def _border_px(depth: np.ndarray, box: tuple[float, ...]) -> float:
+    from holescan.detect import BAND_MAX_PX, unread_bands
+
+    h, w = depth.shape
+    k = 640.0 / w
+    left, top, right, bottom = unread_bands(depth == 0, max(1, round(BAND_MAX_PX / k)))
+    u, v = box[0] + box[2] / 2, box[1] + box[3] / 2
+    return k * min(u - left, w - right - u, v - top, h - bottom - v)
+
+
+def _one(job: tuple[str, int, float]) -> list[tuple[float, float, int, int, float]]:
     from holescan.detect import DEFAULT, detect_holes
     from holescan.ground import load_image_pair
 
@@ -112,10 +126,11 @@ def _one(job: tuple[str, int, float]) -> list[tuple[float, float, int, int]]:
             if iou > 0.5 or (crowd and covered >= 0.5):
                 hit = 1
                 break
+        border = _border_px(depth, tuple(float(v) for v in box))
         if geo is None:
-            out.append((float("nan"), float("nan"), hit, int(crowd)))
+            out.append((float("nan"), float("nan"), hit, int(crowd), border))
         else:
-            out.append((geo[0], geo[1], hit, int(crowd)))
+            out.append((geo[0], geo[1], hit, int(crowd), border))
     return out
 
 
@@ -130,7 +145,7 @@ def main() -> None:
     a = ap.parse_args()
     from holescan.mapping import RecallTable
 
-    rows: list[tuple[str, float, float, int, int]] = []
+    rows: list[tuple[str, float, float, int, int, float]] = []
     if a.rows is not None and a.rows.exists():
         rows = [tuple(r) for r in json.loads(a.rows.read_text())]  # type: ignore[misc]
     for root in a.datasets if not rows else []:
@@ -143,7 +158,7 @@ def main() -> None:
             per = [_one(j) for j in jobs]
         got = [(root.name, *r) for p in per for r in p]
         rows += got
-        arr = np.array([r[1:] for r in got], dtype=np.float64).reshape(-1, 4)
+        arr = np.array([r[1:] for r in got], dtype=np.float64).reshape(-1, 5)
         meas = np.isfinite(arr[:, 0])
         print(
             f"{root.name}: {len(ds.images)} frames, {len(arr)} hole views "  # type: ignore[attr-defined]
@@ -155,47 +170,49 @@ def main() -> None:
     arr = np.array([r[1:] for r in rows], dtype=np.float64)
     meas = np.isfinite(arr[:, 0])
     arr = arr[meas]
-    re, ae = np.array(RANGE_EDGES), np.array(ANGLE_EDGES)
+    re, ae, be = np.array(RANGE_EDGES), np.array(ANGLE_EDGES), np.array(BORDER_EDGES)
     ri = np.searchsorted(re, arr[:, 0], side="right") - 1
     ai = np.searchsorted(ae, arr[:, 1], side="right") - 1
-    nr, na = len(re) - 1, len(ae) - 1
-    ok = (ri >= 0) & (ri < nr) & (ai >= 0) & (ai < na)
-    n = np.zeros((nr, na), np.int64)
-    k = np.zeros((nr, na), np.int64)
-    np.add.at(n, (ri[ok], ai[ok]), 1)
-    np.add.at(k, (ri[ok], ai[ok]), arr[ok, 2].astype(np.int64))
+    bi = np.searchsorted(be, arr[:, 4], side="right") - 1
+    nr, na, nb = len(re) - 1, len(ae) - 1, len(be) - 1
+    ok = (ri >= 0) & (ri < nr) & (ai >= 0) & (ai < na) & (bi >= 0) & (bi < nb)
+    n = np.zeros((nr, na, nb), np.int64)
+    k = np.zeros((nr, na, nb), np.int64)
+    np.add.at(n, (ri[ok], ai[ok], bi[ok]), 1)
+    np.add.at(k, (ri[ok], ai[ok], bi[ok]), arr[ok, 2].astype(np.int64))
     print(f"outside the table's bins: {int((~ok).sum())} of {len(arr)}")
     rec = np.where(n > 0, k / np.maximum(n, 1), 0.0)
-    head = "range \\ angle | " + " | ".join(f"{ae[j]:.0f}-{ae[j + 1]:.0f}" for j in range(na))
-    print(head)
-    for i in range(nr):
-        cells = " | ".join(f"{rec[i, j]:.2f} ({n[i, j]})" if n[i, j] else "-" for j in range(na))
-        print(f"{re[i]:.1f}-{re[i + 1]:.1f} m | {cells}")
-    # A bin with few views takes the recall of it and its 8 neighbours pooled, when those
+    for b in range(nb):
+        print(f"border {be[b]:.0f}-{be[b + 1]:.0f} px: recall {k[..., b].sum()}/{n[..., b].sum()}")
+        print("range \\ angle | " + " | ".join(f"{ae[j]:.0f}-{ae[j + 1]:.0f}" for j in range(na)))
+        for i in range(nr):
+            cells = " | ".join(
+                f"{rec[i, j, b]:.2f} ({n[i, j, b]})" if n[i, j, b] else "-" for j in range(na)
+            )
+            print(f"{re[i]:.1f}-{re[i + 1]:.1f} m | {cells}")
+    # A bin with few views takes the recall of it and its neighbours pooled, when those
     # hold enough; a bin outside everything measured stays 0.
-    pn = np.zeros_like(n)
-    pk = np.zeros_like(k)
-    for i in range(nr):
-        for j in range(na):
-            sl = (slice(max(0, i - 1), i + 2), slice(max(0, j - 1), j + 2))
-            pn[i, j], pk[i, j] = n[sl].sum(), k[sl].sum()
-    table = np.zeros((nr, na))
-    for i in range(nr):
-        for j in range(na):
-            pooled = pk[i, j] / pn[i, j] if pn[i, j] >= a.min_holes else 0.0
-            sl = (slice(max(0, i - 1), i + 2), slice(max(0, j - 1), j + 2))
-            if n[i, j] >= a.min_holes:
-                table[i, j] = rec[i, j]
-            elif n[i, j] > 0:  # few views: never above what they showed
-                table[i, j] = min(pooled, rec[i, j])
-            elif pooled > 0:  # none: the worst measured neighbour
-                table[i, j] = min(pooled, float(rec[sl][n[sl] > 0].min()))
+    table = np.zeros((nr, na, nb))
+    for idx in np.ndindex(nr, na, nb):
+        # Neighbours in range and angle, at the same image position (pooling across it
+        # would lend the interior's recall to the border).
+        sl = (slice(max(0, idx[0] - 1), idx[0] + 2), slice(max(0, idx[1] - 1), idx[1] + 2), idx[2])
+        pn, pk = int(n[sl].sum()), int(k[sl].sum())
+        pooled = pk / pn if pn >= a.min_holes else 0.0
+        if n[idx] >= a.min_holes:
+            table[idx] = rec[idx]
+        elif n[idx] > 0:  # few views: never above what they showed
+            table[idx] = min(pooled, rec[idx])
+        elif pooled > 0:  # none: the worst measured neighbour
+            table[idx] = min(pooled, float(rec[sl][n[sl] > 0].min()))
     print("written table (sparse bins: see --help):")
-    for i in range(nr):
-        print(
-            f"{re[i]:.1f}-{re[i + 1]:.1f} m | "
-            + " | ".join(f"{table[i, j]:.2f}" for j in range(na))
-        )
+    for b in range(nb):
+        print(f"border {be[b]:.0f}-{be[b + 1]:.0f} px")
+        for i in range(nr):
+            print(
+                f"{re[i]:.1f}-{re[i + 1]:.1f} m | "
+                + " | ".join(f"{table[i, j, b]:.2f}" for j in range(na))
+            )
     if a.write:
         t = RecallTable(
             re,
@@ -203,8 +220,10 @@ def main() -> None:
             table,
             n,
             {
-                "what": "default-mode detector recall of access holes per frame, by range "
-                "and view angle (line of sight vs the terrain plane around the hole)",
+                "what": "default-mode detector recall of access holes per frame, by range, "
+                "view angle (line of sight vs the terrain plane around the hole) and image "
+                "position (the hole centre's distance from the edge of the read area, px at "
+                "640 wide), on the structured-light sensor model",
                 "command": "python benchmarks/bench_recall.py "
                 + " ".join(str(p) for p in a.datasets)
                 + f" --min-p-hole {a.min_p_hole} --min-holes {a.min_holes} --write",
@@ -214,10 +233,11 @@ def main() -> None:
                 "detected_when": f"p_hole >= {a.min_p_hole} and IoU > 0.5 (border-cut: covers "
                 "half the visible part)",
                 "bins_below_min_holes": f"fewer than {a.min_holes} views: the lower of its own "
-                "recall and that of it and its 8 neighbours pooled; no view: the lowest measured "
+                "recall and that of it and its neighbours pooled; no view: the lowest measured "
                 "neighbour; 0 when the neighbourhood holds fewer views",
                 "date": datetime.date.today().isoformat(),
             },
+            be,
         )
         out = Path(__file__).resolve().parent.parent / "mapping" / "recall_table.json"
         out.write_text(json.dumps(t.to_json(), indent=1) + "\n")

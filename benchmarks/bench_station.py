@@ -41,7 +41,10 @@ def free_port() -> int:
 
 def hole(hid: int) -> Hole:
     lat, lon = HOME[0] + hid * 2e-5, HOME[1] + hid * 1e-5
-    return Hole(hid, lat, lon, 121.0, 0.3, 0.88, 9, 10**9, 3 * 10**9, 4, (1, 2, 30, 20), 1.1, 0.7)
+    return Hole(
+        hid, lat, lon, 121.0, 0.3, 0.88, 9, 10**9, 3 * 10**9, 4, (1, 2, 30, 20), 1.1, 0.7,
+        p_hole=0.95,
+    )  # fmt: skip
 
 
 class Events:

@@ -1,6 +1,6 @@
 """The default detector on scene sets, per failure mode of a structured-light sensor.
 
-    python benchmarks/sensor_eval.py DATASET [DATASET ...] [--workers N]
+    python benchmarks/sensor_eval.py DATASET [DATASET ...] [--workers N] [--off CHOICE ...]
 
 For each dataset (a COCO-style folder from ``benchmarks/hard_scenes``, ``benchmarks/
 alien_scenes`` or ``holescan dataset synth``): AP under IoU > 0.5, recall, false positives
@@ -39,15 +39,18 @@ EDGE_PX = 2.0
 Det = tuple[tuple[float, float, float, float], float, float]
 
 
-def _detect(job: tuple[Path, int]) -> tuple[int, list[Det]]:
+def _detect(job: tuple[Path, int, tuple[str, ...]]) -> tuple[int, list[Det]]:
+    from dataclasses import replace
+
     from holescan.detect import DEFAULT, detect_holes
     from holescan.ground import load_dataset, load_image_pair
 
-    root, i = job
+    root, i, off = job
     ds = _cache.get(root) or _cache.setdefault(root, load_dataset(root))
     img = ds.images[i]
     rgb, depth = load_image_pair(ds, img)
-    dets = detect_holes(rgb, depth, ds.camera, DEFAULT)
+    params = replace(DEFAULT, options=replace(DEFAULT.options, **dict.fromkeys(off, False)))
+    dets = detect_holes(rgb, depth, ds.camera, params)
     return img.id, [
         (tuple(float(v) for v in d.box), d.score, float(d.p_hole or 0.0))  # type: ignore[misc]
         for d in dets
@@ -70,13 +73,13 @@ def _iou(a: tuple[float, ...], b: tuple[float, ...]) -> float:
     return inter / max(a[2] * a[3] + b[2] * b[3] - inter, 1e-9)
 
 
-def evaluate(root: Path, workers: int) -> dict[str, Any]:
+def evaluate(root: Path, workers: int, off: tuple[str, ...] = ()) -> dict[str, Any]:
     from holescan.detect import ScoredBox, evaluate_detections
     from holescan.ground import ground_truth, load_dataset
 
     ds = load_dataset(root)
     raw = json.loads((root / "annotations.json").read_text())
-    jobs = [(root, i) for i in range(len(ds.images))]
+    jobs = [(root, i, off) for i in range(len(ds.images))]
     ctx = multiprocessing.get_context("spawn")
     with ctx.Pool(workers) as pool:
         found = dict(pool.map(_detect, jobs, chunksize=2))
@@ -152,7 +155,20 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("datasets", nargs="+", type=Path)
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument(
+        "--off",
+        nargs="*",
+        default=[],
+        help="boolean detector choices to switch off (DefaultOptions fields, e.g. bands "
+        "closed_border)",
+    )
     args = ap.parse_args(argv)
+    from holescan.detect import DefaultOptions
+
+    for name in args.off:
+        if not isinstance(getattr(DefaultOptions(), name, None), bool):
+            print(f"--off {name}: not a boolean option of DefaultOptions", file=sys.stderr)
+            return 2
     print(
         "| set | frames | holes | AP IoU | recall | FP p>=0.3 | border recall (p>=0.3) | "
         "interior recall (p>=0.3) | >= half in read area: recall (p>=0.3) | on stain / "
@@ -163,7 +179,7 @@ def main(argv: list[str] | None = None) -> int:
         if not (root / "annotations.json").is_file():
             print(f"{root}: not a dataset folder (no annotations.json)", file=sys.stderr)
             return 2
-        r = evaluate(root, args.workers)
+        r = evaluate(root, args.workers, tuple(args.off))
         m, on = r["modes"], r["on_distractors_p03"]
 
         def rec(k: str, m: dict[str, tuple[int, int, int]] = m) -> str:

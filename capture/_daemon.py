@@ -11,7 +11,9 @@ Threads and processes of one flight:
   (:class:`capture._mavlink.Telemetry`): each message logged raw, each position also as a pose.
 - **results** thread: logs detections, poses the frame they came from (interpolated, once
   the telemetry after it has arrived), geotags, merges sightings into holes, logs the holes,
-  serves them to the ground station and announces them; writes ``/health`` every second.
+  serves them to the ground station and announces them (:class:`geotag.AnnouncePolicy`:
+  again on a noticeable change, once more at the end with their last facts); writes
+  ``/health`` every second.
 
 A sensor that fails (raises, or nothing for ``frame_timeout_s``) is closed, reset on USB
 when it can be, and reopened with back-off; telemetry and logging go on. Frames that cannot
@@ -45,6 +47,7 @@ from holescan.geotag import (
     AnnouncePolicy,
     BestViews,
     Hole,
+    HoleNews,
     HolePipeline,
     HoleView,
     Tier,
@@ -60,7 +63,8 @@ FrameListener = Callable[[Frame, VehiclePose | None], None]
 capture thread, after the log and the detector have it; must never wait (the live map)."""
 HoleListener = Callable[[list[Hole], list[Hole], Mapping[int, HoleView], Mapping[int, Tier]], None]
 """``on_holes(served, news, views, tiers)``: every announced hole (the waypoints), the
-holes new or changed enough to tell the ground now (announced and for review), the best
+holes new or changed enough to tell the ground now (announced and for review; when the
+flight ends, every hole whose facts changed since it was last told), the best
 view of each hole in ``news`` whose best view is known (hole id -> :class:`HoleView`), and
 the tier of each hole in ``news`` (``announced``/``review``, :meth:`geotag.AnnounceGate.tier`)."""
 
@@ -212,7 +216,11 @@ class Flight:
         served, now = self._policy.tiers(holes)
         self._writer.write_holes(holes, self.unix_ns(r.t_mono_ns), now, self._gate)
         self._views.update(r.frame_index, r.detections, changed)
-        news = self._policy.tell(changed, now)
+        self._tell(served, self._policy.tell(changed, now))
+
+    def _tell(self, served: list[Hole], news: list[HoleNews]) -> None:
+        """Count ``news`` and hand it to the ground (``on_holes``)."""
+        c = self.counters
         for n in news:
             if n.tier == "announced":
                 c.announcements += 1
@@ -223,6 +231,23 @@ class Flight:
             views = {h.id: v for h in told if (v := self._views.get(h.id)) is not None}
             tiers: dict[int, Tier] = {n.hole.id: n.tier for n in news}
             self._on_holes(served, told, views, tiers)
+
+    def _tell_final(self) -> list[Hole]:
+        """The flight's last holes, logged; every one the ground knows of whose facts
+        changed since it was last told (a sigma a few cm smaller, more sightings) is told
+        once more (:meth:`geotag.AnnouncePolicy.final`), so the ground ends with the
+        vehicle's last numbers. Their cards are queued like any other (the hole server
+        sends what the link and the budget allow before it closes)."""
+        assert self._writer is not None
+        with self._lock:
+            final = self.tracker.holes()
+            served, tiers = self._policy.tiers(final)
+            self._writer.write_holes(final, time.time_ns(), tiers, self._gate)
+            try:
+                self._tell(served, self._policy.final(final, tiers))
+            except Exception:  # the log must still close
+                log.exception("telling the ground the holes' last facts failed")
+        return final
 
     def _health(self) -> FlightHealth:
         assert self._writer is not None and self._worker is not None
@@ -341,8 +366,7 @@ class Flight:
                     stats = worker.stats()
                     log.debug("capture ended; results drained in %.2f s", time.monotonic() - t_stop)
             telemetry_stats = self._link.summary()
-            final = self.tracker.holes()
-            writer.write_holes(final, time.time_ns(), self._policy.tiers(final)[1], self._gate)
+            self._tell_final()
         finally:
             if deadline is not None:
                 deadline.cancel()

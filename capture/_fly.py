@@ -137,7 +137,8 @@ def fly(
                 server.update_holes(served)
                 # announced first: their STATUSTEXTs and cards go before the review ones
                 for h in sorted(news, key=lambda h: tiers[h.id] != "announced"):
-                    announced.append(server.announce(h, tiers[h.id]))
+                    if (said := server.announce(h, tiers[h.id])) is not None:
+                        announced.append(said)  # None: this hole's last text said the same
                     if h.id in views:
                         server.send_card(h, views[h.id].jpeg, views[h.id].why, tiers[h.id])
 

@@ -30,7 +30,6 @@ dependency on the companion computer for the same checks, with longer error mess
 from __future__ import annotations
 
 import dataclasses
-import datetime as dt
 import importlib.util
 import logging
 import math
@@ -50,6 +49,7 @@ from holescan.errors import InputError
 from holescan.flightlog.options import LogOptions
 from holescan.geotag import AnnounceGate, CameraMount, ErrorModel
 from holescan.link import SigningKey
+from holescan.utc import utc_datetime
 
 __all__ = [
     "FlyConfig",
@@ -146,7 +146,7 @@ class FlyConfig:
             self.log_dir.mkdir(parents=True, exist_ok=True)
         except OSError as err:
             raise InputError(f"cannot create the log folder {self.log_dir}: {err}") from err
-        t = dt.datetime.fromtimestamp((t_unix_ns or time.time_ns()) / 1e9, dt.UTC)
+        t = utc_datetime(t_unix_ns or time.time_ns())
         stem = f"flight-{t:%Y%m%dT%H%M%SZ}"
         name, k = stem, 1
         while any(self.log_dir.glob(f"{name}_*.mcap*")):

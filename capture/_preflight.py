@@ -293,7 +293,11 @@ def _ready_item(tel: Telemetry, heard: _Heard, limits: PreflightLimits) -> Check
         tel.send_with(lambda mav: mav.param_request_read_send(sysid, compid, b"", 0))
 
     def ask_mission() -> None:
-        tel.send_with(lambda mav: mav.mission_request_list_send(sysid, compid, 0))
+        tel.send_with(
+            lambda mav: mav.mission_request_list_send(
+                sysid, compid, mavlink.MAV_MISSION_TYPE_MISSION
+            )
+        )
 
     if not heard.wait(lambda: heard.param is not None, limits.ready_s, ask_param):
         return CheckItem(

@@ -238,19 +238,22 @@ class _Ground:
         new = [h for h in holes if h.id not in self._told]
         self._told.update(h.id for h in new)
         return tuple(
-            f"hole {h.id} ({h.vehicle_tier}) score {h.score:.2f} at {h.lat_deg:.7f}, "
-            f"{h.lon_deg:.7f}"
+            f"hole {h.id} ({h.vehicle_tier})"
+            + (f" p_hole {h.p_hole:.2f}" if h.p_hole is not None else "")
+            + f" at {h.lat_deg:.7f}, {h.lon_deg:.7f}"
             for h in new
         )
 
-    def wait_complete(self, ids: set[int], timeout_s: float) -> bool:
+    def wait_complete(self, ids: set[int], revs: Mapping[int, int], timeout_s: float) -> bool:
         """Wait until every hole of ``ids`` is at the ground with its picture, in the
-        downloaded mission."""
+        downloaded mission, and every hole of ``revs`` (id -> the vehicle's newest card
+        revision) has that card (the last facts the vehicle sent)."""
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
             _, holes, _ = self.station.state.snapshot()
             done = {h.id for h in holes if h.has_picture and h.seq is not None}
-            if ids <= done:
+            rev = {h.id: h.card_rev for h in holes}
+            if ids <= done and all(rev.get(i, 0) >= r for i, r in revs.items()):
                 return True
             time.sleep(0.2)
         return False
@@ -347,7 +350,8 @@ def run_demo(
             server.update_holes(served)
             for h in sorted(news, key=lambda h: tiers[h.id] != "announced"):
                 tier = tiers[h.id]
-                announced.append(server.announce(h, tier))
+                if (said := server.announce(h, tier)) is not None:  # None: said already
+                    announced.append(said)
                 told = first_announced if tier == "announced" else first_review
                 if h.id not in told:  # boot-clock span first sighting -> now
                     told[h.id] = (h.t_last_boot_ns - h.t_first_boot_ns) * 1e-9
@@ -419,8 +423,10 @@ def run_demo(
         server.flush_cards(timeout_s=30.0)
         live_map.flush(timeout_s=10.0)
         server.flush_cards(timeout_s=5.0)
-        if not gcs.wait_complete(served_ids, timeout_s=30.0):
-            mission_error = "not every announced hole reached the ground with its picture"
+        if not gcs.wait_complete(served_ids, server.card_revisions(), timeout_s=30.0):
+            mission_error = (
+                "not every announced hole reached the ground with its picture and last facts"
+            )
         _, ground_holes, _ = gcs.station.state.snapshot()
         mission_items = sum(h.seq is not None for h in ground_holes)
         pictures = sum(h.has_picture for h in ground_holes if h.id in served_ids)

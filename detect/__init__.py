@@ -20,6 +20,7 @@ from holescan.detect._evaluate import (
 from holescan.detect._frame import Frame, FrameSource
 from holescan.detect._options import DefaultOptions
 from holescan.detect._paper import detect_paper, paper_superpixels
+from holescan.detect._regions import BAND_MAX_PX, unread_bands
 from holescan.detect._scores import combined_score, luminance, ramp
 from holescan.detect._types import (
     DEFAULT,
@@ -37,6 +38,7 @@ from holescan.detect._types import (
 )
 
 __all__ = [
+    "BAND_MAX_PX",
     "DEFAULT",
     "DOG",
     "HUMAN",
@@ -69,4 +71,5 @@ __all__ = [
     "p_hole_of_score",
     "paper_superpixels",
     "ramp",
+    "unread_bands",
 ]

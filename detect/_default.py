@@ -69,6 +69,7 @@ from holescan.detect._geometry import (
 )
 from holescan.detect._photometry import relative_luminance, void_evidence
 from holescan.detect._regions import (
+    BAND_MAX_PX,
     SHALLOW_M,
     Candidate,
     basin_depth,
@@ -115,13 +116,15 @@ TERRAIN_PX = 6
 # DARK_CUT.
 DARK_CUT = 0.75
 DARK_SMOOTH_PX = 5
-# Unread border bands (options.bands: registered structured-light depth) are cut off the
-# frame; wider than this (frame pixels) an unread border area is the scene's, not a band.
-BAND_MAX_PX = 64
+# Unread border bands (options.bands: registered structured-light depth, at most
+# BAND_MAX_PX wide) are cut off the frame.
 # A basin cut by the frame border (or a band) is also looked at closed there
-# (options.closed_border), and, with a read floor, counts from this depth score (0 at the
-# first, 1 at the second; Sd 0.2 = 0.55 m below the bridged rim for a human searcher).
+# (options.closed_border), and, with a read floor, counts when clearly deep (depth score
+# from 0 at the first to 1 at the second; Sd 0.2 = 0.55 m below the bridged rim for a human
+# searcher) or dark inside as a hole is (darkness score, likewise): a shallow lit dip
+# running into the border closes that way too.
 BRIDGED_SD = (0.2, 0.35)
+BRIDGED_DARK = (0.1, 0.25)
 
 
 def _nms(dets: list[Detection], iou_max: float, contained: float) -> list[Detection]:
@@ -197,8 +200,9 @@ def _measure(
 
     A no-reading blob (not enclosed) must show enough valid rim (not border, not more
     no-reading) around it. A ``bridged`` basin (closed only by bridging its cut at the
-    border) with a read floor must be clearly deep: its depth is measured against a rim
-    partly assumed, and a shallow dip running into the border is closed that way too.
+    border) with a read floor must be clearly deep or dark inside: its depth is measured
+    against a rim partly assumed, and a shallow lit dip running into the border is closed
+    that way too.
     """
     mask, enclosed = region.mask, region.enclosed
     x, y, w, h = region.box
@@ -309,7 +313,7 @@ def _measure(
         # No reading: a void only if it looks like one (dark against the rubble around it).
         score *= 0.2 + 0.8 * (void_evidence(rel_in) if o.photometric_evidence else 1.0)
     elif bridged:
-        score *= ramp(sd, BRIDGED_SD[0], BRIDGED_SD[1])
+        score *= max(ramp(sd, *BRIDGED_SD), ramp(sb, *BRIDGED_DARK))
     if score < params.min_score:
         return None
     box = _frame_box((gx0, gy0, gx1, gy1), (ww, hh), f)
@@ -391,7 +395,8 @@ def detect_default(
         return []
     # The read area: the frame without its unread border bands (a hole the band cuts is
     # cut by the read area's border, its rim there unknown).
-    bands = unread_bands(z_full, max(1, round(BAND_MAX_PX / factor))) if o.bands else (0, 0, 0, 0)
+    max_px = max(1, round(BAND_MAX_PX / factor))
+    bands = unread_bands(np.isnan(z_full), max_px) if o.bands else (0, 0, 0, 0)
     left, top, right, bottom = bands
     hf, wf = z_full.shape
     z = z_full[top : hf - bottom, left : wf - right]

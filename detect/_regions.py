@@ -18,8 +18,10 @@ from holescan.detect._options import DefaultOptions
 # sigmas at 4 m (Xtion: 1.425e-6 Z^2 mm per pixel -> 23 mm, /4 after 4x4 averaging).
 SHALLOW_M = 0.05
 DEEP_M = 0.25
-# A border column (row) this unread belongs to an unread band of the registered frame.
+# A border column (row) this unread belongs to an unread band of the registered frame;
+# wider than BAND_MAX_PX (frame pixels at 640 wide) an unread border area is the scene's.
 BAND_UNREAD = 0.95
+BAND_MAX_PX = 64
 # Dips along a border line up to this fraction of its length are bridged (basin_depth).
 BORDER_BRIDGE = 0.5
 # ... and at least this many pixels long.
@@ -48,19 +50,18 @@ def block_depth(
     return z, frac
 
 
-def unread_bands(z: npt.NDArray[np.float32], max_px: int) -> tuple[int, int, int, int]:
+def unread_bands(unread: npt.NDArray[np.bool_], max_px: int) -> tuple[int, int, int, int]:
     """Widths ``(left, top, right, bottom)`` of the unread bands at the frame border.
 
     A registered structured-light frame has no reading in bands along its border (right
     24-43 px, top 8-14, bottom 6-12, left 0-11 at 640x480): a band is the run of border
-    columns (rows) of ``z`` (NaN = no reading) at least :data:`BAND_UNREAD` unread, at most
-    ``max_px`` wide (wider unread areas are the scene's, e.g. terrain beyond range).
+    columns (rows) of ``unread`` (True = no reading) at least :data:`BAND_UNREAD` unread,
+    at most ``max_px`` wide (wider unread areas are the scene's, e.g. terrain beyond range).
 
-    >>> z = np.ones((20, 30), np.float32); z[:, 26:] = np.nan; z[:2] = np.nan
-    >>> unread_bands(z, 8)
+    >>> unread = np.zeros((20, 30), bool); unread[:, 26:] = True; unread[:2] = True
+    >>> unread_bands(unread, 8)
     (0, 2, 4, 0)
     """
-    unread = np.isnan(z)
     cols, rows = unread.mean(axis=0), unread.mean(axis=1)
 
     def run(frac: npt.NDArray[np.float64]) -> int:

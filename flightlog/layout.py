@@ -7,9 +7,10 @@ metadata records); each task then opens the log itself and reads its own byte ra
 
 A cleanly closed file gives its layout from its summary section
 (:func:`format.read_summary`, CRC checked). A file without a readable summary (cut off by
-a crash) is walked record header by record header up to its last complete record (its own
-walk, not mcap's :class:`~mcap.stream_reader.StreamReader`: it must note each chunk's byte
-range and seek over the chunk bodies rather than read gigabytes, also from a URL), and
+a crash) is walked record header by record header up to its last complete record (the
+flight log's one record walker, :func:`scan.walk_records`, not mcap's
+:class:`~mcap.stream_reader.StreamReader`: it must note each chunk's byte range and seek
+over the chunk bodies rather than read gigabytes, also from a URL), and
 its chunks are opened until every channel the caller needs is known; ``complete`` is then
 False and ``stop_reason`` says where it ends.
 """
@@ -21,17 +22,17 @@ import hashlib
 import os
 import struct
 from collections.abc import Collection, Iterable, Iterator, Mapping
+from pathlib import Path
 from typing import IO, Any, Final
 
 import zstandard
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
-from mcap.records import Channel, Chunk, McapRecord, Message, Metadata, Schema
+from mcap.records import Channel, Chunk, DataEnd, Footer, McapRecord, Message, Metadata, Schema
 from mcap.stream_reader import breakup_chunk
 
 from holescan.flightlog.errors import ChunkDamagedError, FlightLogError, RecordError
 from holescan.flightlog.format import (
-    CHUNK_FIELDS,
     MAGIC,
     RECORD_HEADER,
     parse_record,
@@ -39,6 +40,7 @@ from holescan.flightlog.format import (
     read_summary,
 )
 from holescan.flightlog.reader import LogRecord, decode_message
+from holescan.flightlog.scan import ChunkHead, ScanState, walk_records
 
 __all__ = [
     "ChunkSpan",
@@ -179,44 +181,30 @@ def _from_summary(f: IO[bytes], name: str, size: int, digest: Any) -> LogLayout 
 
 
 def _walk(f: IO[bytes], name: str, size: int, digest: Any, wanted: set[str]) -> LogLayout:
-    """Record headers from the front; stops at the first record that does not fit."""
+    """The file without a readable summary, through the one record walker
+    (:func:`scan.walk_records`: chunk bodies not read, no resync): up to the first record
+    that does not fit, or the data-end record (the data is whole, its summary was not)."""
     chunks: list[ChunkSpan] = []
     channels: dict[int, Channel] = {}
     schemas: dict[int, Schema] = {}
     metadata: dict[str, dict[str, str]] = {}
-    pos = len(MAGIC)
-    stop: str | None = "file ends inside a record"
+    state = ScanState(Path(name), size=size)
     complete = False
-    while True:
-        f.seek(pos)
-        header = f.read(RECORD_HEADER.size)
-        if len(header) < RECORD_HEADER.size:
+    for _offset, rec in walk_records(f, size, state, chunk_bodies=False, resync=False):
+        if isinstance(rec, ChunkHead):
+            digest.update(struct.pack("<QQ", rec.offset, rec.length - RECORD_HEADER.size))
+            digest.update(rec.fields)
+            chunks.append(ChunkSpan(rec.offset, rec.length, rec.start_time_ns, rec.end_time_ns))
+        elif isinstance(rec, Metadata):
+            metadata[rec.name] = dict(rec.metadata)
+        elif isinstance(rec, Schema):
+            schemas[rec.id] = rec
+        elif isinstance(rec, Channel):
+            channels[rec.id] = rec
+        elif isinstance(rec, DataEnd | Footer):
+            complete = True  # the summary could not be read, the data could
             break
-        opcode, length = RECORD_HEADER.unpack(header)
-        end = pos + RECORD_HEADER.size + length
-        if end > size:
-            break
-        if opcode == Opcode.CHUNK:
-            head = f.read(min(length, CHUNK_FIELDS.size))
-            if len(head) < CHUNK_FIELDS.size:
-                break
-            start_ns, end_ns, _, _, _ = CHUNK_FIELDS.unpack(head)
-            digest.update(struct.pack("<QQ", pos, length) + head)
-            chunks.append(ChunkSpan(pos, end - pos, start_ns, end_ns))
-        elif opcode in (Opcode.METADATA, Opcode.SCHEMA, Opcode.CHANNEL):
-            rec = _parse(opcode, f.read(length))
-            if isinstance(rec, Metadata):
-                metadata[rec.name] = dict(rec.metadata)
-            elif isinstance(rec, Schema):
-                schemas[rec.id] = rec
-            elif isinstance(rec, Channel):
-                channels[rec.id] = rec
-        elif opcode in (Opcode.DATA_END, Opcode.FOOTER):
-            stop, complete = None, True  # the summary could not be read, the data could
-            break
-        pos = end
-    if stop is not None:
-        stop = f"{stop} at byte {pos} of {size}"
+    stop = None if complete else f"{state.stop_reason} at byte {state.good_bytes} of {size}"
     _channels_from_chunks(f, chunks, channels, schemas, wanted)
     return LogLayout(
         url=name,
@@ -229,13 +217,6 @@ def _walk(f: IO[bytes], name: str, size: int, digest: Any, wanted: set[str]) -> 
         stop_reason=stop,
         content_hash=digest.hexdigest(),
     )
-
-
-def _parse(opcode: int, body: bytes) -> McapRecord | None:
-    try:
-        return parse_record(opcode, body)
-    except RecordError:
-        return None  # a damaged record costs itself only
 
 
 def _channels_from_chunks(

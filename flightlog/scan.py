@@ -58,7 +58,7 @@ from holescan.flightlog.format import (
 )
 from holescan.utc import utc_text
 
-__all__ = ["DamagedRegion", "ScanState", "scan_records"]
+__all__ = ["ChunkHead", "DamagedRegion", "ScanState", "scan_records", "walk_records"]
 
 #: Records other than chunks and attachments are small; a longer one is a corrupt length.
 _SMALL_RECORD_LIMIT = 64 << 20
@@ -276,100 +276,150 @@ def scan_records(path: str | os.PathLike[str], state: ScanState | None = None) -
         if f.read(len(MAGIC)) != MAGIC:
             raise FlightLogError(f"{st.path}: not an MCAP file (bad magic)")
         summary = read_summary(f, size)
-        pos = st.good_bytes = len(MAGIC)
-        crc: int | None = zlib.crc32(MAGIC)
-        seen_schemas: set[int] = set()
-        seen_channels: set[int] = set()
-        lost: DamagedRegion | None = None  # the damaged chunk whose indexes may follow
-        while True:
+        for _offset, rec in walk_records(f, size, st, summary=summary):
+            yield rec
+
+
+@dataclasses.dataclass(frozen=True)
+class ChunkHead:
+    """A chunk seen by :func:`walk_records` without reading its body: the record's bytes
+    ``[offset, offset + length)``, its messages' log times (Unix ns) and ``fields``, the
+    raw bytes of its fixed fields (times, sizes, CRC: what identifies its content)."""
+
+    offset: int
+    length: int
+    start_time_ns: int
+    end_time_ns: int
+    fields: bytes
+
+
+#: Records :func:`walk_records` parses when it does not read chunk bodies.
+_HEAD_ONLY_PARSED = frozenset(
+    {Opcode.HEADER, Opcode.SCHEMA, Opcode.CHANNEL, Opcode.METADATA, Opcode.DATA_END, Opcode.FOOTER}
+)
+
+
+def walk_records(
+    f: IO[bytes],
+    size: int,
+    st: ScanState,
+    *,
+    summary: Summary | None = None,
+    chunk_bodies: bool = True,
+    resync: bool = True,
+) -> Iterator[tuple[int, Any]]:
+    """The one MCAP record walker: ``(offset, record)`` of every intact record of the open
+    file ``f`` (``size`` bytes, its magic already checked), front to back, filling ``st``.
+
+    Every record's length is checked against the bytes left before anything is read.
+    ``chunk_bodies`` : decompress each chunk (bounded, CRC checked; a damaged chunk is
+    skipped and reported) and yield its content after it (offset of the chunk); False:
+    yield a :class:`ChunkHead` instead, reading only its fixed fields (a log's layout,
+    from a URL too), and parse only the header, schema, channel, metadata, data-end and
+    footer records. ``resync`` : after a damaged record header, go on at the next intact
+    record (from ``summary``'s chunk index, else by scanning); False: stop there (a record
+    whose frame holds but whose body does not parse is then skipped alone).
+    """
+    pos = st.good_bytes = len(MAGIC)
+    crc: int | None = zlib.crc32(MAGIC) if chunk_bodies else None
+    seen_schemas: set[int] = set()
+    seen_channels: set[int] = set()
+    lost: DamagedRegion | None = None  # the damaged chunk whose indexes may follow
+    while True:
+        f.seek(pos)
+        head = f.read(_HEAD)
+        if len(head) < _HEAD:
+            st.stop_reason = "file ends inside a record" if head else "file ends (no footer)"
+            return
+        opcode, length = RECORD_HEADER.unpack(head)
+        limit = size - pos - _HEAD
+        why = None
+        if opcode not in KNOWN_OPCODES:
+            why = f"unknown record type 0x{opcode:02x}"
+        elif length > limit:
+            why = f"record length {length} runs past the end of the file"
+        elif length > _SMALL_RECORD_LIMIT and opcode not in (Opcode.CHUNK, Opcode.ATTACHMENT):
+            why = f"{Opcode(opcode).name.lower()} record length {length} is implausible"
+        rec: Any = None
+        content: list[McapRecord] = []
+        body = b""
+        if why is None and not chunk_bodies and opcode == Opcode.CHUNK:
+            fields = f.read(min(length, CHUNK_FIELDS.size))
+            if len(fields) < CHUNK_FIELDS.size:
+                why = f"chunk record length {length} is too short"
+            else:
+                t0, t1, _, _, _ = CHUNK_FIELDS.unpack(fields)
+                rec = ChunkHead(pos, _HEAD + length, t0, t1, fields)
+        elif why is None and (chunk_bodies or opcode in _HEAD_ONLY_PARSED):
+            body = f.read(length)
+            try:
+                rec = parse_record(opcode, body)
+                content = _chunk_content(rec) if isinstance(rec, Chunk) else []
+            except RecordError as err:
+                if isinstance(rec, Chunk) or not resync:  # the frame held: skip just it
+                    lost = DamagedRegion(
+                        pos, _HEAD + length, str(err),
+                        rec.message_start_time if isinstance(rec, Chunk) else None,
+                        rec.message_end_time if isinstance(rec, Chunk) else None,
+                        None if isinstance(rec, Chunk) else 0,
+                    )  # fmt: skip
+                    st.damaged.append(lost)
+                    crc = None
+                    pos += _HEAD + length
+                    continue
+                why = str(err)
+        if why is not None:
+            nxt = _resync(f, pos + 1, size, summary) if resync else None
+            if nxt is None:
+                if length > limit:
+                    st.stop_reason = "file ends inside a record"
+                else:
+                    st.stop_reason = f"damaged record ({why})"
+                return
+            lost = DamagedRegion(pos, nxt - pos, why)
+            st.damaged.append(lost)
+            crc = None
+            pos = nxt
+            continue
+        if isinstance(rec, MessageIndex) and lost is not None:
+            lost = dataclasses.replace(lost, messages=(lost.messages or 0) + len(rec.records))
+            st.damaged[-1] = lost
+            pos += _HEAD + length
+            continue  # the index of a chunk not yielded
+        lost = None
+        if isinstance(rec, DataEnd) and crc is not None and rec.data_section_crc not in (0, crc):
+            st.damaged.append(DamagedRegion(len(MAGIC), pos - len(MAGIC), _DATA_CRC, messages=0))
+        if crc is not None:
+            crc = zlib.crc32(head + body, crc)
+        st.record_start, st.good_bytes = pos, pos + _HEAD + length
+        record_at = pos
+        pos = st.good_bytes
+        if rec is None:
+            continue
+        if isinstance(rec, (Chunk, ChunkHead)):
+            st.chunks += 1
+        for item in (rec, *content):
+            if isinstance(item, Message) and item.channel_id not in seen_channels:
+                restored = _restore_channel(item.channel_id, summary, seen_schemas)
+                if not restored:
+                    st.orphan_messages += 1
+                    continue
+                seen_channels.add(item.channel_id)
+                for r in restored:
+                    yield record_at, r
+            yield record_at, item
+            if isinstance(item, Schema):
+                seen_schemas.add(item.id)
+            elif isinstance(item, Channel):
+                seen_channels.add(item.id)
+        if isinstance(rec, Footer):
             f.seek(pos)
-            head = f.read(_HEAD)
-            if len(head) < _HEAD:
-                st.stop_reason = "file ends inside a record" if head else "file ends (no footer)"
+            if f.read(len(MAGIC)) != MAGIC:
+                st.stop_reason = "no closing magic after the footer"
                 return
-            opcode, length = RECORD_HEADER.unpack(head)
-            limit = size - pos - _HEAD
-            why = None
-            if opcode not in KNOWN_OPCODES:
-                why = f"unknown record type 0x{opcode:02x}"
-            elif length > limit:
-                why = f"record length {length} runs past the end of the file"
-            elif length > _SMALL_RECORD_LIMIT and opcode not in (Opcode.CHUNK, Opcode.ATTACHMENT):
-                why = f"{Opcode(opcode).name.lower()} record length {length} is implausible"
-            rec: McapRecord | None = None
-            content: list[McapRecord] = []
-            if why is None:
-                body = f.read(length)
-                try:
-                    rec = parse_record(opcode, body)
-                    content = _chunk_content(rec) if isinstance(rec, Chunk) else []
-                except RecordError as err:
-                    why = str(err)
-                    if isinstance(rec, Chunk):  # the chunk's frame held: skip just it
-                        lost = DamagedRegion(
-                            pos, _HEAD + length, why, rec.message_start_time,
-                            rec.message_end_time, None,
-                        )  # fmt: skip
-                        st.damaged.append(lost)
-                        crc = None
-                        pos += _HEAD + length
-                        continue
-            if why is not None:
-                nxt = _resync(f, pos + 1, size, summary)
-                if nxt is None:
-                    if length > limit:
-                        st.stop_reason = "file ends inside a record"
-                    else:
-                        st.stop_reason = f"damaged record ({why})"
-                    return
-                lost = DamagedRegion(pos, nxt - pos, why)
-                st.damaged.append(lost)
-                crc = None
-                pos = nxt
-                continue
-            if isinstance(rec, MessageIndex) and lost is not None:
-                lost = dataclasses.replace(lost, messages=(lost.messages or 0) + len(rec.records))
-                st.damaged[-1] = lost
-                pos += _HEAD + length
-                continue  # the index of a chunk not yielded
-            lost = None
-            if (
-                isinstance(rec, DataEnd)
-                and crc is not None
-                and rec.data_section_crc not in (0, crc)
-            ):
-                st.damaged.append(
-                    DamagedRegion(len(MAGIC), pos - len(MAGIC), _DATA_CRC, messages=0)
-                )
-            if crc is not None:
-                crc = zlib.crc32(head + body, crc)
-            st.record_start, st.good_bytes = pos, pos + _HEAD + length
-            pos = st.good_bytes
-            if rec is None:
-                continue
-            if isinstance(rec, Chunk):
-                st.chunks += 1
-            for item in (rec, *content):
-                if isinstance(item, Message) and item.channel_id not in seen_channels:
-                    restored = _restore_channel(item.channel_id, summary, seen_schemas)
-                    if not restored:
-                        st.orphan_messages += 1
-                        continue
-                    seen_channels.add(item.channel_id)
-                    yield from restored
-                yield item
-                if isinstance(item, Schema):
-                    seen_schemas.add(item.id)
-                elif isinstance(item, Channel):
-                    seen_channels.add(item.id)
-            if isinstance(rec, Footer):
-                f.seek(pos)
-                if f.read(len(MAGIC)) != MAGIC:
-                    st.stop_reason = "no closing magic after the footer"
-                    return
-                st.complete = True
-                st.good_bytes = size
-                return
+            st.complete = True
+            st.good_bytes = size
+            return
 
 
 def _restore_channel(

@@ -98,7 +98,7 @@ def local_en_m(
 ) -> tuple[float, float]:
     """(east, north) metres of one point from a reference point, both on the ellipsoid.
 
-    >>> [round(v, 2) for v in local_en_m(47.0001, 8.0, 47.0, 8.0)]
+    >>> [round(v, 2) + 0.0 for v in local_en_m(47.0001, 8.0, 47.0, 8.0)]  # + 0.0: no -0.0
     [0.0, 11.12]
     """
     e, n = LocalFrame(lat0_deg, lon0_deg).to_en(lat_deg, lon_deg)

@@ -67,6 +67,11 @@ class ErrorModel:
         * major * tan(view angle), opening_unseen * major * (1 - rim_seen))``; the view
         angle is the line of sight's angle to the rim plane's normal. Calibrated with
         ``benchmarks/bench_geotag.py`` so that 68 % of sightings fall within it.
+    cut_unseen : an opening the frame's border or an unread band cuts
+        (:attr:`detect.Detection.border_cut`) has at least this fraction of its major axis
+        unseen (how far it runs on beyond the cut is unknown; its centre, placed on the
+        circle through the rim it shows, was 0.12-0.18 m off in the median in the simulated
+        sortie of ``tests/geotag/test_sim_accuracy.py``, against 0.03-0.04 m uncut).
     box_oblique : detections without an opening centre (paper mode, older logs) are placed
         at their box centre, which moves toward the camera as the view turns oblique:
         ``hypot(opening_base_m, box_oblique * major * tan(view angle))``.
@@ -78,6 +83,7 @@ class ErrorModel:
     opening_base_m: float = 0.018
     opening_oblique: float = 0.03
     opening_unseen: float = 0.5
+    cut_unseen: float = 0.5
     box_oblique: float = 0.35
 
     def __post_init__(self) -> None:
@@ -270,6 +276,8 @@ def _opening_sigma(det: Detection, view_rad: float, measured: bool, em: ErrorMod
         return math.hypot(em.opening_base_m, em.box_oblique * oblique) if oblique > 0 else 0.0
     seen = det.rim_seen if det.rim_seen is not None and math.isfinite(det.rim_seen) else 1.0
     unseen = major * (1.0 - min(max(seen, 0.0), 1.0))
+    if det.border_cut:  # its rim beyond the frame's border or band is unknown, not seen
+        unseen = max(unseen, em.cut_unseen * major)
     return math.hypot(em.opening_base_m, em.opening_oblique * oblique, em.opening_unseen * unseen)
 
 

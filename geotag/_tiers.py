@@ -89,7 +89,7 @@ class AnnounceGate:
     >>> gate = AnnounceGate(min_p_hole=0.5, min_sightings=2, min_span_s=0.3)
     >>> gate.min_p_hole
     0.5
-    >>> from detect import p_hole_of_score  # p_hole 0.5 is a best score of 0.368
+    >>> from holescan.detect import p_hole_of_score  # p_hole 0.5 is a best score of 0.368
     >>> p_hole_of_score(0.37) >= gate.min_p_hole > p_hole_of_score(0.36)
     True
     """

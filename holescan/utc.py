@@ -3,8 +3,9 @@ the flight log's damage report).
 
 Every timestamp in holescan is an ``int`` of nanoseconds; here it becomes an aware
 :class:`datetime.datetime` in UTC, or the ISO 8601 text ``YYYY-MM-DDTHH:MM:SS.mmmZ`` that
-KML, GPX, GeoJSON and Cursor-on-Target all read (milliseconds, truncated, never rounded up
-into the next second). Exact integer arithmetic: no float on the way.
+KML, GPX, GeoJSON and Cursor-on-Target all read: the time to the nearest microsecond (as
+:meth:`datetime.datetime.fromtimestamp` gives it), shown to the millisecond (truncated).
+Integer arithmetic: no float on the way.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ _EPOCH = dt.datetime(1970, 1, 1, tzinfo=dt.UTC)
 
 
 def utc_datetime(t_unix_ns: int) -> dt.datetime:
-    """An aware UTC datetime (microseconds, truncated) of nanoseconds since the Unix epoch.
+    """An aware UTC datetime (to the nearest microsecond) of nanoseconds since the Unix epoch.
 
     Raises
     ------
@@ -26,10 +27,10 @@ def utc_datetime(t_unix_ns: int) -> dt.datetime:
     Examples
     --------
     >>> utc_datetime(1_796_300_000_123_456_789)
-    datetime.datetime(2026, 12, 3, 12, 13, 20, 123456, tzinfo=datetime.timezone.utc)
+    datetime.datetime(2026, 12, 3, 12, 13, 20, 123457, tzinfo=datetime.timezone.utc)
     """
     try:
-        return _EPOCH + dt.timedelta(microseconds=t_unix_ns // 1000)
+        return _EPOCH + dt.timedelta(microseconds=(t_unix_ns + 500) // 1000)
     except OverflowError as err:
         raise ValueError(f"{t_unix_ns} ns since 1970 is not a date") from err
 
@@ -44,8 +45,8 @@ def utc_text(t: int | dt.datetime) -> str:
 
     Examples
     --------
-    >>> utc_text(1_796_300_000_999_999_999)
-    '2026-12-03T12:13:20.999Z'
+    >>> utc_text(1_796_300_000_999_499_999), utc_text(1_796_300_000_999_999_999)
+    ('2026-12-03T12:13:20.999Z', '2026-12-03T12:13:21.000Z')
     >>> utc_text(dt.datetime(2026, 12, 3, 12, 30, tzinfo=dt.timezone(dt.timedelta(hours=1))))
     '2026-12-03T11:30:00.000Z'
     """

@@ -91,9 +91,14 @@ def gps_from_gps_raw_int(msg: Any, t_boot_ns: int) -> GpsFix:
 
 
 # ArduPilot's EKF_STATUS_FLAGS and PX4's ESTIMATOR_STATUS_FLAGS share the low bits.
-_POS_HORIZ_ABS = 16
-_CONST_POS_MODE = 128
-_GPS_GLITCH = {"EKF_STATUS_REPORT": 32768, "ESTIMATOR_STATUS": 1024}
+_POS_HORIZ_ABS = {
+    "EKF_STATUS_REPORT": mavlink.EKF_POS_HORIZ_ABS,
+    "ESTIMATOR_STATUS": mavlink.ESTIMATOR_POS_HORIZ_ABS,
+}
+_NO_POSITION = {  # constant-position mode (no aiding) or a GPS glitch
+    "EKF_STATUS_REPORT": mavlink.EKF_CONST_POS_MODE | mavlink.EKF_GPS_GLITCHING,
+    "ESTIMATOR_STATUS": mavlink.ESTIMATOR_CONST_POS_MODE | mavlink.ESTIMATOR_GPS_GLITCH,
+}
 
 
 def nav_from_ekf_status(msg: Any, t_boot_ns: int) -> NavStatus:
@@ -106,7 +111,7 @@ def nav_from_ekf_status(msg: Any, t_boot_ns: int) -> NavStatus:
     """
     mtype = msg.get_type()
     flags = int(msg.flags)
-    ok = bool(flags & _POS_HORIZ_ABS) and not flags & (_CONST_POS_MODE | _GPS_GLITCH[mtype])
+    ok = bool(flags & _POS_HORIZ_ABS[mtype]) and not flags & _NO_POSITION[mtype]
     return NavStatus(t_boot_ns=t_boot_ns, horizontal_ok=ok, flags=flags, source=mtype)
 
 
@@ -132,7 +137,7 @@ def telemetry_sample(msg: Any, gps_t_boot_ns: int) -> TelemetrySample | None:
         return attitude_from_quaternion(msg)
     if mtype == "GPS_RAW_INT":
         return gps_from_gps_raw_int(msg, gps_t_boot_ns)
-    if mtype in _GPS_GLITCH:
+    if mtype in _NO_POSITION:
         return nav_from_ekf_status(msg, gps_t_boot_ns)
     return None
 

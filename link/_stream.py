@@ -17,10 +17,12 @@ from __future__ import annotations
 
 from typing import Any
 
+from holescan.link._connection import mavlink
+
 __all__ = ["MavlinkStream"]
 
-_V1, _V2 = 0xFE, 0xFD
-_SIGNED = 0x01
+_V1, _V2 = mavlink.PROTOCOL_MARKER_V1, mavlink.PROTOCOL_MARKER_V2
+_SIGNED = mavlink.MAVLINK_IFLAG_SIGNED
 _MAX_BUFFER = 1 << 16
 
 

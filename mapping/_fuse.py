@@ -43,7 +43,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from holescan.detect import CameraIntrinsics
+from holescan.detect import BAND_MAX_PX, CameraIntrinsics, unread_bands
 from holescan.geotag import LocalCameraPose, LocalFrame
 from holescan.mapping._grid import MapGrid
 from holescan.mapping._layers import MapLayers
@@ -122,8 +122,8 @@ class SearchMap:
     --------
     >>> from holescan.geotag import LocalFrame
     >>> m = SearchMap(MapGrid.covering(0, 0, 10, 10, 0.05), LocalFrame(47.0, 8.0))
-    >>> m.version, m.layers().coverage.max()
-    (0, np.float32(0.0))
+    >>> m.version, bool(m.layers().coverage.any())  # nothing fused yet: nothing covered
+    (0, False)
     """
 
     def __init__(
@@ -284,7 +284,10 @@ class SearchMap:
         in_hole = (pts[..., 2] < level - _BELOW_TERRAIN_M) & np.isfinite(t_level) & (t_level > 0)
         rng_pod = np.where(in_hole, np.minimum(t_level, t_pt), t_pt) * ray_len
         cos_view = np.where(read & ~in_hole, cos_view, up_cos)
-        looked = read | void
+        # Where in the image: distance from the edge of the read area (the frame without
+        # its unread border bands: no look at all there), pixels at 640 wide.
+        border = self._border_px(depth, camera, s, z.shape)
+        looked = (read | void) & (border >= 0)
         ang = np.degrees(np.arccos(np.clip(cos_view, 0.0, 1.0)))
 
         rows, cols = self.grid.cell_of(pts[..., 0][looked], pts[..., 1][looked])
@@ -302,7 +305,8 @@ class SearchMap:
         top = order[last]
         cell = idx[top]
         src = sel[top]
-        pod = np.minimum(self.recall.pod(rng_pod.ravel()[src], ang.ravel()[src]), _MAX_POD)
+        pod = self.recall.pod(rng_pod.ravel()[src], ang.ravel()[src], border.ravel()[src])
+        pod = np.minimum(pod, _MAX_POD)
         self.version += 1
         self._update(cell, src, is_read[top], pod, pts, rgb[::s, ::s], rng, up_cos, c)
         return FrameFused(
@@ -313,6 +317,20 @@ class SearchMap:
             len(cell),
             n_out,
         )
+
+    @staticmethod
+    def _border_px(
+        depth: npt.NDArray[np.uint16], camera: CameraIntrinsics, s: int, shape: tuple[int, ...]
+    ) -> F32:
+        """Per sample, its distance (pixels at 640 wide) from the nearest edge of the frame's
+        read area; negative in an unread border band."""
+        k = 640.0 / camera.width
+        left, top, right, bottom = unread_bands(depth == 0, max(1, round(BAND_MAX_PX / k)))
+        u = np.arange(shape[1], dtype=np.float32) * s
+        v = np.arange(shape[0], dtype=np.float32) * s
+        du = np.minimum(u - left, camera.width - 1 - right - u)
+        dv = np.minimum(v - top, camera.height - 1 - bottom - v)
+        return (np.minimum(du[None, :], dv[:, None]) * np.float32(k)).astype(np.float32)
 
     @staticmethod
     def _cos_view(pts: F32, read: npt.NDArray[np.bool_], dirs: F32, ray_len: F32, k: int) -> F32:

@@ -14,6 +14,8 @@
 
 from holescan.missions._files import read_area, read_waypoints, write_waypoints
 from holescan.missions._geofiles import (
+    geojson_document,
+    kml_document,
     read_geojson,
     read_gpx,
     read_kml,
@@ -23,12 +25,15 @@ from holescan.missions._geofiles import (
 )
 from holescan.missions._holecards import (
     CARD_PAYLOAD,
+    NO_PICTURE,
     CardAssembler,
     CardSender,
     TileSource,
     card_facts,
+    card_picture,
     make_card,
     read_card,
+    with_picture,
 )
 from holescan.missions._holefiles import (
     HOLE_FORMATS,
@@ -139,6 +144,7 @@ __all__ = [
     "MAV_FRAME_GLOBAL_RELATIVE_ALT",
     "MAV_FRAME_MISSION",
     "MAV_MISSION_ACCEPTED",
+    "NO_PICTURE",
     "SUNRISE_ELEVATION_DEG",
     "TILE_CELLS_RANGE",
     "TYPE_COVERAGE",
@@ -171,6 +177,7 @@ __all__ = [
     "UploadReport",
     "Waypoint",
     "card_facts",
+    "card_picture",
     "check_flight",
     "connect",
     "coverage_from_levels",
@@ -180,6 +187,7 @@ __all__ = [
     "encode_inventory",
     "encode_ortho_tile",
     "frame_around",
+    "geojson_document",
     "held_by",
     "hole_description",
     "hole_mission",
@@ -188,6 +196,7 @@ __all__ = [
     "hole_statustext",
     "hole_waypoints",
     "is_map_tile",
+    "kml_document",
     "local_solar_day",
     "make_card",
     "plan_survey",
@@ -213,6 +222,7 @@ __all__ = [
     "tiles_per_hectare",
     "upload_mission",
     "waypoint_from_mission_item",
+    "with_picture",
     "write_geojson",
     "write_gpx",
     "write_hole_file",

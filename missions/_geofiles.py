@@ -25,7 +25,16 @@ from holescan.missions._waypoint import (
     round_ll,
 )
 
-__all__ = ["read_geojson", "read_gpx", "read_kml", "write_geojson", "write_gpx", "write_kml"]
+__all__ = [
+    "geojson_document",
+    "kml_document",
+    "read_geojson",
+    "read_gpx",
+    "read_kml",
+    "write_geojson",
+    "write_gpx",
+    "write_kml",
+]
 
 # ----------------------------------------------------------------------------- GeoJSON
 
@@ -43,23 +52,10 @@ def _feature_properties(w: Waypoint, seq: int) -> dict[str, Any]:
     return props
 
 
-def write_geojson(
-    path: str | Path,
-    items: Sequence[Waypoint],
-    *,
-    path_name: str | None = None,
-    altitude: bool = True,
-) -> Path:
-    """Write a GeoJSON FeatureCollection: one Point per positioned item (+ the path line).
-
-    Coordinates are ``[lon, lat, alt]`` (RFC 7946 order). Each point's properties hold
-    name, description, seq (its index in ``items``), command, frame, alt_m and the
-    waypoint's own ``properties``. With ``path_name``, a LineString through the points in
-    order is added first (for a map of the flight path). ``altitude=False`` writes
-    ``[lon, lat]`` only (RFC 7946's third value is height above the WGS84 ellipsoid, which
-    a mean-sea-level altitude is not); ``alt_m`` stays in the properties.
-    """
-    path = Path(path)
+def geojson_document(
+    items: Sequence[Waypoint], *, path_name: str | None = None, altitude: bool = True
+) -> dict[str, Any]:
+    """The GeoJSON FeatureCollection of ``items`` (see :func:`write_geojson`), as a dict."""
     features: list[dict[str, Any]] = []
     pts = [(i, w) for i, w in enumerate(items) if w.has_position]
     if path_name is not None and len(pts) >= 2:
@@ -87,7 +83,27 @@ def write_geojson(
                 "properties": _feature_properties(w, i),
             }
         )
-    doc = {"type": "FeatureCollection", "features": features}
+    return {"type": "FeatureCollection", "features": features}
+
+
+def write_geojson(
+    path: str | Path,
+    items: Sequence[Waypoint],
+    *,
+    path_name: str | None = None,
+    altitude: bool = True,
+) -> Path:
+    """Write a GeoJSON FeatureCollection: one Point per positioned item (+ the path line).
+
+    Coordinates are ``[lon, lat, alt]`` (RFC 7946 order). Each point's properties hold
+    name, description, seq (its index in ``items``), command, frame, alt_m and the
+    waypoint's own ``properties``. With ``path_name``, a LineString through the points in
+    order is added first (for a map of the flight path). ``altitude=False`` writes
+    ``[lon, lat]`` only (RFC 7946's third value is height above the WGS84 ellipsoid, which
+    a mean-sea-level altitude is not); ``alt_m`` stays in the properties.
+    """
+    path = Path(path)
+    doc = geojson_document(items, path_name=path_name, altitude=altitude)
     text = json.dumps(doc, indent=2, allow_nan=False)  # strict: properties made finite above
     path.write_text(text + "\n", encoding="utf-8")
     return path
@@ -138,20 +154,14 @@ def _kml_coords(points: Sequence[Waypoint]) -> str:
     return " ".join(f"{fmt_ll(w.lon_deg)},{fmt_ll(w.lat_deg)},{w.alt_m:.3f}" for w in points)
 
 
-def write_kml(
-    path: str | Path,
+def kml_document(
     items: Sequence[Waypoint],
     *,
     document_name: str = "holescan",
     path_name: str | None = None,
     area: Area | None = None,
-) -> Path:
-    """Write KML 2.2: a Placemark per positioned item (+ path line, + area polygon).
-
-    Altitudes are ``relativeToGround`` for frame 3 and ``absolute`` for frame 0. Each
-    waypoint's ``properties`` go into ``ExtendedData`` (values as JSON text).
-    """
-    path = Path(path)
+) -> ET.Element:
+    """The KML 2.2 ``kml`` element of ``items`` (see :func:`write_kml`), XML-safe."""
     ET.register_namespace("", KML_NS)
     root = ET.Element(_kml("kml"))
     doc = ET.SubElement(root, _kml("Document"))
@@ -193,6 +203,24 @@ def write_kml(
         ET.SubElement(pt, _kml("coordinates")).text = _kml_coords([w])
     ET.indent(root)
     xml_safe_tree(root)  # no text a reader refuses, whatever a name or description holds
+    return root
+
+
+def write_kml(
+    path: str | Path,
+    items: Sequence[Waypoint],
+    *,
+    document_name: str = "holescan",
+    path_name: str | None = None,
+    area: Area | None = None,
+) -> Path:
+    """Write KML 2.2: a Placemark per positioned item (+ path line, + area polygon).
+
+    Altitudes are ``relativeToGround`` for frame 3 and ``absolute`` for frame 0. Each
+    waypoint's ``properties`` go into ``ExtendedData`` (values as JSON text).
+    """
+    path = Path(path)
+    root = kml_document(items, document_name=document_name, path_name=path_name, area=area)
     ET.ElementTree(root).write(path, encoding="utf-8", xml_declaration=True)
     return path
 

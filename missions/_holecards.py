@@ -16,6 +16,14 @@ is repeated after ``repeat_s`` while the budget allows, and a ground station can
 all cards again by sending DATA_TRANSMISSION_HANDSHAKE with ``size = 0`` to component
 191, e.g. after a link drop), and one picture at a time (cards are queued).
 
+**Facts-only cards.** A hole told again whose best view did not change (its sigma shrank,
+it was seen again) goes down as a card without the picture: the facts in the COM segment
+of an empty JPEG (SOI, COM, EOI: ~300-600 bytes, 2-3 packets instead of ~12). The ground
+keeps the picture it holds and takes the new facts (:func:`card_picture`,
+:func:`with_picture`). Only after the hole's picture went out whole is a facts-only card
+made (:meth:`CardSender.picture_sent`); repeats and a ground station's request for every card
+send the newest facts *with* the picture, so a station that missed it still gets it.
+
 Byte budget: :class:`CardSender` paces packets with a token bucket of ``bytes_per_s``
 (default 1,000 B/s, counting whole MAVLink 2 frames: 12 bytes of header and CRC plus the
 payload), so telemetry on the same radio is never starved.
@@ -43,12 +51,15 @@ from holescan.link import mavlink
 
 __all__ = [
     "CARD_PAYLOAD",
+    "NO_PICTURE",
     "CardAssembler",
     "CardSender",
     "TileSource",
     "card_facts",
+    "card_picture",
     "make_card",
     "read_card",
+    "with_picture",
 ]
 
 CARD_PAYLOAD = 253
@@ -57,6 +68,8 @@ _FRAME_OVERHEAD = 12  # MAVLink 2: 10 header bytes + 2 CRC (unsigned)
 _HANDSHAKE_BYTES = _FRAME_OVERHEAD + 13
 _PACKET_BYTES = _FRAME_OVERHEAD + 2 + CARD_PAYLOAD
 _JPEG = mavlink.MAVLINK_DATA_STREAM_IMG_JPEG
+NO_PICTURE = b"\xff\xd8\xff\xd9"
+"""The JPEG of a facts-only card: SOI and EOI, no image (the ground keeps the one it has)."""
 
 
 def make_card(jpeg: bytes, facts: Mapping[str, Any]) -> bytes:
@@ -84,6 +97,35 @@ def read_card(card: bytes) -> dict[str, Any] | None:
     except (UnicodeDecodeError, json.JSONDecodeError):
         return None
     return facts if isinstance(facts, dict) else None
+
+
+def card_picture(card: bytes) -> bytes:
+    """The card's JPEG without its facts (the COM segment after SOI taken out);
+    :data:`NO_PICTURE` for a facts-only card; ``card`` itself when it carries no facts.
+
+    >>> card_picture(make_card(b"\\xff\\xd8\\xff\\xdbDQT\\xff\\xd9", {"id": 3}))
+    b'\\xff\\xd8\\xff\\xdbDQT\\xff\\xd9'
+    >>> card_picture(make_card(NO_PICTURE, {"id": 3})) == NO_PICTURE
+    True
+    """
+    if card[:4] != b"\xff\xd8\xff\xfe" or len(card) < 6:
+        return card
+    (n,) = struct.unpack(">H", card[4:6])
+    return card[:2] + card[4 + n :]
+
+
+def with_picture(card: bytes, picture: bytes) -> bytes:
+    """The facts of ``card`` with the picture of ``picture`` (a card or a bare JPEG): what
+    the ground keeps when a facts-only card comes for a hole whose picture it holds.
+
+    >>> kept = make_card(b"\\xff\\xd8\\xff\\xdbDQT\\xff\\xd9", {"id": 3, "sigma": 1.2})
+    >>> newer = make_card(NO_PICTURE, {"id": 3, "sigma": 1.05})
+    >>> both = with_picture(newer, kept)
+    >>> read_card(both), card_picture(both) == card_picture(kept)
+    ({'id': 3, 'sigma': 1.05}, True)
+    """
+    facts_end = len(card) - len(card_picture(card)) + 2  # SOI + COM segment
+    return card[:facts_end] + card_picture(picture)[2:]
 
 
 def card_facts(hole: Any, why: str, revision: int, tier: str = "announced") -> dict[str, Any]:
@@ -173,6 +215,7 @@ class CardSender:
     tiles_sent: int = 0
     _queue: collections.deque[_Outgoing] = field(default_factory=collections.deque)
     _latest: dict[int, bytes] = field(default_factory=dict)
+    _whole: dict[int, bytes] = field(default_factory=dict)
     _priority: dict[int, int] = field(default_factory=dict)
     _repeat_at: dict[int, tuple[float, int]] = field(default_factory=dict)
     _tokens: float = 0.0
@@ -182,13 +225,15 @@ class CardSender:
         if not self.bytes_per_s >= _PACKET_BYTES / 10.0:
             raise InputError(f"card byte budget must be >= 27 B/s, got {self.bytes_per_s}")
 
-    def put(self, key: int, card: bytes, priority: int = 0) -> None:
+    def put(self, key: int, card: bytes, priority: int = 0, *, full: bytes | None = None) -> None:
         """Queue ``card`` for hole ``key``; an unsent older card of the same hole is dropped.
 
         Cards go out by ``priority`` (lower first: 0 announced holes, 1 holes for review),
-        in order of arrival within one; the card being sent is never cut off.
+        in order of arrival within one; the card being sent is never cut off. ``full``:
+        the same facts with the picture when ``card`` is facts-only; repeats and
+        :meth:`resend_all` send it (a ground station that lost the picture gets it again).
         """
-        self._latest[key] = card
+        self._latest[key] = full if full is not None else card
         self._priority[key] = priority
         for item in list(self._queue):
             if item.key == key and item.sent < 0 and not item.tile:
@@ -216,6 +261,11 @@ class CardSender:
         for key, card in sorted(self._latest.items()):
             if key not in queued:
                 self._enqueue(_Outgoing(key, card, priority=self._priority.get(key, 0)))
+
+    def picture_sent(self, key: int) -> bytes | None:
+        """The picture (JPEG without facts) of the last card of hole ``key`` that went out
+        whole with one (None: none yet)."""
+        return self._whole.get(key)
 
     @property
     def pending(self) -> int:
@@ -275,6 +325,8 @@ class CardSender:
                     self.tiles_sent += 1
                     continue
                 self.cards_sent += 1
+                if (picture := card_picture(card)) != NO_PICTURE:
+                    self._whole[item.key] = picture
                 _, n = self._repeat_at.get(item.key, (math.inf, 0))
                 if self.repeat_s is not None and n < self.repeats:
                     self._repeat_at[item.key] = (now + self.repeat_s, n + 1)

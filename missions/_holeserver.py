@@ -4,7 +4,7 @@
 component 191 (MAV_COMP_ID_ONBOARD_COMPUTER) of the vehicle's system, so a ground station
 targeting that component (MAVProxy: ``--target-component 191``, then ``wp list`` /
 ``wp save FILE``) downloads one waypoint per hole, and announces each new or updated hole
-with a STATUSTEXT ``HOLE <id> <score> <lat> <lon>`` that every GCS shows. Holes for
+with a STATUSTEXT ``HOLE <id> p<p_hole> <lat> <lon>`` that every GCS shows. Holes for
 review (:meth:`geotag.AnnounceGate.tier`) are not in the mission: they get a STATUSTEXT
 ``REVIEW <id> ...`` and a card whose facts say ``"tier": "review"``, sent after the
 announced holes' cards under the same byte budget.
@@ -51,6 +51,7 @@ from holescan.errors import InputError
 from holescan.geotag import Hole
 from holescan.link import SigningKey, hole_text, mavlink
 from holescan.missions._holecards import (
+    NO_PICTURE,
     CardAssembler,
     CardSender,
     TileSource,
@@ -126,15 +127,17 @@ def hole_waypoints(
 
 
 def hole_statustext(hole: Hole, tier: str = "announced") -> str:
-    """``HOLE <id> <score> <lat> <lon>`` (``REVIEW ...`` for a hole sent for review) of
-    ``hole``, through the link's one codec (:func:`link.hole_text`).
+    """``HOLE <id> p<p_hole> <lat> <lon>`` (``REVIEW ...`` for a hole sent for review) of
+    ``hole``, with its hole-level ``p_hole``, through the link's one codec
+    (:func:`link.hole_text`).
 
     >>> from holescan.geotag import Hole
-    >>> h = Hole(3, 43.65331, -79.38312, 120.0, 0.5, 0.88, 4, 0, 10, 1, (0, 0, 9, 9), 1.0, 0.7)
+    >>> h = Hole(3, 43.65331, -79.38312, 120.0, 0.5, 0.88, 4, 0, 10, 1, (0, 0, 9, 9), 1.0, 0.7,
+    ...          p_hole=0.97)
     >>> hole_statustext(h), hole_statustext(h, "review")
-    ('HOLE 3 0.88 43.6533100 -79.3831200', 'REVIEW 3 0.88 43.6533100 -79.3831200')
+    ('HOLE 3 p0.97 43.6533100 -79.3831200', 'REVIEW 3 p0.97 43.6533100 -79.3831200')
     """
-    return hole_text(hole.id, hole.score, hole.lat_deg, hole.lon_deg, tier)
+    return hole_text(hole.id, hole.p_hole, hole.lat_deg, hole.lon_deg, tier)
 
 
 _MIN_CARD_BYTES_PER_S = 50.0
@@ -241,6 +244,7 @@ class HoleMissionServer(MissionServer):
         self._held: TileInventory | None = None
         self._held_at = -math.inf
         self._card_revs: dict[int, int] = {}
+        self._said: dict[int, str] = {}  # hole id -> its last STATUSTEXT
         self.card_ceiling_bytes_per_s = card_bytes_per_s
         self.radio_status_seen = 0
         self.relayed = 0
@@ -304,12 +308,20 @@ class HoleMissionServer(MissionServer):
         with self._lock:
             return self.receiver.mission
 
-    def announce(self, hole: Hole, tier: str = "announced") -> str:
-        """Send STATUSTEXT ``HOLE <id> <score> <lat> <lon>`` (severity NOTICE), or for a
-        hole for review ``REVIEW ...`` (severity INFO); return it."""
+    def announce(self, hole: Hole, tier: str = "announced") -> str | None:
+        """Send STATUSTEXT ``HOLE <id> p<p_hole> <lat> <lon>`` (severity NOTICE), or for a
+        hole for review ``REVIEW ...`` (severity INFO); return it. None when the last
+        STATUSTEXT of this hole said exactly the same (a hole told again for a smaller
+        sigma or more sightings): nothing new for a GCS's message list, not sent again;
+        its card carries what changed."""
         text = hole_statustext(hole, tier)
+        with self._lock:
+            if self._said.get(hole.id) == text:
+                return None
         severity = mavlink.MAV_SEVERITY_NOTICE if tier == "announced" else mavlink.MAV_SEVERITY_INFO
         self._send_or_fail(lambda mav: mav.statustext_send(severity, text.encode("ascii")))
+        with self._lock:
+            self._said[hole.id] = text
         _log.info("announced %s", text)
         return text
 
@@ -319,14 +331,26 @@ class HoleMissionServer(MissionServer):
 
         Sent under the byte budget by the server's thread, announced holes' cards before
         those of holes for review; a newer card of the same hole replaces one not yet
-        started.
+        started. When this very picture already went out whole in an earlier card of the
+        hole, the card is facts-only (:data:`missions._holecards.NO_PICTURE`: a few hundred
+        bytes instead of a few kB); its repeats carry the picture again.
         """
         with self._lock:
             rev = self._card_revs.get(hole.id, 0) + 1
             self._card_revs[hole.id] = rev
-            card = make_card(jpeg, card_facts(hole, why, rev, tier))
-            self.cards.put(hole.id, card, priority=0 if tier == "announced" else 1)
+            facts = card_facts(hole, why, rev, tier)
+            full = make_card(jpeg, facts)
+            card = full
+            if self.cards.picture_sent(hole.id) == jpeg:
+                card = make_card(NO_PICTURE, facts)
+            self.cards.put(hole.id, card, priority=0 if tier == "announced" else 1, full=full)
         return len(card)
+
+    def card_revisions(self) -> dict[int, int]:
+        """Hole id -> revision of the newest card queued for it (what the ground should
+        end with)."""
+        with self._lock:
+            return dict(self._card_revs)
 
     def set_tiles(self, tiles: TileSource | None) -> None:
         """Send the live map's tiles from ``tiles`` with what the cards leave of the budget

@@ -57,7 +57,7 @@ def connect(
     link: str,
     *,
     source_system: int = 255,
-    source_component: int = 190,
+    source_component: int = mavlink.MAV_COMP_ID_MISSIONPLANNER,
     signing: SigningKey | None = None,
 ) -> Any:
     """Open a pymavlink link (``udpout:HOST:PORT``, ``udpin:...``, ``tcp:...``) speaking MAVLink 2.
@@ -205,9 +205,9 @@ def upload_mission(
     home: Waypoint | None = None,
     *,
     target_system: int = 1,
-    target_component: int = 1,
+    target_component: int = mavlink.MAV_COMP_ID_AUTOPILOT1,
     source_system: int = 255,
-    source_component: int = 190,
+    source_component: int = mavlink.MAV_COMP_ID_MISSIONPLANNER,
     heartbeat_timeout_s: float = 5.0,
     item_timeout_s: float = 1.0,
     retries: int = 5,
@@ -328,9 +328,9 @@ def download_mission(
     link: str | Any,
     *,
     target_system: int = 1,
-    target_component: int = 1,
+    target_component: int = mavlink.MAV_COMP_ID_AUTOPILOT1,
     source_system: int = 255,
-    source_component: int = 190,
+    source_component: int = mavlink.MAV_COMP_ID_MISSIONPLANNER,
     heartbeat_timeout_s: float = 5.0,
     item_timeout_s: float = 1.0,
     retries: int = 5,
@@ -346,7 +346,9 @@ def download_mission(
     m = mavlink  # the dialect's message classes
     try:
         _wait_vehicle(conn, name, target_system, heartbeat_timeout_s)
-        request: Any = m.MAVLink_mission_request_list_message(target_system, target_component, 0)
+        request: Any = m.MAVLink_mission_request_list_message(
+            target_system, target_component, m.MAV_MISSION_TYPE_MISSION
+        )
         expect = ["MISSION_COUNT"]
         count: int | None = None
         items: list[Waypoint] = []

@@ -19,6 +19,7 @@ from typing import Literal
 
 from holescan.errors import InputError
 from holescan.missions.errors import SunWindowError
+from holescan.utc import utc_datetime
 
 __all__ = [
     "SUNRISE_ELEVATION_DEG",
@@ -116,7 +117,7 @@ class FlightCheck:
 
 
 def _to_dt(t_unix_ns: int, tz: dt.tzinfo = dt.UTC) -> dt.datetime:
-    return dt.datetime.fromtimestamp(t_unix_ns / _NS, tz=dt.UTC).astimezone(tz)
+    return utc_datetime(t_unix_ns).astimezone(tz)
 
 
 def _tzname(t: dt.datetime) -> str:
@@ -167,8 +168,11 @@ def _crossings(
     """Times in [start, end] where ``f`` crosses each level: (t, level index, rising).
 
     ``f`` is sampled every minute (one sampling shared by all levels), then each sign
-    change is bisected to half a second.
+    change is solved to half a second by scipy's Brent root finder (``brentq``; the
+    minute holds one crossing: the sun's elevation turns at most twice a day).
     """
+    from scipy.optimize import brentq
+
     times = [*list(range(start_ns, end_ns, _SCAN_STEP_NS)), end_ns]
     values = [f(t) for t in times]
     out = []
@@ -177,14 +181,17 @@ def _crossings(
             v0, v1 = values[k] - level, values[k + 1] - level
             if (v0 < 0.0) == (v1 < 0.0):
                 continue
-            lo, hi = times[k], times[k + 1]
-            while hi - lo > _TOL_NS:
-                mid = (lo + hi) // 2
-                if (f(mid) - level < 0.0) == (v0 < 0.0):
-                    lo = mid
-                else:
-                    hi = mid
-            out.append(((lo + hi) // 2, index, v1 >= 0.0))
+            if v0 == 0.0 or v1 == 0.0:  # on the level at a sample
+                t = times[k] if v0 == 0.0 else times[k + 1]
+            else:
+                t0 = times[k]  # solved in seconds from the minute's start: floats stay exact
+
+                def g(x: float, t0: int = t0, level: float = level) -> float:
+                    return f(t0 + round(x * _NS)) - level
+
+                dt_s = (times[k + 1] - t0) / _NS
+                t = t0 + round(float(brentq(g, 0.0, dt_s, xtol=_TOL_NS / _NS)) * _NS)
+            out.append((t, index, v1 >= 0.0))
     return sorted(out)
 
 

@@ -132,7 +132,7 @@ class MissionReceiver:
         if self.read_only and kind in ("MISSION_COUNT", "MISSION_CLEAR_ALL"):
             log.info("refusing %s from %s: this mission is read-only", kind, peer)
             return [self._ack(peer, mavlink.MAV_MISSION_DENIED, mission_type)]
-        if mission_type != 0:
+        if mission_type != mavlink.MAV_MISSION_TYPE_MISSION:
             if self.read_only and kind == "MISSION_REQUEST_LIST":
                 return [mavlink.MAVLink_mission_count_message(*peer, 0, mission_type)]
             return [self._ack(peer, mavlink.MAV_MISSION_UNSUPPORTED, mission_type)]

@@ -67,9 +67,26 @@ _NS = 1_000_000_000
 _BACKLOG_NS = 500_000_000  # messages due longer ago than this are dropped, not sent late
 
 # EKF_STATUS_REPORT flags: using GPS; no fix ever (constant position); dead reckoning.
-_EKF_GOOD = 0x33F
-_EKF_NO_ORIGIN = 0x0A5
-_EKF_DEAD_RECKONING = 0x02F
+_EKF_AIDED = (
+    mavlink.EKF_ATTITUDE
+    | mavlink.EKF_VELOCITY_HORIZ
+    | mavlink.EKF_VELOCITY_VERT
+    | mavlink.EKF_POS_VERT_ABS
+)
+_EKF_GOOD = (
+    _EKF_AIDED
+    | mavlink.EKF_POS_HORIZ_REL
+    | mavlink.EKF_POS_HORIZ_ABS
+    | mavlink.EKF_PRED_POS_HORIZ_REL
+    | mavlink.EKF_PRED_POS_HORIZ_ABS
+)
+_EKF_NO_ORIGIN = (
+    mavlink.EKF_ATTITUDE
+    | mavlink.EKF_VELOCITY_VERT
+    | mavlink.EKF_POS_VERT_ABS
+    | mavlink.EKF_CONST_POS_MODE
+)
+_EKF_DEAD_RECKONING = _EKF_AIDED | mavlink.EKF_POS_HORIZ_REL
 
 
 @dataclass(frozen=True)
@@ -115,7 +132,7 @@ class SimAutopilot:
         path: SimPath | None = None,
         *,
         sysid: int = 1,
-        compid: int = 1,
+        compid: int = mavlink.MAV_COMP_ID_AUTOPILOT1,
         uptime_at_start_s: float = 37.25,
         drift_ppm: float = 15.0,
         jitter_ns: int = 20_000,
@@ -155,7 +172,7 @@ class SimAutopilot:
         self.received: dict[str, int] = {}
         self.received_signed: dict[str, int] = {}  # of those, correctly signed (signing_key)
         self.silent = False
-        self.mode = 3  # ArduCopter custom mode in the heartbeat: AUTO (6 RTL, 9 LAND ...)
+        self.mode = mavlink.COPTER_MODE_AUTO  # ArduCopter's custom mode in the heartbeat
         self.armed = True
         self.radio_txbuf: int | None = None
         self.params: dict[str, float] | None = {"SYSID_THISMAV": sysid, "MIS_TOTAL": 0}
@@ -378,7 +395,7 @@ class SimAutopilot:
             txbuf = self.radio_txbuf
             if txbuf is not None:  # the SiK radio's own report, routed to this link
                 ids = (mav.srcSystem, mav.srcComponent)
-                mav.srcSystem, mav.srcComponent = 51, 68
+                mav.srcSystem, mav.srcComponent = 51, mavlink.MAV_COMP_ID_TELEMETRY_RADIO
                 try:
                     mav.radio_status_send(180, 170, txbuf, 30, 28, 0, 0)
                 finally:

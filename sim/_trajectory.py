@@ -13,6 +13,10 @@ from scipy.interpolate import CubicSpline
 from scipy.spatial.transform import Rotation
 
 from holescan.geotag import LocalFrame
+from holescan.link import mavlink
+
+_ABOVE_HOME = (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
+_ABOVE_MSL = (mavlink.MAV_FRAME_GLOBAL, mavlink.MAV_FRAME_GLOBAL_INT)
 
 __all__ = ["SimPath"]
 
@@ -59,10 +63,10 @@ class SimPath:
         enu: list[tuple[float, float, float]] = []
         home = LocalFrame(home_lat_deg, home_lon_deg, home_alt_m)
         for wp in waypoints:
-            frame = getattr(wp, "frame", 3)
-            if frame not in (0, 3, 5, 6):
+            frame = getattr(wp, "frame", mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT)
+            if frame not in _ABOVE_HOME and frame not in _ABOVE_MSL:
                 continue
-            alt_msl = wp.alt_m + (home_alt_m if frame in (3, 6) else 0.0)
+            alt_msl = wp.alt_m + (home_alt_m if frame in _ABOVE_HOME else 0.0)
             e, n, u = home.to_enu(wp.lat_deg, wp.lon_deg, alt_msl)
             point = (float(e), float(n), float(u))
             if not enu or math.dist(point, enu[-1]) > 1e-3:

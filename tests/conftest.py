@@ -13,7 +13,9 @@ run (no worker) is left exactly as collected.
 
 from __future__ import annotations
 
+import ast
 import os
+from pathlib import Path
 
 import pytest
 
@@ -22,20 +24,69 @@ import pytest
 # here first means no test module's own pymavlink import (mavwp ...) can make it MAVLink 1.
 import holescan.missions  # noqa: F401
 
+_TESTS = Path(__file__).resolve().parent
 
-def _shared_keys(item: pytest.Item) -> list[str]:
+
+def _fixture_scopes(path: Path) -> dict[str, str]:
+    """Fixture name -> scope of the fixtures ``path`` defines (``@pytest.fixture`` with a
+    literal ``scope=``, as every fixture here is written; read from the source, so no
+    pytest internals are needed)."""
+    scopes: dict[str, str] = {}
+    for node in ast.walk(ast.parse(path.read_text())):
+        if not isinstance(node, ast.FunctionDef):
+            continue
+        for dec in node.decorator_list:
+            call = dec if isinstance(dec, ast.Call) else None
+            target = call.func if call is not None else dec
+            if not (isinstance(target, ast.Attribute) and target.attr == "fixture"):
+                continue
+            scope = "function"
+            for kw in call.keywords if call is not None else ():
+                if kw.arg == "scope" and isinstance(kw.value, ast.Constant):
+                    scope = str(kw.value.value)
+            scopes[node.name] = scope
+    return scopes
+
+
+class _Definitions:
+    """Where each fixture an item uses is defined (its module, else the closest conftest
+    up to this folder) and with which scope; files read once."""
+
+    def __init__(self) -> None:
+        self._files: dict[Path, dict[str, str]] = {}
+
+    def _scopes(self, path: Path) -> dict[str, str]:
+        if path not in self._files:
+            self._files[path] = _fixture_scopes(path) if path.is_file() else {}
+        return self._files[path]
+
+    def find(self, module: Path, name: str) -> tuple[Path, str] | None:
+        """(defining file, scope) of fixture ``name`` as a test in ``module`` gets it."""
+        if name in self._scopes(module):
+            return module, self._scopes(module)[name]
+        folder = module.parent
+        while True:
+            conftest = folder / "conftest.py"
+            if name in self._scopes(conftest):
+                return conftest, self._scopes(conftest)[name]
+            if folder == _TESTS or folder == folder.parent:
+                return None  # a plugin's (tmp_path_factory ...): nothing of ours to share
+            folder = folder.parent
+
+
+def _shared_keys(item: pytest.Item, defs: _Definitions) -> list[str]:
     """What ``item`` shares with other tests: one key per non-function fixture of ours."""
-    info = getattr(item, "_fixtureinfo", None)
-    if info is None:
-        return []
+    if not isinstance(item, pytest.Function):
+        return []  # a doctest: no fixtures of ours
     module = item.nodeid.split("::", 1)[0]
     keys = []
-    for name, defs in info.name2fixturedefs.items():
-        fixdef = defs[-1]  # the one this item gets (the closest override)
-        if fixdef.scope == "function" or not fixdef.baseid:
-            continue  # per test, or a plugin's (tmp_path_factory ...): nothing to share
-        if fixdef.scope in ("session", "package"):
-            keys.append(f"{fixdef.baseid}::{name}")  # one instance for every user
+    for name in item.fixturenames:
+        found = defs.find(item.path, name)
+        if found is None or found[1] == "function":
+            continue  # per test, or not ours
+        where, scope = found
+        if scope in ("session", "package"):
+            keys.append(f"{where.relative_to(_TESTS)}::{name}")  # one instance for every user
         else:
             keys.append(module)  # module / class: one instance per module
     return keys
@@ -51,7 +102,8 @@ def _groups(items: list[pytest.Item]) -> dict[str, str]:
             k = parent[k]
         return k
 
-    item_keys = {item.nodeid: _shared_keys(item) for item in items}
+    defs = _Definitions()
+    item_keys = {item.nodeid: _shared_keys(item, defs) for item in items}
     for keys in item_keys.values():
         for k in keys[1:]:
             parent[root(k)] = root(keys[0])

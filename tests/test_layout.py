@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import contextlib
 import graphlib
 import subprocess
 import sys
@@ -158,3 +159,40 @@ def test_a_typo_in_the_sim_table_is_named() -> None:
         sortie_params({"world_sed": 3})
     params, record = sortie_params({"world_seed": 3})
     assert params.world_seed == 3 and record["sim.world_seed"] == 3
+
+
+def _imported_modules(path: Path) -> Iterator[tuple[int, str]]:
+    """Every module an import names in ``path``: its code and its docstring examples."""
+    text = path.read_text()
+    for node in ast.walk(ast.parse(text)):
+        if isinstance(node, ast.stmt):
+            yield from _imported_modules_of(node)
+    for lineno, line in enumerate(text.splitlines(), 1):
+        example = line.strip()
+        if example.startswith((">>> import ", ">>> from ")):
+            with contextlib.suppress(SyntaxError):
+                for node in ast.parse(example[4:]).body:
+                    for _, name in _imported_modules_of(node):
+                        yield lineno, name
+
+
+def _imported_modules_of(node: ast.stmt) -> Iterator[tuple[int, str]]:
+    if isinstance(node, ast.Import):
+        yield from ((node.lineno, a.name) for a in node.names)
+    elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+        yield node.lineno, node.module
+
+
+def test_subpackages_are_imported_by_one_name_only() -> None:
+    # capture/, detect/, ... are holescan.capture, holescan.detect, ...; the root folders
+    # are also importable as top-level names when the clone's root is on sys.path (pytest
+    # puts it there to collect the doctests): a module imported by both names is two
+    # modules (two copies of its state, isinstance failing across them).
+    bare = set(PACKAGES) - {"holescan"}
+    offenders = [
+        f"{path.relative_to(ROOT)}:{lineno}: {module}"
+        for path in (*_package_sources(), *_sources(*OTHER_CODE))
+        for lineno, module in _imported_modules(path)
+        if module.split(".")[0] in bare
+    ]
+    assert offenders == [], "\n".join(offenders)

@@ -10,7 +10,6 @@ windows of the day the flight was flown.
 from __future__ import annotations
 
 import dataclasses
-import datetime as dt
 import logging
 import statistics
 from collections.abc import Mapping, Sequence
@@ -27,6 +26,7 @@ from holescan.ground.reprocessing.mapchunk import merge_flight_maps
 from holescan.ground.reprocessing.options import ReprocessOptions
 from holescan.mapping import MapLayers
 from holescan.missions import Area, SurveyParams
+from holescan.utc import utc_datetime
 
 __all__ = ["MapResult", "area_polygon", "flight_map_outputs"]
 
@@ -101,8 +101,7 @@ def flight_map_outputs(
     area = area_polygon(opts.area, frame) if opts.area is not None else None
     day = None
     if boot_to_unix_ns is not None and track:
-        t = (track[0].t_boot_ns + boot_to_unix_ns) / 1e9
-        day = dt.datetime.fromtimestamp(t, tz=dt.UTC).date()
+        day = utc_datetime(track[0].t_boot_ns + boot_to_unix_ns).date()
     try:
         res = write_map_outputs(
             out,

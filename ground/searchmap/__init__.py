@@ -12,6 +12,7 @@ from holescan.ground.searchmap.gaps import (
     GapReport,
     Refly,
     find_gaps,
+    gaps_document,
     plan_refly,
     write_gaps_geojson,
 )
@@ -30,6 +31,7 @@ __all__ = [
     "MapOutputs",
     "Refly",
     "find_gaps",
+    "gaps_document",
     "local_crs",
     "plan_refly",
     "utm_crs",

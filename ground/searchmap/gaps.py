@@ -33,7 +33,14 @@ from holescan.mapping import MapLayers
 from holescan.missions import Area, SurveyParams, SurveyPlan, Waypoint, plan_survey
 from holescan.outputs import atomic_output
 
-__all__ = ["GapReport", "Refly", "find_gaps", "plan_refly", "write_gaps_geojson"]
+__all__ = [
+    "GapReport",
+    "Refly",
+    "find_gaps",
+    "gaps_document",
+    "plan_refly",
+    "write_gaps_geojson",
+]
 
 
 @dataclass(frozen=True)
@@ -128,11 +135,10 @@ def _poly_ll(frame: LocalFrame, p: Polygon) -> dict[str, Any]:
     return {"type": "Polygon", "coordinates": rings}
 
 
-def write_gaps_geojson(
-    path: Path, report: GapReport, frame: LocalFrame, *, force: bool = True
-) -> Path:
-    """``NAME_gaps.geojson``: each gap a Polygon feature (``area_m2``, ``mean_coverage``),
-    and the surveyed area as a feature of its own (``kind: "surveyed area"``)."""
+def gaps_document(report: GapReport, frame: LocalFrame) -> dict[str, Any]:
+    """The gaps as a GeoJSON FeatureCollection: each gap a Polygon feature (``area_m2``,
+    ``mean_coverage``), and the surveyed area as a feature of its own (``kind:
+    "surveyed area"``); ``frame`` is the local frame of the report's metres."""
     feats: list[dict[str, Any]] = []
     for k, (p, c) in enumerate(zip(report.gaps, report.gap_coverage, strict=True), start=1):
         feats.append(
@@ -165,7 +171,14 @@ def write_gaps_geojson(
                 },
             }
         )
-    doc = {"type": "FeatureCollection", "features": feats}
+    return {"type": "FeatureCollection", "features": feats}
+
+
+def write_gaps_geojson(
+    path: Path, report: GapReport, frame: LocalFrame, *, force: bool = True
+) -> Path:
+    """``NAME_gaps.geojson``: :func:`gaps_document`."""
+    doc = gaps_document(report, frame)
     with atomic_output(path, force=force) as f:
         f.write((json.dumps(doc, indent=1) + "\n").encode())
     return path

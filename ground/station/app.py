@@ -27,14 +27,17 @@ TAK right after; one lock per station keeps a flush whole.
 from __future__ import annotations
 
 import contextlib
+import ipaddress
 import logging
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from urllib.parse import urlsplit
 
 from holescan.errors import InputError
+from holescan.ground.station.basemap import Basemap, open_basemap
 from holescan.ground.station.cot import hole_cot, hole_tier, on_tak, withdraw_cot
 from holescan.ground.station.datapackage import DATAPACKAGE_NAME, write_datapackage
 from holescan.ground.station.files import write_station_files
@@ -66,10 +69,13 @@ class GroundOptions:
     : 0 = CoT XML, 1 = TAK protocol v1 (protobuf, via takproto). station : name in the CoT
     uids. cot_stale_s, cot_refresh_s : CoT stale time (from each sending) and re-send
     period, s. kml_refresh_s : Google Earth's NetworkLink reload period. overlay : a map
-    overlay (``.kmz``) for the data package. signing : MAVLink 2 signing key shared with the
-    vehicle (None: unsigned link). pair : operators to issue a pairing for at start
-    (:mod:`ground.station.pairing`; when the folder has none and none is asked for, one for
-    "operator 1").
+    overlay (``.kmz``) for the data package. signing : MAVLink 2 signing key shared with
+    the vehicle (None: unsigned link). pair : operators to issue a pairing for at start
+    (:mod:`ground.station.pairing`; when the folder has none and none is asked for, one
+    for "operator 1"). public_url : the station's address as the crew's devices reach it,
+    ``http://HOST:PORT`` (the picture links in CoT and in the live feeds; None: the
+    address the page is bound to, the primary LAN address when bound to 0.0.0.0).
+    basemaps : offline basemaps for the page (MBTiles, GeoTIFF; :mod:`ground.station.basemap`).
     """
 
     mavlink: str
@@ -91,6 +97,8 @@ class GroundOptions:
     signing: SigningKey | None = None
     overlay: Path | None = None
     pair: tuple[str, ...] = ()
+    public_url: str | None = None
+    basemaps: tuple[Path, ...] = ()
 
     def check(self) -> None:
         """Raise InputError for options that cannot work together."""
@@ -113,6 +121,18 @@ class GroundOptions:
             raise InputError(f"map overlay {self.overlay}: no such file")
         for name in self.pair:
             check_operator(name)
+        if self.public_url is not None:
+            from holescan.ground.station.feeds import check_public_url
+
+            url = check_public_url(self.public_url)
+            if self.http_port is None:
+                raise InputError("--public-url is the live page's address: not with --http off")
+            port = urlsplit(url).port
+            if self.http_port and port != self.http_port:
+                raise InputError(
+                    f"--public-url {url} has port {port}, the page is served on port "
+                    f"{self.http_port}: give the same port"
+                )
 
 
 class GroundStation:
@@ -121,6 +141,14 @@ class GroundStation:
     def __init__(self, opts: GroundOptions) -> None:
         self.opts = opts
         opts.check()  # the options first: a bad one creates nothing
+        self.basemaps: list[Basemap] = []
+        try:
+            for path in opts.basemaps:
+                self.basemaps.append(open_basemap(path))
+        except InputError:
+            for b in self.basemaps:
+                b.close()
+            raise
         self._tak = tak_settings(opts.cot_url, opts.cot_tls) if opts.cot_url is not None else None
         self.state = StationState.open(opts.out)
         self.map_store = MapStore.open(opts.out / "map")
@@ -143,6 +171,8 @@ class GroundStation:
 
     def __enter__(self) -> GroundStation:
         o = self.opts
+        for b in self.basemaps:
+            self._stack.callback(b.close)
         try:
             if o.http_port is not None:
                 self.web = self._stack.enter_context(
@@ -154,6 +184,10 @@ class GroundStation:
                         map_store=self.map_store,
                         names=o.http_names,
                         pairings=self.pairings,
+                        public_url=o.public_url,
+                        vehicles=self._vehicles,
+                        kml_refresh_s=o.kml_refresh_s,
+                        basemaps=self.basemaps,
                     )
                 )
                 names = list(o.pair) or ([] if self.pairings.all() else ["operator 1"])
@@ -193,6 +227,12 @@ class GroundStation:
         self._worker.join(timeout=5.0)
         self.state.flush()  # a batched save still held
         self._flush()
+
+    def _vehicles(self, h: GroundHole) -> list[int]:
+        """The vehicles that reported hole ``h``: this station follows one, its system id
+        once heard (empty before)."""
+        link = self.link
+        return [] if link is None or link.sysid is None else [link.sysid]
 
     def mark(self, hole_id: int, mark: str) -> GroundHole:
         """The operator's mark, in the state; TAK and the files follow on the station's
@@ -234,7 +274,8 @@ class GroundStation:
                 self._sent.pop(gone, None)
             for h in holes:
                 tier = hole_tier(h)
-                key = (h.lat_deg, h.lon_deg, h.score, tier, h.mark, h.card_rev, h.sigma_h_m)
+                key: tuple[object, ...] = (h.lat_deg, h.lon_deg, h.p_hole, h.score, h.sigma_h_m)
+                key += (tier, h.mark, h.card_rev)
                 if self._sent.get(h.id) == key:
                     continue
                 self._sent[h.id] = key
@@ -247,7 +288,7 @@ class GroundStation:
                     self._on_tak.add(h.id)
                     url = None
                     if self.web is not None and h.has_picture:
-                        url = f"{self.web.url}cards/hole-{h.id}.jpg"
+                        url = f"{self.web.public_url}cards/hole-{h.id}.jpg"
                     events.append(
                         hole_cot(
                             h,
@@ -276,6 +317,14 @@ class GroundStation:
         )
 
 
+def _loopback(url: str) -> bool:
+    host = urlsplit(url).hostname or ""
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return host == "localhost"
+
+
 def run_ground(
     opts: GroundOptions, stop: threading.Event, show: Callable[[str], None] | None = None
 ) -> GroundStation:
@@ -287,6 +336,21 @@ def run_ground(
     with GroundStation(opts) as station:
         if station.web is not None:
             _log.warning("live page (read-only): %s", station.web.url)
+            public = station.web.public_url
+            _log.warning(
+                "live layers: %sholes.geojson, %sgaps.geojson (QGIS, CalTopo), "
+                "%sholes_live.kml (Google Earth)",
+                public,
+                public,
+                public,
+            )
+            if _loopback(public) and opts.cot_url is not None:
+                _log.warning(
+                    "picture links in CoT point at %s, which no handheld can open: serve the "
+                    "page on the team's network (--http 0.0.0.0:PORT) or say its address "
+                    "(--public-url http://ADDRESS:PORT)",
+                    public,
+                )
             if station.new_pairings and show is not None:
                 show(
                     "Pairing links (shown once, not logged; each lets one operator's browser "

@@ -168,7 +168,11 @@ def hole_cot(
     age = point_age(h, now)
     remarks = f"{tier.upper()}: {hole_summary(h)}"
     ET.SubElement(detail, "remarks").text = f"{remarks} ({age})" if age else remarks
-    facts = {"tier": tier, "mark": h.mark, "score": f"{h.score:.3f}", "sightings": str(h.sightings)}
+    facts = {"tier": tier, "mark": h.mark, "sightings": str(h.sightings)}
+    if h.p_hole is not None:
+        facts["p_hole"] = f"{h.p_hole:.3f}"
+    if h.score is not None:
+        facts["score"] = f"{h.score:.3f}"
     if h.sigma_h_m is not None:
         facts["sigma_h_m"] = f"{h.sigma_h_m:.3f}"
     if h.t_first_unix_ns > 0:

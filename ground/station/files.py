@@ -34,12 +34,22 @@ from holescan.missions import (
 )
 from holescan.outputs import atomic_output, output_via_part
 
-__all__ = ["hole_summary", "hole_waypoint", "write_station_files"]
+__all__ = [
+    "hole_points",
+    "hole_summary",
+    "hole_waypoint",
+    "kml_points",
+    "network_link_kml",
+    "write_station_files",
+]
 
 
-def hole_summary(h: GroundHole) -> str:
-    """One line: size, depth reason, score, sightings, uncertainty, operator's mark."""
-    parts = [f"hole {h.id}", f"best frame's score {h.score:.2f}"]
+def hole_summary(h: GroundHole, *, why: bool = True) -> str:
+    """One line: size, score, sightings, uncertainty, operator's mark, and (``why``) the
+    detector's explanation."""
+    parts = [f"hole {h.id}"]
+    if h.score is not None:
+        parts.append(f"best frame's score {h.score:.2f}")
     if h.major_m is not None and h.minor_m is not None:
         parts.append(f"opening {h.major_m:.2f} x {h.minor_m:.2f} m")
     if h.sightings:
@@ -48,7 +58,7 @@ def hole_summary(h: GroundHole) -> str:
         parts.append(f"within {CIRCLE_95_PER_SIGMA * h.sigma_h_m:.2f} m (95 %)")
     parts.append(f"operator: {h.mark}")
     text = ", ".join(parts)
-    return f"{text}. {h.why}" if h.why else text
+    return f"{text}. {h.why}" if h.why and why else text
 
 
 def hole_waypoint(h: GroundHole, image_src: str | None = None) -> Waypoint:
@@ -57,7 +67,7 @@ def hole_waypoint(h: GroundHole, image_src: str | None = None) -> Waypoint:
         "hole_id": h.id,
         "tier": h.tier,
         "p_hole": h.p_hole,
-        "score": round(h.score, 3),
+        "score": None if h.score is None else round(h.score, 3),
         "mark": h.mark,
         "sightings": h.sightings,
         "sigma_h_m": h.sigma_h_m,
@@ -86,18 +96,17 @@ def _replace(path: Path, write: Callable[[Path], object]) -> None:
         write(part)
 
 
-def write_station_files(
-    folder: Path, holes: Sequence[GroundHole], *, refresh_s: float = 5.0
-) -> list[Path]:
-    """Write the station's hole files (see the module docstring); return their paths."""
-    shown = [h for h in holes if h.mark != "rejected"]
-    points = []
-    for h in shown:
-        src = f"cards/hole-{h.id}.jpg" if h.has_picture else None
-        points.append(hole_waypoint(h, src))
-    kml, live = folder / "holes.kml", folder / "holes_live.kml"
-    gj, gpx = folder / "holes.geojson", folder / "holes.gpx"
-    kml_points = [
+def hole_points(
+    holes: Sequence[GroundHole], picture: Callable[[GroundHole], str | None]
+) -> list[Waypoint]:
+    """The holes not rejected as waypoints; ``picture(h)`` is where a hole's picture is
+    (a file name beside the files, or the station's URL; None: no picture)."""
+    return [hole_waypoint(h, picture(h)) for h in holes if h.mark != "rejected"]
+
+
+def kml_points(points: Sequence[Waypoint]) -> list[Waypoint]:
+    """The points with their picture (when they have one) in their KML description."""
+    return [
         Waypoint(
             w.lat_deg,
             w.lon_deg,
@@ -114,23 +123,34 @@ def write_station_files(
         )
         for w in points
     ]
-    _replace(kml, lambda p: write_kml(p, kml_points, document_name="holescan holes (live)"))
+
+
+def write_station_files(
+    folder: Path, holes: Sequence[GroundHole], *, refresh_s: float = 5.0
+) -> list[Path]:
+    """Write the station's hole files (see the module docstring); return their paths."""
+    points = hole_points(holes, lambda h: f"cards/hole-{h.id}.jpg" if h.has_picture else None)
+    kml, live = folder / "holes.kml", folder / "holes_live.kml"
+    gj, gpx = folder / "holes.geojson", folder / "holes.gpx"
+    kml_doc = kml_points(points)
+    _replace(kml, lambda p: write_kml(p, kml_doc, document_name="holescan holes (live)"))
     _replace(gj, lambda p: write_geojson(p, points, altitude=False))
     _replace(gpx, lambda p: write_gpx(p, points))
     if not live.exists():
         with atomic_output(live, force=True) as f:
-            f.write(_network_link(refresh_s).encode())
+            f.write(network_link_kml("holes.kml", refresh_s).encode())
     return [kml, live, gj, gpx]
 
 
-def _network_link(refresh_s: float) -> str:
+def network_link_kml(href: str, refresh_s: float) -> str:
+    """A KML 2.2 NetworkLink to ``href`` that Google Earth reloads every ``refresh_s``."""
     return f"""<?xml version="1.0" encoding="UTF-8"?>
 <kml xmlns="http://www.opengis.net/kml/2.2">
   <NetworkLink>
     <name>holescan holes (live)</name>
     <refreshVisibility>0</refreshVisibility>
     <Link>
-      <href>holes.kml</href>
+      <href>{html.escape(href)}</href>
       <refreshMode>onInterval</refreshMode>
       <refreshInterval>{refresh_s:g}</refreshInterval>
     </Link>

@@ -16,6 +16,15 @@ separated piece of the server; the page's script is ``static/maplayers.js``, no 
 * ``GET /map/view/<file>`` a coverage tile coloured for the page: seen cells green, cells
   of the tile not seen red (both translucent), RGBA PNG.
 
+The basemaps the team brought (:mod:`ground.station.basemap`), numbered in the order given:
+
+* ``GET /basemaps.json`` each one's ``id``, ``name``, ``kind``, zoom range and extent;
+* ``GET /basemap/<id>/view.json?lat=..&lon=..&x0=..&y0=..&x1=..&y1=..&px=..`` the tiles
+  that fill the page's view (its box in the page's metres, ``px`` pixels wide): each
+  tile's corners in those metres and where to fetch it (at most
+  :data:`~ground.station.basemap.MAX_VIEW_TILES`);
+* ``GET /basemap/<id>/<z>/<x>/<y>`` a tile (PNG, JPEG or WebP).
+
 Every request is hostile: file names are looked up in the store's list (never opened as
 given), numbers are parsed and range-checked, anything else is 404 / 400.
 """
@@ -25,21 +34,25 @@ from __future__ import annotations
 import json
 import math
 import re
+from collections.abc import Sequence
 from urllib.parse import parse_qs
 
 import cv2
 import numpy as np
 
 from holescan.geotag import LocalFrame
+from holescan.ground.station.basemap import MAX_VIEW_M, Basemap, view_tiles
 from holescan.ground.station.mapcombine import CombinedCache, combined_places
 from holescan.ground.station.mapstore import MapStore
 from holescan.missions import read_tile
 
-__all__ = ["Reply", "coverage_view_png", "map_document", "map_route"]
+__all__ = ["Reply", "basemap_route", "coverage_view_png", "map_document", "map_route"]
 
 Reply = tuple[int, bytes, str]
 _ALL = re.compile(r"/map/all/(cov|ortho)-(-?\d{1,7})_(-?\d{1,7})\.png")
 _NAME = re.compile(r"m\d{1,10}-(cov|ortho)--?\d{1,7}_-?\d{1,7}\.(png|jpg)")
+_BASEMAP_TILE = re.compile(r"/basemap/(\d{1,2})/(\d{1,2})/(\d{1,8})/(\d{1,8})")
+_BASEMAP_VIEW = re.compile(r"/basemap/(\d{1,2})/view\.json")
 _SEEN_RGBA = (46, 125, 50, 45)
 _UNSEEN_RGBA = (211, 47, 47, 110)
 
@@ -81,9 +94,9 @@ def _combined_tile(cache: CombinedCache, layer: str, tx: int, ty: int) -> bytes 
     return _png(rgba)
 
 
-def _origin(query: str) -> tuple[float, float] | None:
+def _origin(query: str, max_fields: int = 4) -> tuple[float, float] | None:
     try:
-        q = parse_qs(query[:200], max_num_fields=4)
+        q = parse_qs(query[:400], max_num_fields=max_fields)
         lat, lon = float(q["lat"][0]), float(q["lon"][0])
     except (KeyError, IndexError, ValueError):  # also too many fields
         return None
@@ -157,3 +170,60 @@ def map_route(
     if got is None:
         return 404, b"no such tile", "text/plain"
     return 200, coverage_view_png(got[1]), "image/png"
+
+
+def _view_query(query: str) -> tuple[tuple[float, float], tuple[float, ...], int] | None:
+    """(origin, (x0, y0, x1, y1), px) of a view request, or None when out of bounds."""
+    origin = _origin(query, 8)
+    try:
+        q = parse_qs(query[:400], max_num_fields=8)
+        box = tuple(float(q[k][0]) for k in ("x0", "y0", "x1", "y1"))
+        px = int(q["px"][0])
+    except (KeyError, IndexError, ValueError):
+        return None
+    if origin is None or not 1 <= px <= 8192:
+        return None
+    if not all(math.isfinite(v) and abs(v) <= MAX_VIEW_M for v in box):
+        return None
+    if not (box[0] < box[2] and box[1] < box[3]):
+        return None
+    return origin, box, px
+
+
+def basemap_route(basemaps: Sequence[Basemap], path: str, query: str = "") -> Reply | None:
+    """The reply to a GET of a basemap path (None: not one); see the module docstring."""
+    if path == "/basemaps.json":
+        doc = [
+            {
+                "id": i,
+                "name": b.info.name,
+                "kind": b.info.kind,
+                "minzoom": b.info.minzoom,
+                "maxzoom": b.info.maxzoom,
+                "bounds": b.info.bounds,
+            }
+            for i, b in enumerate(basemaps)
+        ]
+        return 200, json.dumps({"basemaps": doc}).encode(), "application/json"
+    if not path.startswith("/basemap/"):
+        return None
+    if (m := _BASEMAP_VIEW.fullmatch(path)) is not None:
+        i = int(m[1])
+        got = _view_query(query)
+        if i >= len(basemaps):
+            return 404, b"no such basemap", "text/plain"
+        if got is None:
+            return 400, b"a view wants lat, lon, x0, y0, x1, y1 (metres) and px", "text/plain"
+        origin, (x0, y0, x1, y1), px = got
+        tiles = [
+            {"x0": b[0], "y0": b[1], "x1": b[2], "y1": b[3], "href": f"/basemap/{i}/{z}/{x}/{y}"}
+            for z, x, y, b in view_tiles(basemaps[i].info, origin, (x0, y0, x1, y1), px)
+        ]
+        return 200, json.dumps({"id": i, "tiles": tiles}).encode(), "application/json"
+    if (m := _BASEMAP_TILE.fullmatch(path)) is not None:
+        i, z, x, y = (int(v) for v in m.groups())
+        tile = basemaps[i].tile(z, x, y) if i < len(basemaps) else None
+        if tile is None:
+            return 404, b"no such tile", "text/plain"
+        return 200, tile[0], tile[1]
+    return 404, b"no such basemap", "text/plain"

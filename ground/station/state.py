@@ -69,6 +69,7 @@ from holescan.link import (
     read_hole_text,
     xml_text,
 )
+from holescan.missions import NO_PICTURE, card_picture, with_picture
 from holescan.outputs import atomic_output
 
 __all__ = [
@@ -114,21 +115,27 @@ _OLD_SECONDS = {"first_unix": "t_first_unix_ns", "updated_unix": "t_updated_unix
 
 
 def parse_hole_statustext(text: str) -> tuple[int, float, float, float] | None:
-    """``HOLE <id> <score> <lat> <lon>`` (an announced hole) or ``REVIEW <id> ...`` (a hole
-    for review) -> (id, score, lat_deg, lon_deg); None for other texts. The link's one codec
-    (:func:`link.read_hole_text`, which also gives the tier).
+    """``HOLE <id> p<p_hole> <lat> <lon>`` (an announced hole) or ``REVIEW <id> ...`` (a
+    hole for review) -> (id, confidence, lat_deg, lon_deg); None for other texts. The
+    confidence is the hole-level p_hole, or the best frame's detector score from a vehicle
+    that sent the old form (``HOLE <id> <score> ...``). The link's one codec
+    (:func:`link.read_hole_text`, which says which of the two it was and the tier).
 
-    >>> parse_hole_statustext("HOLE 3 0.88 43.6533100 -79.3831200")
-    (3, 0.88, 43.65331, -79.38312)
+    >>> parse_hole_statustext("HOLE 3 p0.97 43.6533100 -79.3831200")
+    (3, 0.97, 43.65331, -79.38312)
     >>> parse_hole_statustext("REVIEW 4 0.30 43.6533100 -79.3831200")
     (4, 0.3, 43.65331, -79.38312)
     >>> parse_hole_statustext("PreArm: GPS") is None
     True
-    >>> parse_hole_statustext("HOLE 1000000000 0.88 43.6533100 -79.3831200") is None
+    >>> parse_hole_statustext("HOLE 1000000000 p0.88 43.6533100 -79.3831200") is None
     True
     """
     said = read_hole_text(text)
-    return None if said is None else (said.hole_id, said.score, said.lat_deg, said.lon_deg)
+    if said is None:
+        return None
+    value = said.p_hole if said.p_hole is not None else said.score
+    assert value is not None  # the codec sets one of the two
+    return (said.hole_id, value, said.lat_deg, said.lon_deg)
 
 
 @dataclass
@@ -147,7 +154,7 @@ class HoleSource:
     hole_id: int
     lat_deg: float
     lon_deg: float
-    score: float = 0.0
+    score: float | None = None
     alt_m: float | None = None
     sigma_h_m: float | None = None
     major_m: float | None = None
@@ -169,7 +176,7 @@ class HoleSource:
         v.sysid = link_int(v.sysid, 1, 255, "system id")
         v.hole_id = check_hole_id(v.hole_id)
         v.lat_deg, v.lon_deg = link_lat_lon(v.lat_deg, v.lon_deg)
-        v.score = link_float(v.score, 0.0, 1.0, "score")
+        v.score = optional_float(v.score, 0.0, 1.0, "score")
         v.alt_m = optional_float(v.alt_m, *_ALT_M, "alt_m")
         for name in ("sigma_h_m", "major_m", "minor_m"):
             setattr(v, name, optional_float(getattr(v, name), *_SIZE_M, name))
@@ -192,7 +199,7 @@ class HoleSource:
             self.lon_deg,
             nan if self.alt_m is None else self.alt_m,
             nan if self.sigma_h_m is None else self.sigma_h_m,
-            self.score,
+            nan if self.score is None else self.score,
             self.sightings,
             self.t_first_unix_ns,
             self.t_last_unix_ns,
@@ -209,7 +216,8 @@ class GroundHole:
 
     id : the vehicle's hole id. lat_deg, lon_deg : WGS84; alt_m : m MSL (None: unknown).
     sigma_h_m : 1-sigma horizontal uncertainty, m (None until the card came).
-    score, sightings, major_m, minor_m : the detector's. why : its explanation.
+    score : the best frame's detector score (None until a card or an old-form STATUSTEXT
+    told it). sightings, major_m, minor_m : the detector's. why : its explanation.
     card_rev : revision of the newest card (0: no card yet). has_picture : a JPEG is kept.
     mark : the operator's (``new`` until set). vehicle_tier : what the vehicle said of it
     (``announced``: sure enough to send to the crews; ``review``: plausible, for an
@@ -227,7 +235,7 @@ class GroundHole:
     id: int
     lat_deg: float
     lon_deg: float
-    score: float
+    score: float | None = None
     alt_m: float | None = None
     sigma_h_m: float | None = None
     sightings: int = 0
@@ -293,9 +301,9 @@ class GroundHole:
         unknown and named in the list returned."""
         self.id = check_hole_id(self.id)
         self.lat_deg, self.lon_deg = link_lat_lon(self.lat_deg, self.lon_deg)
-        self.score = link_float(self.score, 0.0, 1.0, "score")
         forgotten = []
         optional = {
+            "score": (0.0, 1.0),
             "alt_m": _ALT_M,
             "sigma_h_m": _SIZE_M,
             "major_m": _SIZE_M,
@@ -617,7 +625,7 @@ class StationState:
         return hid if hid is not None and hid in m.from_reference else None
 
     def _source(
-        self, sysid: int | None, own: int, lat: float, lon: float, score: float
+        self, sysid: int | None, own: int, lat: float, lon: float
     ) -> tuple[GroundHole, HoleSource, bool] | None:
         """The station hole and vehicle part for vehicle ``sysid``'s hole ``own`` (made
         when new: matched to another vehicle's hole or a new station hole), and whether
@@ -632,7 +640,7 @@ class StationState:
                 src = next(v for v in h.vehicles if v.sysid == sysid)
                 src.t_last_unix_ns = now
                 return h, src, False
-            src = HoleSource(sysid, own, lat, lon, score, t_first_unix_ns=now, t_last_unix_ns=now)
+            src = HoleSource(sysid, own, lat, lon, t_first_unix_ns=now, t_last_unix_ns=now)
             match = self._same_opening(src, None)
             if match is not None:
                 h = self.holes[match]
@@ -650,7 +658,7 @@ class StationState:
         if h_old is None and not self._room_for(None):
             return None
         if h_old is None:  # a hole known before vehicles were told apart keeps its facts
-            h_old = GroundHole(hid, lat, lon, score, t_first_unix_ns=now)
+            h_old = GroundHole(hid, lat, lon, t_first_unix_ns=now)
             self.holes[hid] = h_old
         else:  # a hole of a state file older than this: its facts are this vehicle's
             src = HoleSource(
@@ -681,7 +689,8 @@ class StationState:
         if sized:
             s = _best(sized)
             h.major_m, h.minor_m = s.major_m, s.minor_m
-        h.score = max(v.score for v in h.vehicles)
+        scores = [v.score for v in h.vehicles if v.score is not None]
+        h.score = max(scores) if scores else None
         known = [v.p_hole for v in h.vehicles if v.p_hole is not None]
         h.p_hole = max(known) if known else None
         h.vehicle_tier = "announced" if any(v.tier == "announced" for v in h.vehicles) else "review"
@@ -718,22 +727,18 @@ class StationState:
             if text.lstrip().startswith(("HOLE ", "REVIEW ")):
                 self.reject("a hole STATUSTEXT", LinkValueError(repr(xml_text(text, 60))))
             return None
-        hid, score, lat, lon, tier = (
-            said.hole_id, said.score, said.lat_deg, said.lon_deg, said.tier,
-        )  # fmt: skip
+        hid, lat, lon, tier = said.hole_id, said.lat_deg, said.lon_deg, said.tier
         with self._lock:
-            got = self._source(sysid, hid, lat, lon, score)
+            got = self._source(sysid, hid, lat, lon)
             if got is None:
                 return None
             h, src, new = got
-            if not new and (src.lat_deg, src.lon_deg, src.score, src.tier) == (
-                lat,
-                lon,
-                score,
-                tier,
-            ):
+            p_hole = said.p_hole if said.p_hole is not None else src.p_hole
+            score = said.score if said.score is not None else src.score
+            told = (lat, lon, p_hole, score, tier)
+            if not new and (src.lat_deg, src.lon_deg, src.p_hole, src.score, src.tier) == told:
                 return h
-            src.lat_deg, src.lon_deg, src.score, src.tier = lat, lon, score, tier
+            src.lat_deg, src.lon_deg, src.p_hole, src.score, src.tier = told
             h = self._fold(h, src)
         self._changed()
         return h
@@ -741,22 +746,32 @@ class StationState:
     def on_card(
         self, facts: dict[str, Any], jpeg: bytes, sysid: int | None = None
     ) -> GroundHole | None:
-        """Take a card's facts (:func:`missions.read_card`) and picture from vehicle
-        ``sysid`` (None: the first vehicle); an older revision than kept is ignored."""
+        """Take a card's facts (:func:`missions.read_card`) and picture (``jpeg``: the
+        card's bytes) from vehicle ``sysid`` (None: the first vehicle); an older revision
+        than kept is ignored. A facts-only card (:data:`missions.NO_PICTURE`) updates the
+        facts and keeps the picture held (its file then carries the new facts)."""
         try:
             v = card_values(facts)
         except LinkValueError as err:
             self.reject("a card", err)
             return None
         with self._lock:
-            got = self._source(sysid, v.hole_id, v.lat_deg, v.lon_deg, v.score)
+            got = self._source(sysid, v.hole_id, v.lat_deg, v.lon_deg)
             if got is None:
                 return None
             h, src, _ = got
             if src.card_rev >= v.rev:
                 return h
-            with atomic_output(self.card_path(h.id), force=True) as f:
-                f.write(jpeg)
+            picture = card_picture(jpeg) != NO_PICTURE
+            if not picture and h.has_picture:
+                try:
+                    jpeg, picture = with_picture(jpeg, self.card_path(h.id).read_bytes()), True
+                except OSError as err:  # the kept picture is gone: facts only, ask again
+                    _log.warning("hole %d: kept picture unreadable (%s)", h.id, err)
+                    h.has_picture = False
+            if picture:
+                with atomic_output(self.card_path(h.id), force=True) as f:
+                    f.write(jpeg)
             src.lat_deg, src.lon_deg, src.score, src.card_rev = (
                 v.lat_deg, v.lon_deg, v.score, v.rev,
             )  # fmt: skip
@@ -765,7 +780,7 @@ class StationState:
             if v.sightings is not None:
                 src.sightings = v.sightings
             src.tier, src.p_hole = v.tier, v.p_hole
-            h.has_picture = True
+            h.has_picture = h.has_picture or picture
             if v.why is not None:
                 h.why = v.why
             h = self._fold(h, src)

@@ -25,17 +25,19 @@ import logging
 import math
 import socket
 import threading
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from typing import TYPE_CHECKING, Any
+from urllib.parse import urlsplit
 
 from holescan.errors import InputError
 from holescan.geotag import CIRCLE_95_PER_SIGMA, LocalFrame
 from holescan.ground.station.audit import AuditEntry, AuditTrail
+from holescan.ground.station.basemap import Basemap
 from holescan.ground.station.files import hole_summary
 from holescan.ground.station.guard import GuardMiddleware, Limits, RateLimiter, default_names
 from holescan.ground.station.locate import bearing_name, mgrs_text, range_bearing
 from holescan.ground.station.mapcombine import CombinedCache
-from holescan.ground.station.maplayers import Reply, map_route
+from holescan.ground.station.maplayers import Reply, basemap_route, map_route
 from holescan.ground.station.mapstore import MapStore
 from holescan.ground.station.pairing import Pairing, Pairings
 from holescan.ground.station.state import MARKS, GroundHole, StationState, TrackPoint
@@ -150,7 +152,8 @@ def state_document(
     ``vehicles`` included), ``x``/``y``/``r95`` in local metres, ``mgrs`` (its grid
     reference, :func:`~ground.station.locate.mgrs_text`), ``from_home`` and
     ``from_vehicles`` (``{"distance_m", "bearing_deg", "compass"}`` from the launch point
-    and from each vehicle's position now), ``summary``, ``picture`` (its URL or None) and
+    and from each vehicle's position now), ``summary`` (its facts in one line, without the
+    "why", which the page shows on its own line), ``picture`` (its URL or None) and
     ``marked_by`` (``{"operator", "pairing", "t_unix_ns"}`` of its newest mark, or None).
     ``vehicles``: each vehicle heard (:meth:`VehicleStatus.to_json`, with ``colour``,
     ``xy``, ``track``, ``footprints``, ``footprint_now``); ``home``: the launch point
@@ -210,7 +213,7 @@ def state_document(
             from_vehicles=[
                 {"sysid": sid, **(_range(at, h.lat_deg, h.lon_deg) or {})} for sid, at in here
             ],
-            summary=hole_summary(h),
+            summary=hole_summary(h, why=False),  # the page shows the "why" on its own
             picture=f"/cards/hole-{h.id}.jpg?rev={h.card_rev}" if h.has_picture else None,
             marked_by=(
                 {
@@ -279,8 +282,16 @@ class StationWeb:
         names: Iterable[str] | None = None,
         limits: Limits | None = None,
         map_store: MapStore | None = None,
+        public_url: str | None = None,
+        vehicles: Callable[[GroundHole], list[int]] | None = None,
+        kml_refresh_s: float = 5.0,
+        basemaps: Sequence[Basemap] = (),
     ) -> None:
         self.state = state
+        self._public_url = public_url
+        self.vehicles = vehicles or (lambda _h: [])
+        self.kml_refresh_s = kml_refresh_s
+        self.basemaps = tuple(basemaps)
         self.map_store = map_store
         self._map_cache = CombinedCache(map_store) if map_store is not None else None
         self.on_mark = on_mark or state.mark
@@ -304,8 +315,19 @@ class StationWeb:
         # the web stack (the ground extra) is imported when a page is served, not with
         # holescan.ground: the flight install can import the ground package's names
         from holescan.ground.station.events import Changes, EventStream
+        from holescan.ground.station.feeds import GapsCache, check_public_url
         from holescan.ground.station.webapp import make_app
         from holescan.ground.station.webserver import WebServer
+
+        if public_url is not None:
+            self._public_url = check_public_url(public_url)
+            name = urlsplit(self._public_url).hostname or ""
+            with contextlib.suppress(ValueError):
+                ipaddress.ip_address(name)
+                name = ""  # an address is checked against the connection's own
+            if name and name not in self.names:
+                self.names = (*self.names, name)
+        self._gaps = GapsCache(self._map_cache) if self._map_cache is not None else None
 
         self.changes: Changes = Changes(state.version)
         self.events: EventStream = EventStream(self.changes, limits)
@@ -335,6 +357,27 @@ class StationWeb:
     def url(self) -> str:
         """The page, read-only (no pairing)."""
         return station_url(str(self.server.address[0]), self.port)
+
+    @property
+    def public_url(self) -> str:
+        """The station as the crew's devices reach it (picture links in feeds and CoT)."""
+        return self._public_url or self.url
+
+    def feed(self, path: str) -> bytes | None:
+        """A live layer for the crew's other tools (:mod:`ground.station.feeds`), or None
+        when ``path`` is none."""
+        from holescan.ground.station import feeds
+
+        holes = self.state.snapshot()[1]
+        if path == "/holes.geojson":
+            return feeds.holes_geojson(holes, self.vehicles, self.public_url)
+        if path == "/holes.kml":
+            return feeds.holes_kml(holes, self.public_url)
+        if path == "/holes_live.kml":
+            return feeds.live_kml(self.public_url, self.kml_refresh_s)
+        if path == "/gaps.geojson":
+            return feeds.EMPTY if self._gaps is None else self._gaps.get()
+        return None
 
     def pair_url(self, token: str) -> str:
         """The pairing link of ``token`` (:meth:`Pairings.issue`): opened once in an
@@ -367,7 +410,10 @@ class StationWeb:
         return self.state.card_path(hole_id).read_bytes()
 
     def map_reply(self, path: str, query: str) -> Reply | None:
-        """The live map's answer to a GET of ``path`` (None: not a map path)."""
+        """The live map's or a basemap's answer to a GET of ``path`` (None: neither)."""
+        got = basemap_route(self.basemaps, path, query)
+        if got is not None:
+            return got
         return map_route(self.map_store, path, query, self._map_cache)
 
     def mark(self, hole_id: int, mark: str, pairing: Pairing, client: str) -> GroundHole:

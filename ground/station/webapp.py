@@ -5,7 +5,10 @@
 * ``GET /state.json`` everything the page draws, with ``can_mark`` and ``paired`` (the
   asker's pairing, or null); ``GET /cards/hole-<id>.jpg`` a hole's picture;
 * ``GET /events`` Server-Sent Events (:mod:`ground.station.events`);
-* ``GET /map.json``, ``GET /map/...`` the live map's layers (:mod:`ground.station.maplayers`);
+* ``GET /map.json``, ``GET /map/...`` the live map's layers, ``GET /basemaps.json``,
+  ``GET /basemap/...`` the offline basemaps (:mod:`ground.station.maplayers`);
+* ``GET /holes.geojson``, ``/gaps.geojson``, ``/holes.kml``, ``/holes_live.kml`` the live
+  layers for QGIS, CalTopo and Google Earth (:mod:`ground.station.feeds`), read-only;
 * ``POST /pair`` with ``Authorization: Bearer TOKEN``: the page checks a pairing link's
   token before it keeps anything; 200 ``{"pairing", "operator"}`` and the cookie
   ``holescan_pairing`` (``HttpOnly; SameSite=Strict``), or 401 with the reason;
@@ -36,6 +39,7 @@ from starlette.staticfiles import StaticFiles
 from holescan.errors import InputError
 from holescan.ground.station.audit import AuditError
 from holescan.ground.station.events import EventStream
+from holescan.ground.station.feeds import FEEDS
 from holescan.ground.station.guard import Limits
 from holescan.ground.station.maplayers import Reply
 from holescan.ground.station.pairing import Pairing, Pairings
@@ -49,6 +53,7 @@ COOKIE = "holescan_pairing"
 """The page's pairing cookie (HttpOnly, SameSite=Strict, this browser session only)."""
 
 _MAX_ID_DIGITS = 9
+_TILE_CACHE = {"Cache-Control": "private, max-age=3600"}
 
 
 class Site(Protocol):
@@ -64,6 +69,8 @@ class Site(Protocol):
     def card(self, hole_id: int) -> bytes: ...
 
     def map_reply(self, path: str, query: str) -> Reply | None: ...
+
+    def feed(self, path: str) -> bytes | None: ...
 
     def mark(self, hole_id: int, mark: str, pairing: Pairing, client: str) -> GroundHole: ...
 
@@ -130,7 +137,16 @@ def make_app(site: Site) -> Starlette:
         code, body, ctype = reply
         if code >= 400:
             return _text(code, body.decode("utf-8", "replace"))
+        if path.startswith("/basemap/") and ctype.startswith("image/"):  # a basemap's tile
+            return Response(body, code, media_type=ctype, headers=_TILE_CACHE)
         return Response(body, code, media_type=ctype)
+
+    async def feed(request: Request) -> Response:
+        path = request.url.path
+        body = await run_in_threadpool(site.feed, path)
+        if body is None:
+            return _text(404, "not found")
+        return Response(body, media_type=FEEDS[path])
 
     async def pair(request: Request) -> Response:
         p = site.pairings.check(_bearer(request))
@@ -205,6 +221,9 @@ def make_app(site: Site) -> Starlette:
         Route("/cards/hole-{hole_id}.jpg", card),
         Route("/map.json", map_layers),
         Route("/map/{rest:path}", map_layers),
+        Route("/basemaps.json", map_layers),
+        Route("/basemap/{rest:path}", map_layers),
+        *(Route(path, feed) for path in FEEDS),
         Route("/pair", pair, methods=["POST"]),
         Route("/holes/{hole_id}/mark", mark, methods=["POST"]),
     ]

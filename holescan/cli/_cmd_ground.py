@@ -63,6 +63,24 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "default: this machine's hostname and HOSTNAME.local); other names are refused",
     )
     p.add_argument(
+        "--basemap",
+        action="append",
+        default=[],
+        type=Path,
+        metavar="FILE",
+        help="an offline basemap for the live page (repeatable, switchable there): raster "
+        "tiles in an MBTiles file (.mbtiles), or a GeoTIFF (.tif) such as an earlier sortie's "
+        "or campaign's NAME_ortho.tif",
+    )
+    p.add_argument(
+        "--public-url",
+        metavar="URL",
+        help="the station's address as the team's handhelds and laptops reach it, "
+        "http://ADDRESS:PORT (e.g. http://192.168.1.10:8080): the picture links in CoT and "
+        "in the live layers /holes.geojson, /holes.kml (default: the address of --http; "
+        "with 0.0.0.0, the laptop's primary address)",
+    )
+    p.add_argument(
         "--cot",
         default="udp+wo://239.2.3.1:6969",
         help="TAK: mesh multicast udp+wo://239.2.3.1:6969 (default), a TAK server "
@@ -177,6 +195,8 @@ def run(args: argparse.Namespace) -> int:
         cot_refresh_s=args.cot_refresh,
         overlay=args.overlay,
         pair=tuple(args.pair),
+        public_url=args.public_url,
+        basemaps=tuple(args.basemap),
         signing=(
             SigningKey.from_file(args.mavlink_key_file)
             if args.mavlink_key_file is not None

@@ -1,11 +1,14 @@
 """Helpers shared by the tests (one copy each): free loopback ports for the peers the tests
-start (pymavlink links, MAVProxy, the ground station, Dask schedulers)."""
+start (pymavlink links, MAVProxy, the ground station, Dask schedulers), and a hang guard for
+waits on them (:func:`wait_for`)."""
 
 from __future__ import annotations
 
 import socket
+import time
+from collections.abc import Callable
 
-__all__ = ["free_tcp_port", "free_udp_port"]
+__all__ = ["free_tcp_port", "free_udp_port", "wait_for"]
 
 
 def free_udp_port() -> int:
@@ -20,3 +23,18 @@ def free_tcp_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
+
+
+def wait_for(cond: Callable[[], object], timeout_s: float, what: str, poll_s: float = 0.02) -> None:
+    """Poll ``cond`` until it is true; raise :class:`TimeoutError` naming ``what`` if it is
+    still false after ``timeout_s``.
+
+    The timeout is a hang guard, never a speed check: make it many times what the wait takes
+    on a loaded machine, so reaching it means the thing never came. How fast it comes is
+    measured by a benchmark.
+    """
+    deadline = time.monotonic() + timeout_s
+    while not cond():
+        if time.monotonic() >= deadline:
+            raise TimeoutError(f"{what}: not after {timeout_s:g} s")
+        time.sleep(poll_s)

@@ -5,6 +5,7 @@ docs/measurements.md quotes (run with ``-s``)."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import signal
@@ -17,11 +18,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from holescan.capture import Flight, FlightConfig, Telemetry
+from holescan.capture import Flight, FlightConfig, FlightSummary, Telemetry
 from holescan.detect import CameraIntrinsics, Frame
-from holescan.flightlog import LoggedFrame, log_info, read_flight_log, recover_log
+from holescan.flightlog import (
+    LoggedFrame,
+    LoggedHealth,
+    LogOptions,
+    log_info,
+    read_flight_log,
+    recover_log,
+)
 from holescan.sim import SimAutopilot, SimPath
-from tests._support import free_udp_port
+from tests._support import free_udp_port, wait_for
 from tests.capture.test_shutdown import group_members, start_sim_flight
 
 CAM = CameraIntrinsics.xtion(160, 120)
@@ -116,8 +124,12 @@ def test_link_gone_10_s_then_a_rebooted_autopilot(tmp_path: Path) -> None:
     )
     assert sum(before) >= 0.8 * len(before)
     assert not any(during)  # never a made-up pose
-    assert first_posed < 6.0  # rates re-requested, clock re-synchronised
+    # The reboot seen, rates re-requested and the clock re-synchronised: frames are posed
+    # again, most of those after the first posed one. How soon against a real ArduPilot:
+    # benchmarks/sitl_sortie.py --reboot-at (its "first posed" line).
     assert tel.reboots >= 1
+    resynced = [p for t, p in after if t >= marks["back"] + first_posed]
+    assert sum(resynced) >= 0.8 * len(resynced) > 0
     assert summary.frames_logged == len(frames)  # type: ignore[attr-defined]
 
 
@@ -149,14 +161,18 @@ def test_sensor_stops_and_comes_back(tmp_path: Path) -> None:
         f"detector {c.frames_detected}"
     )
     assert t_stop < t_back
-    assert c.sensor_failures >= 1
-    assert first_after < 2.5
+    # The stall seen (the frame timeout's path: a failure, then a reopen) and the sensor
+    # read again after it came back: frames logged after it, detected too.
+    assert c.sensor_reopens >= c.sensor_failures >= 1
+    assert any(t > t_back for t, _ in frames)
     assert c.frames_detected > 0
 
 
 @pytest.mark.skipif(os.geteuid() != 0 or shutil.which("mount") is None, reason="needs root")
-@pytest.mark.slow
-def test_disk_full_while_logging(tmp_path: Path) -> None:
+@contextlib.contextmanager
+def _fly_onto_a_small_disk(tmp_path: Path, image_reserve_bytes: int) -> Iterator[FlightSummary]:
+    """A 14 s flight of incompressible frames logged onto a 20 MB tmpfs (mounted while the
+    caller reads the log back)."""
     logs = tmp_path / "small"
     logs.mkdir()
     if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=20m", "tmpfs", str(logs)]).returncode:
@@ -177,10 +193,25 @@ def test_disk_full_while_logging(tmp_path: Path) -> None:
                     time.sleep(max(0.0, (target - time.monotonic_ns()) / 1e9))
                     yield Frame(i, rgb, depth, time.monotonic_ns(), i * 100_000_000)
 
-        cfg = FlightConfig(log_prefix=logs / "f", max_duration_s=14.0, startup_sync_s=5.0)
+        options = LogOptions(color="raw", depth="raw", image_reserve_bytes=image_reserve_bytes)
+        cfg = FlightConfig(
+            log_prefix=logs / "f", max_duration_s=14.0, startup_sync_s=5.0, log_options=options
+        )
         with SimAutopilot(f"udpout:127.0.0.1:{port}", PATH):
             flight = Flight(cfg, Big, cam, mavlink=f"udpin:127.0.0.1:{port}")
             summary = flight.run()
+        out = tmp_path / "recovered.mcap"  # what was written can be repaired elsewhere
+        got = sum(1 for _ in read_flight_log(summary.log.files, kinds={LoggedFrame}))
+        assert recover_log(summary.log.files[0], out).frames == got
+        yield summary
+    finally:
+        subprocess.run(["umount", "-l", str(logs)], check=False)
+
+
+@pytest.mark.slow
+def test_disk_full_while_logging(tmp_path: Path) -> None:
+    """No reserve: the disk fills; the error is reported, capture and detection go on."""
+    with _fly_onto_a_small_disk(tmp_path, image_reserve_bytes=0) as summary:
         c = summary.counters
         files = summary.log.files
         got = sum(1 for _ in read_flight_log(files, kinds={LoggedFrame}))
@@ -194,17 +225,30 @@ def test_disk_full_while_logging(tmp_path: Path) -> None:
         assert got > 0 and info.frames == got  # what was written stays readable
         assert c.frames_captured > got  # capture went on after the disk filled
         assert c.frames_detected > 0 and len(summary.holes) >= 1
-        out = tmp_path / "recovered.mcap"  # and it can be repaired elsewhere
-        assert recover_log(files[0], out).frames == got
-    finally:
-        subprocess.run(["umount", "-l", str(logs)], check=False)
+
+
+@pytest.mark.slow
+def test_disk_reserve_stops_images_first(tmp_path: Path) -> None:
+    """A 12 MB reserve on a 20 MB disk: frames stop being logged before the disk is full;
+    telemetry, health and holes go on being logged, and the log closes without an error."""
+    with _fly_onto_a_small_disk(tmp_path, image_reserve_bytes=12 << 20) as summary:
+        c = summary.counters
+        records = list(read_flight_log(summary.log.files, kinds={LoggedFrame, LoggedHealth}))
+        frames = [r for r in records if isinstance(r, LoggedFrame)]
+        health = [r for r in records if isinstance(r, LoggedHealth)]
+        stopped = [h for h in health if h.values.get("event") == "images_stopped"]
+        assert summary.log.error is None  # never ran out of disk
+        assert summary.log.images_stopped_t_unix_ns is not None and len(stopped) == 1
+        assert 0 < len(frames) < c.frames_captured
+        assert summary.log.frames_not_logged > 0
+        assert any(h.t_unix_ns > stopped[0].t_unix_ns for h in health)  # health kept after it
+        assert c.frames_detected > 0 and len(summary.holes) >= 1  # detection went on
 
 
 @pytest.mark.slow
 def test_sigkill_loses_only_the_last_moments(tmp_path: Path) -> None:
     proc, logs = start_sim_flight(tmp_path)
     time.sleep(3.0)
-    t_kill = time.time()
     proc.send_signal(signal.SIGKILL)
     proc.communicate(timeout=10)
     deadline = time.monotonic() + 2.0
@@ -213,19 +257,19 @@ def test_sigkill_loses_only_the_last_moments(tmp_path: Path) -> None:
     assert not group_members(proc.pid)
     (path,) = sorted(logs.glob("*.mcap"))
     report = recover_log(path, tmp_path / "rec.mcap")
-    frames = list(read_flight_log(tmp_path / "rec.mcap", kinds={LoggedFrame}))
-    assert frames
-    last = frames[-1]
-    assert isinstance(last, LoggedFrame)
-    lost_s = t_kill - last.t_unix_ns / 1e9
-    indices = [r.frame.index for r in frames if isinstance(r, LoggedFrame)]
-    print(
-        f"\nSIGKILL: {report.frames} frames recovered (indices {indices[0]}..{indices[-1]}, "
-        f"none missing: {indices == list(range(indices[0], indices[-1] + 1))}); the last "
-        f"{lost_s:.2f} s before the kill lost"
-    )
-    assert indices == list(range(indices[0], indices[-1] + 1))
-    assert lost_s < 2.5  # fsync every second (+ the frame in flight)
+    records = list(read_flight_log(tmp_path / "rec.mcap", kinds={LoggedFrame, LoggedHealth}))
+    indices = [r.frame.index for r in records if isinstance(r, LoggedFrame)]
+    synced = [
+        int(r.values["frames_written"])
+        for r in records
+        if isinstance(r, LoggedHealth) and r.values.get("source") == "logger"
+    ]
+    print(f"\nSIGKILL: {report.frames} frames recovered, the logger's syncs at {synced}")
+    # Every frame from the first, none missing in between, and at least every frame the
+    # logger had written at its last sync (it fsyncs every second): only what came after
+    # the last sync is lost. How many seconds that is: benchmarks/bench_stop.py.
+    assert indices and indices == list(range(len(indices)))
+    assert synced and len(indices) >= synced[-1] > 0
 
 
 def test_duration_holds_while_the_sensor_is_missing(tmp_path: Path) -> None:
@@ -236,10 +280,16 @@ def test_duration_holds_while_the_sensor_is_missing(tmp_path: Path) -> None:
         raise SensorError("no Xtion found on USB")
 
     cfg = FlightConfig(log_prefix=tmp_path / "f", max_duration_s=3.0, retry_backoff_s=(8.0,))
-    t0 = time.monotonic()
-    summary = Flight(cfg, no_xtion, CAM).run()
-    took = time.monotonic() - t0
-    print(f"\nno sensor, --duration 3: ended after {took:.1f} s")
-    assert took < 8.0  # the worker's start-up included; the 8 s back-off is cut short
-    assert summary.frames_logged == 0  # (under load the worker's start-up can take it all)
+    box: dict[str, FlightSummary] = {}
+    runner = threading.Thread(
+        target=lambda: box.setdefault("s", Flight(cfg, no_xtion, CAM).run()), daemon=True
+    )
+    runner.start()
+    wait_for(lambda: not runner.is_alive(), 120.0, "the flight ending at its 3 s duration")
+    summary = box["s"]
+    c = summary.counters
+    # The duration ended the first 8 s back-off (a second attempt would be a second failure;
+    # under load the worker's start-up can take all 3 s: then not even one).
+    assert c.sensor_failures <= 1 and c.frames_captured == 0
+    assert summary.frames_logged == 0
     log_info(summary.log.files)  # a complete (empty) log

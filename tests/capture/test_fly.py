@@ -265,7 +265,7 @@ def test_fly_sim_serves_holes_to_the_gcs_and_stops_cleanly_on_sigint(tmp_path: P
     # Ids follow first sighting; which hole is confirmed (announced) first depends on load.
     announced = [t for t in texts if not t.startswith("REVIEW")]
     assert announced and re.match(
-        r"HOLE \d+ [01]\.\d\d -?\d+\.\d{7} -?\d+\.\d{7}$", announced[0]
+        r"HOLE \d+ p[01]\.\d\d -?\d+\.\d{7} -?\d+\.\d{7}$", announced[0]
     ), (texts, err[-3000:])
     assert count is not None and count >= 2
     assert "SIGINT: finishing the flight" in err

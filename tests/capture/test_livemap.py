@@ -31,6 +31,7 @@ from holescan.sim import (
     render,
     survey_path,
 )
+from tests._support import wait_for
 
 CAM = CameraIntrinsics.xtion()
 
@@ -116,16 +117,24 @@ def test_budget_holds_whatever_the_machine(frames: list[tuple[Frame, VehiclePose
                 lm.offer(f, pose)
                 offered += 1
                 time.sleep(0.005)
+
         # the map's thread runs at nice +15: on a loaded machine it may not have run yet
-        deadline = time.monotonic() + 30.0
-        while lm.stats.fused == 0 and time.monotonic() < deadline:
+        # (offers go on meanwhile, as capture's do; the 60 s only guard a hang)
+        def fused_one() -> bool:
+            nonlocal offered
+            if lm.stats.fused:
+                return True
             lm.offer(*frames[0])
             offered += 1
-            time.sleep(0.05)
+            return False
+
+        wait_for(fused_one, 60.0, "the live map fusing a frame", poll_s=0.05)
         lm.offer(frames[0][0], None)  # unposed: counted, never fused
     s = lm.stats
     assert s.offered == offered + 1 and s.unposed == 1
     assert 1 <= s.fused < offered  # the budget passed frames over
+    # The credit's bookkeeping, on the CPU times it measured itself (no clock read here):
+    # what the map spent per frame on this machine is benchmarks/bench_livemap.py's figure.
     worst = max(s.fuse_cpu_ms + s.publish_cpu_ms)
     assert s.cpu_ms <= cfg.budget_ms * s.offered + cfg.budget_burst_ms + 2 * worst
     assert s.skipped_budget >= offered - s.fused - 1

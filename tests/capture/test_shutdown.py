@@ -39,9 +39,10 @@ def group_members(pgid: int) -> list[int]:
 #: Children leave within ~0.1 s of the daemon (the worker polls its parent every 0.1 s): a
 #: process still there after 10 s (100 times that) is an orphan, not a slow machine.
 GONE_S = 10.0
-#: ``fly`` ends ~0.6 s after SIGTERM/SIGINT (detector drained, log closed); systemd waits
-#: 90 s before it kills. More than 10 s is a hang, not a busy machine.
-STOP_S = 10.0
+#: A hang guard, not a speed bound: ``fly`` ends within seconds of SIGTERM/SIGINT (detector
+#: drained, log closed; systemd waits 90 s before it kills): still running after 30 s is a
+#: hang. How long it takes is measured by benchmarks/bench_stop.py.
+STOP_S = 30.0
 
 
 def wait_gone(pgid: int, timeout_s: float) -> float:
@@ -82,20 +83,19 @@ def test_signal_to_the_whole_group_ends_the_flight_in_seconds(
 ) -> None:
     """``systemctl stop`` (SIGTERM to the group) and Ctrl-C (SIGINT to the group)."""
     proc, logs = start_sim_flight(tmp_path)
-    t0 = time.monotonic()
     os.killpg(proc.pid, sig)
     try:
-        _out, err = proc.communicate(timeout=30)
+        out, err = proc.communicate(timeout=STOP_S)
     except subprocess.TimeoutExpired:
         os.killpg(proc.pid, signal.SIGKILL)
         _out, err = proc.communicate()
-        pytest.fail(f"{sig.name} to the group: still running after 30 s:\n{err[-3000:]}")
-    stop_s = time.monotonic() - t0
-    gone_s = wait_gone(proc.pid, GONE_S)
-    print(f"\n{sig.name} to the group: flight ended in {stop_s:.2f} s, all gone +{gone_s:.2f} s")
+        pytest.fail(f"{sig.name} to the group: still running after {STOP_S} s:\n{err[-3000:]}")
+    wait_gone(proc.pid, GONE_S)
     assert proc.returncode == 0, err[-3000:]
-    assert stop_s < STOP_S
+    # The flight ended by the signal (its handler's line), not by --duration 300, and
+    # finished as a flight does: its report printed.
     assert f"{sig.name}: finishing the flight" in err
+    assert "flight: " in out, out[-3000:]
     assert "Traceback" not in err and "KeyboardInterrupt" not in err, err[-3000:]
     files = sorted(logs.glob("*.mcap"))
     info = log_info(files)  # opens without recovery: complete, every CRC checked

@@ -22,16 +22,13 @@ def _frame(i: int, hole_u: int) -> Frame:
 def test_worker_matches_in_process_detection_and_skips_stale_frames() -> None:
     frames = [_frame(i, 100 + 20 * i) for i in range(12)]
     with DetectionWorker(CAM, DEFAULT) as worker:
-        t0 = time.perf_counter()
         for f in frames:  # offered far faster than detection runs
             worker.offer(f)
-        offer_s = time.perf_counter() - t0
         results = worker.drain(timeout=30.0)
         stats = worker.stats()
-    # Offering never waits for detection: 12 copies into shared memory take ~5 ms. The
-    # bound (hundreds of times that) only catches an offer that hangs on the worker; the
-    # skipped frames below are the evidence that offers outran detection.
-    assert offer_s < 2.0
+    # Offering never waits for detection: the skipped frames are the evidence that offers
+    # outran it (an offer that waited would let every frame be detected). What an offer
+    # costs the capture thread: benchmarks/bench_livemap.py (offer median and p99, us).
     assert stats.offered == 12
     assert stats.done + stats.skipped == 12  # every frame either detected or counted skipped
     assert stats.skipped > 0

@@ -25,6 +25,8 @@ from holescan.flightlog import (
     read_log_layout,
 )
 from holescan.flightlog.errors import ChunkDamagedError, FlightLogError
+from holescan.flightlog.format import read_summary
+from holescan.flightlog.scan import ScanState, scan_records
 from holescan.geotag import CameraMount, ErrorModel
 from holescan.link import (
     AttitudeSample,
@@ -100,6 +102,27 @@ def test_a_cut_off_file_is_walked_to_its_last_complete_chunk(log: Path, tmp_path
     only_header = tmp_path / "head.mcap"
     only_header.write_bytes(data[:40])
     assert read_log_layout(only_header).chunks == ()
+
+
+def test_a_file_without_its_summary_is_walked_whole(log: Path, tmp_path: Path) -> None:
+    """The layout's walk and the reader's scan are the one record walker: a file cut right
+    after its data section (summary and footer lost) gives the summary's chunks, complete,
+    and the scan counts the same chunks."""
+    full = read_log_layout(log)
+    data = log.read_bytes()
+    with open(log, "rb") as f:
+        summary = read_summary(f, len(data))
+    assert summary is not None
+    cut = tmp_path / "no-summary.mcap"
+    cut.write_bytes(data[: summary.start])
+    walked = read_log_layout(cut, topics=full.topics())  # their channels are in the chunks
+    assert walked.complete and walked.stop_reason is None
+    assert walked.chunks == full.chunks
+    assert walked.topics() == full.topics()
+    state = ScanState(cut)
+    records = list(scan_records(cut, state))
+    assert state.chunks == len(walked.chunks) and not state.damaged
+    assert sum(isinstance(r, Message) for r in records) > 0
 
 
 def test_a_damaged_chunk_raises_and_bad_files_are_named(log: Path, tmp_path: Path) -> None:

@@ -102,7 +102,7 @@ def test_pipeline_geotag_error_and_every_hole_once(
         for r in read_flight_log(summary.log.files, kinds={LoggedDetections})
         if isinstance(r, LoggedDetections)
     }
-    added, to_truth = [], []
+    added, to_truth, cut_to_truth = [], [], []
     for s in sightings:
         assert s.frame_index is not None
         det = next(d for d in dets[s.frame_index] if d.box == s.box)
@@ -114,7 +114,7 @@ def test_pipeline_geotag_error_and_every_hole_once(
         added.append(math.hypot(float(e), float(n)))
         d, _ = nearest(s.lat_deg, s.lon_deg, truth)
         if d <= MATCH_M:
-            to_truth.append(d)
+            (cut_to_truth if det.border_cut else to_truth).append(d)
 
     # Holes in view: wholly inside the image in IN_VIEW_FRAMES frames or more.
     whole: dict[int, int] = {}
@@ -141,7 +141,10 @@ def test_pipeline_geotag_error_and_every_hole_once(
         f"\n  added by the pipeline: median {statistics.median(added):.3f} m, "
         f"p90 {pct(added, 90):.3f} m, max {max(added):.3f} m (n={len(added)})"
         f"\n  sighting vs true hole: median {statistics.median(to_truth):.3f} m, "
-        f"p90 {pct(to_truth, 90):.3f} m (n={len(to_truth)} within {MATCH_M} m)"
+        f"p90 {pct(to_truth, 90):.3f} m (n={len(to_truth)} within {MATCH_M} m); cut by "
+        f"the frame's border or band: median "
+        f"{statistics.median(cut_to_truth) if cut_to_truth else float('nan'):.3f} m "
+        f"(n={len(cut_to_truth)})"
         f"\n  merged hole vs true hole: {', '.join(f'{d:.3f}' for d in hole_err)} m"
         f"\n  access holes in view {sorted(in_view)} (frames wholly in view: {whole}); "
         f"found {sorted(matches)}, missed {sorted(in_view - set(matches))}, duplicated "
@@ -158,6 +161,11 @@ def test_pipeline_geotag_error_and_every_hole_once(
     # median 0.11 m and merged holes up to 0.20 m from the truth in this flight.
     # Issue 21 keeps views cut by the image border (one opening, one hole): they place
     # less well, and this flight's sighting median went 0.042 -> 0.045-0.052 m (the merged
-    # holes, what the crew gets, still within 0.10 m below).
+    # holes, what the crew gets, still within 0.10 m below). Since the detector finds the
+    # openings an unread band or the border cuts (closed there, Detection.border_cut), those
+    # views are many more: they are held to a bar of their own (0.10-0.18 m measured), the
+    # others to the one before.
     assert statistics.median(to_truth) <= 0.06
+    if len(cut_to_truth) >= 5:
+        assert statistics.median(cut_to_truth) <= 0.20
     assert max(hole_err) <= 0.10

@@ -48,7 +48,9 @@ def test_height_and_colour_lie_on_the_simulated_world(world) -> None:  # type: i
     # The cell's height is a sample somewhere in the cell, not at its centre: rubble slopes.
     assert abs(float(np.median(err))) < 0.01
     assert float(np.percentile(np.abs(err), 75)) < 0.04
-    assert np.all(lay.rgb[seen].sum(axis=1) > 0)
+    # Every seen cell got a colour: black only where the frame itself is (noise clipped at
+    # a dark spot: 60-76 of the 307k pixels of these frames, both sensor models).
+    assert float((lay.rgb[seen].sum(axis=1) > 0).mean()) > 0.999
     assert np.all(lay.looks[seen] >= 1) and lay.looks.max() == 3
 
 
@@ -177,3 +179,32 @@ def test_bad_frames_are_refused() -> None:
         m.add_frame(good_d, good_c, CAM, pose, pixel_stride=0)
     with pytest.raises(MapError):
         MapGrid.covering(0, 0, -1, 2)
+
+
+def test_unread_bands_are_no_look_and_the_border_counts_less() -> None:
+    # A nadir frame of flat ground with a registered Xtion's unread right band (40 px of
+    # 640): the ground under the band is not looked at (before, its unread pixels counted
+    # as looks into a void), and looks near the read area's edge are worth that bin.
+    pose = camera_pose_local(FRAME, CameraMount(), VehiclePose(0, 47.0, 8.0, 403.0, 3.0, 0, 0, 0))
+    vga = CameraIntrinsics.xtion()
+    depth = np.full((vga.height, vga.width), 3000, np.uint16)
+    rgb = np.full((vga.height, vga.width, 3), 90, np.uint8)
+    table = RecallTable(
+        np.array([0.0, 5.0]),
+        np.array([0.0, 60.0]),
+        np.array([[[0.3, 0.9]]]),
+        np.array([[[20, 20]]]),
+        {},
+        np.array([0.0, 60.0, np.inf]),
+    )
+    grid = MapGrid.covering(-3, -3, 3, 3, 0.05)
+    full, banded = SearchMap(grid, FRAME, table), SearchMap(grid, FRAME, table)
+    full.add_frame(depth, rgb, vga, pose, pixel_stride=4)
+    depth[:, 600:] = 0
+    banded.add_frame(depth, rgb, vga, pose, pixel_stride=4)
+    a, b = full.layers(), banded.layers()
+    assert (b.looks > 0).sum() < 0.95 * (a.looks > 0).sum()
+    assert not ((b.looks > 0) & (a.looks == 0)).any()
+    cov = b.coverage[b.looks > 0]
+    assert np.isclose(cov, 0.9, atol=0.01).mean() > 0.5 and np.isclose(cov, 0.3, atol=0.01).any()
+    assert table.pod(2.0, 10.0, -1.0) == 0.0 and table.pod(2.0, 10.0) == pytest.approx(0.9)

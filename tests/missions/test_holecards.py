@@ -194,7 +194,8 @@ def test_every_file_says_what_each_hole_is_and_only_announced_ones_are_waypoints
     descs = {w.name: w.description or "" for w in gpx}
     assert "(announced, rank 1): p_hole 0.97" in descs["hole 7"]
     assert f"({tier}, rank 2): p_hole 0.31" in descs[f"{tier} 8"]
-    assert "+-0.50 m" in descs[f"{tier} 8"] and "0.30 x 0.20 m" in descs[f"{tier} 8"]
+    assert "within 0.81 m (95 %)" in descs[f"{tier} 8"]  # sigma 0.5 m
+    assert "0.30 x 0.20 m" in descs[f"{tier} 8"]
     kml = write_hole_file(tmp_path / "h.kml", holes, "kml", tiers=tiers).read_text()
     root = ET.fromstring(kml)
     data = {

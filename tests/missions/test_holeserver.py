@@ -30,10 +30,13 @@ from tests._support import free_udp_port
 SYSID = 1
 
 
-def hole(hid: int, score: float, lat: float, lon: float, sightings: int = 3) -> Hole:
+def hole(
+    hid: int, score: float, lat: float, lon: float, sightings: int = 3, p_hole: float = 0.97
+) -> Hole:
     return Hole(
-        hid, lat, lon, 31.0, 1.5, score, sightings, 10**9, 2 * 10**9, 7, (1, 2, 3, 4), 0.7, 0.4
-    )
+        hid, lat, lon, 31.0, 1.5, score, sightings, 10**9, 2 * 10**9, 7, (1, 2, 3, 4), 0.7, 0.4,
+        p_hole=p_hole,
+    )  # fmt: skip
 
 
 HOLES = [
@@ -79,17 +82,18 @@ def test_hole_waypoints_home_first_then_by_confidence() -> None:
     )
 
 
-def test_statustext_fits_fifty_characters() -> None:
-    assert hole_statustext(HOLES[1]) == "HOLE 2 0.91 45.1234701 7.6543088"
-    worst = hole(123456789, 1.0, -89.12345678, -179.12345678)
-    assert hole_statustext(worst) == "HOLE 123456789 1.00 -89.1234568 -179.1234568"
-    assert len(hole_statustext(worst)) <= 50
-    exactly = hole_statustext(hole(10**14, 0.5, -89.12345678, -179.12345678))
-    assert exactly == f"HOLE {10**14} 0.50 -89.1234568 -179.1234568"
+def test_statustext_says_p_hole_and_fits_fifty_characters() -> None:
+    # the hole-level p_hole, named "p", never the best frame's detector score (0.91 here)
+    assert hole_statustext(HOLES[1]) == "HOLE 2 p0.97 45.1234701 7.6543088"
+    worst = hole(123456789, 1.0, -89.12345678, -179.12345678, p_hole=1.0)
+    assert hole_statustext(worst, "review") == "REVIEW 123456789 p1.00 -89.1234568 -179.1234568"
+    assert len(hole_statustext(worst, "review")) <= 50
+    exactly = hole_statustext(hole(10**13, 0.5, -89.12345678, -179.12345678, p_hole=0.5))
+    assert exactly == f"HOLE {10**13} p0.50 -89.1234568 -179.1234568"
     assert len(exactly) == 50
     # Only absurd ids lose decimals.
-    assert hole_statustext(hole(10**16, 0.5, -89.12345678, -179.12345678)) == (
-        f"HOLE {10**16} 0.50 -89.123457 -179.123457"
+    assert hole_statustext(hole(10**15, 0.5, -89.12345678, -179.12345678, p_hole=0.5)) == (
+        f"HOLE {10**15} p0.50 -89.123457 -179.123457"
     )
 
 
@@ -177,7 +181,7 @@ def test_statustext_announces_hole(served: tuple[HoleMissionServer, Any]) -> Non
     srv, gcs = served
     sent = srv.announce(HOLES[2])
     msg = recv(gcs, "STATUSTEXT")
-    assert msg.text == sent == "HOLE 3 0.73 -45.0000005 -170.9876543"
+    assert msg.text == sent == "HOLE 3 p0.97 -45.0000005 -170.9876543"
     assert msg.severity == mavutil.mavlink.MAV_SEVERITY_NOTICE
     assert (msg.get_srcSystem(), msg.get_srcComponent()) == (SYSID, 191)
 

@@ -145,11 +145,9 @@ def test_rejected_missions_raise_with_the_reason() -> None:
 
 def test_unreachable_autopilot_times_out_quickly() -> None:
     port = free_udp_port()
-    t0 = time.monotonic()
+    # The heartbeat timeout's path (its error names it); a hang would meet the test's timeout.
     with pytest.raises(MissionTimeoutError, match="no heartbeat from system 1"):
         upload_mission(f"udpout:127.0.0.1:{port}", _items(), HOME, heartbeat_timeout_s=0.5)
-    # Liveness, not speed: the 0.5 s heartbeat timeout is honoured and nothing hangs (20x).
-    assert time.monotonic() - t0 < 10.0
 
 
 def test_vehicle_going_silent_mid_upload_times_out() -> None:

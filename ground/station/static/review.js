@@ -20,7 +20,9 @@ const Review = (() => {
   function esc(s) {
     return String(s).replace(/[&<>"']/g, c => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;" }[c]));
   }
-  const conf = h => (h.p_hole ?? h.score);  // the hole's confidence (p_hole when sent)
+  // the hole's confidence for ordering: p_hole (hole level) when told, else the best
+  // frame's detector score (a vehicle that sent the old STATUSTEXT form)
+  const conf = h => (h.p_hole ?? h.score ?? 0);
 
   function order(holes) {
     return holes.slice().sort((a, b) =>
@@ -37,7 +39,9 @@ const Review = (() => {
   function facts(h) {
     const size = h.major_m != null && h.minor_m != null ? ` &middot; ${h.major_m.toFixed(2)} x ${h.minor_m.toFixed(2)} m` : "";
     const seen = h.sightings ? ` &middot; seen in ${h.sightings} frames` : "";
-    return `p_hole ${conf(h).toFixed(2)}${size}${seen}`;
+    const p = h.p_hole != null ? `p_hole ${h.p_hole.toFixed(2)}`
+      : h.score != null ? `best frame's score ${h.score.toFixed(2)}` : "p_hole not told yet";
+    return `${p}${size}${seen}`;
   }
 
   function buttons(h) {

@@ -10,7 +10,6 @@ import json
 import subprocess
 import sys
 import textwrap
-import time
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +25,7 @@ REPO = Path(__file__).resolve().parents[3]
 
 PLAYER = textwrap.dedent(
     """
-    import json, sys, time
+    import json, sys
     import numpy as np
     from holescan.capture import OniSource
     from holescan.errors import InputError
@@ -34,7 +33,6 @@ PLAYER = textwrap.dedent(
     args = json.loads(sys.argv[1])
     summary = {"cycles": [], "error": None}
     frames = []
-    t0 = time.perf_counter()
     try:
         for _ in range(args.get("cycles", 1)):
             frames = []
@@ -48,7 +46,6 @@ PLAYER = textwrap.dedent(
             summary["cycles"].append(len(frames))
     except InputError as err:
         summary["error"] = str(err)
-    summary["elapsed_s"] = time.perf_counter() - t0
     if frames and args.get("npz"):
         summary["camera"] = cam.to_dict()
         np.savez(args["npz"],
@@ -108,8 +105,8 @@ def test_playback_round_trips_pixels_timestamps_and_count(tmp_path: Path) -> Non
     assert got["t_sensor_ns"].tolist() == [f.t_sensor_ns for f in frames]
     assert np.all(np.diff(got["t_sensor_ns"]) > 0)
     assert np.all(np.diff(got["t_mono_ns"]) >= 0)
-    # Manual stepping (speed -1) is not paced: 12 VGA frames in well under their 0.4 s.
-    assert summary["elapsed_s"] < 5.0
+    # Manual stepping (speed -1) is not paced: how fast it plays is measured by
+    # benchmarks/bench_oni.py (frames per second), not here.
 
 
 def test_realtime_playback_is_paced_and_complete(tmp_path: Path) -> None:
@@ -146,10 +143,9 @@ def test_stream_the_player_drops_ends_in_input_error_not_a_hang(tmp_path: Path) 
     # Without xnCropping the library silently drops every frame (FIELD-NOTES.md). The
     # structure stays valid, so only the playback timeout can catch it.
     path.write_bytes(path.read_bytes().replace(b"xnCropping", b"xnCroppinX"))
-    t0 = time.monotonic()
+    # The playback's own timeout ends it (its message); play()'s 120 s guards a hang.
     summary, _ = play(tmp_path, path, timeout_s=0.5)
     assert "no frame for 0.5 s (after 0 depth and 0 colour frames)" in summary["error"]
-    assert time.monotonic() - t0 < 30
 
 
 def test_stop_early_then_reopen_and_read_all(tmp_path: Path) -> None:

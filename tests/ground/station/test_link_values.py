@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from test_station import free_port, hole, picture, wait_for
+from test_station import hole, picture, wait_for
 
 from holescan.ground import StationState
 from holescan.ground.station.cot import hole_cot
@@ -32,6 +32,7 @@ from holescan.ground.station.maplayers import map_document
 from holescan.ground.station.mapstore import MapStore
 from holescan.link import HOLE_ID_MAX, mavlink, open_link
 from holescan.missions import TileFacts, card_facts, encode_coverage_tile, read_tile
+from tests._support import free_udp_port
 
 JPEG = picture(1)
 
@@ -109,8 +110,9 @@ def test_a_poisoned_station_json_is_read_safely(tmp_path: Path) -> None:
     }
     (tmp_path / "station.json").write_text(json.dumps(doc))
     state = StationState.open(tmp_path)
-    assert set(state.holes) == {1}
+    assert set(state.holes) == {1, 3}  # a bad position loses the hole, a bad score the score
     assert state.holes[1].sigma_h_m is None and state.holes[1].p_hole is None
+    assert state.holes[3].score is None
     assert state.holes[1].why == "dark"
     assert [p.yaw for p in state.track] == [0.5]
     assert list(tmp_path.glob("station.rejected-*.json"))  # the evidence kept
@@ -215,7 +217,7 @@ def _send_attitude_and_position(sender: Any, yaw: float) -> None:
 
 
 def test_a_nan_yaw_never_reaches_the_track(tmp_path: Path) -> None:
-    port = free_port()
+    port = free_udp_port()
     state = StationState.open(tmp_path)
     clock = iter(range(10**18, 10**18 + 10**15, 2 * 10**9))
     state.clock = lambda: next(clock)
@@ -245,7 +247,7 @@ def _heartbeat(sender: Any) -> bool:
 def test_a_flood_of_forged_holes_does_not_lose_the_genuine_one(tmp_path: Path) -> None:
     """2,000 forged HOLE STATUSTEXTs at 200/s on an unsigned link, then the genuine hole:
     it is kept; the state file is written in batches, not once per forged hole."""
-    port = free_port()
+    port = free_udp_port()
     state = StationState.open(tmp_path)
     writes = 0
     save = state._save

@@ -40,11 +40,12 @@ NODE_COT = Path(__file__).parents[1] / "cot"  # tests/ground/cot: the node parse
 HOME = (43.6532, -79.3832)
 
 
-def hole(hid: int, score: float = 0.88, sigma: float = 0.3) -> Hole:
+def hole(hid: int, score: float = 0.88, sigma: float = 0.3, p_hole: float = 0.95) -> Hole:
     lat, lon = HOME[0] + hid * 2e-5, HOME[1] + hid * 1e-5
     return Hole(
-        hid, lat, lon, 121.0, sigma, score, 9, 10**9, 3 * 10**9, 4, (1, 2, 30, 20), 1.1, 0.7
-    )
+        hid, lat, lon, 121.0, sigma, score, 9, 10**9, 3 * 10**9, 4, (1, 2, 30, 20), 1.1, 0.7,
+        p_hole=p_hole,
+    )  # fmt: skip
 
 
 def picture(seed: int) -> bytes:

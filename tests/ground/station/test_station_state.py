@@ -124,3 +124,98 @@ def test_the_vehicles_tier_from_statustext_and_card_and_in_the_files(tmp_path: P
     assert state.holes[4].tier == "confirmed"
     again = StationState.open(tmp_path / "st")
     assert again.holes[4].vehicle_tier == "announced" and again.holes[4].p_hole == 0.42
+
+
+def test_each_statustext_number_is_kept_as_what_it_is(tmp_path: Path) -> None:
+    """``p0.68``: the hole-level p_hole; an old vehicle's bare ``0.99``: the best frame's
+    score. One never becomes the other, on the state or in the files."""
+    from holescan.ground.station.files import hole_summary, hole_waypoint
+
+    state = StationState.open(tmp_path / "st")
+    state.clock = lambda: T_NS
+    new = state.on_statustext("REVIEW 7 p0.68 43.6533100 -79.3831200")
+    assert new is not None and (new.vehicle_tier, new.p_hole, new.score) == ("review", 0.68, None)
+    props = hole_waypoint(new).properties
+    assert (props["p_hole"], props["score"]) == (0.68, None)
+    assert "score" not in hole_summary(new)
+    old = state.on_statustext("HOLE 8 0.99 43.6533400 -79.3831500")
+    assert old is not None
+    assert (old.vehicle_tier, old.p_hole, old.score) == ("announced", None, 0.99)
+    assert "best frame's score 0.99" in hole_summary(old)
+    # the next line of hole 7 changes p_hole only; what the card told of the score stays
+    state.holes[7].score = 0.42
+    again = state.on_statustext("REVIEW 7 p0.71 43.6533100 -79.3831200")
+    assert again is not None and (again.p_hole, again.score) == (0.71, 0.42)
+    back = StationState.open(tmp_path / "st").holes
+    assert (back[7].p_hole, back[8].score, back[8].p_hole) == (0.71, 0.99, None)
+
+
+def test_a_hole_told_again_goes_down_facts_only_and_the_station_keeps_its_picture(
+    tmp_path: Path,
+) -> None:
+    """The vehicle's hole server sends the picture once; a smaller sigma later goes as a
+    facts-only card (a few hundred bytes); repeats carry the picture again; the station
+    shows the newest facts beside the picture it holds."""
+    from dataclasses import replace
+
+    import cv2
+    import numpy as np
+
+    from holescan.link import mavlink as dialect
+    from holescan.link import parser
+    from holescan.missions import (
+        NO_PICTURE,
+        CardAssembler,
+        HoleMissionServer,
+        card_picture,
+        read_card,
+    )
+
+    img = (np.random.default_rng(3).random((72, 96, 3)) * 255).astype(np.uint8)
+    pic = cv2.imencode(".jpg", cv2.GaussianBlur(img, (5, 5), 2))[1].tobytes()
+    now = [0.0]
+    wire: list[bytes] = []
+    mav = dialect.MAVLink(None, srcSystem=1, srcComponent=191)
+
+    class Capture:
+        def __getattr__(self, name: str) -> object:
+            encode = getattr(mav, name.removesuffix("_send") + "_encode")
+            return lambda *a: wire.append(encode(*a).pack(mav))
+
+    server = HoleMissionServer("udpout:127.0.0.1:9", 1)  # never started: cards pumped here
+    server.cards.clock = lambda: now[0]
+    p, asm = parser(), CardAssembler()
+
+    def down(seconds: float) -> list[bytes]:
+        n0 = len(wire)
+        for _ in range(int(seconds * 10)):
+            server.cards.pump(lambda fn: fn(Capture()))
+            now[0] += 0.1
+        got = [asm.add(m) for b in wire[n0:] for m in (p.parse_buffer(b) or [])]
+        return [c for c in got if c is not None]
+
+    state = StationState.open(tmp_path / "st")
+    state.clock = lambda: T_NS
+    h = Hole(5, 43.65331, -79.38312, 120.0, 1.2, 0.8, 4, 0, 10**9, 1, (0, 0, 9, 9), 0.9, 0.5,
+             p_hole=0.95)  # fmt: skip
+    full_size = server.send_card(h, pic, "why", "announced")
+    (first,) = down(10.0)
+    assert card_picture(first) == pic
+    assert state.on_card(read_card(first) or {}, first) is not None
+    later = replace(h, sigma_h_m=1.155, sightings=9)
+    size = server.send_card(later, pic, "why", "announced")  # same picture: facts only
+    assert size < 700 < full_size
+    (second,) = down(10.0)
+    assert card_picture(second) == NO_PICTURE
+    got = state.on_card(read_card(second) or {}, second)
+    assert got is not None and got.has_picture
+    assert (got.sigma_h_m, got.sightings, got.card_rev) == (1.16, 9, 2)
+    kept = state.card_path(5).read_bytes()  # the picture held, with the newest facts
+    assert card_picture(kept) == pic and read_card(kept) == read_card(second)
+    assert StationState.open(tmp_path / "st").holes[5].sigma_h_m == 1.16
+    # the repeat (60 s after the newest card) carries the picture with the newest facts
+    (repeat,) = down(61.0)
+    assert card_picture(repeat) == pic and read_card(repeat) == read_card(second)
+    # a new best view goes whole
+    pic2 = cv2.imencode(".jpg", img)[1].tobytes()
+    assert server.send_card(replace(later, sightings=10), pic2, "why", "announced") > 700
