@@ -143,7 +143,7 @@ def test_each_statustext_number_is_kept_as_what_it_is(tmp_path: Path) -> None:
     assert (old.vehicle_tier, old.p_hole, old.score) == ("announced", None, 0.99)
     assert "best frame's score 0.99" in hole_summary(old)
     # the next line of hole 7 changes p_hole only; what the card told of the score stays
-    state.holes[7].score = 0.42
+    state.holes[7].vehicles[0].score = 0.42  # the hole shows its vehicles' facts
     again = state.on_statustext("REVIEW 7 p0.71 43.6533100 -79.3831200")
     assert again is not None and (again.p_hole, again.score) == (0.71, 0.42)
     back = StationState.open(tmp_path / "st").holes
