@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import math
 import zipfile
+from collections.abc import Sequence
 from pathlib import Path
 
 import pymap3d
@@ -16,7 +17,9 @@ import rasterio
 from holescan import cli
 from holescan.capture import FlightSummary
 from holescan.errors import InputError
-from holescan.ground import ReprocessOptions, ReprocessResult, run_campaign
+from holescan.geotag import Hole
+from holescan.ground import ReprocessOptions, ReprocessResult, StationState, run_campaign
+from holescan.link import hole_text
 from holescan.sim import RubbleWorld, WorldAnchor
 
 ANCHOR = WorldAnchor(43.6532, -79.3832, 120.0)  # as in conftest.py
@@ -143,3 +146,57 @@ def test_cli(flight: Flown, tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
     assert "campaign:" in text and (out / "summary.json").is_file()
     assert cli.main(argv) == 0  # again: every partition from the cache
     assert "0 computed" in capsys.readouterr().out
+
+
+def _station(folder: Path, holes: Sequence[Hole], mark: str) -> None:
+    """A ground station folder that followed one flight: its holes (as the vehicle's
+    STATUSTEXTs told them) and ``mark`` on every one."""
+    state = StationState.open(folder)
+    for h in holes:
+        p = h.p_hole if math.isfinite(h.p_hole) else 0.5
+        assert state.on_statustext(hole_text(h.id, p, h.lat_deg, h.lon_deg)) is not None
+        state.mark(h.id, mark)
+    state.flush()
+
+
+@pytest.mark.slow
+def test_each_flights_station_marks_reach_the_campaign_through_that_flights_ids(
+    flight: Flown, flight_b: Flown, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Both vehicles number their holes from 1: station A's mark of hole N must reach the
+    campaign hole flight A calls N, never flight B's hole N elsewhere."""
+    a, b = flight[1].holes, flight_b[1].holes
+    _station(tmp_path / "station_a", a, "confirmed")
+    _station(tmp_path / "station_b", b, "rejected")
+    out = tmp_path / "c"
+    argv = ["campaign", *map(str, [*flight[0], *flight_b[0]]), "--out", str(out)]
+    argv += ["--workers", "0", "--station", str(tmp_path / "station_a")]
+    assert cli.main([*argv, "--station", str(tmp_path / "station_b")]) == 0
+    capsys.readouterr()
+    doc = json.loads((out / "summary.json").read_text())
+    want = {"sortie": ("confirmed", {h.id for h in a}), "second": ("rejected", {h.id for h in b})}
+    a_at = {h.id: (h.lat_deg, h.lon_deg) for h in a}
+    collisions = 0
+    for h in doc["campaign"]["holes"]:
+        marks = []
+        for f in h["flights"]:
+            mark, ids = want[f["flight"]]
+            expected = mark if f["hole_id"] in ids else None
+            assert f["mark"] == expected, (h["id"], f)
+            marks.append(expected)
+            if f["flight"] == "second" and f["hole_id"] in a_at:
+                b_hole = next(x for x in b if x.id == f["hole_id"])
+                collisions += dist_m(a_at[f["hole_id"]], (b_hole.lat_deg, b_hole.lon_deg)) > 1.0
+        # one hole marked in both flights: the most affirmative mark (recall first)
+        top = "confirmed" if "confirmed" in marks else ("rejected" if "rejected" in marks else None)
+        assert h["mark"] == top, h
+        if top is not None:
+            assert h["tier"] == top
+    assert collisions >= 1  # flight B has ids flight A used for other openings
+    page = (out / "campaign_holes.geojson").read_text()
+    tiers = {
+        f["properties"]["hole_id"]: f["properties"]["tier"] for f in json.loads(page)["features"]
+    }
+    for h in doc["campaign"]["holes"]:
+        if h["id"] in tiers:
+            assert tiers[h["id"]] == h["tier"]
