@@ -4,6 +4,7 @@ which every hole both saw is one hole with sightings per flight; a bad log in th
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import zipfile
@@ -149,8 +150,8 @@ def test_cli(flight: Flown, tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
 
 
 def _station(folder: Path, holes: Sequence[Hole], mark: str) -> None:
-    """A ground station folder that followed one flight: its holes (as the vehicle's
-    STATUSTEXTs told them) and ``mark`` on every one."""
+    """A ground station folder: ``holes`` (as the vehicle's STATUSTEXTs told them) and
+    ``mark`` on every one."""
     state = StationState.open(folder)
     for h in holes:
         p = h.p_hole if math.isfinite(h.p_hole) else 0.5
@@ -164,39 +165,58 @@ def test_each_flights_station_marks_reach_the_campaign_through_that_flights_ids(
     flight: Flown, flight_b: Flown, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """Both vehicles number their holes from 1: station A's mark of hole N must reach the
-    campaign hole flight A calls N, never flight B's hole N elsewhere."""
+    campaign hole flight A calls N, never flight B's hole N elsewhere (only a hole N of
+    both flights at the same place, within 1 m, takes both marks)."""
     a, b = flight[1].holes, flight_b[1].holes
+    # A third station showed a hole N 20 m from each of flight B's holes N, confirmed:
+    # another flight's hole N elsewhere, whose mark must reach neither flight.
+    decoys = [dataclasses.replace(h, lat_deg=h.lat_deg + 20.0 / 111_132.0) for h in b]
     _station(tmp_path / "station_a", a, "confirmed")
     _station(tmp_path / "station_b", b, "rejected")
+    _station(tmp_path / "station_c", decoys, "confirmed")
     out = tmp_path / "c"
     argv = ["campaign", *map(str, [*flight[0], *flight_b[0]]), "--out", str(out)]
     argv += ["--workers", "0", "--station", str(tmp_path / "station_a")]
-    assert cli.main([*argv, "--station", str(tmp_path / "station_b")]) == 0
+    argv += ["--station", str(tmp_path / "station_b")]
+    assert cli.main([*argv, "--station", str(tmp_path / "station_c")]) == 0
     capsys.readouterr()
     doc = json.loads((out / "summary.json").read_text())
-    want = {"sortie": ("confirmed", {h.id for h in a}), "second": ("rejected", {h.id for h in b})}
-    a_at = {h.id: (h.lat_deg, h.lon_deg) for h in a}
-    collisions = 0
+    at = {
+        "sortie": {h.id: (h.lat_deg, h.lon_deg) for h in a},
+        "second": {h.id: (h.lat_deg, h.lon_deg) for h in b},
+    }
+    shown = [  # each station's holes: the mark, and where it showed them
+        ("confirmed", at["sortie"]),
+        ("rejected", at["second"]),
+        ("confirmed", {h.id: (h.lat_deg, h.lon_deg) for h in decoys}),
+    ]
+    elsewhere = 0
     for h in doc["campaign"]["holes"]:
         marks = []
         for f in h["flights"]:
-            mark, ids = want[f["flight"]]
-            expected = mark if f["hole_id"] in ids else None
+            own = at[f["flight"]].get(f["hole_id"])
+            here = [
+                m
+                for m, holes in shown
+                if own is not None
+                and f["hole_id"] in holes
+                and dist_m(holes[f["hole_id"]], own) <= 1.0
+            ]
+            elsewhere += sum(
+                own is not None and f["hole_id"] in holes and dist_m(holes[f["hole_id"]], own) > 1
+                for _, holes in shown
+            )
+            expected = "confirmed" if "confirmed" in here else ("rejected" if here else None)
             assert f["mark"] == expected, (h["id"], f)
             marks.append(expected)
-            if f["flight"] == "second" and f["hole_id"] in a_at:
-                b_hole = next(x for x in b if x.id == f["hole_id"])
-                collisions += dist_m(a_at[f["hole_id"]], (b_hole.lat_deg, b_hole.lon_deg)) > 1.0
         # one hole marked in both flights: the most affirmative mark (recall first)
         top = "confirmed" if "confirmed" in marks else ("rejected" if "rejected" in marks else None)
         assert h["mark"] == top, h
         if top is not None:
             assert h["tier"] == top
-    assert collisions >= 1  # flight B has ids flight A used for other openings
-    page = (out / "campaign_holes.geojson").read_text()
-    tiers = {
-        f["properties"]["hole_id"]: f["properties"]["tier"] for f in json.loads(page)["features"]
-    }
+    assert elsewhere >= 1  # a mark of the same id at another place was not taken
+    features = json.loads((out / "campaign_holes.geojson").read_text())["features"]
+    tiers = {f["properties"]["hole_id"]: f["properties"]["tier"] for f in features}
     for h in doc["campaign"]["holes"]:
         if h["id"] in tiers:
             assert tiers[h["id"]] == h["tier"]
