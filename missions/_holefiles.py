@@ -163,13 +163,20 @@ def _p(hole: Hole) -> str:
     return f"p_hole {hole.p_hole:.2f}" if math.isfinite(hole.p_hole) else "p_hole unknown"
 
 
+def _sightings(hole: Hole) -> str:
+    """Frames and, when known, distinct viewpoints (0 views: unknown, e.g. an older log)."""
+    if hole.views > 0:
+        return f"{hole.sightings} frames from {hole.views} viewpoints"
+    return f"{hole.sightings} frames"
+
+
 def hole_description(
     hole: Hole, rank: int, boot_to_unix_ns: int | None = None, tier: str = "announced"
 ) -> str:
     """One ASCII line a person reads on a handheld GPS: the hole's data and position."""
     return (
         f"hole {hole.id} ({tier}, rank {rank}): {_p(hole)}, best frame's score "
-        f"{hole.score:.2f}, seen in {hole.sightings} frames from {hole.views} viewpoints, "
+        f"{hole.score:.2f}, seen in {_sightings(hole)}, "
         f"opening {hole.major_m:.2f} x {hole.minor_m:.2f} m, within "
         f"{CIRCLE_95_PER_SIGMA * hole.sigma_h_m:.2f} m (95 %), {_seen(hole, boot_to_unix_ns)}, "
         f"lat {hole.lat_deg:.7f} lon {hole.lon_deg:.7f}, alt {hole.alt_m:.1f} m MSL"
@@ -184,7 +191,7 @@ def _html_description(
         ("p_hole", _p(hole).removeprefix("p_hole ")),
         ("rank", str(rank)),
         ("best frame's score", f"{hole.score:.2f}"),
-        ("sightings", f"{hole.sightings} frames from {hole.views} viewpoints"),
+        ("sightings", _sightings(hole)),
         ("opening", f"{hole.major_m:.2f} x {hole.minor_m:.2f} m"),
         ("95 % circle", f"{CIRCLE_95_PER_SIGMA * hole.sigma_h_m:.2f} m"),
         ("lat, lon", f"{hole.lat_deg:.7f}, {hole.lon_deg:.7f}"),

@@ -44,8 +44,9 @@ __all__ = [
 ]
 
 
-def hole_summary(h: GroundHole) -> str:
-    """One line: size, depth reason, score, sightings, uncertainty, operator's mark."""
+def hole_summary(h: GroundHole, *, why: bool = True) -> str:
+    """One line: size, score, sightings, uncertainty, operator's mark, and (``why``) the
+    detector's explanation."""
     parts = [f"hole {h.id}"]
     if h.score is not None:
         parts.append(f"best frame's score {h.score:.2f}")
@@ -57,7 +58,7 @@ def hole_summary(h: GroundHole) -> str:
         parts.append(f"within {CIRCLE_95_PER_SIGMA * h.sigma_h_m:.2f} m (95 %)")
     parts.append(f"operator: {h.mark}")
     text = ", ".join(parts)
-    return f"{text}. {h.why}" if h.why else text
+    return f"{text}. {h.why}" if h.why and why else text
 
 
 def hole_waypoint(h: GroundHole, image_src: str | None = None) -> Waypoint:

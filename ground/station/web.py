@@ -73,7 +73,8 @@ def state_document(
     """What the page draws, with positions in local metres (east, north).
 
     Each hole has its fields (:meth:`GroundHole.to_json`, ``tier`` and ``vehicle_tier``
-    included), ``x``/``y``/``r95`` in local metres, ``summary``, ``picture`` (its URL or
+    included), ``x``/``y``/``r95`` in local metres, ``summary`` (its facts in one line,
+    without the "why", which the page shows on its own line), ``picture`` (its URL or
     None) and ``marked_by`` (``{"operator", "pairing", "t_unix_ns"}`` of its newest mark,
     or None).
     """
@@ -97,7 +98,7 @@ def state_document(
             x=round(float(e), 3),
             y=round(float(n), 3),
             r95=round(CIRCLE_95_PER_SIGMA * h.sigma_h_m, 3) if h.sigma_h_m is not None else None,
-            summary=hole_summary(h),
+            summary=hole_summary(h, why=False),  # the page shows the "why" on its own
             picture=f"/cards/hole-{h.id}.jpg?rev={h.card_rev}" if h.has_picture else None,
             marked_by=(
                 {

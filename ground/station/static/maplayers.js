@@ -1,6 +1,8 @@
 // holescan live page: the flight's map layers (served by ground/station/maplayers.py).
-// The orthophoto under everything, the coverage (seen green / not seen red) above it, both
-// toggleable; tiles placed in the page's local metres by /map.json. No CDN, no tile server.
+// The team's offline basemap (MBTiles or GeoTIFF, chosen in the box) under everything, the
+// drone's orthophoto over it, the coverage (seen green / not seen red) above, each
+// switchable; tiles placed in the page's local metres by /map.json and
+// /basemap/ID/view.json. No CDN, no tile server on the internet.
 // Hooks the page calls: holescanMap.corners() (extent, for the view) and
 // holescanMap.svg(X, Y, s, doc, redraw) (the layers' SVG, drawn first).
 "use strict";
@@ -11,6 +13,11 @@ window.holescanMap = (function () {
   let asked = null;     // the origin map.json was last asked for ("lat,lon" or "")
   let redraw = null;
   let busy = false;
+  let basemaps = [];    // /basemaps.json
+  let basemap = -1;     // the one shown (-1: none)
+  let baseTiles = [];
+  let baseKey = "";     // the view baseTiles were asked for
+  let baseBusy = false;
 
   function toggles() {
     if (document.getElementById("maplayers")) return;
@@ -19,12 +26,30 @@ window.holescanMap = (function () {
     const box = document.createElement("div");
     box.id = "maplayers";
     box.innerHTML =
-      '<label><input type="checkbox" id="layer-ortho" checked> orthophoto</label><br>'
+      '<label class="basemap">basemap <select id="layer-basemap"><option value="-1">none</option></select></label>'
+      + '<label><input type="checkbox" id="layer-ortho" checked> drone orthophoto</label>'
       + '<label><input type="checkbox" id="layer-cov" checked> coverage: '
       + '<span class="seen">&#9632; seen</span> '
       + '<span class="unseen">&#9632; not seen</span></label>'
       + '<div id="map-tiles"></div>';
     map.appendChild(box);
+    const sel = document.getElementById("layer-basemap");
+    sel.addEventListener("change", ev => {
+      basemap = Number(ev.target.value);
+      baseTiles = []; baseKey = "";
+      if (redraw) redraw();
+    });
+    fetch("/basemaps.json", { cache: "no-store" }).then(r => r.ok ? r.json() : { basemaps: [] }).then(d => {
+      basemaps = d.basemaps || [];
+      for (const b of basemaps) {
+        const o = document.createElement("option");
+        o.value = String(b.id);
+        o.textContent = b.name;
+        sel.appendChild(o);
+      }
+      if (basemaps.length && basemap < 0) { basemap = basemaps[0].id; sel.value = String(basemap); }
+      if (redraw) redraw();
+    }).catch(() => {});
     for (const layer of ["ortho", "cov"]) {
       document.getElementById("layer-" + layer).addEventListener("change", ev => {
         show[layer] = ev.target.checked;
@@ -67,12 +92,45 @@ window.holescanMap = (function () {
     return out;
   }
 
+  // the basemap's tiles for the view the page shows (its box in the page's metres)
+  async function loadBase(key, q) {
+    if (baseBusy) return;
+    baseBusy = true;
+    try {
+      const r = await fetch(`/basemap/${basemap}/view.json?${q}`, { cache: "no-store" });
+      if (r.ok) { baseTiles = (await r.json()).tiles; baseKey = key; if (redraw) redraw(); }
+    } catch (e) {
+      // the station is restarting: the next draw asks again
+    } finally {
+      baseBusy = false;
+    }
+  }
+
+  function baseSvg(X, Y, s) {
+    const el = document.getElementById("svg");
+    if (basemap < 0 || !origin || !el) return "";
+    const W = el.clientWidth || 800, H = el.clientHeight || 600;
+    const x0 = -X(0) / s, x1 = (W - X(0)) / s, y0 = (Y(0) - H) / s, y1 = Y(0) / s;
+    const r = v => v.toFixed(1);
+    const q = `lat=${origin[0]}&lon=${origin[1]}&x0=${r(x0)}&y0=${r(y0)}&x1=${r(x1)}&y1=${r(y1)}&px=${Math.round(W)}`;
+    const key = `${basemap}|${q}`;
+    if (key !== baseKey) loadBase(key, q);
+    const parts = ['<g class="maplayer" data-layer="basemap">'];
+    for (const t of baseTiles) {
+      const w = (t.x1 - t.x0) * s, h = (t.y1 - t.y0) * s;
+      parts.push(`<image href="${t.href}" x="${X(t.x0)}" y="${Y(t.y1)}" width="${w}" height="${h}"`
+        + ` preserveAspectRatio="none"/>`);
+    }
+    parts.push("</g>");
+    return parts.join("");
+  }
+
   function svg(X, Y, s, doc, redrawFn) {
     redraw = redrawFn;
     toggles();
     origin = doc && doc.origin ? doc.origin : null;
     if ((origin ? origin.join(",") : "") !== asked) load(origin);
-    const parts = [];
+    const parts = [baseSvg(X, Y, s)];
     for (const layer of ["ortho", "cov"]) {
       if (!show[layer]) continue;
       parts.push(`<g class="maplayer" data-layer="${layer}">`);
@@ -87,5 +145,5 @@ window.holescanMap = (function () {
     return parts.join("");
   }
 
-  return { svg, corners, show };
+  return { svg, corners, show, basemap: () => basemap, baseTiles: () => baseTiles };
 })();

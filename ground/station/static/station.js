@@ -50,11 +50,11 @@ function draw() {
     }
     // scale bar: a round length near a fifth of the width
     const L = niceLength((W / 5) / s);
-    parts.push(`<g transform="translate(20,${H - 24})"><rect x="0" y="-4" width="${L * s}" height="6" fill="#333"/>`
+    parts.push(`<g id="scalebar" transform="translate(20,${H - 24})"><rect x="0" y="-4" width="${L * s}" height="6" fill="#333"/>`
       + `<text class="label" x="0" y="-9">${L} m</text></g>`);
   }
   // north arrow (local metres: north is up)
-  parts.push(`<g transform="translate(${W - 36},46)"><polygon points="0,-26 9,6 0,0 -9,6" fill="#333"/>`
+  parts.push(`<g id="north" transform="translate(${W - 36},46)"><polygon points="0,-26 9,6 0,0 -9,6" fill="#333"/>`
     + `<text class="label" x="-5" y="22" font-weight="bold">N</text></g>`);
   svg.innerHTML = parts.join("");
 }
