@@ -10,6 +10,11 @@ autopilot boot clock is its own), and flights are merged in the order they start
 Ids: the campaign's holes take the ids of the first flight's (its reprocessed holes carry
 the vehicle's ids; :func:`geotag.carry_ids`), and holes it did not see ids above every id
 that flight used; each hole also lists the id each flight knows it by (``flights``).
+
+Operators' marks (``--station``): each flight's marks by its own ids
+(:meth:`ground.reprocessing.ReprocessOptions.marks_for`) reach the campaign's hole through
+the id that flight knows it by (:func:`campaign_marks`); marks of several flights that
+disagree give the most affirmative (:func:`ground.station.marks.strongest_mark`).
 """
 
 from __future__ import annotations
@@ -33,11 +38,13 @@ from holescan.geotag import (
 from holescan.ground.reprocessing.merge import box_of, read_views
 from holescan.ground.reprocessing.plan import PartitionTask
 from holescan.ground.reprocessing.task import Box, FrameResult, View
+from holescan.ground.station.marks import strongest_mark
 
 __all__ = [
     "CampaignHole",
     "CampaignMerge",
     "FlightSightings",
+    "campaign_marks",
     "campaign_summary",
     "track_coverage",
 ]
@@ -53,16 +60,19 @@ class FlightSightings:
     first_seen_unix_ns: int
     last_seen_unix_ns: int
     hole_id: int | None = None
+    mark: str | None = None
 
 
 @dataclasses.dataclass(frozen=True)
 class CampaignHole:
     """A hole of the campaign. ``hole`` is the fused hole (its ``t_first_boot_ns`` and
-    ``t_last_boot_ns`` are Unix ns here); ``flights`` in the order they first saw it."""
+    ``t_last_boot_ns`` are Unix ns here); ``flights`` in the order they first saw it;
+    ``mark``: the operators' (None: none; each flight's in ``flights``)."""
 
     hole: Hole
     flights: tuple[FlightSightings, ...]
     tier: str = "announced"
+    mark: str | None = None
 
     @property
     def id(self) -> int:
@@ -73,6 +83,7 @@ class CampaignHole:
         return {
             "id": h.id,
             "tier": self.tier,
+            "mark": self.mark,
             "p_hole": h.p_hole if math.isfinite(h.p_hole) else None,
             "lat_deg": h.lat_deg,
             "lon_deg": h.lon_deg,
@@ -149,6 +160,34 @@ class CampaignMerge:
             carried = h if self.id_map is None else dataclasses.replace(h, id=self.id_map.ids[h.id])
             out.append(CampaignHole(carried, tuple(flights)))
         return sorted(out, key=lambda c: c.id)
+
+
+def campaign_marks(
+    holes: Sequence[CampaignHole], flight_marks: Mapping[str, Mapping[int, str]]
+) -> list[CampaignHole]:
+    """``holes`` with the operators' marks: each flight's (``flight_marks``: flight name ->
+    its hole id -> mark) through the id that flight knows the hole by; a hole marked in
+    several flights takes :func:`~ground.station.marks.strongest_mark`.
+
+    >>> f1 = FlightSightings("f1", 5, 0, 1, hole_id=3)
+    >>> f2 = FlightSightings("f2", 4, 2, 3, hole_id=1)
+    >>> h = Hole(7, 43.6, -79.4, 100.0, 0.3, 0.8, 9, 0, 3, 1, (0, 0, 9, 9), 1.0, 0.6)
+    >>> (c,) = campaign_marks([CampaignHole(h, (f1, f2))], {"f1": {3: "rejected"},
+    ...                                                     "f2": {1: "confirmed"}})
+    >>> c.mark, [f.mark for f in c.flights]
+    ('confirmed', ['rejected', 'confirmed'])
+    """
+    out = []
+    for c in holes:
+        flights = tuple(
+            dataclasses.replace(
+                f, mark=None if f.hole_id is None else flight_marks.get(f.flight, {}).get(f.hole_id)
+            )
+            for f in c.flights
+        )
+        mark = strongest_mark(f.mark for f in flights if f.mark is not None)
+        out.append(dataclasses.replace(c, flights=flights, mark=mark))
+    return out
 
 
 def track_coverage(track: Sequence[VehiclePose]) -> tuple[float, float]:

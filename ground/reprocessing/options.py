@@ -18,7 +18,8 @@ import numpy as np
 
 from holescan.detect import DEFAULT, DetectParams
 from holescan.errors import InputError
-from holescan.geotag import AnnounceGate, LocalFrame, nearest_pairs
+from holescan.geotag import AnnounceGate, Hole, LocalFrame, nearest_pairs
+from holescan.ground.station.marks import StationMark, marks_for_flight, strongest_mark
 from holescan.missions import Area, HoleFormat
 
 __all__ = ["TOPICS", "HoleMatch", "Progress", "ReprocessOptions", "match_points"]
@@ -60,9 +61,14 @@ class ReprocessOptions:
     announce_min_p_hole, review_min_p_hole : the thresholds of the tiers of the reprocessed
         holes (:class:`geotag.AnnounceGate`); None: the flight's own, as its log records
         them (:meth:`gate_for`).
-    marks : the operators' marks by the flight's hole id (``confirmed``, ``rejected``,
-        ``visited``: a station folder's, :func:`ground.station.marks.read_station_marks`);
-        they decide those holes' tiers in every output (the holes keep the flight's ids).
+    marks : the operators' marks by hole id (``confirmed``, ``rejected``, ``visited``),
+        applied by id alone to every flight's holes (one flight; the holes keep the
+        flight's ids); they decide those holes' tiers in every output.
+    station_marks : the marks of station folders
+        (:func:`ground.station.marks.read_station_marks`, any number of stations), each
+        applied to the flight whose own hole has its id at its place
+        (:func:`ground.station.marks.marks_for_flight`), in a campaign through each
+        flight's ids to the campaign's (:meth:`marks_for`).
     """
 
     params: DetectParams = DEFAULT
@@ -84,6 +90,7 @@ class ReprocessOptions:
     announce_min_p_hole: float | None = None
     review_min_p_hole: float | None = None
     marks: Mapping[int, str] = dataclasses.field(default_factory=dict)
+    station_marks: tuple[StationMark, ...] = ()
 
     def __post_init__(self) -> None:
         self.gate_for(None)  # refuses thresholds outside [0, 0.99]
@@ -129,6 +136,16 @@ class ReprocessOptions:
         if given:
             source += ", " + " and ".join(given) + " given"
         return gate, source
+
+    def marks_for(self, flight_holes: Sequence[Hole]) -> dict[int, str]:
+        """Hole id -> the operators' mark for one flight whose own holes (the vehicle's ids
+        and positions) are ``flight_holes``: :attr:`marks` by id, and every station mark
+        that is this flight's (:func:`ground.station.marks.marks_for_flight`); one hole
+        marked twice takes :func:`~ground.station.marks.strongest_mark`."""
+        got = marks_for_flight(self.station_marks, flight_holes)
+        for hid, mark in self.marks.items():
+            got[hid] = strongest_mark([mark, got.get(hid, "")]) or mark
+        return got
 
     def settings_key(self) -> dict[str, Any]:
         """What decides a partition's result besides the log bytes (the cache key)."""

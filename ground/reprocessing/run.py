@@ -39,7 +39,12 @@ from holescan.errors import InputError
 from holescan.flightlog import FlightLogError, read_log_layout, to_json
 from holescan.geotag import FOUND_TIERS, AnnounceGate, Hole, VehiclePose
 from holescan.ground.reprocessing.cache import PartitionCache
-from holescan.ground.reprocessing.campaign import CampaignHole, CampaignMerge, campaign_summary
+from holescan.ground.reprocessing.campaign import (
+    CampaignHole,
+    CampaignMerge,
+    campaign_marks,
+    campaign_summary,
+)
 from holescan.ground.reprocessing.engine import EngineStats, run_tasks
 from holescan.ground.reprocessing.mapfiles import flight_map_outputs
 from holescan.ground.reprocessing.merge import FlightMerger
@@ -224,7 +229,8 @@ def _flight_outputs(
 ) -> FlightResult:
     holes = tuple(fl.holes()) if fl is not None else ()
     gate, source = opts.gate_for(fl.flight_gate if fl is not None else None)
-    tiers = flight_tiers(holes, gate, opts, fl.flight_tiers if fl is not None else {})
+    marks = _flight_marks(fl, opts) if fl is not None else {}
+    tiers = flight_tiers(holes, gate, opts, fl.flight_tiers if fl is not None else {}, marks)
     flight_holes = fl.flight_holes if fl is not None else ()
     told = fl.flight_tiers if fl is not None else {}
     flight_found = [
@@ -283,8 +289,8 @@ def _flight_outputs(
         "the flight's own (the same opening keeps its id); found only by reprocessing: "
         + (", ".join(str(i) for i in result.new_ids) or "none")
     )
-    if opts.marks:
-        facts["operator marks"] = ", ".join(f"hole {i} {m}" for i, m in sorted(opts.marks.items()))
+    if marks:
+        facts["operator marks"] = ", ".join(f"hole {i} {m}" for i, m in sorted(marks.items()))
     if problems:
         facts["cut off or damaged"] = "; ".join(problems)
     views = {}
@@ -342,18 +348,25 @@ def flight_tiers(
     gate: AnnounceGate,
     opts: ReprocessOptions,
     told: Mapping[int, str],
+    marks: Mapping[int, str],
 ) -> dict[int, str]:
     """Every reprocessed hole's tier: the one gate (:meth:`geotag.AnnounceGate.tiers`, holes
     the flight announced staying announced while they pass), holes seen fewer than
-    ``opts.min_sightings`` times candidates, then the operators' marks
-    (:func:`ground.station.marks.tier_with_mark`)."""
+    ``opts.min_sightings`` times candidates, then the operators' ``marks`` by these holes'
+    ids (:func:`ground.station.marks.tier_with_mark`)."""
     announced = [i for i, t in told.items() if t == "announced"]
     tiers: dict[int, str] = dict(gate.tiers(holes, announced=announced))
     for h in holes:
         if h.sightings < opts.min_sightings:
             tiers[h.id] = "candidate"
-        tiers[h.id] = tier_with_mark(tiers[h.id], opts.marks.get(h.id))
+        tiers[h.id] = tier_with_mark(tiers[h.id], marks.get(h.id))
     return tiers
+
+
+def _flight_marks(fl: FlightMerger, opts: ReprocessOptions) -> dict[int, str]:
+    """The operators' marks of one flight by its ids (:meth:`ReprocessOptions.marks_for`
+    of its own holes; a log without them: the reprocessed holes, which then number alike)."""
+    return opts.marks_for(fl.flight_holes or fl.holes())
 
 
 def _write_json(path: Path, doc: Any) -> None:
@@ -378,7 +391,10 @@ def _campaign_tiers(run: _Run, holes: list[CampaignHole]) -> list[CampaignHole]:
     """The campaign's holes with their tiers (:func:`flight_tiers`, the first flight's
     announced holes staying announced while they pass)."""
     first = run.mergers[min(run.mergers)].flight_tiers if run.mergers else {}
-    tiers = flight_tiers([h.hole for h in holes], _campaign_gate(run)[0], run.opts, first)
+    per_flight = {run.plans[k].name: _flight_marks(m, run.opts) for k, m in run.mergers.items()}
+    holes = campaign_marks(holes, per_flight)
+    marks = {h.id: h.mark for h in holes if h.mark is not None}
+    tiers = flight_tiers([h.hole for h in holes], _campaign_gate(run)[0], run.opts, first, marks)
     return [dataclasses.replace(h, tier=tiers[h.id]) for h in holes]
 
 

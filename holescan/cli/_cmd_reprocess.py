@@ -136,8 +136,12 @@ def add_engine_arguments(p: argparse.ArgumentParser, default_out: str) -> None:
     p.add_argument(
         "--station",
         metavar="DIR",
+        action="append",
+        default=[],
         help="a ground station's folder (holescan ground --out): its operators' marks "
-        "(confirmed, rejected, visited) carry into every output under the flight's hole ids",
+        "(confirmed, rejected, visited) carry into every output, each to the flight whose "
+        "hole has that id at that place (repeat for one station per flight; one station "
+        "that followed several flights works too)",
     )
     p.add_argument(
         "--area",
@@ -188,9 +192,9 @@ def options(args: argparse.Namespace) -> ReprocessOptions:
         map_every=args.map_every,
         gap_threshold=args.gap_threshold,
         area=read_area(args.area) if args.area else None,
-        marks={i: m.mark for i, m in read_station_marks(Path(args.station)).items()}
-        if args.station
-        else {},
+        station_marks=tuple(
+            m for folder in args.station for m in read_station_marks(Path(folder)).values()
+        ),
     )
     if args.formats:
         opts = dataclasses.replace(opts, formats=tuple(dict.fromkeys(args.formats)))

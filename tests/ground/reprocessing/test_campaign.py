@@ -4,9 +4,11 @@ which every hole both saw is one hole with sightings per flight; a bad log in th
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import zipfile
+from collections.abc import Sequence
 from pathlib import Path
 
 import pymap3d
@@ -16,7 +18,9 @@ import rasterio
 from holescan import cli
 from holescan.capture import FlightSummary
 from holescan.errors import InputError
-from holescan.ground import ReprocessOptions, ReprocessResult, run_campaign
+from holescan.geotag import Hole
+from holescan.ground import ReprocessOptions, ReprocessResult, StationState, run_campaign
+from holescan.link import hole_text
 from holescan.sim import RubbleWorld, WorldAnchor
 
 ANCHOR = WorldAnchor(43.6532, -79.3832, 120.0)  # as in conftest.py
@@ -143,3 +147,76 @@ def test_cli(flight: Flown, tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
     assert "campaign:" in text and (out / "summary.json").is_file()
     assert cli.main(argv) == 0  # again: every partition from the cache
     assert "0 computed" in capsys.readouterr().out
+
+
+def _station(folder: Path, holes: Sequence[Hole], mark: str) -> None:
+    """A ground station folder: ``holes`` (as the vehicle's STATUSTEXTs told them) and
+    ``mark`` on every one."""
+    state = StationState.open(folder)
+    for h in holes:
+        p = h.p_hole if math.isfinite(h.p_hole) else 0.5
+        assert state.on_statustext(hole_text(h.id, p, h.lat_deg, h.lon_deg)) is not None
+        state.mark(h.id, mark)
+    state.flush()
+
+
+@pytest.mark.slow
+def test_each_flights_station_marks_reach_the_campaign_through_that_flights_ids(
+    flight: Flown, flight_b: Flown, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Both vehicles number their holes from 1: station A's mark of hole N must reach the
+    campaign hole flight A calls N, never flight B's hole N elsewhere (only a hole N of
+    both flights at the same place, within 1 m, takes both marks)."""
+    a, b = flight[1].holes, flight_b[1].holes
+    # A third station showed a hole N 20 m from each of flight B's holes N, confirmed:
+    # another flight's hole N elsewhere, whose mark must reach neither flight.
+    decoys = [dataclasses.replace(h, lat_deg=h.lat_deg + 20.0 / 111_132.0) for h in b]
+    _station(tmp_path / "station_a", a, "confirmed")
+    _station(tmp_path / "station_b", b, "rejected")
+    _station(tmp_path / "station_c", decoys, "confirmed")
+    out = tmp_path / "c"
+    argv = ["campaign", *map(str, [*flight[0], *flight_b[0]]), "--out", str(out)]
+    argv += ["--workers", "0", "--station", str(tmp_path / "station_a")]
+    argv += ["--station", str(tmp_path / "station_b")]
+    assert cli.main([*argv, "--station", str(tmp_path / "station_c")]) == 0
+    capsys.readouterr()
+    doc = json.loads((out / "summary.json").read_text())
+    at = {
+        "sortie": {h.id: (h.lat_deg, h.lon_deg) for h in a},
+        "second": {h.id: (h.lat_deg, h.lon_deg) for h in b},
+    }
+    shown = [  # each station's holes: the mark, and where it showed them
+        ("confirmed", at["sortie"]),
+        ("rejected", at["second"]),
+        ("confirmed", {h.id: (h.lat_deg, h.lon_deg) for h in decoys}),
+    ]
+    elsewhere = 0
+    for h in doc["campaign"]["holes"]:
+        marks = []
+        for f in h["flights"]:
+            own = at[f["flight"]].get(f["hole_id"])
+            here = [
+                m
+                for m, holes in shown
+                if own is not None
+                and f["hole_id"] in holes
+                and dist_m(holes[f["hole_id"]], own) <= 1.0
+            ]
+            elsewhere += sum(
+                own is not None and f["hole_id"] in holes and dist_m(holes[f["hole_id"]], own) > 1
+                for _, holes in shown
+            )
+            expected = "confirmed" if "confirmed" in here else ("rejected" if here else None)
+            assert f["mark"] == expected, (h["id"], f)
+            marks.append(expected)
+        # one hole marked in both flights: the most affirmative mark (recall first)
+        top = "confirmed" if "confirmed" in marks else ("rejected" if "rejected" in marks else None)
+        assert h["mark"] == top, h
+        if top is not None:
+            assert h["tier"] == top
+    assert elsewhere >= 1  # a mark of the same id at another place was not taken
+    features = json.loads((out / "campaign_holes.geojson").read_text())["features"]
+    tiers = {f["properties"]["hole_id"]: f["properties"]["tier"] for f in features}
+    for h in doc["campaign"]["holes"]:
+        if h["id"] in tiers:
+            assert tiers[h["id"]] == h["tier"]
