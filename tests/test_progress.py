@@ -6,7 +6,7 @@ import io
 import os
 import pty
 
-from holescan.cli._args import Progress, end_progress
+from holescan.cli.progress import Progress, end_progress
 
 
 def test_no_progress_text_in_a_pipe() -> None:

@@ -17,7 +17,8 @@ from collections.abc import Sequence
 os.environ.setdefault("OPENCV_LOG_LEVEL", "ERROR")
 
 from holescan import __version__
-from holescan.cli._args import EXIT_INPUT, EXIT_INTERRUPTED, end_progress
+from holescan.cli._args import EXIT_INPUT, EXIT_INTERRUPTED
+from holescan.cli.progress import end_progress
 from holescan.errors import HolescanError
 
 GROUND_ONLY = frozenset(

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from holescan.cli._args import Progress
+from holescan.cli.progress import Progress
 from holescan.ground import import_csv_dataset, load_dataset, read_camera
 from holescan.outputs import check_folder
 

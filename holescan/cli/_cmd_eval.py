@@ -8,8 +8,8 @@ import tempfile
 from dataclasses import replace
 from pathlib import Path
 
-from holescan.cli._args import Progress
 from holescan.cli._cmd_detect import add_detector_options, params_from_args
+from holescan.cli.progress import Progress
 from holescan.errors import InputError
 from holescan.ground import (
     JSON_SUFFIXES,
