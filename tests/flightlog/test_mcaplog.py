@@ -777,7 +777,9 @@ def test_sigkilled_writer_loses_at_most_about_a_second(tmp_path: Path) -> None:
         f"SIGKILL after {enqueued} frames: {len(got)} recovered, lost {lost} "
         f"({lost / 30:.2f} s); writer had reported {written} written, {synced} fsynced"
     )
-    assert len(got) >= written >= synced  # all it wrote to the OS survived
+    # every frame fsynced survived; frames written after the last fsync may sit in the chunk
+    # still being built in the writer's memory (lost with it: at most the open chunk)
+    assert written >= synced and len(got) >= synced
     assert lost <= 30  # at most ~1 s at 30 fps
 
 
