@@ -15,16 +15,21 @@ and its records to ``write`` (the sidecar MCAP).
 sighting; at :meth:`FlightMerger.finish` its holes take the ids the flight gave the same
 openings (:func:`geotag.carry_ids` against the flight's last ``/holes`` record), and holes
 only the replay found take ids above every id the flight used. :meth:`FlightMerger.holes`
-and every output carry those ids; the sidecar's ``/holes`` records written during the
-replay use the replay's own numbering, and its last one the flight's, with the mapping
-(``"ids"``).
+and every output carry those ids, and so does **every** ``/holes`` record of the sidecar:
+the replay's hole lists are kept (the holes themselves are shared, a record costs a list)
+and written at :meth:`FlightMerger.finish`, once the pairing is known, at their own log
+times. In a record from before two of the replay's holes were found to be one opening,
+both carry the id of the hole they became (the tracker's ``merged``); each hole also
+keeps the replay's own number as ``replay_id``. The last record repeats the final list
+with the mapping (``"ids"``).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from collections import OrderedDict, deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any, Final
 
 from holescan.flightlog import (
@@ -113,6 +118,7 @@ class FlightMerger:
         self.pose_gap_m: list[float] = []
         self._map_every = 0
         self._last_t_unix_ns = 0
+        self._hole_records: list[tuple[int, tuple[Hole, ...]]] = []  # (t, holes) to write
 
     # -- feeding -----------------------------------------------------------------------------
 
@@ -231,9 +237,7 @@ class FlightMerger:
             if h.best_frame_index == fr.index:
                 self.best[h.id] = (task, fr.index, box_of(h.best_box))
         self._last_t_unix_ns = t
-        holes = [jsonable(h) for h in self.pipeline.holes()]
-        self.write("holes", {"holes": holes}, t)
-        self.write("holes/geojson", holes_geojson_message(holes), t)
+        self._hole_records.append((t, tuple(self.pipeline.holes())))
 
     def finish(self) -> None:
         """End of the flight: pose the frames still waiting for telemetry and merge them."""
@@ -246,11 +250,34 @@ class FlightMerger:
             self.pipeline.tracker.params,
             reference_max_id=self.flight_max_id,
         )
-        if self.pipeline.holes():  # the last record: the holes with the flight's ids
-            holes = [jsonable(h) for h in self.holes()]
-            t = self._last_t_unix_ns
-            self.write("holes", {"holes": holes, "ids": self._ids_record()}, t)
-            self.write("holes/geojson", holes_geojson_message(holes), t)
+        for t, holes in self._hole_records:  # every record, with the flight's ids
+            self._write_holes(t, holes)
+        self._hole_records.clear()
+        if self.pipeline.holes():  # the last record: the final holes and the mapping
+            self._write_holes(self._last_t_unix_ns, self.pipeline.holes(), self._ids_record())
+
+    def _write_holes(
+        self, t: int, holes: Sequence[Hole], ids: dict[str, Any] | None = None
+    ) -> None:
+        """One ``/holes`` record of the replay's ``holes`` at ``t``, with the flight's ids
+        (a hole fused later into another: the id of the one it became)."""
+        assert self.id_map is not None
+        merged = self.pipeline.tracker.merged()
+        out = []
+        for h in holes:
+            own = h.id
+            while own in merged and own not in self.id_map.ids:
+                own = merged[own]
+            carried = self.id_map.ids.get(own)
+            if carried is None:  # the tracker keeps every hole: not expected
+                _log.warning("%s: replay hole %d has no id to carry", self.plan.name, h.id)
+                continue
+            out.append({**jsonable(dataclasses.replace(h, id=carried)), "replay_id": h.id})
+        doc: dict[str, Any] = {"holes": sorted(out, key=lambda d: (d["id"], d["replay_id"]))}
+        if ids is not None:
+            doc["ids"] = ids
+        self.write("holes", doc, t)
+        self.write("holes/geojson", holes_geojson_message(doc["holes"]), t)
 
     def _ids_record(self) -> dict[str, Any]:
         m = self.id_map

@@ -121,8 +121,20 @@ def test_in_process_run_reads_every_frame_and_writes_a_sidecar(
     )
     frames = [json.loads(d)["frame_index"] for _, _, d in new["/reprocess/detections"]]
     assert frames == sorted(frames) and len(frames) == summary.frames_logged
-    last = json.loads(new["/reprocess/holes"][-1][2])["holes"]
+    records = [json.loads(d) for _, _, d in new["/reprocess/holes"]]
+    last = records[-1]["holes"]
     assert [h["id"] for h in last] == [h.id for h in f.holes]  # the flight's ids
+    # every record, not only the last, carries the flight's ids: the replay's number of a
+    # hole always maps to the same id, the one the final mapping gives it (or, for a hole
+    # fused later into another, the one it became)
+    final = {int(k): v for k, v in records[-1]["ids"]["this_run_to_flight"].items()}
+    carried: dict[int, int] = {}
+    for rec in records:
+        for h in rec["holes"]:
+            assert carried.setdefault(h["replay_id"], h["id"]) == h["id"], h
+            assert h["id"] in final.values()
+    assert all(carried[k] == v for k, v in final.items())
+    assert len(records) > 2  # written during the replay, not only at its end
     info = log_info(path)  # every CRC; summary counts against the content
     assert not info.truncated and info.metadata["ground.reprocess"]["frames"] == "all"
     kinds = dict(f.files)
