@@ -31,6 +31,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # this checkout
 
 from holescan.flightlog import LoggedFrame, read_flight_log, recover_log  # noqa: E402
+from tests._support import group_members  # noqa: E402
 
 SIM_TOML = """
 sensor = "sim"
@@ -42,21 +43,6 @@ world_seed = 15
 n_access_holes = 4
 fps = 10.0
 """
-
-
-def group_alive(pgid: int) -> bool:
-    """True while a live (not zombie) process of group ``pgid`` is left."""
-    for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit():
-            continue
-        try:
-            stat = (entry / "stat").read_text()
-        except OSError:
-            continue
-        fields = stat[stat.rindex(")") + 2 :].split()
-        if int(fields[2]) == pgid and fields[0] != "Z":
-            return True
-    return False
 
 
 def start(work: Path) -> tuple[subprocess.Popen[bytes], Path]:
@@ -101,7 +87,7 @@ def stop_once(sig: signal.Signals) -> tuple[float, float]:
         os.killpg(proc.pid, sig)
         proc.wait(timeout=120)
         exited = time.monotonic() - t0
-        while group_alive(proc.pid) and time.monotonic() - t0 < 60:
+        while group_members(proc.pid) and time.monotonic() - t0 < 60:
             time.sleep(0.01)
         return exited, time.monotonic() - t0
 

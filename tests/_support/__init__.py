@@ -1,14 +1,16 @@
 """Helpers shared by the tests (one copy each): free loopback ports for the peers the tests
 start (pymavlink links, MAVProxy, the ground station, Dask schedulers), and a hang guard for
-waits on them (:func:`wait_for`)."""
+waits on them (:func:`wait_for`), and the live processes of a process group (a flight and its
+worker, :func:`group_members`)."""
 
 from __future__ import annotations
 
 import socket
 import time
 from collections.abc import Callable
+from pathlib import Path
 
-__all__ = ["free_tcp_port", "free_udp_port", "wait_for"]
+__all__ = ["free_tcp_port", "free_udp_port", "group_members", "wait_for"]
 
 
 def free_udp_port() -> int:
@@ -38,3 +40,19 @@ def wait_for(cond: Callable[[], object], timeout_s: float, what: str, poll_s: fl
         if time.monotonic() >= deadline:
             raise TimeoutError(f"{what}: not after {timeout_s:g} s")
         time.sleep(poll_s)
+
+
+def group_members(pgid: int) -> list[int]:
+    """Pids of the live (not zombie) processes of process group ``pgid`` (reads ``/proc``)."""
+    out = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            stat = (entry / "stat").read_text()
+        except OSError:
+            continue
+        fields = stat[stat.rindex(")") + 2 :].split()
+        if int(fields[2]) == pgid and fields[0] != "Z":
+            out.append(int(entry.name))
+    return out

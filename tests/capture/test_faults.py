@@ -29,8 +29,8 @@ from holescan.flightlog import (
     recover_log,
 )
 from holescan.sim import SimAutopilot, SimPath
-from tests._support import free_udp_port, wait_for
-from tests.capture.test_shutdown import group_members, start_sim_flight
+from tests._support import free_udp_port, group_members, wait_for
+from tests.capture.test_shutdown import start_sim_flight
 
 CAM = CameraIntrinsics.xtion(160, 120)
 FPS = 15.0

@@ -15,25 +15,10 @@ from pathlib import Path
 import pytest
 
 from holescan.flightlog import LoggedHealth, log_info, read_flight_log
+from tests._support import group_members
 from tests.capture.test_fly import SIM_TOML, holescan
 
 pytestmark = pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc")
-
-
-def group_members(pgid: int) -> list[int]:
-    """Pids of the live (not zombie) processes of process group ``pgid``."""
-    out = []
-    for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit():
-            continue
-        try:
-            stat = (entry / "stat").read_text()
-        except OSError:
-            continue
-        fields = stat[stat.rindex(")") + 2 :].split()
-        if int(fields[2]) == pgid and fields[0] != "Z":
-            out.append(int(entry.name))
-    return out
 
 
 #: Children leave within ~0.1 s of the daemon (the worker polls its parent every 0.1 s): a
