@@ -111,7 +111,11 @@ def test_pycocotools_reads_it(dataset: Path) -> None:
 def test_deterministic_for_a_seed_whatever_the_workers(
     alien: ModuleType, dataset: Path, tmp_path: Path
 ) -> None:
-    summary = alien.generate_dataset(tmp_path, 2, 11, jobs=2)
+    sys.path.insert(0, str(SCRIPT.parent))  # the spawned workers import the generator
+    try:
+        summary = alien.generate_dataset(tmp_path, 2, 11, jobs=2)
+    finally:
+        sys.path.remove(str(SCRIPT.parent))
     assert summary["images"] == 2
     first = json.loads((dataset / "annotations.json").read_text())
     again = json.loads((tmp_path / "annotations.json").read_text())

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import concurrent.futures
 import json
 import multiprocessing
 import time
@@ -168,9 +169,12 @@ def generate_dataset(
     cam = CameraModel.sample(np.random.default_rng([seed, 0xCA]))
     work = [_Job(i, seed, cam, out, sensor) for i in range(n)]
     if jobs > 1:
-        ctx = multiprocessing.get_context("fork")
-        with ctx.Pool(jobs) as pool:
-            results = pool.map(_worker, work, chunksize=1)
+        # spawn, not fork: a forked worker inherits the parent's threads' locks (OpenCV's
+        # pool, a test runner's); and an executor, not a Pool: a worker that dies raises
+        # BrokenProcessPool here instead of leaving Pool.map waiting forever
+        ctx = multiprocessing.get_context("spawn")
+        with concurrent.futures.ProcessPoolExecutor(jobs, mp_context=ctx) as pool:
+            results = list(pool.map(_worker, work))
     else:
         results = [_worker(j) for j in work]
     images: list[dict[str, Any]] = []
