@@ -77,7 +77,7 @@ def tile_bounds_m(z: int, x: int, y: int) -> tuple[float, float, float, float]:
 def mercator_of_lonlat(lon_deg: float, lat_deg: float) -> tuple[float, float]:
     """EPSG:4326 degrees -> EPSG:3857 metres (latitude clipped to the Mercator world).
 
-    >>> [round(v, 3) for v in mercator_of_lonlat(0.0, 0.0)]
+    >>> [round(v, 3) + 0.0 for v in mercator_of_lonlat(0.0, 0.0)]  # + 0.0: no -0.0
     [0.0, 0.0]
     """
     lat = max(-85.05112878, min(85.05112878, lat_deg))

@@ -330,10 +330,8 @@ class VehicleLink:
                     if h is not None and h.seq is None:  # not yet seen in the mission
                         peer.next_mission = min(peer.next_mission, now + 2.0)
         elif kind == "ATTITUDE":
-            try:
+            with contextlib.suppress(LinkValueError):  # counted once, by on_vehicle_message
                 peer.yaw = link_yaw(msg.yaw)
-            except LinkValueError as err:
-                self.state.reject("an ATTITUDE", err)
         elif kind == "GLOBAL_POSITION_INT" and comp != _COMPANION:
             p = position_from_global_position_int(msg)
             if p.lat_deg == 0 and p.lon_deg == 0:  # no fix yet

@@ -23,7 +23,7 @@ from holescan.errors import HolescanError
 
 GROUND_ONLY = frozenset(
     {"numba", "matplotlib", "dask", "distributed", "fsspec", "pytak", "takproto"}
-    | {"cryptography", "rasterio", "rosbags", "starlette", "uvicorn", "h11", "bokeh"}
+    | {"cryptography", "rasterio", "rosbags", "starlette", "uvicorn", "h11", "bokeh", "mgrs"}
 )
 """Import names of what pyproject's ``ground`` extra installs (the flight install lacks them)."""
 

@@ -79,7 +79,11 @@ def assert_kept_valid(state: StationState, folder: Path) -> None:
     _, holes, track = state.snapshot()
     for h in holes:
         assert 0 <= h.id <= HOLE_ID_MAX
-        assert -90 <= h.lat_deg <= 90 and -180 <= h.lon_deg <= 180 and 0 <= h.score <= 1
+        assert (
+            -90 <= h.lat_deg <= 90
+            and -180 <= h.lon_deg <= 180
+            and (h.score is None or 0 <= h.score <= 1)
+        )
         for v in (h.alt_m, h.sigma_h_m, h.major_m, h.minor_m, h.p_hole):
             assert v is None or math.isfinite(v)
         assert ET.fromstring(f"<w>{h.why}</w>") is not None
