@@ -83,7 +83,10 @@ class Limits:
     max_head_bytes : request line + headers (h11's incomplete-event bound). max_body_bytes :
     a POST body. rate_per_s, burst : a client's token bucket (requests). max_connections :
     open connections and requests in all (uvicorn's ``limit_concurrency``: 503 past it).
-    max_per_client : open connections from one address (more are closed unanswered).
+    max_per_client : open connections from one address (more are closed unanswered). A
+    browser keeps up to 6 connections per page plus its event stream: 32 lets one laptop
+    hold four tabs of the page (16 refused the third tab's loads) and still leaves half of
+    ``max_connections`` to everyone else.
     max_event_clients, max_events_per_client : open ``/events`` streams in all / from one
     address (503 with ``Retry-After`` past them). events_s : an event stream is closed
     after this long (the page's ``EventSource`` reconnects on its own), so no client holds
@@ -98,7 +101,7 @@ class Limits:
     rate_per_s: float = 20.0
     burst: float = 60.0
     max_connections: int = 64
-    max_per_client: int = 16
+    max_per_client: int = 32
     max_event_clients: int = 16
     max_events_per_client: int = 4
     events_s: float = 300.0

@@ -80,6 +80,7 @@ def test_bad_pairing_links_say_so_and_the_page_still_works(
             assert "waiting" not in _text(page, "status")  # the holes are there
             assert "token" not in page.js("location.href")
             assert page.js("window.__csp") == []
+            browser.close_page(page)  # as a person closes the tab
 
 
 def test_a_good_link_pairs_without_leaving_the_token_behind(

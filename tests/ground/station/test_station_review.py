@@ -32,6 +32,7 @@ CHROMIUM = Path("/usr/bin/chromium")
 
 
 class Page(Tab):
+    context: str = ""  # the DevTools browser context it was opened in
     """One tab of the review page."""
 
     def ids(self) -> list[int]:
@@ -100,9 +101,17 @@ class Browser:
         ctx = self._call("Target.createBrowserContext")["browserContextId"]
         target = self._call("Target.createTarget", url=url, browserContextId=ctx)["targetId"]
         p = Page(f"ws://127.0.0.1:{self.port}/devtools/page/{target}")
+        p.context = ctx
         self.pages.append(p)
         wait_for(lambda: p.js("document.readyState") == "complete", 20.0, "page load")
         return p
+
+    def close_page(self, p: Page) -> None:
+        """Close a page and its browser context (its connections with it), as a person
+        closing the tab does."""
+        p.close()
+        self.pages.remove(p)
+        self._call("Target.disposeBrowserContext", browserContextId=p.context)
 
     def close(self) -> None:
         for p in self.pages:

@@ -50,6 +50,7 @@ class Autopilot:
         self.conn = open_link(f"udpout:127.0.0.1:{port}", source_system=1, source_component=1)
         self.asked: list[int] = []
         self.bad_roll = False
+        self.skip = 0  # sequence numbers to skip once (packets "lost on the way")
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
         self._thread.start()
@@ -74,8 +75,9 @@ class Autopilot:
                     [1, 0, 0, 0], 0, 0, 0,
                 )  # fmt: skip
                 mav.radio_status_send(180, 170, 80, 40, 38, 0, 0)
-            if k == 6:
-                mav.seq = (mav.seq + 5) % 256  # five packets lost on the way
+            if self.skip:  # set by the test once the station hears the vehicle
+                mav.seq = (mav.seq + self.skip) % 256
+                self.skip = 0
             roll = math.nan if self.bad_roll else 0.05
             mav.attitude_send(ms, roll, 0.0, math.radians(60), 0.0, 0.0, 0.0)
             mav.global_position_int_send(
@@ -157,12 +159,14 @@ def test_vehicle_and_hole_location_on_the_page(
         try:
             ap = Autopilot(port)
             wait_for(lambda: 1 in state.vehicles, 20.0, "the vehicle heard")
+            ap.skip = 5  # five packets lost on the way
             state.on_card(facts, picture(4), sysid=1)
             # politely: only what does not come is asked for, and then it comes
             wait_for(lambda: state.vehicles[1].battery_pct == 76, 30.0, "the battery")
             assert set(ap.asked) == {mavlink.MAVLINK_MSG_ID_SYS_STATUS}
             assert link.streams_requested == [(1, "SYS_STATUS")]
             v = state.vehicles[1]
+            wait_for(lambda: v.quality.lost > 0, 10.0, "the gap seen")
             assert v.quality.lost == 5 and v.mode == "GUIDED" and v.armed is True
             assert v.home == pytest.approx(HOME)
             # a NaN roll is refused and counted; nothing of its ATTITUDE kept
