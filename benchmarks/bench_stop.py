@@ -31,18 +31,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # this checkout
 
 from holescan.flightlog import LoggedFrame, read_flight_log, recover_log  # noqa: E402
-from tests._support import group_members  # noqa: E402
-
-SIM_TOML = """
-sensor = "sim"
-[capture]
-startup_sync_s = 5.0
-[sim]
-size_m = [4.0, 4.0]
-world_seed = 15
-n_access_holes = 4
-fps = 10.0
-"""
+from tests._support import SIM_TOML, group_members  # noqa: E402
 
 
 def start(work: Path) -> tuple[subprocess.Popen[bytes], Path]:

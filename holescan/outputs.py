@@ -266,9 +266,8 @@ class PartFile:
         if f is None:
             return
         try:
-            f.close()
-        except OSError:
-            pass  # a failed flush of what is thrown away anyway
+            with contextlib.suppress(OSError):  # a failed flush of what is thrown away anyway
+                f.close()
         finally:
             self.part.unlink(missing_ok=True)
 

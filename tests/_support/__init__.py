@@ -10,7 +10,21 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-__all__ = ["free_tcp_port", "free_udp_port", "group_members", "wait_for"]
+__all__ = ["SIM_TOML", "free_tcp_port", "free_udp_port", "group_members", "wait_for"]
+
+
+SIM_TOML = """
+sensor = "sim"
+[capture]
+startup_sync_s = 5.0
+[sim]
+size_m = [4.0, 4.0]
+world_seed = 15
+n_access_holes = 4
+fps = 10.0
+"""
+"""A short simulated sortie's fly.toml (4 x 4 m, world 15, 4 access holes, 10 fps) for the
+tests and benchmarks that start ``holescan fly`` as a process."""
 
 
 def free_udp_port() -> int:

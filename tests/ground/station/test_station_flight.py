@@ -37,20 +37,10 @@ from devtools import Tab
 from test_station import PytakReceiver, Relay, parse_tak, wait_for
 
 from holescan.link import mavlink
-from tests._support import free_udp_port
+from tests._support import SIM_TOML, free_udp_port
 
 CHROMIUM = Path("/usr/bin/chromium")
 ROOT = Path(__file__).resolve().parents[3]
-SIM_TOML = """
-sensor = "sim"
-[capture]
-startup_sync_s = 5.0
-[sim]
-size_m = [4.0, 4.0]
-world_seed = 15
-n_access_holes = 4
-fps = 10.0
-"""
 
 
 class AutopilotRouter:
