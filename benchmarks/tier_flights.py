@@ -7,6 +7,10 @@ Shared by ``benchmarks/calibrate_confidence.py`` (fits the hole-level confidence
 pickle, so merging, confidence and tiers can be replayed over hundreds of flights in
 seconds.
 
+Frames are rendered as the sortie's camera renders them: the structured-light sensor
+(:mod:`sim.structured_light`, on by default in :class:`sim.Conditions`) with the motion blur
+and depth/colour time offset of the vehicle's image motion (:func:`sim.image_motion`).
+
 Flights, over :func:`sim.make_sortie_world` worlds (world seed ``S``, all distractors):
 
 * ``survey`` : one lap of the demo's lawnmower at 3 m (``sim.survey_path``);
@@ -40,6 +44,7 @@ from holescan.sim import (
     SimPath,
     SortieParams,
     camera_pose_in_world,
+    image_motion,
     make_sortie_world,
     random_conditions,
     render,
@@ -47,6 +52,10 @@ from holescan.sim import (
 )
 
 KINDS = ("survey", "hover", "line")
+#: Frames are rendered as the sortie's camera renders them (:class:`sim.SimSource`): the
+#: structured-light sensor (``Conditions()``' default) under the vehicle's image motion,
+#: measured over this step.
+MOTION_DT_NS = 10_000_000
 
 
 @dataclass(frozen=True)
@@ -104,9 +113,10 @@ def _fly(
         pose = VehiclePose(**{**truth_pose.__dict__, "eph_m": p.eph_m})
         rng = np.random.default_rng((p.world_seed, tag, k))
         cond = random_conditions(rng, Conditions())
-        rgb, depth, boxes = render(
-            world, camera_pose_in_world(pose, mount, p.anchor), camera, rng, cond
-        )
+        cam_pose = camera_pose_in_world(pose, mount, p.anchor)
+        later = camera_pose_in_world(ap.truth_pose(t_boot + MOTION_DT_NS), mount, p.anchor)
+        motion = image_motion(cam_pose, later, camera, MOTION_DT_NS * 1e-9)
+        rgb, depth, boxes = render(world, cam_pose, camera, rng, cond, motion)
         for b in boxes:
             if not b.iscrowd:
                 seen[b.hole_id] = seen.get(b.hole_id, 0) + 1

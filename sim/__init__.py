@@ -40,7 +40,7 @@ from holescan.sim._sortie import (
     true_holes,
     world_area,
 )
-from holescan.sim._source import SimSource, WorldAnchor, camera_pose_in_world
+from holescan.sim._source import SimSource, WorldAnchor, camera_pose_in_world, image_motion
 from holescan.sim._synth import sample_pose, synth_dataset, synth_samples
 from holescan.sim._trajectory import SimPath
 from holescan.sim._world import AccessHole, HoleKind, RubbleWorld, make_world, relight
@@ -70,6 +70,7 @@ __all__ = [
     "fly_sim",
     "format_sim_report",
     "hole_boxes",
+    "image_motion",
     "lap_frames",
     "loop_length_m",
     "make_sortie_world",
