@@ -25,6 +25,12 @@ Printed per gate of a grid and for the chosen one, per flight kind and overall:
   true holes in view;
 * the same for the best-frame gate the vehicle used before (``p_hole_of_score(best
   score) >= 0.9``, two sightings over 0.3 s; no review tier).
+
+``--holes``: where the thresholds can go. Per hole of every flight (true when it lies at an
+access hole, as above), the highest hole-level ``p_hole`` it reached at all (what the
+review threshold sees) and while seen ``min_sightings`` times over ``min_span_s`` (what the
+announce threshold sees; 0 when it never was), as quantiles, for the true holes at an
+opening in view (whole in the image in >= 3 frames) and for the false holes.
 """
 
 from __future__ import annotations
@@ -136,6 +142,44 @@ def score(replays: list[Replay], gate: AnnounceGate, *, best_frame: bool = False
     }
 
 
+def _quantiles(v: list[float]) -> str:
+    if not v:
+        return "-"
+    qs = [min(v), *(statistics.quantiles(v, n=10, method="inclusive")[i] for i in (0, 4, 8))]
+    return " / ".join(f"{q:.2f}" for q in [*qs, max(v)])
+
+
+def hole_levels(replays: list[Replay], gate: AnnounceGate) -> None:
+    """Print the ``--holes`` table (module docstring)."""
+    rows: dict[str, list[float]] = {k: [] for k in ("true any", "true A", "false any", "false A")}
+    for r in replays:
+        fl = r.flight
+        for states in r.states.values():
+            h_end = states[-1][1]
+            tid = tier_flights.truth_of(fl, h_end.lat_deg, h_end.lon_deg)
+            if tid is not None and fl.in_view.get(tid, 0) < 3:
+                continue
+            span_ok = [
+                h.p_hole
+                for _, h in states
+                if h.sightings >= gate.min_sightings
+                and (h.t_last_boot_ns - h.t_first_boot_ns) * 1e-9 >= gate.min_span_s
+            ]
+            kind = "true" if tid is not None else "false"
+            rows[f"{kind} any"].append(max(h.p_hole for _, h in states))
+            rows[f"{kind} A"].append(max(span_ok, default=0.0))
+    print("| holes | n | highest p_hole min / p10 / p50 / p90 / max |")
+    print("|---|---|---|")
+    names = {
+        "true any": "true, any time",
+        "true A": f"true, seen {gate.min_sightings}x over {gate.min_span_s:g} s",
+        "false any": "false, any time",
+        "false A": f"false, seen {gate.min_sightings}x over {gate.min_span_s:g} s",
+    }
+    for k, v in rows.items():
+        print(f"| {names[k]} | {len(v)} | {_quantiles(v)} |")
+
+
 def _line(name: str, s: dict[str, Any]) -> str:
     return (
         f"  {name:34} in view {s['in_view']:3}  recall A {s['recall_announced']:.3f} "
@@ -154,6 +198,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--announce", type=float, default=AnnounceGate.min_p_hole)
     ap.add_argument("--review", type=float, default=AnnounceGate.review_min_p_hole)
     ap.add_argument("--grid", action="store_true", help="print the threshold curves")
+    ap.add_argument("--holes", action="store_true", help="print true/false holes' p_hole")
     args = ap.parse_args(argv)
     a, _, b = args.seeds.partition("-")
     seeds = range(int(a), int(b or a) + 1)
@@ -172,11 +217,13 @@ def main(argv: list[str] | None = None) -> int:
     if args.grid:
         print("announce p / review p over all flights:")
         for pa in (0.5, 0.7, 0.8, 0.9, 0.95, 0.98):
-            for pr in (0.01, 0.02, 0.03, 0.05, 0.1, 0.2, 0.3):
+            for pr in (0.01, 0.02, 0.03, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5):
                 if pr <= pa:
                     g = AnnounceGate(min_p_hole=pa, review_min_p_hole=pr)
                     print(_line(f"A>={pa:.2f} R>={pr:.2f}", score(everything, g)))
     gate = AnnounceGate(min_p_hole=args.announce, review_min_p_hole=args.review)
+    if args.holes:
+        hole_levels(everything, gate)
     print(f"gate: announce p_hole >= {gate.min_p_hole}, review p_hole >= {gate.review_min_p_hole}")
     for kind, rs in by_kind.items():
         print(_line(kind, score(rs, gate)))
