@@ -22,6 +22,7 @@ overconfident there.
 from __future__ import annotations
 
 import argparse
+import datetime
 import json
 import multiprocessing
 import sys
@@ -198,6 +199,16 @@ def split_images(rows: list[Row], seed: int) -> tuple[list[Row], list[Row]]:
     return cal, held
 
 
+def _sensor_of(root: Path) -> str:
+    """The depth model a generated dataset records (``info.sensor`` of its annotations)."""
+    try:
+        info = json.loads((root / "annotations.json").read_text()).get("info", {})
+    except (OSError, ValueError, AttributeError):
+        info = {}
+    sensor = info.get("sensor") if isinstance(info, dict) else None
+    return str(sensor) if sensor else "not recorded"
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("datasets", nargs="+", type=Path)
@@ -251,9 +262,15 @@ def main(argv: list[str] | None = None) -> int:
         # the fitted table is a source file of the detector package (not an import of it)
         path = Path(holescan.detect.__file__).with_name("_calibration_table.py")
         names = ", ".join(p.name for p in args.datasets)
+        sets = "\n".join(
+            f"- {p.name}: {len({r.image_id for r in rows if r.dataset == p.name})} images with a "
+            f"detection; sensor: {_sensor_of(p)}"
+            for p in args.datasets
+        )
         path.write_text(
             '"""Fitted by ``python benchmarks/calibrate.py`` (do not edit by hand).\n\n'
-            f"Data: {names}.\nCalibration split (seed {args.seed}): {len(cal)} detections; "
+            f"Data: {names}, fitted {datetime.date.today().isoformat()}.\n{sets}\n"
+            f"Calibration split (seed {args.seed}): {len(cal)} detections; "
             f"held-out Brier score {brier:.4f}.\n"
             '"""\n\n'
             "# p_hole = 1 / (1 + exp(-(a * score + b))) for a raw default-mode score.\n"
