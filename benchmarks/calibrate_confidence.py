@@ -223,7 +223,7 @@ def main(argv: list[str] | None = None) -> int:
         prov = (
             f"benchmarks/calibrate_confidence.py, {datetime.date.today().isoformat()}: "
             f"{len(fit_ex)} examples ({int(y.sum())} true) from {', '.join(srcs)}; "
-            f"flight seeds {args.fit_seeds}, scene images with even ids of "
+            f"flight seeds {args.fit_seeds} ({tier_flights.SENSOR}), scene images with even ids of "
             f"{', '.join(r.name for r in args.scenes) or 'no scene set'}; l2 {args.l2}"
         )
         words = textwrap.wrap(prov, 80, drop_whitespace=False)

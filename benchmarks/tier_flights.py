@@ -56,6 +56,8 @@ KINDS = ("survey", "hover", "line")
 #: structured-light sensor (``Conditions()``' default) under the vehicle's image motion,
 #: measured over this step.
 MOTION_DT_NS = 10_000_000
+#: What the flights' frames are, for the provenance of what is fitted on them.
+SENSOR = "structured-light sensor model under the vehicle's image motion"
 
 
 @dataclass(frozen=True)
