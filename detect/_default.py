@@ -73,9 +73,9 @@ from holescan.detect._regions import (
     SHALLOW_M,
     Candidate,
     basin_depth,
+    basin_depths,
     basin_regions,
     block_depth,
-    border_is_bridged,
     no_reading_regions,
     unread_bands,
 )
@@ -409,7 +409,8 @@ def detect_default(
     grey = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)  # BT.601 Y, as the paper's YUV
     small = cv2.resize(grey, (wf, hf), interpolation=cv2.INTER_AREA)
     y_img = np.asarray(small, np.float64)[top : hf - bottom, left : wf - right] / 255.0
-    pit, invalid, z_far = basin_depth(z, closed_border=False)
+    depths = basin_depths(z, closed_border=o.closed_border)
+    pit, invalid, z_far = depths.spilled, depths.invalid, depths.z_far
     rel = relative_luminance(y_img, ~invalid)
     range_m = max(params.max_range_m, z_far)
     s = params.searcher
@@ -424,11 +425,10 @@ def detect_default(
     # Basins the border cuts, closed there (their rim beyond is unknown): candidates beside
     # the spilled view's (the better-scoring one of a pair wins in NMS).
     bridged: list[Candidate] = []
-    if o.closed_border and border_is_bridged(z):
-        closed, _, _ = basin_depth(z, closed_border=True)
+    if depths.closed is not None:
         bridged = [
             r
-            for r in basin_regions(closed, min_px, o.depression_ratio)
+            for r in basin_regions(depths.closed, min_px, o.depression_ratio)
             if _touches_border(r, z.shape)
         ]
     # The dark part of each spilled no-reading blob: a hole's interior cut from the bright
