@@ -189,7 +189,7 @@ def basin_depths(z: npt.NDArray[np.float32], closed_border: bool = True) -> Basi
     neighbours lie at their own height in both views, so the box holds all it depends on.
     """
     height, invalid = _heights(z)
-    z_far = float(np.nanpercentile(z, 99.5))  # robust to a few outliers
+    z_far = float(np.percentile(z[~invalid], 99.5))  # robust to a few outliers
     spilled_seed = _border_seed(height, False)
     closed_seed = _border_seed(height, closed_border)
     if not closed_border or np.array_equal(closed_seed, spilled_seed):
@@ -337,15 +337,22 @@ def no_reading_regions(
         else:
             opened = inv_u8
         n, lab, stats = components(opened)
+        hh, ww = invalid.shape
         for i in range(1, n):
             if stats[i, cv2.CC_STAT_AREA] < min_px:
                 continue
-            blob = (lab == i).astype(np.uint8)
+            # The blob grown back by r stays within its box widened by r.
+            x, y = int(stats[i, cv2.CC_STAT_LEFT]), int(stats[i, cv2.CC_STAT_TOP])
+            w, h = int(stats[i, cv2.CC_STAT_WIDTH]), int(stats[i, cv2.CC_STAT_HEIGHT])
+            x0, y0 = max(0, x - r), max(0, y - r)
+            win = (slice(y0, min(hh, y + h + r)), slice(x0, min(ww, x + w + r)))
+            blob = (lab[win] == i).astype(np.uint8)
             if r:
-                blob = np.asarray(cv2.dilate(blob, k), np.uint8) & inv_u8
-            if not (blob.astype(bool) & spilled).any():
+                blob = np.asarray(cv2.dilate(blob, k), np.uint8) & inv_u8[win]
+            if not (blob.astype(bool) & spilled[win]).any():
                 continue  # an enclosed pit: basin_regions has it
             _, lab2, stats2 = components(blob)
             j = int(np.argmax(stats2[1:, cv2.CC_STAT_AREA])) + 1
-            regions.append(Candidate(*_crop(lab2, stats2, j), False))
+            mask, (bx, by, bw, bh) = _crop(lab2, stats2, j)
+            regions.append(Candidate(mask, (bx + x0, by + y0, bw, bh), False))
     return regions
