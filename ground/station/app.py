@@ -44,7 +44,8 @@ from holescan.ground.station.files import write_station_files
 from holescan.ground.station.link import VehicleLink
 from holescan.ground.station.mapstore import MapStore
 from holescan.ground.station.pairing import Pairing, Pairings, check_operator
-from holescan.ground.station.state import GroundHole, StationState
+from holescan.ground.station.records import GroundHole
+from holescan.ground.station.state import StationState
 from holescan.ground.station.tak import DEFAULT_COT_URL, CotPublisher, TakTls, tak_settings
 from holescan.ground.station.web import StationWeb
 from holescan.link import SigningKey

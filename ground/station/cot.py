@@ -44,7 +44,7 @@ import xml.etree.ElementTree as ET
 
 from holescan.geotag import CIRCLE_95_PER_SIGMA
 from holescan.ground.station.files import hole_summary
-from holescan.ground.station.state import TIERS, GroundHole, Tier
+from holescan.ground.station.records import TIERS, GroundHole, Tier
 from holescan.link import xml_safe_tree
 from holescan.utc import utc_datetime, utc_text
 

@@ -38,7 +38,7 @@ from holescan.geotag import LocalFrame
 from holescan.ground.searchmap import find_gaps, gaps_document
 from holescan.ground.station.files import hole_points, kml_points, network_link_kml
 from holescan.ground.station.mapcombine import Combined, CombinedCache
-from holescan.ground.station.state import GroundHole
+from holescan.ground.station.records import GroundHole
 from holescan.mapping import MapGrid, MapLayers
 from holescan.missions import geojson_document, kml_document
 

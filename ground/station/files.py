@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from holescan.geotag import CIRCLE_95_PER_SIGMA
-from holescan.ground.station.state import GroundHole
+from holescan.ground.station.records import GroundHole
 from holescan.missions import (
     MAV_FRAME_GLOBAL,
     MAV_FRAME_GLOBAL_RELATIVE_ALT,

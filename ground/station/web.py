@@ -40,7 +40,8 @@ from holescan.ground.station.mapcombine import CombinedCache
 from holescan.ground.station.maplayers import Reply, basemap_route, map_route
 from holescan.ground.station.mapstore import MapStore
 from holescan.ground.station.pairing import Pairing, Pairings
-from holescan.ground.station.state import MARKS, GroundHole, StationState, TrackPoint
+from holescan.ground.station.records import MARKS, GroundHole, TrackPoint
+from holescan.ground.station.state import StationState
 from holescan.ground.station.vehicles import camera_footprint
 from holescan.missions import XTION, Camera
 
