@@ -143,6 +143,10 @@ class HoleSource:
             v.tier = "announced"
         return v
 
+    def to_json(self) -> dict[str, Any]:
+        """The part's fields (a JSON-able dict, as :meth:`from_json` reads)."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+
     def as_hole(self, station_id: int) -> Hole:
         """This vehicle's view of the hole as the tracker's record (for its gate)."""
         nan = float("nan")
@@ -222,7 +226,10 @@ class GroundHole:
 
     def to_json(self) -> dict[str, Any]:
         """The hole's fields and its :attr:`tier` (a JSON-able dict)."""
-        d = dataclasses.asdict(self)
+        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        # what dataclasses.asdict gives, a field at a time (asdict's deep copy of every
+        # value costs ~1 ms a hole: the state file of a few thousand holes took seconds)
+        d["vehicles"] = [v.to_json() for v in self.vehicles]
         d["tier"] = self.tier
         return d
 

@@ -15,7 +15,6 @@ read too, and written back in the current format with the next change.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import logging
 import time
@@ -148,7 +147,9 @@ class StateFile:
             "version": version,
             "primary_sysid": primary_sysid,
             "holes": [h.to_json() for h in holes],
-            "track": [dataclasses.astuple(p) for p in track],
+            "track": [
+                [p.t_unix_ns, p.lat_deg, p.lon_deg, p.rel_alt_m, p.yaw, p.sysid] for p in track
+            ],
         }
         text = json.dumps(doc, separators=(",", ":"), allow_nan=False)
         with atomic_output(self.path, force=True) as f:
