@@ -224,6 +224,29 @@ class GroundHole:
             return "confirmed"
         return self.vehicle_tier
 
+    @property
+    def sysids(self) -> list[int]:
+        """The vehicles that reported the hole (system ids), in the order they first did
+        (empty: a hole of a state file older than vehicles told apart)."""
+        return [v.sysid for v in sorted(self.vehicles, key=lambda v: v.t_first_unix_ns)]
+
+    @property
+    def first_last(self) -> tuple[int, int] | None:
+        """The vehicle that reported the hole first and the one that reported it last
+        (None: not known).
+
+        >>> a = HoleSource(2, 5, 43.6, -79.4, t_first_unix_ns=1, t_last_unix_ns=9)
+        >>> b = HoleSource(1, 5, 43.6, -79.4, t_first_unix_ns=3, t_last_unix_ns=4)
+        >>> h = GroundHole(1, 43.6, -79.4, vehicles=[a, b])
+        >>> h.sysids, h.first_last
+        ([2, 1], (2, 2))
+        """
+        if not self.vehicles:
+            return None
+        first = min(self.vehicles, key=lambda v: v.t_first_unix_ns)
+        last = max(reversed(self.vehicles), key=lambda v: v.t_last_unix_ns)
+        return first.sysid, last.sysid
+
     def to_json(self) -> dict[str, Any]:
         """The hole's fields and its :attr:`tier` (a JSON-able dict)."""
         d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}

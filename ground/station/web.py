@@ -214,7 +214,7 @@ def state_document(
             from_vehicles=[
                 {"sysid": sid, **(_range(at, h.lat_deg, h.lon_deg) or {})} for sid, at in here
             ],
-            summary=hole_summary(h, why=False),  # the page shows the "why" on its own
+            summary=hole_summary(h, why=False, vehicles=False),  # the page shows them apart
             picture=f"/cards/hole-{h.id}.jpg?rev={h.card_rev}" if h.has_picture else None,
             marked_by=(
                 {
@@ -290,7 +290,7 @@ class StationWeb:
     ) -> None:
         self.state = state
         self._public_url = public_url
-        self.vehicles = vehicles or (lambda _h: [])
+        self.vehicles = vehicles or (lambda h: h.sysids)
         self.kml_refresh_s = kml_refresh_s
         self.basemaps = tuple(basemaps)
         self.map_store = map_store
