@@ -88,6 +88,7 @@ from holescan.detect._scores import (
     ramp,
     width_score,
 )
+from holescan.detect._surface import plane_evidence, surface_factor
 from holescan.detect._types import CameraIntrinsics, Detection, DetectParams, FeatureScores
 from holescan.detect._validate import check_frame
 
@@ -300,8 +301,15 @@ def _measure(
     sr = ramp(fill, 0.3, 0.7)
     score = combined_score(sd, sw, sr, sb, sc, o.depth_exponent)
     if beyond:
-        # No reading: a void only if it looks like one (dark against the rubble around it).
+        # No reading: a void only if it looks like one (dark against the rubble around it),
+        # and not a surface that returns no infrared (read islands on its rim plane).
         score *= 0.2 + 0.8 * (void_evidence(rel_in) if o.photometric_evidence else 1.0)
+        if o.surface_plane:
+            rim_pts = rays_of(rim_u, rim_v, f.cam) * rim_zs[:, None]
+            ev = plane_evidence(
+                inside, zc, ~inv_c, (x0, y0), f.cam, (opening.normal, opening.centre), rim_pts
+            )
+            score *= surface_factor(ev)
     elif bridged:
         score *= max(ramp(sd, *BRIDGED_SD), ramp(sb, *BRIDGED_DARK))
     if score < params.min_score:

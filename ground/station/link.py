@@ -49,7 +49,8 @@ from collections.abc import Callable
 from typing import Any
 
 from holescan.ground.station.mapstore import MapStore
-from holescan.ground.station.state import StationState, TrackPoint
+from holescan.ground.station.records import TrackPoint
+from holescan.ground.station.state import StationState
 from holescan.link import (
     LinkValueError,
     MavConnection,

@@ -40,7 +40,8 @@ from holescan.ground.station.mapcombine import CombinedCache
 from holescan.ground.station.maplayers import Reply, basemap_route, map_route
 from holescan.ground.station.mapstore import MapStore
 from holescan.ground.station.pairing import Pairing, Pairings
-from holescan.ground.station.state import MARKS, GroundHole, StationState, TrackPoint
+from holescan.ground.station.records import MARKS, GroundHole, TrackPoint
+from holescan.ground.station.state import StationState
 from holescan.ground.station.vehicles import camera_footprint
 from holescan.missions import XTION, Camera
 
@@ -213,7 +214,7 @@ def state_document(
             from_vehicles=[
                 {"sysid": sid, **(_range(at, h.lat_deg, h.lon_deg) or {})} for sid, at in here
             ],
-            summary=hole_summary(h, why=False),  # the page shows the "why" on its own
+            summary=hole_summary(h, why=False, vehicles=False),  # the page shows them apart
             picture=f"/cards/hole-{h.id}.jpg?rev={h.card_rev}" if h.has_picture else None,
             marked_by=(
                 {
@@ -289,7 +290,7 @@ class StationWeb:
     ) -> None:
         self.state = state
         self._public_url = public_url
-        self.vehicles = vehicles or (lambda _h: [])
+        self.vehicles = vehicles or (lambda h: h.sysids)
         self.kml_refresh_s = kml_refresh_s
         self.basemaps = tuple(basemaps)
         self.map_store = map_store
