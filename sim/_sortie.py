@@ -164,7 +164,7 @@ def true_holes(world: RubbleWorld, anchor: WorldAnchor) -> tuple[TrueHole, ...]:
 
 
 def _loop_corners(
-    corners: Sequence[Sequence[float]], turn_radius_m: float
+    corners: Sequence[tuple[float, float]], turn_radius_m: float
 ) -> list[tuple[float, float]]:
     """The survey's corners as a closed loop the simulated vehicle can fly lap after lap.
 
@@ -177,8 +177,7 @@ def _loop_corners(
     [(0.0, 0.0), (3.0, 0.0), (3.0, 2.0), (0.0, 2.0)]
     """
     pts: list[tuple[float, float]] = []
-    for c in corners:
-        q = (float(c[0]), float(c[1]))
+    for q in corners:
         if not pts or math.dist(q, pts[-1]) > 1e-3:
             pts.append(q)
     if len(pts) > 1 and math.dist(pts[0], pts[-1]) <= 1e-3:
@@ -256,7 +255,11 @@ def survey_path(world: RubbleWorld, p: SortieParams) -> tuple[SurveyPlan, SimPat
         ),
     )
     corners = [a.to_world(w.lat_deg, w.lon_deg, a.alt_m)[:2] for w in plan.path]
-    xy = _rounded(_loop_corners(corners, p.turn_radius_m), p.turn_radius_m, 0.5)
+    xy = _rounded(
+        _loop_corners([(float(c[0]), float(c[1])) for c in corners], p.turn_radius_m),
+        p.turn_radius_m,
+        0.5,
+    )
     waypoints = []
     for x, y in xy:
         lat, lon, _ = a.to_geodetic(float(x), float(y), 0.0)
