@@ -81,9 +81,14 @@ window.holescanMap = (function () {
           showVehicle[v.sysid] = ev.target.checked;
           if (redraw) redraw();
         });
-        const swatch = document.createElement("span");
-        swatch.className = "swatch";
-        swatch.textContent = "\u25A0";
+        const NS = "http://www.w3.org/2000/svg";  // the swatch: an SVG square (no style)
+        const swatch = document.createElementNS(NS, "svg");
+        swatch.setAttribute("class", "swatch");
+        swatch.setAttribute("width", "12");
+        swatch.setAttribute("height", "12");
+        swatch.appendChild(document.createElementNS(NS, "rect"));
+        swatch.firstChild.setAttribute("width", "12");
+        swatch.firstChild.setAttribute("height", "12");
         const text = document.createElement("span");
         text.textContent = ` drone ${v.sysid}: searched (`;
         const grey = document.createElement("span");
@@ -92,8 +97,8 @@ window.holescanMap = (function () {
         label.append(input, " ", swatch, text, grey, " not)");
         box.appendChild(label);
       }
-      const swatch = input.parentElement.querySelector(".swatch");
-      if (swatch) swatch.style.color = v.colour;  // CSSOM: allowed by the page's CSP
+      const rect = input.parentElement.querySelector(".swatch rect");
+      if (rect) rect.setAttribute("fill", v.colour);
     }
   }
 
