@@ -151,6 +151,12 @@ class StationState:
                 list(self.track),
             )
 
+    def track_sysids(self) -> set[int]:
+        """The vehicles (system ids) with points in the track (0: a point of an older
+        state file, whose vehicle is not known)."""
+        with self._lock:
+            return {p.sysid for p in self.track}
+
     def vehicle_snapshot(self) -> list[VehicleStatus]:
         """Copies of the vehicles heard, by system id."""
         with self._lock:

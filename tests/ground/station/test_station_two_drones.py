@@ -12,7 +12,9 @@ Chromium (1280 px):
   ``vehicles`` name both, with each one's own id; the station's ids are those the
   class docstring of :class:`ground.StationState` gives (the first reporting vehicle's
   ids; the other's first-found holes ``sysid * 1000000 + its id``);
-* no two station holes of different vehicles lie at one opening by the campaign's rule.
+* no two station holes of different vehicles lie at one opening by the campaign's rule;
+* each drone's coverage tiles are kept as its own (``/map.json``'s ``vehicles``, in the
+  drone's colour) and drawn when switched on.
 
 The screenshot goes to ``HOLESCAN_ARTEFACTS`` (else the test's folder).
 """
@@ -154,6 +156,27 @@ def test_two_drones_one_station(tmp_path: Path) -> None:
             )
             text = page.js("document.getElementById('locate').textContent")
             assert "vehicle 2" in text
+            # each drone's own coverage: its tiles, in its colour, switched on the page
+            with urllib.request.urlopen(station.web.url + "map.json", timeout=5) as r:
+                mapdoc = json.loads(r.read())
+            layers = {v["sysid"]: v for v in mapdoc["vehicles"]}
+            assert set(layers) == {1, 2}
+            assert all(layers[s]["colour"] == colours[s] and layers[s]["tiles"] for s in (1, 2))
+            assert station.map_store is not None and station.map_store.vehicles() == [1, 2]
+            count = "document.querySelectorAll('g.maplayer[data-layer=\"cov-%d\"] image').length"
+            wait_for(
+                lambda: page.js("document.querySelectorAll('#layer-vehicles input').length") == 2,
+                10.0,
+                "a coverage switch per drone",
+            )
+            page.js(
+                "document.getElementById('layer-vehicles').open = true;"
+                "document.getElementById('layer-cov-1').click();"
+                "document.getElementById('layer-cov-2').click()"
+            )
+            for s in (1, 2):
+                n = len(layers[s]["tiles"])
+                wait_for(lambda s=s, n=n: page.js(count % s) == n, 10.0, f"drone {s}'s coverage")
             page.screenshot(art / "ground-station-two-drones.png")
         finally:
             browser.close()
