@@ -23,7 +23,7 @@ from typing import Any
 
 import pytest
 from test_station import wait_for
-from test_station_layout import _box, _open, _overlap, _small_targets
+from test_station_layout import open_page, overlap, page_box, small_targets
 from test_station_review import CHROMIUM, Browser, Page, review_station
 
 from holescan.ground.station.web import StationWeb
@@ -74,7 +74,7 @@ def _drag(page: Page, start: tuple[float, float], by: tuple[float, float]) -> No
 
 
 def _click(page: Page, selector: str) -> None:
-    b = _box(page, selector)
+    b = page_box(page, selector)
     x, y = (b["left"] + b["right"]) / 2, (b["top"] + b["bottom"]) / 2
     _mouse(page, "mousePressed", x, y, button="left", buttons=1, clickCount=1)
     _mouse(page, "mouseReleased", x, y, button="left", buttons=0, clickCount=1)
@@ -93,7 +93,7 @@ def test_wheel_drag_buttons_and_fit_on_a_laptop(tmp_path: Path, browser: Browser
     art = Path(os.environ.get("HOLESCAN_ARTEFACTS", tmp_path))
     art.mkdir(parents=True, exist_ok=True)
     with StationWeb(state, "127.0.0.1", 0) as web:
-        page = _open(browser, web.url, 1280, 800, False)
+        page = open_page(browser, web.url, 1280, 800, False)
         wait_for(lambda: page.js("!!document.getElementById('zoom-fit')"), 10.0, "the buttons")
         assert page.js("MapView.state().view") is None  # fitted
         s0, at0 = _scale(page), _holes(page)
@@ -148,15 +148,15 @@ def test_pinch_and_finger_drag_on_a_phone(tmp_path: Path, browser: Browser) -> N
     art = Path(os.environ.get("HOLESCAN_ARTEFACTS", tmp_path))
     art.mkdir(parents=True, exist_ok=True)
     with StationWeb(state, "127.0.0.1", 0) as web:
-        page = _open(browser, web.url, 412, 915, True)
+        page = open_page(browser, web.url, 412, 915, True)
         wait_for(lambda: page.js("!!document.getElementById('zoom-fit')"), 10.0, "the buttons")
-        zoom, layers = _box(page, "#zoom"), _box(page, "#maplayers")
-        north, legend = _box(page, "#north"), _box(page, "#legend")
+        zoom, layers = page_box(page, "#zoom"), page_box(page, "#maplayers")
+        north, legend = page_box(page, "#north"), page_box(page, "#legend")
         for other in (layers, north, legend):
-            assert not _overlap(zoom, other), (zoom, other)
-        assert _small_targets(page) == []
+            assert not overlap(zoom, other), (zoom, other)
+        assert small_targets(page) == []
         s0, at0 = _scale(page), _holes(page)
-        m = _box(page, "#svg")
+        m = page_box(page, "#svg")
         cx, cy = (m["left"] + m["right"]) / 2, (m["top"] + m["bottom"]) / 2
         # two fingers 100 px apart spread to 200 px: twice the scale about their middle
         _touch(page, "touchStart", [(cx - 50, cy), (cx + 50, cy)])
