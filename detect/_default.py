@@ -127,6 +127,9 @@ DARK_SMOOTH_PX = 5
 # searcher) or dark inside as a hole is (darkness score, likewise): a shallow lit dip
 # running into the border closes that way too.
 BRIDGED_SD = (0.2, 0.35)
+# The rim-plane test (options.surface_plane) only for unread candidates scoring at least
+# this (p_hole ~0.1): below, it could only lower what is not shown anyway.
+SURFACE_GATE = 0.2
 BRIDGED_DARK = (0.1, 0.25)
 
 
@@ -304,7 +307,7 @@ def _measure(
         # No reading: a void only if it looks like one (dark against the rubble around it),
         # and not a surface that returns no infrared (read islands on its rim plane).
         score *= 0.2 + 0.8 * (void_evidence(rel_in) if o.photometric_evidence else 1.0)
-        if o.surface_plane:
+        if o.surface_plane and score >= SURFACE_GATE:
             rim_pts = rays_of(rim_u, rim_v, f.cam) * rim_zs[:, None]
             ev = plane_evidence(
                 inside, zc, ~inv_c, (x0, y0), f.cam, (opening.normal, opening.centre), rim_pts

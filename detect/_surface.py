@@ -25,7 +25,6 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 import numpy.typing as npt
-from scipy.ndimage import binary_fill_holes
 
 from holescan.detect._scores import ramp
 from holescan.detect._types import CameraIntrinsics
@@ -104,8 +103,12 @@ def plane_evidence(
     """
     # The outline: the region closed over gaps up to CLOSE_PX (islands of readings that
     # reach its edge between unread clumps) with its enclosed islands filled in.
-    closed = cv2.morphologyEx(np.pad(inside, CLOSE_PX).astype(np.uint8), cv2.MORPH_CLOSE, _CLOSE)
-    filled = np.asarray(binary_fill_holes(closed[CLOSE_PX:-CLOSE_PX, CLOSE_PX:-CLOSE_PX]), bool)
+    pad = CLOSE_PX + 1
+    closed = cv2.morphologyEx(np.pad(inside, pad).astype(np.uint8), cv2.MORPH_CLOSE, _CLOSE)
+    # Enclosed gaps filled: whatever the background flooded from the corner does not reach.
+    outside = closed.copy()
+    cv2.floodFill(outside, None, (0, 0), 1)
+    filled = ((closed > 0) | (outside == 0))[pad:-pad, pad:-pad]
     if int(filled.sum()) < MIN_INNER_PX:
         return NO_EVIDENCE
     dist = cv2.distanceTransform(np.pad(filled, 1).astype(np.uint8), cv2.DIST_L2, 3)[1:-1, 1:-1]
