@@ -117,10 +117,27 @@ def _border_seed(height: npt.NDArray[np.float64], closed_border: bool) -> npt.ND
     if closed_border and min(height.shape) >= 3:
         hh, ww = height.shape
         lw, lh = round(BORDER_BRIDGE * ww), round(BORDER_BRIDGE * hh)
-        seed[0, :] = _bridged(height[0, :], lw)
-        seed[-1, :] = _bridged(height[-1, :], lw)
-        seed[:, 0] = np.maximum(seed[:, 0], _bridged(height[:, 0], lh))
-        seed[:, -1] = np.maximum(seed[:, -1], _bridged(height[:, -1], lh))
+        # The border as one loop, clockwise from the top-left corner. Each line is bridged
+        # continued around its two corners (and what it bridges there counts on the next
+        # line too), so a hole the corner cuts, its dip running off the ends of two lines,
+        # has its rim on both.
+        loop = np.concatenate(
+            [height[0, :], height[1:, -1], height[-1, -2::-1], height[-2:0:-1, 0]]
+        )
+        raised = loop.copy()
+        for start, size, n in (
+            (0, ww, lw),
+            (ww - 1, hh, lh),
+            (ww + hh - 2, ww, lw),
+            (2 * ww + hh - 3, hh, lh),
+        ):
+            idx = np.arange(start - n, start + size + n) % loop.size
+            raised[idx] = np.maximum(raised[idx], _bridged(loop[idx], n))
+        at = np.arange(2 * ww + 2 * hh - 2) % loop.size
+        seed[0, :] = raised[at[:ww]]
+        seed[:, -1] = raised[at[ww - 1 : ww - 1 + hh]]
+        seed[-1, :] = raised[at[ww + hh - 2 : 2 * ww + hh - 2]][::-1]
+        seed[:, 0] = raised[at[2 * ww + hh - 3 : 2 * ww + 2 * hh - 3]][::-1]
     return seed
 
 
@@ -149,8 +166,9 @@ def basin_depth(
     cuts does not drain through the cut: the rim beyond the border is unknown, not absent,
     so along each border line, dips shorter than :data:`BORDER_BRIDGE` of its length and
     deeper than :data:`DEEP_M` (a hole or its unread floor crossing the border) are bridged
-    at the height of the rim on their two sides. Without it (the default) such a basin
-    spills there and is no pit.
+    at the height of the rim on their two sides; a line runs on around its corners, so a
+    dip the corner cuts is bridged at the rim on both lines. Without it (the default) such
+    a basin spills there and is no pit.
 
     Returns ``(pit, invalid, z_far)`` where ``z_far`` is the farthest reading in the image.
     """

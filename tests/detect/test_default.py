@@ -124,6 +124,22 @@ def test_basin_cut_by_the_border_is_closed_there_not_spilled() -> None:
     assert float(closed[30, 30]) == pytest.approx(0.0, abs=1e-6)  # the floor stays a floor
 
 
+@pytest.mark.parametrize("corner", ["top-left", "top-right", "bottom-right", "bottom-left"])
+def test_basin_the_corner_cuts_is_closed_by_the_rim_on_both_lines(corner: str) -> None:
+    # A pit in the corner: its dip runs off the end of two border lines, with rim on each.
+    z = np.full((40, 50), 2.0, np.float32)
+    z[0:10, 0:12] = 2.7
+    flip = {"top-left": (1, 1), "top-right": (1, -1), "bottom-right": (-1, -1)}
+    fy, fx = flip.get(corner, (-1, 1))
+    z = np.ascontiguousarray(z[::fy, ::fx])
+    spilled, _, _ = basin_depth(z)
+    closed, _, _ = basin_depth(z, closed_border=True)
+    y, x = (5 if fy == 1 else 34), (6 if fx == 1 else 43)
+    assert float(spilled[y, x]) == pytest.approx(0.0, abs=1e-6)
+    assert float(closed[y, x]) == pytest.approx(0.7, abs=1e-5)
+    assert float(closed[20, 25]) == pytest.approx(0.0, abs=1e-6)
+
+
 @pytest.mark.parametrize("seed", range(8))
 def test_both_basin_views_at_once_equal_each_computed_alone(seed: int) -> None:
     # Rough tilted terrain with pits, some cut by the border (a lake in the closed view
