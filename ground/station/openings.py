@@ -53,12 +53,23 @@ class Openings:
         self.primary_sysid: int | None = None
         self.max_holes = max_holes
         self._ids: dict[tuple[int, int], int] = {}
+        # station ids of the holes with a vehicle's part, and of each vehicle's holes: the
+        # candidates of :meth:`same_opening` by set difference (a flood of one vehicle's
+        # holes must not cost a Python loop over every hole kept per packet)
+        self._parted: set[int] = set()
+        self._of: dict[int, set[int]] = {}
+
+    def _part(self, sysid: int, own: int, hid: int) -> None:
+        """Vehicle ``sysid``'s hole ``own`` is station hole ``hid``."""
+        self._ids[(sysid, own)] = hid
+        self._parted.add(hid)
+        self._of.setdefault(sysid, set()).add(hid)
 
     def keep(self, h: GroundHole) -> None:
         """Keep a hole as it is (one of the state file, checked), with its vehicles' ids."""
         self.holes[h.id] = h
         for v in h.vehicles:
-            self._ids[(v.sysid, v.hole_id)] = h.id
+            self._part(v.sysid, v.hole_id, h.id)
 
     def sysid(self, sysid: int | None) -> int:
         """The vehicle a report names (None: the station's first); the first vehicle that
@@ -90,11 +101,8 @@ class Openings:
     def same_opening(self, src: HoleSource, exclude: int | None) -> int | None:
         """The station hole (not ``exclude``, none with a part of ``src``'s vehicle) at
         ``src``'s opening by the campaign's rule, or None."""
-        others = [
-            h
-            for h in self.holes.values()
-            if h.id != exclude and h.vehicles and all(v.sysid != src.sysid for v in h.vehicles)
-        ]
+        ids = self._parted - self._of.get(src.sysid, set()) - {exclude}
+        others = [h for hid, h in self.holes.items() if hid in ids] if ids else []
         if not others:
             return None
         # each station hole by its most certain vehicle's estimate (the one it shows)
@@ -122,7 +130,7 @@ class Openings:
         if match is not None:
             h = self.holes[match]
             h.vehicles.append(src)
-            self._ids[(sysid, own)] = h.id
+            self._part(sysid, own, h.id)
             return h, src, True
         hid = self.station_id(sysid, own)
         h_old = self.holes.get(hid)
@@ -141,7 +149,7 @@ class Openings:
                 h_old.t_first_unix_ns or now, now,
             )  # fmt: skip
         h_old.vehicles.append(src)
-        self._ids[(sysid, own)] = hid
+        self._part(sysid, own, hid)
         return h_old, src, True
 
     def fold(
@@ -183,7 +191,9 @@ class Openings:
         keep.vehicles += gone.vehicles
         keep.vehicles.sort(key=lambda v: v.t_first_unix_ns)
         for v in gone.vehicles:
-            self._ids[(v.sysid, v.hole_id)] = keep.id
+            self._of[v.sysid].discard(gone.id)
+            self._part(v.sysid, v.hole_id, keep.id)
+        self._parted.discard(gone.id)
         if keep.mark == "new":
             keep.mark = gone.mark
         keep.t_first_unix_ns = min(keep.t_first_unix_ns, gone.t_first_unix_ns)
