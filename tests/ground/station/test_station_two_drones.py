@@ -13,6 +13,8 @@ Chromium (1280 px):
   class docstring of :class:`ground.StationState` gives (the first reporting vehicle's
   ids; the other's first-found holes ``sysid * 1000000 + its id``);
 * no two station holes of different vehicles lie at one opening by the campaign's rule;
+* the shared hole's KML description, GeoJSON properties and CoT remarks name both
+  drones, the first and the last (GDAL reads the KML and GeoJSON);
 * each drone's coverage tiles are kept as its own (``/map.json``'s ``vehicles``, in the
   drone's colour) and drawn when switched on.
 
@@ -27,14 +29,17 @@ import signal
 import subprocess
 import sys
 import urllib.request
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
+import pyogrio
 import pytest
 from test_station import wait_for
 from test_station_review import CHROMIUM, Browser
 
 from holescan.geotag import carry_ids
 from holescan.ground import GroundOptions, GroundStation
+from holescan.ground.station.cot import hole_cot
 from tests._support import free_udp_port
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -129,6 +134,23 @@ def test_two_drones_one_station(tmp_path: Path) -> None:
             own = first.hole_id
             want = own if first.sysid == primary else first.sysid * 1_000_000 + own
             assert h.id == want, (h.id, h.vehicles)
+        # the crew's other tools say which drones saw the shared hole, first and last
+        sh = shared[0]
+        first = min(sh.vehicles, key=lambda v: v.t_first_unix_ns).sysid
+        last = max(sh.vehicles, key=lambda v: v.t_last_unix_ns).sysid
+        info = pyogrio.read_info(f"/vsicurl/{station.web.url}holes.kml")
+        _, _, _, kfields = pyogrio.raw.read(f"/vsicurl/{station.web.url}holes.kml")
+        k = dict(zip(info["fields"], kfields, strict=True))
+        (desc,) = [str(d) for n, d in zip(k["Name"], k["description"], strict=True)
+                   if str(n).startswith(f"hole {sh.id} ")]  # fmt: skip
+        assert f"seen by vehicles {first} + {3 - first} (first {first}, last {last})" in desc
+        with urllib.request.urlopen(station.web.url + "holes.geojson", timeout=5) as r:
+            feats = json.loads(r.read())["features"]
+        (props,) = [f["properties"] for f in feats if f["properties"]["hole_id"] == sh.id]
+        assert sorted(props["vehicles"]) == [1, 2]
+        assert (props["first_vehicle"], props["last_vehicle"]) == (first, last)
+        remarks = ET.fromstring(hole_cot(sh)).findtext("detail/remarks") or ""
+        assert f"(first {first}, last {last})" in remarks
         # the page: holes of both, each vehicle's track in its own colour
         with urllib.request.urlopen(station.web.url + "state.json", timeout=5) as r:
             doc = json.loads(r.read())
