@@ -37,9 +37,7 @@ _WORLDS: dict[int, Any] = {}
 
 def _frame(job: tuple[int, int, str]) -> dict[str, Any]:
     from holescan.detect import DEFAULT, CameraIntrinsics, detect_holes
-    from holescan.sim._camera_model import CameraPose, random_conditions
-    from holescan.sim._render import hole_boxes, render
-    from holescan.sim._world import make_world
+    from holescan.sim import CameraPose, hole_boxes, make_world, random_conditions, render
     from holescan.sim.structured_light import random_motion
 
     wseed, i, mode = job
