@@ -35,6 +35,7 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "occluding edges kept as rim": {"occluder_step_m": 1e9},
     "unread border bands not cut off (frame = read area)": {"bands": False},
     "basins cut by the border spill (not closed)": {"closed_border": False},
+    "no rim-plane test of unread regions (absorbing surfaces)": {"surface_plane": False},
 }
 
 _DATASETS: dict[Path, Any] = {}

@@ -50,6 +50,7 @@ the *basins* of the depth image instead, found at every scale at once:
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -58,6 +59,7 @@ import numpy.typing as npt
 from holescan.detect._calibration import p_hole_of_score
 from holescan.detect._evaluate import overlap
 from holescan.detect._geometry import (
+    Opening,
     disk,
     grow_walls,
     measure_opening,
@@ -73,9 +75,9 @@ from holescan.detect._regions import (
     SHALLOW_M,
     Candidate,
     basin_depth,
+    basin_depths,
     basin_regions,
     block_depth,
-    border_is_bridged,
     no_reading_regions,
     unread_bands,
 )
@@ -86,6 +88,7 @@ from holescan.detect._scores import (
     ramp,
     width_score,
 )
+from holescan.detect._surface import plane_evidence, surface_factor
 from holescan.detect._types import CameraIntrinsics, Detection, DetectParams, FeatureScores
 from holescan.detect._validate import check_frame
 
@@ -124,21 +127,25 @@ DARK_SMOOTH_PX = 5
 # searcher) or dark inside as a hole is (darkness score, likewise): a shallow lit dip
 # running into the border closes that way too.
 BRIDGED_SD = (0.2, 0.35)
+# The rim-plane test (options.surface_plane) only for unread candidates scoring at least
+# this (p_hole ~0.1): below, it could only lower what is not shown anyway.
+SURFACE_GATE = 0.2
 BRIDGED_DARK = (0.1, 0.25)
 
 
-def _nms(dets: list[Detection], iou_max: float, contained: float) -> list[Detection]:
+def _nms(found: list[_Measured], iou_max: float, contained: float) -> list[_Measured]:
     """Suppress overlaps (IoU > ``iou_max``) and containers of a better detection.
 
     A region that holds a higher-scoring one (most of it inside) is a depression or a
     no-reading area around that hole, not a second hole.
     """
-    keep: list[Detection] = []
-    for d in sorted(dets, key=lambda d: -d.score):
-        if all(box_iou(d.box, k.box) <= iou_max for k in keep) and not any(
-            _inside(k.box, d.box) > contained for k in keep
+    keep: list[_Measured] = []
+    for m in sorted(found, key=lambda m: -m.det.score):
+        d = m.det
+        if all(box_iou(d.box, k.det.box) <= iou_max for k in keep) and not any(
+            _inside(k.det.box, d.box) > contained for k in keep
         ):
-            keep.append(d)
+            keep.append(m)
     return keep
 
 
@@ -195,7 +202,7 @@ def _measure(
     params: DetectParams,
     dark_cut: bool = False,
     bridged: bool = False,
-) -> Detection | None:
+) -> _Measured | None:
     """Measure one candidate region and score it; None when it cannot be a hole.
 
     A no-reading blob (not enclosed) must show enough valid rim (not border, not more
@@ -245,19 +252,6 @@ def _measure(
     rim_seen = min(1.0, (n_rim - int(occ.sum())) / (int(ring_all.sum()) + RING_PX * open_px))
     region_uv = (us.astype(np.float64) + x0, vs.astype(np.float64) + y0)
     opening = measure_opening(region_uv, (rim_u, rim_v, rim_zs), f.cam)
-    # Sizes (and so the score) come from the rim's plane; where the opening is, from the
-    # terrain's when the border cuts it.
-    placed, centre = opening, opening.centre
-    if open_px and o.cut_circle:  # cut by the border: the circle through the rim it shows
-        band = (cv2.dilate(big, _TERRAIN_KERNEL) > 0) & ~inside & ~inv_c
-        bv, bu = np.nonzero(band)
-        uv_band = (bu.astype(np.float64) + x0, bv.astype(np.float64) + y0)
-        around = rays_of(*uv_band, f.cam) * zc[band].astype(np.float64)[:, None]
-        plane = terrain_plane(around, rays_of(rim_u, rim_v, f.cam) * rim_zs[:, None])
-        if plane is not None:
-            placed = measure_opening(region_uv, (rim_u, rim_v, rim_zs), f.cam, plane=plane)
-        fitted = rim_circle_centre((rim_u, rim_v, rim_zs), placed, f.cam)
-        centre = placed.centre if fitted is None else fitted
     major, minor_pca, area, rim_z = (
         opening.major_m,
         opening.minor_m,
@@ -310,14 +304,21 @@ def _measure(
     sr = ramp(fill, 0.3, 0.7)
     score = combined_score(sd, sw, sr, sb, sc, o.depth_exponent)
     if beyond:
-        # No reading: a void only if it looks like one (dark against the rubble around it).
+        # No reading: a void only if it looks like one (dark against the rubble around it),
+        # and not a surface that returns no infrared (read islands on its rim plane).
         score *= 0.2 + 0.8 * (void_evidence(rel_in) if o.photometric_evidence else 1.0)
+        if o.surface_plane and score >= SURFACE_GATE:
+            rim_pts = rays_of(rim_u, rim_v, f.cam) * rim_zs[:, None]
+            ev = plane_evidence(
+                inside, zc, ~inv_c, (x0, y0), f.cam, (opening.normal, opening.centre), rim_pts
+            )
+            score *= surface_factor(ev)
     elif bridged:
         score *= max(ramp(sd, *BRIDGED_SD), ramp(sb, *BRIDGED_DARK))
     if score < params.min_score:
         return None
     box = _frame_box((gx0, gy0, gx1, gy1), (ww, hh), f)
-    return Detection(
+    det = Detection(
         box=box,
         score=float(score),
         features=FeatureScores(sd, sw, sr, sb, sc),
@@ -327,11 +328,55 @@ def _measure(
         rim_depth_m=rim_z,
         beyond_range=beyond,
         relative_brightness=round(rel_in, 3) if beyond else None,
-        opening_m=_xyz(centre),
-        rim_normal=_xyz(placed.normal),
+        opening_m=_xyz(opening.centre),
+        rim_normal=_xyz(opening.normal),
         rim_seen=round(max(rim_seen, 0.0), 3),
         border_cut=bool(open_px),
     )
+    # Sizes (and so the score) come from the rim's plane; where the opening is, from the
+    # terrain's when the border cuts it: placed once the detection has outlived NMS.
+    if not (open_px and o.cut_circle):
+        return _Measured(det, None)
+    return _Measured(
+        det, _Cut(opening, region_uv, (rim_u, rim_v, rim_zs), inside, inv_c, zc, (x0, y0))
+    )
+
+
+class _Cut(NamedTuple):
+    """What placing an opening the border cuts needs (:func:`_place`)."""
+
+    opening: Opening
+    region_uv: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]
+    rim_uvz: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]
+    inside: npt.NDArray[np.bool_]
+    invalid: npt.NDArray[np.bool_]
+    zc: npt.NDArray[np.float32]
+    origin: tuple[int, int]
+
+
+class _Measured(NamedTuple):
+    det: Detection
+    cut: _Cut | None
+
+
+def _place(m: _Measured, cam: CameraIntrinsics) -> Detection:
+    """The detection with an opening the border cuts placed at the centre of the circle
+    through the rim it shows, on the plane of the terrain around it (``options.cut_circle``)."""
+    if m.cut is None:
+        return m.det
+    opening, region_uv, rim, inside, invalid, zc, (x0, y0) = m.cut
+    rim_u, rim_v, rim_zs = rim
+    band = (cv2.dilate(inside.astype(np.uint8), _TERRAIN_KERNEL) > 0) & ~inside & ~invalid
+    bv, bu = np.nonzero(band)
+    uv_band = (bu.astype(np.float64) + x0, bv.astype(np.float64) + y0)
+    around = rays_of(*uv_band, cam) * zc[band].astype(np.float64)[:, None]
+    plane = terrain_plane(around, rays_of(rim_u, rim_v, cam) * rim_zs[:, None])
+    placed = opening
+    if plane is not None:
+        placed = measure_opening(region_uv, rim, cam, plane=plane)
+    fitted = rim_circle_centre(rim, placed, cam)
+    centre = placed.centre if fitted is None else fitted
+    return replace(m.det, opening_m=_xyz(centre), rim_normal=_xyz(placed.normal))
 
 
 def _extrude(
@@ -409,7 +454,8 @@ def detect_default(
     grey = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)  # BT.601 Y, as the paper's YUV
     small = cv2.resize(grey, (wf, hf), interpolation=cv2.INTER_AREA)
     y_img = np.asarray(small, np.float64)[top : hf - bottom, left : wf - right] / 255.0
-    pit, invalid, z_far = basin_depth(z, closed_border=False)
+    depths = basin_depths(z, closed_border=o.closed_border)
+    pit, invalid, z_far = depths.spilled, depths.invalid, depths.z_far
     rel = relative_luminance(y_img, ~invalid)
     range_m = max(params.max_range_m, z_far)
     s = params.searcher
@@ -424,11 +470,10 @@ def detect_default(
     # Basins the border cuts, closed there (their rim beyond is unknown): candidates beside
     # the spilled view's (the better-scoring one of a pair wins in NMS).
     bridged: list[Candidate] = []
-    if o.closed_border and border_is_bridged(z):
-        closed, _, _ = basin_depth(z, closed_border=True)
+    if depths.closed is not None:
         bridged = [
             r
-            for r in basin_regions(closed, min_px, o.depression_ratio)
+            for r in basin_regions(depths.closed, min_px, o.depression_ratio)
             if _touches_border(r, z.shape)
         ]
     # The dark part of each spilled no-reading blob: a hole's interior cut from the bright
@@ -440,12 +485,11 @@ def detect_default(
         dark = _unique(no_reading_regions(dark_blobs, pit, min_px, o.neck_radii_px))
 
     frame = _FrameData(z, invalid, y_img, rel, cam, z_far, range_m, factor, bands)
-    dets = [d for r in regions if (d := _measure(r, frame, params)) is not None]
-    dets += [d for r in dark if (d := _measure(r, frame, params, dark_cut=True)) is not None]
-    dets += [d for r in bridged if (d := _measure(r, frame, params, bridged=True)) is not None]
-    return [
-        replace(d, p_hole=p_hole_of_score(d.score)) for d in _nms(dets, params.nms_iou, o.contained)
-    ]
+    found = [m for r in regions if (m := _measure(r, frame, params)) is not None]
+    found += [m for r in dark if (m := _measure(r, frame, params, dark_cut=True)) is not None]
+    found += [m for r in bridged if (m := _measure(r, frame, params, bridged=True)) is not None]
+    kept = _nms(found, params.nms_iou, o.contained)
+    return [replace(d, p_hole=p_hole_of_score(d.score)) for d in (_place(m, cam) for m in kept)]
 
 
 def basin_labels(

@@ -38,6 +38,9 @@ class DefaultOptions:
     contained : NMS drops a detection when this much of a better one's box lies inside it.
     bands : find the unread bands at the frame border and work on the read area inside.
     closed_border : also look at basins the border cuts as closed there.
+    surface_plane : an unread region whose readings well inside its outline lie on its rim
+        plane is a surface that returns no infrared (soot, char, wet), not a void: its
+        score falls (``detect._surface``).
     """
 
     grow_px: int = 4
@@ -54,3 +57,4 @@ class DefaultOptions:
     contained: float = 0.8
     bands: bool = True
     closed_border: bool = True
+    surface_plane: bool = True

@@ -101,17 +101,43 @@ def _bridged(profile: npt.NDArray[np.float64], length: int) -> npt.NDArray[np.fl
     return np.where(deep, closed, profile)
 
 
-def border_is_bridged(z: npt.NDArray[np.float32]) -> bool:
-    """Whether a deep dip crosses the border (so ``basin_depth(z, closed_border=True)``
-    differs from the spilled view)."""
-    if min(z.shape) < 3:
-        return False
+def _heights(z: npt.NDArray[np.float32]) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
+    """``(height, invalid)``: ``-z``, no reading set below every reading."""
+    invalid = np.isnan(z)
     height = -z.astype(np.float64)
-    height[np.isnan(z)] = -(float(np.nanmax(z)) + 1.0)
-    hh, ww = z.shape
-    lw, lh = round(BORDER_BRIDGE * ww), round(BORDER_BRIDGE * hh)
-    lines = ((height[0, :], lw), (height[-1, :], lw), (height[:, 0], lh), (height[:, -1], lh))
-    return any(bool((_bridged(line, n) > line).any()) for line, n in lines)
+    height[invalid] = -(float(np.nanmax(z)) + 1.0)
+    return height, invalid
+
+
+def _border_seed(height: npt.NDArray[np.float64], closed_border: bool) -> npt.NDArray[np.float64]:
+    """The reconstruction's seed: the border's heights (deep dips bridged with
+    ``closed_border``), above every height inside."""
+    seed = height.copy()
+    seed[1:-1, 1:-1] = height.max()
+    if closed_border and min(height.shape) >= 3:
+        hh, ww = height.shape
+        lw, lh = round(BORDER_BRIDGE * ww), round(BORDER_BRIDGE * hh)
+        seed[0, :] = _bridged(height[0, :], lw)
+        seed[-1, :] = _bridged(height[-1, :], lw)
+        seed[:, 0] = np.maximum(seed[:, 0], _bridged(height[:, 0], lh))
+        seed[:, -1] = np.maximum(seed[:, -1], _bridged(height[:, -1], lh))
+    return seed
+
+
+def _fill(
+    seed: npt.NDArray[np.float64], height: npt.NDArray[np.float64]
+) -> npt.NDArray[np.float64]:
+    """Grey-level reconstruction by erosion of ``height`` from ``seed``: every basin filled
+    to its spill level."""
+    return np.asarray(reconstruction(seed, height, method="erosion"), np.float64)  # type: ignore[no-untyped-call]
+
+
+def _pit(
+    filled: npt.NDArray[np.float64], height: npt.NDArray[np.float64], invalid: npt.NDArray[np.bool_]
+) -> npt.NDArray[np.float64]:
+    pit = filled - height
+    pit[invalid & (pit > 0)] = np.inf
+    return pit
 
 
 def basin_depth(
@@ -128,24 +154,65 @@ def basin_depth(
 
     Returns ``(pit, invalid, z_far)`` where ``z_far`` is the farthest reading in the image.
     """
-    invalid = np.isnan(z)
+    height, invalid = _heights(z)
     z_far = float(np.nanpercentile(z, 99.5))  # robust to a few outliers
-    height = -z.astype(np.float64)
-    floor = -(float(np.nanmax(z)) + 1.0)
-    height[invalid] = floor
-    seed = height.copy()
-    seed[1:-1, 1:-1] = height.max()
-    if closed_border and min(z.shape) >= 3:
-        hh, ww = z.shape
-        lw, lh = round(BORDER_BRIDGE * ww), round(BORDER_BRIDGE * hh)
-        seed[0, :] = _bridged(height[0, :], lw)
-        seed[-1, :] = _bridged(height[-1, :], lw)
-        seed[:, 0] = np.maximum(seed[:, 0], _bridged(height[:, 0], lh))
-        seed[:, -1] = np.maximum(seed[:, -1], _bridged(height[:, -1], lh))
-    filled = np.asarray(reconstruction(seed, height, method="erosion"), np.float64)  # type: ignore[no-untyped-call]
-    pit = filled - height
-    pit[invalid & (pit > 0)] = np.inf
-    return pit, invalid, z_far
+    return _pit(_fill(_border_seed(height, closed_border), height), height, invalid), invalid, z_far
+
+
+class BasinDepths(NamedTuple):
+    """Both views of :func:`basin_depth` of one depth image.
+
+    spilled : the pit with basins draining at the border (``closed_border=False``).
+    closed : the pit with deep border dips bridged (``closed_border=True``); None when no
+        deep dip crosses the border (it would equal ``spilled``).
+    invalid : (h, w) bool, no reading.
+    z_far : the farthest reading in the image (99.5th percentile).
+    """
+
+    spilled: npt.NDArray[np.float64]
+    closed: npt.NDArray[np.float64] | None
+    invalid: npt.NDArray[np.bool_]
+    z_far: float
+
+
+def basin_depths(z: npt.NDArray[np.float32], closed_border: bool = True) -> BasinDepths:
+    """:func:`basin_depth` spilled and (with ``closed_border``) closed, for about the cost
+    of one reconstruction, equal to the two computed apart.
+
+    The closed view fills more: it differs from the spilled one only in the lakes it
+    holds against a bridged border dip (the spilled view's lakes never reach the border,
+    where the seed is the height itself). Such a lake drains through its dip in the
+    spilled view; everywhere else the two views agree. So the full reconstruction is the
+    closed one, and the spilled view is that one with each lake touching the border
+    reconstructed again inside its box, from the closed fill (above the spilled one, so the
+    reconstruction from it comes down to it) with the border unbridged: the lake's
+    neighbours lie at their own height in both views, so the box holds all it depends on.
+    """
+    height, invalid = _heights(z)
+    z_far = float(np.percentile(z[~invalid], 99.5))  # robust to a few outliers
+    spilled_seed = _border_seed(height, False)
+    closed_seed = _border_seed(height, closed_border)
+    if not closed_border or np.array_equal(closed_seed, spilled_seed):
+        return BasinDepths(_pit(_fill(spilled_seed, height), height, invalid), None, invalid, z_far)
+    closed = _fill(closed_seed, height)
+    lake = closed > height
+    edge = np.zeros_like(lake)
+    edge[[0, -1], :] = True
+    edge[:, [0, -1]] = True
+    _, lab, stats = components(lake)
+    spilled = closed.copy()
+    hh, ww = height.shape
+    for i in np.unique(lab[lake & edge]):
+        x, y = int(stats[i, cv2.CC_STAT_LEFT]), int(stats[i, cv2.CC_STAT_TOP])
+        w, h = int(stats[i, cv2.CC_STAT_WIDTH]), int(stats[i, cv2.CC_STAT_HEIGHT])
+        win = (slice(max(0, y - 1), min(hh, y + h + 1)), slice(max(0, x - 1), min(ww, x + w + 1)))
+        start = closed[win].copy()
+        start[edge[win]] = height[win][edge[win]]  # the border drains again
+        own = lab[win] == i
+        spilled[win][own] = _fill(start, height[win])[own]
+    return BasinDepths(
+        _pit(spilled, height, invalid), _pit(closed, height, invalid), invalid, z_far
+    )
 
 
 Region = tuple[npt.NDArray[np.bool_], tuple[int, int, int, int]]
@@ -270,15 +337,22 @@ def no_reading_regions(
         else:
             opened = inv_u8
         n, lab, stats = components(opened)
+        hh, ww = invalid.shape
         for i in range(1, n):
             if stats[i, cv2.CC_STAT_AREA] < min_px:
                 continue
-            blob = (lab == i).astype(np.uint8)
+            # The blob grown back by r stays within its box widened by r.
+            x, y = int(stats[i, cv2.CC_STAT_LEFT]), int(stats[i, cv2.CC_STAT_TOP])
+            w, h = int(stats[i, cv2.CC_STAT_WIDTH]), int(stats[i, cv2.CC_STAT_HEIGHT])
+            x0, y0 = max(0, x - r), max(0, y - r)
+            win = (slice(y0, min(hh, y + h + r)), slice(x0, min(ww, x + w + r)))
+            blob = (lab[win] == i).astype(np.uint8)
             if r:
-                blob = np.asarray(cv2.dilate(blob, k), np.uint8) & inv_u8
-            if not (blob.astype(bool) & spilled).any():
+                blob = np.asarray(cv2.dilate(blob, k), np.uint8) & inv_u8[win]
+            if not (blob.astype(bool) & spilled[win]).any():
                 continue  # an enclosed pit: basin_regions has it
             _, lab2, stats2 = components(blob)
             j = int(np.argmax(stats2[1:, cv2.CC_STAT_AREA])) + 1
-            regions.append(Candidate(*_crop(lab2, stats2, j), False))
+            mask, (bx, by, bw, bh) = _crop(lab2, stats2, j)
+            regions.append(Candidate(mask, (bx + x0, by + y0, bw, bh), False))
     return regions

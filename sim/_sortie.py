@@ -163,6 +163,35 @@ def true_holes(world: RubbleWorld, anchor: WorldAnchor) -> tuple[TrueHole, ...]:
     return tuple(out)
 
 
+def _loop_corners(
+    corners: Sequence[tuple[float, float]], turn_radius_m: float
+) -> list[tuple[float, float]]:
+    """The survey's corners as a closed loop the simulated vehicle can fly lap after lap.
+
+    An area small enough for one survey line (its width within one camera footprint) plans
+    a single straight line, which is no loop: the vehicle then flies it out and comes back
+    on a parallel leg two turn radii to its left (a racetrack), so the line is flown in
+    both directions and the turns stay as wide as elsewhere.
+
+    >>> _loop_corners([(0.0, 0.0), (3.0, 0.0)], 1.0)
+    [(0.0, 0.0), (3.0, 0.0), (3.0, 2.0), (0.0, 2.0)]
+    """
+    pts: list[tuple[float, float]] = []
+    for q in corners:
+        if not pts or math.dist(q, pts[-1]) > 1e-3:
+            pts.append(q)
+    if len(pts) > 1 and math.dist(pts[0], pts[-1]) <= 1e-3:
+        pts.pop()
+    if len(pts) >= 3:
+        return pts
+    if len(pts) < 2:
+        raise InputError("the survey plan has no line to fly: the area is empty")
+    (x0, y0), (x1, y1) = pts
+    length = math.dist(pts[0], pts[1])
+    ox, oy = -(y1 - y0) / length * 2.0 * turn_radius_m, (x1 - x0) / length * 2.0 * turn_radius_m
+    return [(x0, y0), (x1, y1), (x1 + ox, y1 + oy), (x0 + ox, y0 + oy)]
+
+
 def _rounded(points: Sequence[tuple[float, float]], radius: float, step: float) -> np.ndarray:
     """A closed polyline (N, 2) with each corner replaced by a tangent arc, densified.
 
@@ -226,7 +255,11 @@ def survey_path(world: RubbleWorld, p: SortieParams) -> tuple[SurveyPlan, SimPat
         ),
     )
     corners = [a.to_world(w.lat_deg, w.lon_deg, a.alt_m)[:2] for w in plan.path]
-    xy = _rounded([(float(c[0]), float(c[1])) for c in corners], p.turn_radius_m, 0.5)
+    xy = _rounded(
+        _loop_corners([(float(c[0]), float(c[1])) for c in corners], p.turn_radius_m),
+        p.turn_radius_m,
+        0.5,
+    )
     waypoints = []
     for x, y in xy:
         lat, lon, _ = a.to_geodetic(float(x), float(y), 0.0)

@@ -16,8 +16,10 @@ the statistics of this model's frames with the real ones):
 * the correlation window **fattens** the nearer surface by 1-2 px, and **flying pixels**
   (values between the two plateaus) sit at 1-18 % of the edge crossings;
 * **IR dropouts**: surfaces that absorb the pattern (soot, char, wet or black material;
-  ``Surface.ir_unread``) lose that fraction of their pixels in ragged blobs; grazing
-  surfaces (incidence cosine below ~0.1-0.25) lose theirs;
+  ``Surface.ir_unread``) lose that fraction of each patch's pixels as on real frames: in
+  connected clumps (a field correlated over ~``dropout_clump_px``, ragged at its edges)
+  that leave islands of readings on the patch, not scattered specks; grazing surfaces
+  (incidence cosine below ~0.1-0.25) lose theirs;
 * **RGB-to-depth misregistration** (a 1-4 px shift and ~1 % scale) plus the depth/colour
   **time offset** (up to ~16 ms) times the image motion;
 * **unread registration bands** at the frame border (right 24-43 px, top 8-14, bottom
@@ -102,8 +104,12 @@ class StructuredLight:
     max_time_offset_s: float = 0.016
     #: Incidence cosine below which a surface returns nothing (drawn per frame).
     grazing_cos: Range = (0.1, 0.25)
-    #: Correlation length of absorbing-surface dropouts, pixels.
-    dropout_blob_px: float = 3.0
+    #: Correlation length of absorbing-surface dropouts (the clumps), pixels, drawn per
+    #: frame, and the weight of a fine ragged component (~``dropout_ragged_px``) at their
+    #: edges.
+    dropout_clump_px: Range = (10.0, 18.0)
+    dropout_ragged_px: float = 2.5
+    dropout_ragged_weight: float = 0.35
     min_range_m: float = 0.5
     max_range_m: float = 4.0
     #: Readings thin out from here to ``max_range_m`` (the pattern fades).
@@ -166,6 +172,8 @@ class FrameDraws:
     shift_px: tuple[float, float]
     scale: float
     time_offset_s: float
+    #: Correlation length of this frame's absorbing-surface dropout clumps.
+    dropout_clump_px: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -393,23 +401,54 @@ def _read(
     return out
 
 
-def _blobs(
-    shape: tuple[int, int], where: npt.NDArray[np.bool_], corr_px: float, rng: np.random.Generator
-) -> F32:
-    """Smooth noise with blobs ~corr_px, uniformly distributed in [0, 1] over the pixels of
-    ``where`` (rank-transformed there; 1 elsewhere)."""
+def _smooth_field(shape: tuple[int, int], corr_px: float, rng: np.random.Generator) -> F32:
+    """Zero-mean smooth noise with features ~``corr_px`` (bilinear upsampling of white noise
+    on a grid that coarse), unit variance."""
     h, w = shape
     s = max(corr_px, 1.0)
-    small = rng.standard_normal((max(2, math.ceil(h / s)), max(2, math.ceil(w / s))))
-    smooth = cv2.resize(small.astype(np.float32), (w, h), interpolation=cv2.INTER_LINEAR)
-    idx = np.flatnonzero(where.ravel())
-    vals = np.asarray(smooth, np.float32).ravel()[idx]
-    vals += np.float32(0.2) * rng.standard_normal(idx.size, dtype=np.float32)
+    small = rng.standard_normal((max(2, math.ceil(h / s) + 1), max(2, math.ceil(w / s) + 1)))
+    big = cv2.resize(small.astype(np.float32), (w, h), interpolation=cv2.INTER_LINEAR)
+    out = np.asarray(big, np.float32)
+    sd = float(out.std())
+    return out / np.float32(sd if sd > 0 else 1.0)
+
+
+def _clumps(
+    where: npt.NDArray[np.bool_],
+    clump_px: float,
+    ragged_px: float,
+    ragged_weight: float,
+    rng: np.random.Generator,
+) -> F32:
+    """Per pixel of ``where`` its rank in [0, 1] within its own connected patch of a field
+    correlated over ``clump_px`` (with a ragged ``ragged_px`` component); 1 elsewhere.
+
+    ``rank < f`` then drops exactly the fraction ``f`` of every patch, as connected clumps
+    around the field's lows with read islands at its highs.
+    """
+    h, w = where.shape
+    ys, xs = np.nonzero(where)
+    y0, y1, x0, x1 = int(ys.min()), int(ys.max()) + 1, int(xs.min()), int(xs.max()) + 1
+    sub = where[y0:y1, x0:x1]
+    shape = (y1 - y0, x1 - x0)
+    field = _smooth_field(shape, clump_px, rng)
+    field += np.float32(ragged_weight) * _smooth_field(shape, ragged_px, rng)
+    n, lab = cv2.connectedComponents(sub.astype(np.uint8), connectivity=8)
+    lab = np.asarray(lab, np.int32)
+    idx = np.flatnonzero(sub.ravel())
+    labels = lab.ravel()[idx]
+    vals = field.ravel()[idx]
+    order = np.lexsort((vals, labels))  # by patch, then by value
+    counts = np.bincount(labels, minlength=n).astype(np.float64)
+    start = np.concatenate([[0.0], np.cumsum(counts)[:-1]])
+    pos = np.arange(idx.size, dtype=np.float64) - start[labels[order]]
     ranks = np.empty(idx.size, np.float32)
-    ranks[np.argsort(vals, kind="stable")] = (np.arange(idx.size) + 0.5) / max(idx.size, 1)
-    out = np.ones(h * w, np.float32)
-    out[idx] = ranks
-    return out.reshape(h, w)
+    ranks[order] = ((pos + 0.5) / counts[labels[order]]).astype(np.float32)
+    out = np.ones((h, w), np.float32)
+    part = np.ones(shape, np.float32).ravel()
+    part[idx] = ranks
+    out[y0:y1, x0:x1] = part.reshape(shape)
+    return out
 
 
 def _motion_blur(rgb: U8, velocity: tuple[float, float], exposure_s: float) -> U8:
@@ -471,6 +510,7 @@ def structured_light_frame(
     fly = float(rng.uniform(*p.flying_fraction))
     noise_frac = float(rng.uniform(*p.noise_fraction))
     graze = float(rng.uniform(*p.grazing_cos))
+    clump = float(rng.uniform(*p.dropout_clump_px))
     mag = float(rng.uniform(*p.misregistration_px)) * k
     ang = float(rng.uniform(0.0, 2 * math.pi))
     scale = 1.0 + float(rng.uniform(-p.misregistration_scale, p.misregistration_scale))
@@ -487,6 +527,7 @@ def structured_light_frame(
         shift_px=(round(mag * math.cos(ang), 3), round(mag * math.sin(ang), 3)),
         scale=round(scale, 5),
         time_offset_s=round(dt, 5),
+        dropout_clump_px=round(clump * max(k, 0.25), 2),
     )
 
     # Surfaces that return nothing: grazing, absorbing; judged on the true geometry.
@@ -498,8 +539,14 @@ def structured_light_frame(
         unread = np.clip(np.asarray(s.ir_unread, np.float32), 0.0, 1.0)
         absorbing = unread > 0
         if absorbing.any():
-            blobs = _blobs(z.shape, absorbing, p.dropout_blob_px * max(k, 0.25), rng)
-            drop |= blobs < unread
+            ranks = _clumps(
+                absorbing,
+                clump * max(k, 0.25),
+                p.dropout_ragged_px * max(k, 0.25),
+                p.dropout_ragged_weight,
+                rng,
+            )
+            drop |= ranks < unread
     # The correlation window: the nearer surface fattens, some crossings fly.
     zf = _fatten(z, fat)
     zf, flying = _flying(zf, fly, rng)

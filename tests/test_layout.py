@@ -81,7 +81,14 @@ def test_an_install_adds_no_import_name_but_holescan(tmp_path: Path) -> None:
     # Every subpackage is inside, with its data files.
     for sub in (*PACKAGES[:-1], "cli"):
         assert f"holescan/{sub}/__init__.py" in names, sub
-    for name in ("station.html", "station.js", "station.css", "review.js", "maplayers.js"):
+    for name in (
+        "station.html",
+        "station.js",
+        "station.css",
+        "review.js",
+        "maplayers.js",
+        "mapview.js",
+    ):
         assert f"holescan/ground/station/static/{name}" in names, name
     assert "holescan/ground/report/report.css" in names
     assert "holescan/mapping/recall_table.json" in names

@@ -49,6 +49,8 @@ class FlightResult:
     flight_matches : each hole the flight found (announced or for review) and the
         reprocessed hole with its id (indices into ``flight found`` and :attr:`holes`;
         distance between them); flight_same_ids : of those, found again.
+    flight_tiers : the tiers the flight itself gave its holes (its last record; empty for
+        a log that predates recorded tiers); :attr:`tier_changes` compares them.
     truncated : files cut off or damaged, in words (read up to their last good chunk).
     interrupted : stopped early; the outputs hold what was done.
     partitions, partitions_cached : tasks of this flight, and how many came from the cache.
@@ -74,6 +76,7 @@ class FlightResult:
     flight_holes: tuple[Hole, ...]
     flight_matches: tuple[HoleMatch, ...]
     flight_same_ids: int
+    flight_tiers: Mapping[int, str]
     truncated: tuple[str, ...]
     interrupted: bool
     partitions: int
@@ -94,6 +97,21 @@ class FlightResult:
         """The holes the crew's files hold: found ones and those an operator rejected
         (shown as rejected); never candidates."""
         return tuple(h for h in self.holes if self.tiers.get(h.id, "candidate") != "candidate")
+
+    @property
+    def tier_changes(self) -> tuple[tuple[int, str, str], ...]:
+        """(hole id, the flight's tier, the reprocessed tier) of each of the flight's holes
+        whose tier differs now, by id: a candidate the flight never showed that now reaches
+        the crew, a hole it delivered that no longer passes (or is no longer found: "not
+        found"). Holes only reprocessing found are :attr:`new_ids`, not here. Empty for a
+        log that predates recorded tiers (nothing to compare with)."""
+        now = {h.id: self.tiers.get(h.id, "candidate") for h in self.holes}
+        changes = []
+        for i, before in sorted(self.flight_tiers.items()):
+            after = now.get(i, "not found")
+            if before != after and not (before == "candidate" and after == "not found"):
+                changes.append((i, before, after))
+        return tuple(changes)
 
     @property
     def frames_per_s(self) -> float:
@@ -122,6 +140,9 @@ class FlightResult:
             "flight_reproduced": len(found),
             "flight_same_ids": self.flight_same_ids,
             "flight_max_offset_m": max((m.distance_m for m in found), default=None),
+            "tier_changes": [
+                {"hole_id": i, "flight": a, "reprocessed": b} for i, a, b in self.tier_changes
+            ],
             "truncated": list(self.truncated),
             "interrupted": self.interrupted,
             "partitions": self.partitions,
@@ -161,6 +182,11 @@ class FlightResult:
             + "; found only by reprocessing: "
             + (", ".join(f"hole {i}" for i in self.new_ids) or "none"),
         ]
+        if self.tier_changes:
+            out.append(
+                "  tiers changed from the flight's: "
+                + ", ".join(f"hole {i} {a} -> {b}" for i, a, b in self.tier_changes)
+            )
         out += [f"  {t}" for t in self.truncated]
         out += list(self.map_lines)
         out += [f"  wrote {path} ({kind})" for kind, path in self.files]

@@ -262,6 +262,7 @@ def _flight_outputs(
         new_ids=tuple(fl.id_map.new_ids) if fl is not None and fl.id_map is not None else (),
         flight_holes=flight_holes,
         flight_matches=tuple(matches),
+        flight_tiers=dict(told) if fl is not None and fl.flight_gate is not None else {},
         flight_same_ids=sum(
             m.found is not None and tiers[holes[m.found].id] in FOUND_TIERS for m in matches
         ),

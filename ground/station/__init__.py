@@ -3,7 +3,9 @@
 * :mod:`.app` - :class:`GroundStation` / :func:`run_ground`, the app composed;
 * :mod:`.link` - :class:`VehicleLink`, the vehicle's MAVLink stream (holes, cards, the hole
   mission, the track);
-* :mod:`.state` - :class:`StationState`, everything learnt, kept in ``DIR/station.json``;
+* :mod:`.state` - :class:`StationState`, everything learnt, kept in ``DIR/station.json``
+  (:mod:`.statefile`); :mod:`.records` - a hole, a vehicle's part in it, a track point;
+  :mod:`.openings` - several vehicles' holes, one id per opening;
 * :mod:`.files` - KML/GeoJSON/GPX always current; :mod:`.cot` - holes as TAK CoT;
   :mod:`.tak` - the link to TAK (mesh, TAK server over TCP/TLS); :mod:`.datapackage` -
   the TAK data package with the pictures;
@@ -38,13 +40,13 @@ from holescan.ground.station.files import hole_summary, hole_waypoint, write_sta
 from holescan.ground.station.guard import Limits
 from holescan.ground.station.link import VehicleLink
 from holescan.ground.station.pairing import Pairing, Pairings
-from holescan.ground.station.state import (
+from holescan.ground.station.records import (
     MARKS,
     GroundHole,
-    StationState,
     TrackPoint,
     parse_hole_statustext,
 )
+from holescan.ground.station.state import StationState
 from holescan.ground.station.tak import (
     DEFAULT_COT_URL,
     CotError,

@@ -44,7 +44,8 @@ from holescan.ground.station.files import write_station_files
 from holescan.ground.station.link import VehicleLink
 from holescan.ground.station.mapstore import MapStore
 from holescan.ground.station.pairing import Pairing, Pairings, check_operator
-from holescan.ground.station.state import GroundHole, StationState
+from holescan.ground.station.records import GroundHole
+from holescan.ground.station.state import StationState
 from holescan.ground.station.tak import DEFAULT_COT_URL, CotPublisher, TakTls, tak_settings
 from holescan.ground.station.web import StationWeb
 from holescan.link import SigningKey
@@ -229,10 +230,12 @@ class GroundStation:
         self._flush()
 
     def _vehicles(self, h: GroundHole) -> list[int]:
-        """The vehicles that reported hole ``h``: this station follows one, its system id
-        once heard (empty before)."""
-        link = self.link
-        return [] if link is None or link.sysid is None else [link.sysid]
+        """The vehicles that reported hole ``h``, in the order they first did; a hole of
+        an older state file (vehicles not told apart): the station's first vehicle."""
+        if h.vehicles:
+            return h.sysids
+        primary = self.state.primary_sysid
+        return [] if primary is None else [primary]
 
     def mark(self, hole_id: int, mark: str) -> GroundHole:
         """The operator's mark, in the state; TAK and the files follow on the station's

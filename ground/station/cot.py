@@ -14,9 +14,11 @@ Each hole is one CoT event:
   and reads it as a circle to search, so the conservative circle is sent and the 1-sigma
   figure is in the remarks. ``le`` = 9999999 (the vertical error is not modelled);
 * ``detail``: ``contact callsign`` "HOLE <id>", ``remarks`` starting with the tier, then
-  size, score, sightings, uncertainty, the detector's "why", the operator's mark and the
-  point's age (first seen / last updated, from ``now``); a ``holescan`` element with the
-  same facts as attributes (tier, mark, score, sightings, sigma, times) for tools; a
+  size, score, sightings, uncertainty, the vehicles that saw it (first and last), the
+  detector's "why", the operator's mark and the point's age (first seen / last updated,
+  from ``now``); a ``holescan`` element with the same facts as attributes (tier, mark,
+  score, sightings, sigma, times, ``vehicles``, ``first_vehicle``, ``last_vehicle``) for
+  tools; a
   ``link`` to the picture's URL on the station's web page when one is served; a
   ``color`` by tier;
 * ``stale``: ``stale_s`` after ``now`` (the time the event is made, never the first
@@ -44,7 +46,7 @@ import xml.etree.ElementTree as ET
 
 from holescan.geotag import CIRCLE_95_PER_SIGMA
 from holescan.ground.station.files import hole_summary
-from holescan.ground.station.state import TIERS, GroundHole, Tier
+from holescan.ground.station.records import TIERS, GroundHole, Tier
 from holescan.link import xml_safe_tree
 from holescan.utc import utc_datetime, utc_text
 
@@ -175,6 +177,10 @@ def hole_cot(
         facts["score"] = f"{h.score:.3f}"
     if h.sigma_h_m is not None:
         facts["sigma_h_m"] = f"{h.sigma_h_m:.3f}"
+    first_last = h.first_last
+    if first_last is not None:  # system ids: numbers the link checked (1..255)
+        facts["vehicles"] = " ".join(map(str, h.sysids))
+        facts["first_vehicle"], facts["last_vehicle"] = (str(s) for s in first_last)
     if h.t_first_unix_ns > 0:
         facts["first_seen"] = utc_text(h.t_first_unix_ns)
     if h.t_updated_unix_ns > 0:

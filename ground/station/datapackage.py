@@ -34,7 +34,7 @@ from pathlib import Path
 from holescan.errors import InputError
 from holescan.geotag import Hole
 from holescan.ground.station.cot import cot_uid, hole_cot, hole_tier, on_tak
-from holescan.ground.station.state import GroundHole
+from holescan.ground.station.records import GroundHole
 from holescan.link import xml_safe_tree
 from holescan.outputs import atomic_output
 

@@ -5,14 +5,17 @@ guard as the page (Host check, rate limit, no cross-site browser reads):
 
 * ``GET /holes.geojson`` the holes not rejected, one Point feature each (RFC 7946
   ``[lon, lat]``) with ``hole_id``, ``tier``, ``p_hole``, ``vehicles`` (the system ids of
-  the vehicles that reported it, as the station knows them), the facts of the station's
+  the vehicles that reported it, in the order they first did), ``first_vehicle`` and
+  ``last_vehicle`` (which reported it first and last), the facts of the station's
   ``holes.geojson`` file and ``picture``: the hole's picture at the station's public URL;
 * ``GET /gaps.geojson`` where the live map's coverage is below one half: one Polygon
   feature per gap (``area_m2``, ``mean_coverage``) and the surveyed area (the hull of what
   was seen, with the searched fraction), made by :func:`ground.searchmap.find_gaps` from
   the combined live map (:mod:`ground.station.mapcombine`), at most once every
   ``min_interval_s`` however often it is polled;
-* ``GET /holes.kml`` the same holes as KML 2.2 placemarks, each picture at the public URL;
+* ``GET /holes.kml`` the same holes as KML 2.2 placemarks, each picture at the public URL,
+  the vehicles that saw it in its description ("seen by vehicles 1 + 2 (first 1, last 2)")
+  and in its ExtendedData;
 * ``GET /holes_live.kml`` a KML NetworkLink to ``/holes.kml`` at the public URL that
   Google Earth reloads every ``refresh_s`` (``refreshMode onInterval``).
 
@@ -38,7 +41,7 @@ from holescan.geotag import LocalFrame
 from holescan.ground.searchmap import find_gaps, gaps_document
 from holescan.ground.station.files import hole_points, kml_points, network_link_kml
 from holescan.ground.station.mapcombine import Combined, CombinedCache
-from holescan.ground.station.state import GroundHole
+from holescan.ground.station.records import GroundHole
 from holescan.mapping import MapGrid, MapLayers
 from holescan.missions import geojson_document, kml_document
 

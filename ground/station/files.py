@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from holescan.geotag import CIRCLE_95_PER_SIGMA
-from holescan.ground.station.state import GroundHole
+from holescan.ground.station.records import GroundHole
 from holescan.missions import (
     MAV_FRAME_GLOBAL,
     MAV_FRAME_GLOBAL_RELATIVE_ALT,
@@ -40,13 +40,35 @@ __all__ = [
     "hole_waypoint",
     "kml_points",
     "network_link_kml",
+    "seen_by",
     "write_station_files",
 ]
 
 
-def hole_summary(h: GroundHole, *, why: bool = True) -> str:
-    """One line: size, score, sightings, uncertainty, operator's mark, and (``why``) the
-    detector's explanation."""
+def seen_by(h: GroundHole) -> str:
+    """Which vehicles reported the hole: ``seen by vehicle 2``, ``seen by vehicles 1 + 2
+    (first 1, last 2)``; empty when not known (system ids: numbers the link checked).
+
+    >>> from holescan.ground.station.records import HoleSource
+    >>> h = GroundHole(7, 43.6, -79.4, vehicles=[HoleSource(1, 7, 43.6, -79.4)])
+    >>> seen_by(h)
+    'seen by vehicle 1'
+    >>> h.vehicles.append(HoleSource(2, 3, 43.6, -79.4, t_first_unix_ns=5, t_last_unix_ns=5))
+    >>> seen_by(h)
+    'seen by vehicles 1 + 2 (first 1, last 2)'
+    """
+    got = h.first_last
+    if got is None:
+        return ""
+    ids = h.sysids
+    if len(ids) == 1:
+        return f"seen by vehicle {ids[0]}"
+    return f"seen by vehicles {' + '.join(map(str, ids))} (first {got[0]}, last {got[1]})"
+
+
+def hole_summary(h: GroundHole, *, why: bool = True, vehicles: bool = True) -> str:
+    """One line: size, score, sightings, uncertainty, (``vehicles``) which vehicles saw it,
+    operator's mark, and (``why``) the detector's explanation."""
     parts = [f"hole {h.id}"]
     if h.score is not None:
         parts.append(f"best frame's score {h.score:.2f}")
@@ -56,6 +78,8 @@ def hole_summary(h: GroundHole, *, why: bool = True) -> str:
         parts.append(f"seen in {h.sightings} frames")
     if h.sigma_h_m is not None:
         parts.append(f"within {CIRCLE_95_PER_SIGMA * h.sigma_h_m:.2f} m (95 %)")
+    if vehicles and h.vehicles:
+        parts.append(seen_by(h))
     parts.append(f"operator: {h.mark}")
     text = ", ".join(parts)
     return f"{text}. {h.why}" if h.why and why else text
@@ -75,6 +99,10 @@ def hole_waypoint(h: GroundHole, image_src: str | None = None) -> Waypoint:
         "minor_m": h.minor_m,
         "why": h.why,
     }
+    first_last = h.first_last
+    if first_last is not None:
+        props["vehicles"] = h.sysids
+        props["first_vehicle"], props["last_vehicle"] = first_last
     p = "unknown" if h.p_hole is None else f"{h.p_hole:.2f}"
     desc = f"{h.tier}, p_hole {p}: {hole_summary(h)}"
     if image_src is not None:

@@ -49,7 +49,8 @@ from collections.abc import Callable
 from typing import Any
 
 from holescan.ground.station.mapstore import MapStore
-from holescan.ground.station.state import StationState, TrackPoint
+from holescan.ground.station.records import TrackPoint
+from holescan.ground.station.state import StationState
 from holescan.link import (
     LinkValueError,
     MavConnection,
@@ -319,7 +320,7 @@ class VehicleLink:
             if card is not None and is_map_tile(card):
                 self.tiles_received += 1
                 if self.map_store is not None:
-                    self.map_store.put(card)
+                    self.map_store.put(card, peer.sysid)
             elif card is not None:
                 facts = read_card(card)
                 if facts is None:
@@ -390,7 +391,7 @@ class VehicleLink:
 
     def _request_cards(self, peer: _Peer) -> None:
         self.resync_requests += 1
-        inv = self.map_store.inventory() if self.map_store is not None else None
+        inv = self.map_store.inventory(peer.sysid) if self.map_store is not None else None
         if inv is not None:  # first what it holds: only the other tiles come again
             self._send(lambda mav: send_inventory(mav, inv))
         self._send(

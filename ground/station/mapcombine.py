@@ -13,7 +13,10 @@ sampled at the nearest cell) and combines them per cell:
   tie, the later flight).
 
 The page draws the combined tiles (``/map/all/...``, :mod:`ground.station.maplayers`),
-one image per tile place whatever the number of flights.
+one image per tile place whatever the number of flights: the crew's "where did we look",
+every vehicle's flights together (the live gaps are this map's: not searched by any
+vehicle). Each vehicle's own flights combine the same way on the same grid
+(``sysid``; ``/map/vSYSID/...``), so that its layer lies exactly over the combined one.
 """
 
 from __future__ import annotations
@@ -69,15 +72,27 @@ def _base(tiles: list[StoredTile]) -> TileFacts:
     return min(tiles, key=lambda t: t.seq).facts
 
 
-def combined_places(store: MapStore) -> tuple[TileFacts, dict[tuple[int, int], tuple[int, bool]]]:
-    """The base grid and, per base tile (tx, ty) any kept tile overlaps: (the newest
-    arrival among them, :attr:`StoredTile.seq`; whether an orthophoto tile is among
-    them). Cheap (no picture decoded): what ``/map.json`` lists. Raises ValueError when
-    the store is empty."""
-    tiles = store.tiles()
+def _tiles(store: MapStore, sysid: int | None) -> tuple[TileFacts, list[StoredTile]] | None:
+    """The base grid (the first tile of every vehicle's) and the tiles of vehicle
+    ``sysid`` (None: every tile); None when there are none."""
+    every = store.tiles()
+    tiles = every if sysid is None else [t for t in every if t.sysid == sysid]
     if not tiles:
+        return None
+    return _base(every), tiles
+
+
+def combined_places(
+    store: MapStore, sysid: int | None = None
+) -> tuple[TileFacts, dict[tuple[int, int], tuple[int, bool]]]:
+    """The base grid and, per base tile (tx, ty) any kept tile (of vehicle ``sysid``;
+    None: of any) overlaps: (the newest arrival among them, :attr:`StoredTile.seq`;
+    whether an orthophoto tile is among them). Cheap (no picture decoded): what
+    ``/map.json`` lists. Raises ValueError when there is no such tile."""
+    got = _tiles(store, sysid)
+    if got is None:
         raise ValueError("no map tiles")
-    base = _base(tiles)
+    base, tiles = got
     out: dict[tuple[int, int], tuple[int, bool]] = {}
     shifts: dict[tuple[float, float], tuple[float, float]] = {}
     for t in tiles:
@@ -98,12 +113,14 @@ def _span(rs: npt.NDArray[np.intp], cs: npt.NDArray[np.intp]) -> tuple[slice, sl
     return slice(int(rs[0]), int(rs[-1]) + 1), slice(int(cs[0]), int(cs[-1]) + 1)
 
 
-def combine(store: MapStore) -> Combined | None:
-    """Every map of ``store`` combined on the base grid (None: no tiles)."""
-    tiles = store.tiles()
-    if not tiles:
+def combine(store: MapStore, sysid: int | None = None) -> Combined | None:
+    """Every map of ``store`` (of vehicle ``sysid``; None: of every vehicle) combined on
+    the base grid (None: no tiles)."""
+    picked = _tiles(store, sysid)
+    if picked is None:
         return None
-    base, places = combined_places(store)
+    tiles = picked[1]
+    base, places = combined_places(store, sysid)
     n, cb = base.n, base.cell_m
     tx0 = min(p[0] for p in places)
     tx1 = max(p[0] for p in places)
@@ -116,9 +133,9 @@ def combine(store: MapStore) -> Combined | None:
     # the base cells' centres, east and north in the base map's metres
     east = (tx0 * n + np.arange(w) + 0.5) * cb
     north = ((ty1 + 1) * n - np.arange(h) - 0.5) * cb
-    by_map: dict[int, list[StoredTile]] = {}
+    by_map: dict[tuple[int, int], list[StoredTile]] = {}  # (vehicle, map): one flight
     for t in tiles:
-        by_map.setdefault(t.facts.map_id, []).append(t)
+        by_map.setdefault((t.sysid, t.facts.map_id), []).append(t)
     # the later flights last: they win ties for the orthophoto
     for _, group in sorted(by_map.items(), key=lambda kv: min(t.seq for t in kv[1])):
         f0 = group[0].facts
@@ -162,10 +179,12 @@ def combine(store: MapStore) -> Combined | None:
 
 
 class CombinedCache:
-    """:func:`combine` of a store, computed again only when the store changed."""
+    """:func:`combine` of a store (of vehicle ``sysid``; None: every vehicle), computed
+    again only when the store changed."""
 
-    def __init__(self, store: MapStore) -> None:
+    def __init__(self, store: MapStore, sysid: int | None = None) -> None:
         self.store = store
+        self.sysid = sysid
         self._lock = threading.Lock()
         self._version = -1
         self._combined: Combined | None = None
@@ -174,6 +193,6 @@ class CombinedCache:
         with self._lock:
             if self._version != self.store.version:
                 version = self.store.version
-                self._combined = combine(self.store)
+                self._combined = combine(self.store, self.sysid)
                 self._version = version
             return self._combined

@@ -1,12 +1,14 @@
 """The ground station's copy of the flight's live map: the tiles as they came, on disk.
 
-Each map tile the vehicle sends (:mod:`missions._maptiles`: coverage PNG, orthophoto JPEG,
+Each map tile a vehicle sends (:mod:`missions._maptiles`: coverage PNG, orthophoto JPEG,
 each carrying its own facts) is kept as received in ``DIR/map/`` as
-``m<map>-<layer>-<tx>_<ty>.png|jpg``, written through the output-path rule
-(:func:`outputs.atomic_output`: ``.part``, fsync, rename), only when it is newer than the
-one kept. There is no index to keep consistent: a restarted station reads the folder back
-(each file names itself in its facts); a damaged or foreign file there is skipped with one
-log line.
+``v<sysid>-m<map>-<layer>-<tx>_<ty>.png|jpg`` (``sysid``: the vehicle's MAVLink system id;
+a folder of an older station holds ``m<map>-...`` files, whose vehicle is not known: 0,
+and a vehicle's newer tile of the same place takes over from such a file), written through
+the output-path rule (:func:`outputs.atomic_output`: ``.part``, fsync, rename), only when
+it is newer than the one kept. There is no index to keep consistent: a restarted station
+reads the folder back (each file names itself in its facts); a damaged or foreign file
+there is skipped with one log line.
 
 Several flights are drawn on the grid of the first tile kept (the *base*,
 :mod:`ground.station.mapcombine`). A tile whose place on that grid would make the
@@ -42,6 +44,7 @@ __all__ = [
     "base_tiles",
     "map_shift",
     "tile_file_name",
+    "tile_sysid",
 ]
 
 _log = logging.getLogger(__name__)
@@ -70,26 +73,44 @@ def base_tiles(base: TileFacts, f: TileFacts, shift: tuple[float, float]) -> tup
     )
 
 
-def tile_file_name(f: TileFacts) -> str:
-    """``m<map>-<layer>-<tx>_<ty>.png`` (coverage) or ``.jpg`` (orthophoto).
+def tile_file_name(f: TileFacts, sysid: int = 0) -> str:
+    """``v<sysid>-m<map>-<layer>-<tx>_<ty>.png`` (coverage) or ``.jpg`` (orthophoto);
+    without the ``v<sysid>-`` part when the vehicle is not known (``sysid`` 0).
 
     >>> from holescan.missions import TileFacts
     >>> tile_file_name(TileFacts(3, "cov", -1, 2, 64, 0.1, 43.6, -79.4, 9))
     'm3-cov--1_2.png'
+    >>> tile_file_name(TileFacts(3, "ortho", 0, 0, 64, 0.1, 43.6, -79.4, 9), 2)
+    'v2-m3-ortho-0_0.jpg'
     """
     ext = "png" if f.layer == "cov" else "jpg"
-    return f"m{f.map_id}-{f.layer}-{f.tx}_{f.ty}.{ext}"
+    name = f"m{f.map_id}-{f.layer}-{f.tx}_{f.ty}.{ext}"
+    return f"v{sysid}-{name}" if sysid else name
+
+
+def tile_sysid(name: str) -> int:
+    """The vehicle of a tile file's name (0: not known, or not a name of ours).
+
+    >>> tile_sysid("v2-m3-cov-0_0.png"), tile_sysid("m3-cov-0_0.png"), tile_sysid("v-m3")
+    (2, 0, 0)
+    """
+    head, _, rest = name.partition("-")
+    if head[:1] != "v" or not head[1:].isdigit() or not rest.startswith("m"):
+        return 0
+    sysid = int(head[1:])
+    return sysid if 1 <= sysid <= 255 else 0
 
 
 @dataclass(frozen=True)
 class StoredTile:
-    """A tile kept: its facts, its file name in the map folder and its arrival order
+    """A tile kept: its facts, its file name in the map folder, its arrival order
     (``seq``: the store's version when it was kept; for a folder read back, its order of
-    modification time)."""
+    modification time) and the vehicle that sent it (``sysid``; 0: not known)."""
 
     facts: TileFacts
     name: str
     seq: int = 0
+    sysid: int = 0
 
 
 @dataclass
@@ -107,13 +128,14 @@ class MapStore:
     _tiles: dict[str, StoredTile] = field(default_factory=dict)
     _lock: threading.Lock = field(default_factory=threading.Lock)
     _base: TileFacts | None = None
-    _grids: dict[int, tuple[int, float]] = field(default_factory=dict)
+    _grids: dict[tuple[int, int], tuple[int, float]] = field(default_factory=dict)
     _box: tuple[int, int, int, int] | None = None  # base tiles: west, east, south, north
 
-    def _fits(self, f: TileFacts) -> bool:
-        """Whether tile ``f`` keeps the combined map within :data:`MAX_COMBINED_CELLS`
-        and has its map's grid; if so, it is accounted (call with the lock held)."""
-        grid = self._grids.get(f.map_id)
+    def _fits(self, f: TileFacts, sysid: int) -> bool:
+        """Whether tile ``f`` of vehicle ``sysid`` keeps the combined map within
+        :data:`MAX_COMBINED_CELLS` and has its map's grid; if so, it is accounted (call
+        with the lock held)."""
+        grid = self._grids.get((sysid, f.map_id))
         if grid is not None and grid != (f.n, f.cell_m):
             return False
         base = self._base if self._base is not None else f
@@ -126,7 +148,7 @@ class MapStore:
         if cells > MAX_COMBINED_CELLS:
             return False
         self._base, self._box = base, box
-        self._grids.setdefault(f.map_id, (f.n, f.cell_m))
+        self._grids.setdefault((sysid, f.map_id), (f.n, f.cell_m))
         return True
 
     @classmethod
@@ -135,7 +157,7 @@ class MapStore:
         folder.mkdir(parents=True, exist_ok=True)
         store = cls(folder)
         paths = []
-        for path in folder.glob("m*-*"):
+        for path in (*folder.glob("m*-*"), *folder.glob("v*-m*-*")):
             with contextlib.suppress(OSError):
                 paths.append((path.stat().st_mtime_ns, path.name, path))
         for seq, (_, _, path) in enumerate(sorted(paths), start=1):
@@ -146,31 +168,35 @@ class MapStore:
             except OSError as err:
                 _log.warning("map tile %s not read: %s", path.name, err)
                 continue
-            if got is None or tile_file_name(got[0]) != path.name:
+            sysid = tile_sysid(path.name)
+            if got is None or tile_file_name(got[0], sysid) != path.name:
                 _log.warning("%s is not a map tile of this station; skipped", path.name)
                 continue
-            if not store._fits(got[0]):
+            if not store._fits(got[0], sysid):
                 _log.warning("%s lies outside the station's map (too far or too big); skipped",
                              path.name)  # fmt: skip
                 continue
-            store._tiles[path.name] = StoredTile(got[0], path.name, seq)
+            store._tiles[path.name] = StoredTile(got[0], path.name, seq, sysid)
         store.version = max((t.seq for t in store._tiles.values()), default=0)
         return store
 
-    def put(self, data: bytes) -> TileFacts | None:
-        """Keep a received tile if it is one and newer than the one kept; its facts, or
-        None (not a tile, or stale)."""
+    def put(self, data: bytes, sysid: int = 0) -> TileFacts | None:
+        """Keep a tile received from vehicle ``sysid`` (0: not known) if it is one and
+        newer than the one kept; its facts, or None (not a tile, or stale)."""
         got = read_tile(data)
         if got is None:
             self.rejected += 1
             return None
         facts = got[0]
-        name = tile_file_name(facts)
+        name = tile_file_name(facts, sysid)
         with self._lock:
             old = self._tiles.get(name)
+            # an older station's file of this place (vehicle not known) is this one's
+            unnamed = self._tiles.get(tile_file_name(facts)) if sysid else None
+            old = old if old is not None else unnamed
             if old is not None and old.facts.version >= facts.version:
                 return None
-            if not self._fits(facts):
+            if not self._fits(facts, sysid):
                 self.rejected += 1
                 if self.rejected <= 20 or self.rejected % 1000 == 0:
                     _log.warning("map tile %s refused: outside the station's map (too far "
@@ -178,8 +204,12 @@ class MapStore:
                 return None
             with atomic_output(self.folder / name, force=True) as f:
                 f.write(data)
+            if unnamed is not None:  # taken over: one file per place and vehicle
+                del self._tiles[unnamed.name]
+                with contextlib.suppress(OSError):
+                    (self.folder / unnamed.name).unlink()
             self.version += 1
-            self._tiles[name] = StoredTile(facts, name, self.version)
+            self._tiles[name] = StoredTile(facts, name, self.version, sysid)
             version = self.version
         for fn in list(self.listeners):
             try:
@@ -234,10 +264,17 @@ class MapStore:
         )
         return out, origin
 
-    def inventory(self) -> TileInventory | None:
-        """What is held of the newest map (that of the tile kept last): each tile's
-        version, for the companion to re-send only the others (None: no tile)."""
-        tiles = self.tiles()
+    def vehicles(self) -> list[int]:
+        """The vehicles (system ids) whose tiles are kept (0: a tile whose vehicle is not
+        known), in order."""
+        return sorted({t.sysid for t in self.tiles()})
+
+    def inventory(self, sysid: int | None = None) -> TileInventory | None:
+        """What is held of vehicle ``sysid``'s newest map (that of its tile kept last;
+        None: of every vehicle; tiles whose vehicle is not known count as any vehicle's):
+        each tile's version, for its companion to re-send only the others (None: no
+        tile)."""
+        tiles = [t for t in self.tiles() if sysid is None or t.sysid in (sysid, 0)]
         if not tiles:
             return None
         newest = max(tiles, key=lambda t: t.seq).facts.map_id

@@ -30,7 +30,7 @@ from pathlib import Path
 from holescan.errors import InputError
 from holescan.geotag import Hole, local_en_m
 from holescan.ground.station.audit import AuditTrail
-from holescan.ground.station.state import MARKS, GroundHole
+from holescan.ground.station.records import MARKS, GroundHole
 
 __all__ = [
     "MARK_MATCH_M",

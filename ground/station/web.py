@@ -37,10 +37,11 @@ from holescan.ground.station.files import hole_summary
 from holescan.ground.station.guard import GuardMiddleware, Limits, RateLimiter, default_names
 from holescan.ground.station.locate import bearing_name, mgrs_text, range_bearing
 from holescan.ground.station.mapcombine import CombinedCache
-from holescan.ground.station.maplayers import Reply, basemap_route, map_route
+from holescan.ground.station.maplayers import Reply, VehicleMaps, basemap_route, map_route
 from holescan.ground.station.mapstore import MapStore
 from holescan.ground.station.pairing import Pairing, Pairings
-from holescan.ground.station.state import MARKS, GroundHole, StationState, TrackPoint
+from holescan.ground.station.records import MARKS, GroundHole, TrackPoint
+from holescan.ground.station.state import StationState
 from holescan.ground.station.vehicles import camera_footprint
 from holescan.missions import XTION, Camera
 
@@ -48,7 +49,7 @@ if TYPE_CHECKING:
     from holescan.ground.station.events import Changes, EventStream
     from holescan.ground.station.webserver import WebServer
 
-__all__ = ["StationWeb", "state_document", "station_url"]
+__all__ = ["StationWeb", "state_document", "station_url", "vehicle_colours"]
 
 _log = logging.getLogger(__name__)
 
@@ -85,6 +86,20 @@ def _range(ref: tuple[float, float] | None, lat: float, lon: float) -> dict[str,
     return {"distance_m": round(d, 1), "bearing_deg": round(b, 1), "compass": bearing_name(b)}
 
 
+def _colours(sysids: set[int]) -> dict[int, str]:
+    """Each vehicle's colour: :data:`VEHICLE_COLOURS` in order of system id."""
+    return {s: VEHICLE_COLOURS[k % len(VEHICLE_COLOURS)] for k, s in enumerate(sorted(sysids))}
+
+
+def vehicle_colours(state: StationState) -> dict[int, str]:
+    """Each vehicle's colour on the page (the state document's ``colour``): by order of
+    system id among the vehicles heard and those with a track."""
+    primary = state.primary_sysid
+    sids = {v.sysid for v in state.vehicle_snapshot()}
+    sids |= {s if s or primary is None else primary for s in state.track_sysids()}
+    return _colours(sids)
+
+
 def _vehicles_document(
     state: StationState,
     frame: LocalFrame,
@@ -100,10 +115,11 @@ def _vehicles_document(
         sid = p.sysid if p.sysid or primary is None else primary
         points.setdefault(sid, []).append(p)
     out = []
-    for k, sid in enumerate(sorted(set(status) | set(points))):
+    colours = _colours(set(status) | set(points))
+    for sid in sorted(colours):
         v = status.get(sid)
         d: dict[str, Any] = v.to_json(now_ns) if v is not None else {"sysid": sid}
-        d["colour"] = VEHICLE_COLOURS[k % len(VEHICLE_COLOURS)]
+        d["colour"] = colours[sid]
         d["track"] = [_place(frame, p.lat_deg, p.lon_deg) for p in points.get(sid, [])]
         fps = []
         for i, p in enumerate(points.get(sid, [])):
@@ -213,7 +229,7 @@ def state_document(
             from_vehicles=[
                 {"sysid": sid, **(_range(at, h.lat_deg, h.lon_deg) or {})} for sid, at in here
             ],
-            summary=hole_summary(h, why=False),  # the page shows the "why" on its own
+            summary=hole_summary(h, why=False, vehicles=False),  # the page shows them apart
             picture=f"/cards/hole-{h.id}.jpg?rev={h.card_rev}" if h.has_picture else None,
             marked_by=(
                 {
@@ -289,11 +305,16 @@ class StationWeb:
     ) -> None:
         self.state = state
         self._public_url = public_url
-        self.vehicles = vehicles or (lambda _h: [])
+        self.vehicles = vehicles or (lambda h: h.sysids)
         self.kml_refresh_s = kml_refresh_s
         self.basemaps = tuple(basemaps)
         self.map_store = map_store
         self._map_cache = CombinedCache(map_store) if map_store is not None else None
+        self._vehicle_maps = (
+            VehicleMaps(map_store, lambda: vehicle_colours(state))
+            if map_store is not None
+            else None
+        )
         self.on_mark = on_mark or state.mark
         self.pairings = pairings or Pairings(state.folder)
         self.names = tuple(default_names() if names is None else names)
@@ -414,7 +435,7 @@ class StationWeb:
         got = basemap_route(self.basemaps, path, query)
         if got is not None:
             return got
-        return map_route(self.map_store, path, query, self._map_cache)
+        return map_route(self.map_store, path, query, self._map_cache, self._vehicle_maps)
 
     def mark(self, hole_id: int, mark: str, pairing: Pairing, client: str) -> GroundHole:
         """An operator's mark: into the audit trail first (a change that cannot be audited

@@ -43,7 +43,7 @@ from holescan.ground.station.feeds import FEEDS
 from holescan.ground.station.guard import Limits
 from holescan.ground.station.maplayers import Reply
 from holescan.ground.station.pairing import Pairing, Pairings
-from holescan.ground.station.state import GroundHole
+from holescan.ground.station.records import GroundHole
 
 __all__ = ["COOKIE", "Site", "make_app"]
 

@@ -137,7 +137,7 @@ def test_flight_log_ground_station_and_files(demo: tuple[Path, str]) -> None:
     # the live map flew too: its tiles reached the ground station's store, on disk
     tiles = doc["map_tiles_at_ground"]
     assert tiles >= 2 and f"{tiles} live-map tiles" in text
-    assert len(list((out / "ground" / "map").glob("m*-cov-*.png"))) * 2 >= tiles
+    assert len(list((out / "ground" / "map").glob("*m*-cov-*.png"))) * 2 >= tiles
     files = doc["files"]
     gpx = gpxpy.parse(Path(files["gpx"]).read_text())
     assert len(gpx.waypoints) == confirmed + len(review)

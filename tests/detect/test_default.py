@@ -7,6 +7,7 @@ import pytest
 
 from holescan.detect import DEFAULT, DOG, CameraIntrinsics, Detection, detect_holes
 from holescan.detect._default import basin_depth, block_depth, opening_axes
+from holescan.detect._regions import basin_depths
 from holescan.errors import InputError
 
 CAM = CameraIntrinsics.xtion()
@@ -121,6 +122,33 @@ def test_basin_cut_by_the_border_is_closed_there_not_spilled() -> None:
     assert float(spilled[15, 3]) == pytest.approx(0.0, abs=1e-6)
     assert float(closed[15, 3]) == pytest.approx(0.7, abs=1e-5)
     assert float(closed[30, 30]) == pytest.approx(0.0, abs=1e-6)  # the floor stays a floor
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_both_basin_views_at_once_equal_each_computed_alone(seed: int) -> None:
+    # Rough tilted terrain with pits, some cut by the border (a lake in the closed view
+    # only), some of them unread, and unread specks: basin_depths derives the spilled view
+    # from the closed one, and must give both exactly as two full reconstructions do.
+    rng = np.random.default_rng(seed)
+    hh, ww = 60, 80
+    vv, uu = np.mgrid[0:hh, 0:ww]
+    z = (2.0 + 0.01 * vv + 0.004 * uu + 0.02 * rng.standard_normal((hh, ww))).astype(np.float32)
+    for _ in range(6):
+        cy, cx, r = rng.integers(0, hh), rng.integers(0, ww), rng.integers(3, 12)
+        pit = (vv - cy) ** 2 + (uu - cx) ** 2 < r * r
+        z[pit] += rng.uniform(0.3, 1.5)
+        if rng.random() < 0.4:
+            z[pit & (rng.random((hh, ww)) < 0.7)] = np.nan
+    z[rng.random((hh, ww)) < 0.02] = np.nan
+    both = basin_depths(z)
+    spilled, invalid, z_far = basin_depth(z)
+    closed, _, _ = basin_depth(z, closed_border=True)
+    assert np.array_equal(both.spilled, spilled)
+    assert np.array_equal(both.invalid, invalid) and both.z_far == z_far
+    if np.array_equal(closed, spilled):
+        assert both.closed is None
+    else:
+        assert both.closed is not None and np.array_equal(both.closed, closed)
 
 
 def _banded(depth: np.ndarray, ltrb: tuple[int, int, int, int]) -> np.ndarray:

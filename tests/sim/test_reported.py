@@ -16,7 +16,7 @@ from holescan.capture import parse_fly_config
 from holescan.flightlog import LoggedFrame, read_flight_log
 from holescan.geotag import local_en_m
 from holescan.sim import SimAutopilot, anchor_at_home, fly_sim, sortie_params
-from holescan.sim._sortie import make_sortie_world, survey_path
+from holescan.sim._sortie import loop_length_m, make_sortie_world, survey_path
 from tests._support import free_udp_port
 
 TABLE = {"size_m": [4.0, 4.0], "world_seed": 15, "n_access_holes": 4, "fps": 10.0}
@@ -28,6 +28,22 @@ def test_anchor_at_home_puts_home_margin_inside_the_world() -> None:
     east, north = local_en_m(home[0], home[1], a.lat_deg, a.lon_deg)
     assert east == pytest.approx(3.5, abs=1e-3) and north == pytest.approx(3.5, abs=1e-3)
     assert a.alt_m == 120.0
+
+
+@pytest.mark.parametrize("size", [(3.0, 3.0), (2.0, 9.0)])
+def test_an_area_of_one_survey_line_is_flown_as_a_racetrack(size: tuple[float, float]) -> None:
+    # One camera footprint wide: the planner gives one straight line; the simulated
+    # vehicle flies it out and back (a loop it can repeat), never a 2-point "loop".
+    params, _ = sortie_params({"size_m": list(size), "world_seed": 3})
+    world = make_sortie_world(params)
+    plan, path = survey_path(world, params)
+    assert len(plan.lines) == 1
+    pts = path.waypoints_enu
+    assert len(pts) >= 4
+    SimAutopilot("udpout:127.0.0.1:9", path)  # its trajectory is flyable (never entered)
+    ((a, b),) = plan.lines
+    line_m = math.hypot(*local_en_m(a.lat_deg, a.lon_deg, b.lat_deg, b.lon_deg))
+    assert loop_length_m(path) > 2.0 * line_m  # out along the line and back
 
 
 @pytest.mark.slow

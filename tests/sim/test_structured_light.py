@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -110,6 +111,35 @@ def test_absorbing_patch_loses_its_fraction_of_readings_in_blobs() -> None:
     # Ragged blobs, not salt: an unread pixel's right neighbour is unread more often than
     # the patch's fraction (0.65 for independent pixels).
     assert (patch[:, :-1] & patch[:, 1:]).sum() > 0.72 * patch[:, :-1].sum()
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3, 4, 5])
+@pytest.mark.parametrize("frac", [0.55, 0.76])
+def test_absorbing_dropouts_are_connected_clumps_with_read_islands(seed: int, frac: float) -> None:
+    """A black stain on a plane (640 px frame): each patch loses its own fraction, the
+    unread pixels form clumps tens of pixels across (most of them in one or a few
+    components, as on real frames), and what is read stays in islands on the plane."""
+    z = np.full((480, 640), 2.0, np.float32)
+    unread = np.zeros(z.shape, np.float32)
+    unread[150:270, 200:360] = frac  # a 120 x 160 px stain
+    unread[350:390, 60:120] = 0.7  # a small second patch
+    out = structured_light_frame(z, None, CAM, seed=seed, surface=Surface(unread), params=BARE)
+    assert 10 <= out.draws.dropout_clump_px <= 18
+    dm = out.depth_mm
+    patch = dm[150:270, 200:360] == 0
+    assert abs(patch.mean() - frac) < 0.02
+    assert abs((dm[350:390, 60:120] == 0).mean() - 0.7) < 0.03
+    _, _, stats, _ = cv2.connectedComponentsWithStats(patch.astype(np.uint8), connectivity=8)
+    areas = np.sort(stats[1:, cv2.CC_STAT_AREA])[::-1]
+    # Clumps, not specks: the three largest hold most of the unread pixels.
+    assert areas[:3].sum() > 0.8 * patch.sum()
+    # 4x4 blocks (the detector's work grid) wholly unread: a large share of the patch.
+    blocks = patch.reshape(30, 4, 40, 4).all(axis=(1, 3))
+    assert blocks.mean() > 0.3
+    # The read islands lie on the plane (2 m, within quantisation and noise).
+    read = dm[150:270, 200:360][~patch]
+    assert read.size > 0 and np.abs(read.astype(np.float64) - 2000.0).max() < 40
+    assert (dm[:100] == 0).mean() < 0.01
 
 
 def test_grazing_surfaces_return_nothing() -> None:

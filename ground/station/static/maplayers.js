@@ -1,14 +1,18 @@
 // holescan live page: the flight's map layers (served by ground/station/maplayers.py).
 // The team's offline basemap (MBTiles or GeoTIFF, chosen in the box) under everything, the
 // drone's orthophoto over it, the coverage (seen green / not seen red) above, each
-// switchable; tiles placed in the page's local metres by /map.json and
+// switchable; each drone's own coverage (searched in its colour / not searched grey) as a
+// layer of its own, off until switched on (the combined coverage stays the crew's "where
+// did we look"); tiles placed in the page's local metres by /map.json and
 // /basemap/ID/view.json. No CDN, no tile server on the internet.
 // Hooks the page calls: holescanMap.corners() (extent, for the view) and
 // holescanMap.svg(X, Y, s, doc, redraw) (the layers' SVG, drawn first).
 "use strict";
 window.holescanMap = (function () {
   const show = { ortho: true, cov: true };
+  const showVehicle = {};   // sysid -> shown (each drone's own coverage; off at first)
   let tiles = [];
+  let vehicles = [];        // /map.json's vehicles: [{sysid, colour, tiles}]
   let version = -1;
   let asked = null;     // the origin map.json was last asked for ("lat,lon" or "")
   let redraw = null;
@@ -31,6 +35,7 @@ window.holescanMap = (function () {
       + '<label><input type="checkbox" id="layer-cov" checked> coverage: '
       + '<span class="seen">&#9632; seen</span> '
       + '<span class="unseen">&#9632; not seen</span></label>'
+      + '<details id="layer-vehicles" hidden><summary>each drone\'s coverage</summary></details>'
       + '<div id="map-tiles"></div>';
     map.appendChild(box);
     const sel = document.getElementById("layer-basemap");
@@ -58,6 +63,45 @@ window.holescanMap = (function () {
     }
   }
 
+  // one check box per drone with tiles, its label in the drone's colour
+  function vehicleToggles() {
+    const box = document.getElementById("layer-vehicles");
+    if (!box) return;
+    box.hidden = vehicles.length === 0;
+    for (const v of vehicles) {
+      const id = "layer-cov-" + v.sysid;
+      let input = document.getElementById(id);
+      if (!input) {
+        const label = document.createElement("label");
+        input = document.createElement("input");
+        input.type = "checkbox";
+        input.id = id;
+        input.dataset.sysid = String(v.sysid);
+        input.addEventListener("change", ev => {
+          showVehicle[v.sysid] = ev.target.checked;
+          if (redraw) redraw();
+        });
+        const NS = "http://www.w3.org/2000/svg";  // the swatch: an SVG square (no style)
+        const swatch = document.createElementNS(NS, "svg");
+        swatch.setAttribute("class", "swatch");
+        swatch.setAttribute("width", "12");
+        swatch.setAttribute("height", "12");
+        swatch.appendChild(document.createElementNS(NS, "rect"));
+        swatch.firstChild.setAttribute("width", "12");
+        swatch.firstChild.setAttribute("height", "12");
+        const text = document.createElement("span");
+        text.textContent = ` drone ${v.sysid}: searched (`;
+        const grey = document.createElement("span");
+        grey.className = "notsearched";
+        grey.textContent = "\u25A0";
+        label.append(input, " ", swatch, text, grey, " not)");
+        box.appendChild(label);
+      }
+      const rect = input.parentElement.querySelector(".swatch rect");
+      if (rect) rect.setAttribute("fill", v.colour);
+    }
+  }
+
   async function load(origin) {
     if (busy) return;
     busy = true;
@@ -69,6 +113,8 @@ window.holescanMap = (function () {
       const key = origin ? origin.join(",") : "";
       if (d.version !== version || key !== asked) {
         tiles = d.tiles; version = d.version; asked = key;
+        vehicles = Array.isArray(d.vehicles) ? d.vehicles : [];
+        vehicleToggles();
         const info = document.getElementById("map-tiles");
         if (info) {
           const n = l => tiles.filter(t => t.layer === l).length;
@@ -142,8 +188,18 @@ window.holescanMap = (function () {
       }
       parts.push("</g>");
     }
+    for (const v of vehicles) {  // each drone's own coverage, over the combined one
+      if (!showVehicle[v.sysid]) continue;
+      parts.push(`<g class="maplayer" data-layer="cov-${Number(v.sysid)}">`);
+      for (const t of v.tiles) {
+        const w = (t.x1 - t.x0) * s, h = (t.y1 - t.y0) * s;
+        parts.push(`<image href="${t.href}" x="${X(t.x0)}" y="${Y(t.y1)}" width="${w}" height="${h}"`
+          + ` preserveAspectRatio="none"/>`);
+      }
+      parts.push("</g>");
+    }
     return parts.join("");
   }
 
-  return { svg, corners, show, basemap: () => basemap, baseTiles: () => baseTiles };
+  return { svg, corners, show, showVehicle, basemap: () => basemap, baseTiles: () => baseTiles };
 })();

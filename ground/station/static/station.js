@@ -33,9 +33,15 @@ function draw() {
     let y0 = Math.min(...pts.map(p => p[1])), y1 = Math.max(...pts.map(p => p[1]));
     const pad = 3;
     x0 -= pad; x1 += pad; y0 -= pad; y1 += pad;
-    const s = Math.min(W / (x1 - x0), H / (y1 - y0));   // pixels per metre, same both ways
-    const ox = (W - s * (x1 - x0)) / 2, oy = (H - s * (y1 - y0)) / 2;
-    const X = x => ox + (x - x0) * s, Y = y => H - oy - (y - y0) * s;
+    // pixels per metre (same both ways) and the place of a point: everything fitted, or
+    // the operator's pan and zoom (mapview.js)
+    const { X, Y, s } = window.MapView
+      ? MapView.transform(W, H, [x0, y0, x1, y1], draw)
+      : (() => {
+        const s = Math.min(W / (x1 - x0), H / (y1 - y0));
+        const ox = (W - s * (x1 - x0)) / 2, oy = (H - s * (y1 - y0)) / 2;
+        return { s, X: x => ox + (x - x0) * s, Y: y => H - oy - (y - y0) * s };
+      })();
     if (ML) parts.push(ML.svg(X, Y, s, doc, draw));
     const vehicles = doc.vehicles || [];
     if (!vehicles.length) {  // a state document of an older station: one track

@@ -5,6 +5,7 @@ sidecars read back with mcap's indexed reader; logs cut off or damaged; bad inpu
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -225,6 +226,28 @@ def test_the_flights_recorded_gate_gives_the_tiers(
     )
     report = dict(g.files)["report"].read_text()
     assert "announced p_hole &gt;= 0.99 and review p_hole &gt;= 0 given" in report
+    # Every hole whose tier is no longer the flight's is named, with both tiers.
+    assert g.flight_tiers == logged.tiers
+    now = {h.id: g.tiers.get(h.id, "candidate") for h in g.holes}
+    expected = [
+        (i, t, now.get(i, "not found"))
+        for i, t in sorted(logged.tiers.items())
+        if t != now.get(i, "not found") and not (t == "candidate" and i not in now)
+    ]
+    assert list(g.tier_changes) == expected, (logged.tiers, now)
+    # The same comparison where the flight's tiers differ: promoted, no longer found, and a
+    # candidate not found again (not news: it never reached the crew).
+    (first, tier), *_ = now.items()
+    other = "review" if tier != "review" else "announced"
+    h = dataclasses.replace(g, flight_tiers={first: other, 98: "announced", 99: "candidate"})
+    assert h.tier_changes == ((first, other, tier), (98, "announced", "not found"))
+    line = next(x for x in h.lines() if "tiers changed from the flight's" in x)
+    assert f"hole {first} {other} -> {tier}" in line and "hole 98 announced -> not found" in line
+    assert h.summary()["tier_changes"][1] == {
+        "hole_id": 98,
+        "flight": "announced",
+        "reprocessed": "not found",
+    }
 
 
 def transcode(files: list[Path], out: Path, encoder: ImageEncoder) -> list[Path]:

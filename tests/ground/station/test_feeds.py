@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import socket
+import subprocess
 import urllib.request
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -22,13 +23,16 @@ import numpy as np
 import pyogrio
 import pytest
 from test_maplayers import CELL, LAT0, LON0, N
-from test_station import PytakReceiver, picture, wait_for
+from test_station import NODE_COT, PytakReceiver, picture, wait_for
 from test_station_review import review_station
 
 from holescan import cli
 from holescan.ground import GroundOptions, GroundStation
+from holescan.ground.station.cot import hole_cot
 from holescan.ground.station.guard import Limits
 from holescan.ground.station.mapstore import MapStore
+from holescan.ground.station.state import StationState
+from holescan.ground.station.tak import CotPublisher
 from holescan.ground.station.web import StationWeb
 from holescan.missions import TileFacts, encode_coverage_tile
 from tests._support import free_udp_port
@@ -197,3 +201,83 @@ def test_public_url_is_checked(tmp_path: Path, capsys: pytest.CaptureFixture[str
     args = f"ground --mavlink udpin:127.0.0.1:1 -o {tmp_path / 's'} --http 127.0.0.1:8080"
     code = cli.main([*args.split(), "--public-url", "http://10.0.0.5:9090"])
     assert code != 0 and "give the same port" in capsys.readouterr().err
+
+
+def _seen_by_two(folder: Path) -> StationState:
+    """Vehicle 1 reports its hole 5; vehicle 2 then reports its hole 3 at the same opening
+    with a card whose "why" is hostile text; hole 8 is vehicle 1's alone."""
+    state = StationState.open(folder)
+    t = iter(range(1, 100))
+    state.clock = lambda: 1_796_000_000_000_000_000 + next(t) * 1_000_000_000
+    state.on_statustext("HOLE 5 p0.91 43.6533100 -79.3831200", sysid=1)
+    state.on_statustext("HOLE 8 p0.80 43.6534100 -79.3830200", sysid=1)
+    facts = {
+        *(("id", 3), ("rev", 1), ("lat", 43.65331), ("lon", -79.38312), ("score", 0.9)),
+        *(("sigma", 0.3), ("n", 6), ("major", 1.1), ("minor", 0.7), ("p", 0.93)),
+        ("why", '</remarks><script>alert("x")</script> & <b>rim</b> \x07seen'),
+    }
+    state.on_card(dict(facts), picture(3), sysid=2)
+    return state
+
+
+def test_which_vehicles_saw_a_hole_in_kml_geojson_and_cot(tmp_path: Path) -> None:
+    """GDAL reads the vehicles of each hole (first and last) from /holes.geojson and from
+    /holes.kml (its description and ExtendedData); pytak carries the CoT to a pytak
+    receiver and @tak-ps/node-cot parses the remarks and the holescan facts; the hostile
+    "why" stays text everywhere."""
+    state = _seen_by_two(tmp_path / "st")
+    _, holes, _ = state.snapshot()
+    by_id = {h.id: h for h in holes}
+    assert set(by_id) == {5, 8}  # vehicle 2's hole 3 is hole 5: one id per opening
+    assert by_id[5].sysids == [1, 2] and by_id[5].first_last == (1, 2)
+    with StationWeb(state, "127.0.0.1", 0, public_url=PUBLIC) as web:
+        info = pyogrio.read_info(f"{web.url}holes.geojson")
+        _, _, _, fields = pyogrio.raw.read(f"{web.url}holes.geojson")
+        cols = dict(zip(info["fields"], fields, strict=True))
+        row = {int(i): k for k, i in enumerate(cols["hole_id"])}
+        assert list(cols["vehicles"][row[5]]) == [1, 2] and list(cols["vehicles"][row[8]]) == [1]
+        assert cols["first_vehicle"][row[5]] == 1 and cols["last_vehicle"][row[5]] == 2
+        assert cols["first_vehicle"][row[8]] == 1 and cols["last_vehicle"][row[8]] == 1
+        kml_info = pyogrio.read_info(f"/vsicurl/{web.url}holes.kml")
+        assert kml_info["features"] == 2
+        _, _, _, kfields = pyogrio.raw.read(f"/vsicurl/{web.url}holes.kml")
+        k = dict(zip(kml_info["fields"], kfields, strict=True))
+        desc = {str(n): str(d) for n, d in zip(k["Name"], k["description"], strict=True)}
+        assert "seen by vehicles 1 + 2 (first 1, last 2)" in desc["hole 5 (new)"]
+        assert "seen by vehicle 1," in desc["hole 8 (new)"]
+        assert "<script>" not in desc["hole 5 (new)"]  # HTML of the text: &lt;script&gt;
+        assert json.loads(k["vehicles"][0]) == [1, 2] and k["last_vehicle"].tolist() == ["2", "1"]
+        code, body, _ = _get(f"{web.url}holes.kml")
+        assert code == 200
+        root = ET.fromstring(body)  # well-formed whatever the why held
+        pm5 = [p for p in root.iter(f"{KML}Placemark") if "hole 5 " in p.findtext(f"{KML}name", "")]
+        data = {d.get("name"): d.findtext(f"{KML}value") for d in pm5[0].iter(f"{KML}Data")}
+        assert json.loads(data["vehicles"] or "null") == [1, 2]
+        assert json.loads(data["last_vehicle"] or "null") == 2
+    # CoT: published by pytak, received by pytak, parsed by node-cot
+    port = free_udp_port()
+    rx = PytakReceiver(f"udp+ro://127.0.0.1:{port}")
+    try:
+        with CotPublisher(f"udp+wo://127.0.0.1:{port}") as pub:
+            events = [hole_cot(h, picture_url=f"{PUBLIC}cards/hole-{h.id}.jpg") for h in holes]
+            for ev in events:
+                assert b"<script>" not in ev  # escaped: text, never markup
+            wait_for(lambda: pub.publish(events) is None and len(rx.got) >= 2, 20.0, "the CoT")
+    finally:
+        rx.close()
+    if not (NODE_COT / "node_modules" / "@tak-ps" / "node-cot").exists():
+        pytest.skip(f"npm install --prefix {NODE_COT} (the independent CoT parser)")
+    lines = b"\n".join(g.replace(b"\n", b" ") for g in rx.got)
+    res = subprocess.run(
+        ["node", str(NODE_COT / "parse.mjs")], input=lines, capture_output=True, timeout=60
+    )
+    assert res.returncode == 0, res.stderr.decode()[-2000:]
+    parsed = {p["raw"]["uid"]: p for p in json.loads(res.stdout)}
+    five = parsed["holescan-ground-hole-5"]["geojson"]["properties"]
+    assert "seen by vehicles 1 + 2 (first 1, last 2)" in five["remarks"]
+    assert '<script>alert("x")</script>' in five["remarks"]  # the text, as text
+    eight = parsed["holescan-ground-hole-8"]["geojson"]["properties"]
+    assert "seen by vehicle 1," in eight["remarks"]
+    facts = ET.fromstring(events[0]).find("detail/holescan")
+    assert facts is not None and facts.get("vehicles") == "1 2"
+    assert (facts.get("first_vehicle"), facts.get("last_vehicle")) == ("1", "2")

@@ -138,7 +138,7 @@ def test_fuzz_card_facts_into_the_station(over: dict[str, Any], drop: list[str],
 def test_fuzz_statustext_and_track_into_the_station(
     word: str, fields: list[str], yaw: float, lat: float
 ) -> None:
-    from holescan.ground.station.state import TrackPoint
+    from holescan.ground.station.records import TrackPoint
 
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)

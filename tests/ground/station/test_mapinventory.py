@@ -117,9 +117,9 @@ def test_link_up_resends_only_what_the_station_lacks(tmp_path: Path) -> None:
             wait_for(lambda: link.resync_requests > requests, 20.0, "the station's request")
             wait_for(
                 lambda: (
-                    all(store.get(f"m42-cov-{tx}_0.png") is not None for tx in (3, 7))
+                    all(store.get(f"v1-m42-cov-{tx}_0.png") is not None for tx in (3, 7))
                     and all(
-                        store.get(f"m42-cov-{tx}_0.png").facts.version == 2  # type: ignore[union-attr]
+                        store.get(f"v1-m42-cov-{tx}_0.png").facts.version == 2  # type: ignore[union-attr]
                         for tx in (3, 7)
                     )
                 ),

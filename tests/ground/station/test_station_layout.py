@@ -40,7 +40,7 @@ def browser(tmp_path: Path) -> Iterator[Browser]:
     b.close()
 
 
-def _box(page: Page, selector: str) -> Box:
+def page_box(page: Page, selector: str) -> Box:
     got = page.js(
         f"(() => {{ const r = document.querySelector('{selector}').getBoundingClientRect();"
         " return {left: r.left, top: r.top, right: r.right, bottom: r.bottom}; })()"
@@ -49,7 +49,7 @@ def _box(page: Page, selector: str) -> Box:
     return {k: float(v) for k, v in got.items()}
 
 
-def _overlap(a: Box, b: Box) -> bool:
+def overlap(a: Box, b: Box) -> bool:
     return (
         a["left"] < b["right"]
         and b["left"] < a["right"]
@@ -58,7 +58,7 @@ def _overlap(a: Box, b: Box) -> bool:
     )
 
 
-def _open(browser: Browser, url: str, width: int, height: int, mobile: bool) -> Page:
+def open_page(browser: Browser, url: str, width: int, height: int, mobile: bool) -> Page:
     page = browser.page("about:blank")
     page.call(
         "Emulation.setDeviceMetricsOverride",
@@ -74,7 +74,7 @@ def _open(browser: Browser, url: str, width: int, height: int, mobile: bool) -> 
     return page
 
 
-def _small_targets(page: Page) -> list[Any]:
+def small_targets(page: Page) -> list[Any]:
     """Visible buttons, selects and layer-box labels smaller than 44 px either way."""
     return list(
         page.js(
@@ -102,7 +102,7 @@ def test_page_fits_phone_and_laptop(
     art = Path(os.environ.get("HOLESCAN_ARTEFACTS", tmp_path))
     art.mkdir(parents=True, exist_ok=True)
     with StationWeb(state, "127.0.0.1", 0, map_store=store, basemaps=[basemap]) as web:
-        page = _open(browser, web.url, width, height, mobile)
+        page = open_page(browser, web.url, width, height, mobile)
         images = "document.querySelectorAll('g.maplayer[data-layer=\"basemap\"] image').length"
         wait_for(lambda: page.js(images) >= 1, 20.0, "the basemap drawn")
         served = (
@@ -115,18 +115,18 @@ def test_page_fits_phone_and_laptop(
         assert page.js("document.querySelector('#svg').firstElementChild.dataset.layer") == (
             "basemap"  # under the drone's orthophoto and coverage
         )
-        page_map, side = _box(page, "#map"), _box(page, "#side")
-        layers, north = _box(page, "#maplayers"), _box(page, "#north")
-        scale = _box(page, "#scalebar")
-        assert not _overlap(page_map, side)
-        assert not _overlap(layers, north), (layers, north)
-        assert not _overlap(layers, scale), (layers, scale)
+        page_map, side = page_box(page, "#map"), page_box(page, "#side")
+        layers, north = page_box(page, "#maplayers"), page_box(page, "#north")
+        scale = page_box(page, "#scalebar")
+        assert not overlap(page_map, side)
+        assert not overlap(layers, north), (layers, north)
+        assert not overlap(layers, scale), (layers, scale)
         assert north["right"] <= page_map["right"] and north["top"] >= page_map["top"]
         if mobile:
             assert side["top"] >= page_map["bottom"] - 0.5  # stacked: map above the queue
             assert page_map["right"] - page_map["left"] >= width - 1
             assert page_map["bottom"] - page_map["top"] >= 0.5 * height
-            assert _small_targets(page) == []
+            assert small_targets(page) == []
             assert page.js("document.documentElement.scrollWidth") <= width  # no sideways
         else:
             assert side["left"] >= page_map["right"] - 0.5  # side by side

@@ -95,10 +95,13 @@ def test_flight_map_reaches_the_station_and_matches_the_simulators_view(tmp_path
         store = station.map_store
 
         def all_there() -> bool:
+            if len(store.vehicles()) != 1:  # kept under the one vehicle's system id
+                return False
+            (sysid,) = store.vehicles()
             for data in tiles.values():
                 got = read_tile(data)
                 assert got is not None
-                if store.read(tile_file_name(got[0])) != data:
+                if store.read(tile_file_name(got[0], sysid)) != data:
                     return False
             return True
 

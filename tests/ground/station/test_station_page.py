@@ -155,7 +155,7 @@ def test_the_page_has_no_inline_script_or_style() -> None:
 
     Inline().feed(static.joinpath("station.html").read_text())
     assert found == []
-    for name in ("station.js", "review.js", "maplayers.js", "locate.js"):
+    for name in ("station.js", "review.js", "maplayers.js", "locate.js", "mapview.js"):
         js = static.joinpath(name).read_text()
         assert not re.search(r"style=|\.style\b|\bon[a-z]+=\"", js), name  # no inline style
         assert "eval(" not in js and "new Function" not in js, name

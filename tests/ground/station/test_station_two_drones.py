@@ -12,7 +12,11 @@ Chromium (1280 px):
   ``vehicles`` name both, with each one's own id; the station's ids are those the
   class docstring of :class:`ground.StationState` gives (the first reporting vehicle's
   ids; the other's first-found holes ``sysid * 1000000 + its id``);
-* no two station holes of different vehicles lie at one opening by the campaign's rule.
+* no two station holes of different vehicles lie at one opening by the campaign's rule;
+* the shared hole's KML description, GeoJSON properties and CoT remarks name both
+  drones, the first and the last (GDAL reads the KML and GeoJSON);
+* each drone's coverage tiles are kept as its own (``/map.json``'s ``vehicles``, in the
+  drone's colour) and drawn when switched on.
 
 The screenshot goes to ``HOLESCAN_ARTEFACTS`` (else the test's folder).
 """
@@ -25,14 +29,17 @@ import signal
 import subprocess
 import sys
 import urllib.request
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
+import pyogrio
 import pytest
 from test_station import wait_for
 from test_station_review import CHROMIUM, Browser
 
 from holescan.geotag import carry_ids
 from holescan.ground import GroundOptions, GroundStation
+from holescan.ground.station.cot import hole_cot
 from tests._support import free_udp_port
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -127,6 +134,23 @@ def test_two_drones_one_station(tmp_path: Path) -> None:
             own = first.hole_id
             want = own if first.sysid == primary else first.sysid * 1_000_000 + own
             assert h.id == want, (h.id, h.vehicles)
+        # the crew's other tools say which drones saw the shared hole, first and last
+        sh = shared[0]
+        first = min(sh.vehicles, key=lambda v: v.t_first_unix_ns).sysid
+        last = max(sh.vehicles, key=lambda v: v.t_last_unix_ns).sysid
+        info = pyogrio.read_info(f"/vsicurl/{station.web.url}holes.kml")
+        _, _, _, kfields = pyogrio.raw.read(f"/vsicurl/{station.web.url}holes.kml")
+        k = dict(zip(info["fields"], kfields, strict=True))
+        (desc,) = [str(d) for n, d in zip(k["Name"], k["description"], strict=True)
+                   if str(n).startswith(f"hole {sh.id} ")]  # fmt: skip
+        assert f"seen by vehicles {first} + {3 - first} (first {first}, last {last})" in desc
+        with urllib.request.urlopen(station.web.url + "holes.geojson", timeout=5) as r:
+            feats = json.loads(r.read())["features"]
+        (props,) = [f["properties"] for f in feats if f["properties"]["hole_id"] == sh.id]
+        assert sorted(props["vehicles"]) == [1, 2]
+        assert (props["first_vehicle"], props["last_vehicle"]) == (first, last)
+        remarks = ET.fromstring(hole_cot(sh)).findtext("detail/remarks") or ""
+        assert f"(first {first}, last {last})" in remarks
         # the page: holes of both, each vehicle's track in its own colour
         with urllib.request.urlopen(station.web.url + "state.json", timeout=5) as r:
             doc = json.loads(r.read())
@@ -154,6 +178,35 @@ def test_two_drones_one_station(tmp_path: Path) -> None:
             )
             text = page.js("document.getElementById('locate').textContent")
             assert "vehicle 2" in text
+            # each drone's own coverage: its tiles, in its colour, switched on the page
+            with urllib.request.urlopen(station.web.url + "map.json", timeout=5) as r:
+                mapdoc = json.loads(r.read())
+            layers = {v["sysid"]: v for v in mapdoc["vehicles"]}
+            assert set(layers) == {1, 2}
+            assert all(layers[s]["colour"] == colours[s] and layers[s]["tiles"] for s in (1, 2))
+            assert station.map_store is not None and station.map_store.vehicles() == [1, 2]
+            count = "document.querySelectorAll('g.maplayer[data-layer=\"cov-%d\"] image').length"
+            wait_for(
+                lambda: page.js("document.querySelectorAll('#layer-vehicles input').length") == 2,
+                10.0,
+                "a coverage switch per drone",
+            )
+            page.js(
+                "document.getElementById('layer-vehicles').open = true;"
+                "document.getElementById('layer-cov-1').click();"
+                "document.getElementById('layer-cov-2').click()"
+            )
+            for s in (1, 2):
+                n = len(layers[s]["tiles"])
+                wait_for(lambda s=s, n=n: page.js(count % s) == n, 10.0, f"drone {s}'s coverage")
+            # each switch is one line: the swatch a 12 px square, not the map's full size
+            sizes = page.js(
+                "[...document.querySelectorAll('#layer-vehicles label')].map(l => {"
+                " const s = l.querySelector('.swatch').getBoundingClientRect();"
+                " return [Math.round(s.width), Math.round(s.height),"
+                " Math.round(l.getBoundingClientRect().height)]; })"
+            )
+            assert len(sizes) == 2 and all(w == h == 12 and lh <= 48 for w, h, lh in sizes), sizes
             page.screenshot(art / "ground-station-two-drones.png")
         finally:
             browser.close()

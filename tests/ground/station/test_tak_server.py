@@ -31,7 +31,7 @@ from test_station import hole, picture, wait_for
 from holescan import cli
 from holescan.ground import CotError, GroundHole, GroundOptions, GroundStation, TakTls
 from holescan.ground.station import DATAPACKAGE_NAME, tak_settings
-from holescan.ground.station.state import FORMAT
+from holescan.ground.station.records import FORMAT
 from holescan.missions import HoleMissionServer
 from tests._support import free_udp_port
 
