@@ -19,6 +19,7 @@ import pytest
 from shapely.geometry import Point, Polygon
 
 from holescan import cli
+from holescan.demo import REVIEW_PER_HA_MEASURED
 from holescan.demo._run import DEMO_SORTIE
 from holescan.flightlog import log_info
 from holescan.geotag import AnnounceGate, Hole
@@ -151,7 +152,8 @@ def test_flight_log_ground_station_and_files(demo: tuple[Path, str]) -> None:
     # The stated review load: this flight's, per hectare, next to the measured figure.
     per_ha = round(len(review) / (doc["area_m2"] / 1e4))
     assert f"{len(review)} holes, {doc['review_true']} at a true opening, {per_ha} per " in text
-    assert "expected at the default gate: about 70 per hectare (benchmarks/bench_tiers" in text
+    expected = f"expected at the default gate: about {REVIEW_PER_HA_MEASURED} per hectare ("
+    assert expected + "benchmarks/bench_tiers" in text
     page = Path(files["report"]).read_text()
     shown = confirmed + len(review)
     # Two pictures per hole shown, and the search map's coverage layer.
