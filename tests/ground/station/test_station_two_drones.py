@@ -199,6 +199,14 @@ def test_two_drones_one_station(tmp_path: Path) -> None:
             for s in (1, 2):
                 n = len(layers[s]["tiles"])
                 wait_for(lambda s=s, n=n: page.js(count % s) == n, 10.0, f"drone {s}'s coverage")
+            # each switch is one line: the swatch a 12 px square, not the map's full size
+            sizes = page.js(
+                "[...document.querySelectorAll('#layer-vehicles label')].map(l => {"
+                " const s = l.querySelector('.swatch').getBoundingClientRect();"
+                " return [Math.round(s.width), Math.round(s.height),"
+                " Math.round(l.getBoundingClientRect().height)]; })"
+            )
+            assert len(sizes) == 2 and all(w == h == 12 and lh <= 48 for w, h, lh in sizes), sizes
             page.screenshot(art / "ground-station-two-drones.png")
         finally:
             browser.close()
