@@ -30,14 +30,16 @@ def _summary(out: Path, name: str) -> dict[str, object]:
 
 
 def test_tum_frames_only(
-    recordings: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    recordings: dict[str, Path], scene: Scene, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "out"
     assert main(["reprocess", str(recordings["tum"]), "-o", str(out), "--workers", "0"]) == 0
     text = capsys.readouterr().out
     assert "2 frames, no poses" in text
     s = _summary(out, "rgbd_dataset_scene")
-    assert s["frames_detected"] == 2 and s["detections"] == 2
+    # a candidate at least per true hole (a TUM folder is read with the benchmark's own
+    # freiburg1 camera, not the renderer's, so weak candidates may differ)
+    assert s["frames_detected"] == 2 and s["detections"] >= sum(map(len, scene[2])) == 2
     assert s["frames_unposed"] == 2  # no pose: nothing placed on a map
     assert s["holes_found"] == 0 and s["holes"] == []
     # again: the converted log is kept and the partitions come from the cache
@@ -91,7 +93,9 @@ def test_changed_recording_is_not_written_over(
     assert log.read_bytes() == before
 
 
-def test_detect_oni(scene: Scene, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_detect_oni(
+    scene: Scene, scene_candidates: int, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     pairs, camera, _ = scene
     oni = tmp_path / "scene.oni"
     frames = [
@@ -100,4 +104,4 @@ def test_detect_oni(scene: Scene, tmp_path: Path, capsys: pytest.CaptureFixture[
     assert write_oni(oni, frames, camera) == 2
     assert main(["detect", str(oni)]) == 0
     text = capsys.readouterr().out
-    assert "2 frame(s), 2 candidate(s)" in text and "p_hole 0.9" in text
+    assert f"2 frame(s), {scene_candidates} candidate(s)" in text and "p_hole 0.9" in text
