@@ -143,13 +143,27 @@ class CampaignMerge:
             m = carry_ids(fholes, holes, reference_max_id=top)
             self._flight_ids[name] = {k: v for k, v in m.ids.items() if v in m.from_reference}
 
+    def _seen_by_hole(self) -> dict[int, dict[str, list[int]]]:
+        """Each flight's sightings of each hole, with those counted under an id the tracker
+        later retired (two holes found to be one opening) added to the hole it joined."""
+        merged = self.tracker.merged()
+        out: dict[int, dict[str, list[int]]] = {}
+        for hid, per in self._seen.items():
+            into = out.setdefault(merged.get(hid, hid), {})
+            for name, (n, first, last) in per.items():
+                cur = into.setdefault(name, [0, first, last])
+                cur[0] += n
+                cur[1], cur[2] = min(cur[1], first), max(cur[2], last)
+        return out
+
     def holes(self, min_sightings: int = 1) -> list[CampaignHole]:
         """The campaign's holes seen at least ``min_sightings`` times, by (carried) id."""
         out = []
+        seen = self._seen_by_hole()
         for h in self.tracker.holes():
             if h.sightings < min_sightings:
                 continue
-            per = self._seen.get(h.id, {})
+            per = seen.get(h.id, {})
             flights = sorted(
                 (
                     FlightSightings(name, n, first, last, self._flight_ids.get(name, {}).get(h.id))
