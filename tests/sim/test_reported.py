@@ -55,7 +55,13 @@ def test_sim_camera_renders_from_the_reported_pose(tmp_path: Path) -> None:
     port = free_udp_port()
     cfg = parse_fly_config(
         {"sensor": "sim", "sim": TABLE, "holes": {"announce_min_sightings": 3}},
-        {"log_dir": tmp_path, "mavlink": f"udpin:127.0.0.1:{port}", "duration_s": 12.0},
+        # 60 frames, however long rendering takes on a busy machine (90 s: a hang guard)
+        {
+            "log_dir": tmp_path,
+            "mavlink": f"udpin:127.0.0.1:{port}",
+            "duration_s": 90.0,
+            "max_frames": 60,
+        },
     )
     with SimAutopilot(f"udpout:127.0.0.1:{port}", path, eph_m=0.01) as ap:
         report = fly_sim(cfg, home=home)
