@@ -88,7 +88,7 @@ from holescan.detect._scores import (
     ramp,
     width_score,
 )
-from holescan.detect._surface import plane_evidence, surface_factor
+from holescan.detect._surface import MIN_INNER_PX, plane_evidence, surface_factor
 from holescan.detect._types import CameraIntrinsics, Detection, DetectParams, FeatureScores
 from holescan.detect._validate import check_frame
 
@@ -303,6 +303,7 @@ def _measure(
     fill = area / (major * minor_pca) if major * minor_pca > 0 else 0.0
     sr = ramp(fill, 0.3, 0.7)
     score = combined_score(sd, sw, sr, sb, sc, o.depth_exponent)
+    plane_read: tuple[float, float] | None = None
     if beyond:
         # No reading: a void only if it looks like one (dark against the rubble around it),
         # and not a surface that returns no infrared (read islands on its rim plane).
@@ -313,6 +314,8 @@ def _measure(
                 inside, zc, ~inv_c, (x0, y0), f.cam, (opening.normal, opening.centre), rim_pts
             )
             score *= surface_factor(ev)
+            if ev.inner_px >= MIN_INNER_PX:
+                plane_read = (round(ev.on_plane, 4), round(ev.behind, 4))
     elif bridged:
         score *= max(ramp(sd, *BRIDGED_SD), ramp(sb, *BRIDGED_DARK))
     if score < params.min_score:
@@ -332,6 +335,8 @@ def _measure(
         rim_normal=_xyz(opening.normal),
         rim_seen=round(max(rim_seen, 0.0), 3),
         border_cut=bool(open_px),
+        inside_on_plane=plane_read[0] if plane_read else None,
+        inside_behind=plane_read[1] if plane_read else None,
     )
     # Sizes (and so the score) come from the rim's plane; where the opening is, from the
     # terrain's when the border cuts it: placed once the detection has outlived NMS.

@@ -15,12 +15,20 @@ that into the factor the candidate's score is multiplied by: 1 (no change) unles
 interior is clearly read on the plane and nothing of it behind; a hole whose inside is
 unread throughout, or read behind the plane, is never touched (recall first).
 
+One view is weak evidence (a few islands, a grazing view); many views are strong: a void
+shows its walls behind the plane from somewhere, a black patch is read on its plane again
+and again. The detection keeps the two fractions (:attr:`Detection.inside_on_plane`,
+:attr:`Detection.inside_behind`) and :func:`plane_verdict` says what one view read; the
+tracker counts the verdicts over a hole's viewpoints and the announce gate holds a hole
+that most views read on its plane for review (:mod:`geotag`).
+
 Pure and cheap: run only for candidates with no floor readings, on their crop.
 """
 
 from __future__ import annotations
 
-from typing import NamedTuple
+import math
+from typing import Literal, NamedTuple, get_args
 
 import cv2
 import numpy as np
@@ -29,7 +37,14 @@ import numpy.typing as npt
 from holescan.detect._scores import ramp
 from holescan.detect._types import CameraIntrinsics
 
-__all__ = ["PlaneEvidence", "plane_evidence", "surface_factor"]
+__all__ = [
+    "PLANE_VERDICTS",
+    "PlaneEvidence",
+    "PlaneVerdict",
+    "plane_evidence",
+    "plane_verdict",
+    "surface_factor",
+]
 
 # "Well inside": read pixels at least this fraction of the outline's inscribed radius from
 # its edge, and at least INNER_MIN_PX work pixels.
@@ -158,3 +173,43 @@ def surface_factor(ev: PlaneEvidence) -> float:
     behind_share = ev.behind / (ev.on_plane + ev.behind)
     e = ramp(ev.on_plane, *ON_PLANE) * (1.0 - ramp(behind_share, *BEHIND))
     return round(1.0 - (1.0 - SURFACE_FLOOR) * e, 6)
+
+
+PlaneVerdict = Literal["surface", "behind", "unread", "mixed"]
+"""What one view read inside an unread region: ``surface`` (read on the rim's plane,
+nothing behind it), ``behind`` (read behind the plane: walls, a floor), ``unread``
+(nothing read well inside) or ``mixed`` (some of both, or too little of either)."""
+PLANE_VERDICTS: tuple[PlaneVerdict, ...] = get_args(PlaneVerdict)
+
+# One view reads a surface when at least VERDICT_ON_PLANE of the interior is read on the
+# plane and at most VERDICT_BEHIND_SHARE of the interior's readings lie behind it; it reads
+# behind when at least VERDICT_BEHIND of the interior lies behind the plane and that is at
+# least BEHIND[0] of its readings. Set on the tuning worlds of benchmarks/absorbing_eval.py.
+VERDICT_ON_PLANE = 0.2
+VERDICT_BEHIND_SHARE = 0.3
+VERDICT_BEHIND = 0.05
+
+
+def plane_verdict(on_plane: float | None, behind: float | None) -> PlaneVerdict | None:
+    """One view's verdict from its interior fractions (:attr:`Detection.inside_on_plane`,
+    :attr:`Detection.inside_behind`); None when not measured (or not numbers in [0, 1]).
+
+    >>> plane_verdict(0.4, 0.0), plane_verdict(0.05, 0.5), plane_verdict(0.0, 0.0)
+    ('surface', 'behind', 'unread')
+    >>> plane_verdict(0.1, 0.02), plane_verdict(None, None), plane_verdict(float("nan"), 0.0)
+    ('mixed', None, None)
+    """
+    if on_plane is None or behind is None:
+        return None
+    if not (math.isfinite(on_plane) and math.isfinite(behind)):
+        return None
+    if not (0.0 <= on_plane <= 1.0 and 0.0 <= behind <= 1.0):
+        return None
+    if on_plane <= 0.0 and behind <= 0.0:
+        return "unread"
+    share = behind / (on_plane + behind)
+    if on_plane >= VERDICT_ON_PLANE and share <= VERDICT_BEHIND_SHARE:
+        return "surface"
+    if behind >= VERDICT_BEHIND and share >= BEHIND[0]:
+        return "behind"
+    return "mixed"
