@@ -16,10 +16,27 @@ from tests.geotag.test_one_opening import sighting
 PX_STEP = 100  # one sighting per 80 px image cell: each a viewpoint of its own
 
 
+# What a view read inside (on the plane, behind it) for each verdict (detect.plane_verdict).
+READ: dict[PlaneVerdict | None, tuple[float, float]] = {
+    "surface": (0.35, 0.02),
+    "behind": (0.01, 0.3),
+    "unread": (0.0, 0.0),
+    "mixed": (0.08, 0.02),
+    None: (float("nan"), float("nan")),
+}
+
+
+def _seen(s: HoleSighting, verdict: PlaneVerdict | None) -> HoleSighting:
+    on, behind = READ[verdict]
+    out = replace(s, inside_on_plane=on, inside_behind=behind)
+    assert out.plane == verdict
+    return out
+
+
 def _pass(verdicts: list[PlaneVerdict | None], score: float = 0.95) -> list[HoleSighting]:
     """One opening seen from len(verdicts) viewpoints, each reading ``verdicts[i]``."""
     return [
-        replace(sighting(k, 0.0, score=score, x_px=20 + PX_STEP * k), plane=v)
+        _seen(sighting(k, 0.0, score=score, x_px=20 + PX_STEP * k), v)
         for k, v in enumerate(verdicts)
     ]
 
@@ -66,7 +83,7 @@ def test_fewer_than_three_views_never_vote() -> None:
     assert two.plane_views == 2 and not gate.surface_held(two)
     assert gate.tier(two) == "announced"
     # a hover: many frames from one place are one viewpoint, not many votes
-    hover = [replace(sighting(k, 0.0, score=0.95), plane="surface") for k in range(30)]
+    hover = [_seen(sighting(k, 0.0, score=0.95), "surface") for k in range(30)]
     h = _hole(hover)
     assert (h.sightings, h.plane_views, h.surface_views) == (30, 1, 1)
     assert gate.tier(h) == "announced"
@@ -75,8 +92,8 @@ def test_fewer_than_three_views_never_vote() -> None:
 def test_a_viewpoint_votes_by_the_majority_of_its_sightings() -> None:
     # one viewpoint, three sightings: two on the plane, one behind -> a surface view;
     # one behind and one on the plane -> a behind view (recall first)
-    a = [replace(sighting(k, 0.0, x_px=300), plane=v) for k, v in enumerate(["surface"] * 2)]
-    b = replace(sighting(2, 0.0, x_px=300), plane="behind")
+    a = [_seen(sighting(k, 0.0, x_px=300), "surface") for k in range(2)]
+    b = _seen(sighting(2, 0.0, x_px=300), "behind")
     ev = evidence_of([*a, b])
     assert (ev.plane_views, ev.surface_views, ev.behind_views) == (1, 1, 0)
     ev = evidence_of([a[0], b])
