@@ -288,44 +288,41 @@ def _pass(job: tuple[int, int, str, int]) -> dict[str, Any]:
 
 
 def holes_table(passes: list[dict[str, Any]]) -> list[str]:
-    """Per target kind, the tiers reached with the vote off and on; then the holes the
-    vote held back (their plane views)."""
+    """Per target kind, the tier its own pass gave it (the best of the holes lying on it)
+    with the vote off and on; the holes elsewhere announced; the holes the vote held."""
     from holescan.geotag import AnnounceGate
 
     gates = {"off": AnnounceGate(surface_min_views=10**9), "on": AnnounceGate()}
-    # every target's best tier over every pass (a stain may lie in another target's pass)
-    best: dict[str, dict[tuple[str, int, int], str]] = {k: {} for k in gates}
+    tiers: dict[str, list[tuple[str, str]]] = {g: [] for g in gates}
     held: list[str] = []
-    targets = {(p["mode"], *p["target"]) for p in passes}
-    for key in targets:
-        for g in gates:
-            best[g][key] = "none"
     false_announced = dict.fromkeys(gates, 0)
     for p in passes:
-        wseed = p["target"][0]
-        for h, kind, tid in p["holes"]:
+        wseed, tid = p["target"]
+        best = dict.fromkeys(gates, "none")
+        for h, kind, at in p["holes"]:
             for g, gate in gates.items():
                 t = gate.tier(h)
                 if kind == "other":
                     false_announced[g] += t == "announced"
-                    continue
-                key = (kind, wseed, tid)
-                if key in best[g] and _TIER_RANK[t] > _TIER_RANK[best[g][key]]:
-                    best[g][key] = t
+                elif (kind, at) == (p["mode"], tid) and _TIER_RANK[t] > _TIER_RANK[best[g]]:
+                    best[g] = t
             if gates["on"].surface_held(h):
                 held.append(
-                    f"{kind} {wseed}/{tid}: p_hole {h.p_hole:.2f}, {h.sightings} sightings, "
-                    f"plane views {h.plane_views} (surface {h.surface_views}, behind "
-                    f"{h.behind_views}) -> {gates['off'].tier(h)} before"
+                    f"{kind} {wseed}/{at} (pass over {p['mode']} {tid}): p_hole "
+                    f"{h.p_hole:.2f}, {h.sightings} sightings, plane views {h.plane_views} "
+                    f"(surface {h.surface_views}, behind {h.behind_views}) -> "
+                    f"{gates['off'].tier(h)} before"
                 )
+        for g in gates:
+            tiers[g].append((p["mode"], best[g]))
     lines = [
-        "| targets | vote | announced | review | candidate | not found |",
+        "| pass over | vote | announced | review | candidate | not found |",
         "|---|---|---|---|---|---|",
     ]
     for kind, name in (("stain", "absorbing stains"), ("hole", "access holes")):
-        n = sum(k[0] == kind for k in targets)
+        n = sum(m == kind for m, _ in tiers["off"])
         for g in gates:
-            c = {t: sum(v == t for k, v in best[g].items() if k[0] == kind) for t in _TIER_RANK}
+            c = {t: sum(m == kind and v == t for m, v in tiers[g]) for t in _TIER_RANK}
             lines.append(
                 f"| {name} ({n}) | {g} | {c['announced']} | {c['review']} | "
                 f"{c['candidate']} | {c['none']} |"
@@ -360,6 +357,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rgb", action="store_true", help="also the colour image's evidence")
     ap.add_argument("--holes", action="store_true", help="hole level: passes, tracker, tiers")
     ap.add_argument("--verbose", action="store_true", help="with --holes: every hole's views")
+    ap.add_argument("--save", type=Path, help="with --holes: pickle the passes' holes here")
     args = ap.parse_args(argv)
     try:
         seeds = [int(s) for s in args.worlds.split(",")]
@@ -370,7 +368,7 @@ def main(argv: list[str] | None = None) -> int:
         print("--frames and --workers must be at least 1", file=sys.stderr)
         return 2
     if args.holes:
-        return _main_holes(seeds, args.frames, args.workers, args.verbose)
+        return _main_holes(seeds, args.frames, args.workers, args.verbose, args.save)
     jobs = [(s, i, m) for s in seeds for m in ("stain", "hole") for i in range(args.frames)]
     with multiprocessing.get_context("spawn").Pool(args.workers) as pool:
         frames = pool.map(_frame, jobs, chunksize=args.frames)
@@ -391,7 +389,9 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def _main_holes(seeds: list[int], frames: int, workers: int, verbose: bool) -> int:
+def _main_holes(
+    seeds: list[int], frames: int, workers: int, verbose: bool, save: Path | None
+) -> int:
     jobs = []
     for s in seeds:
         world = _world(s)
@@ -406,6 +406,10 @@ def _main_holes(seeds: list[int], frames: int, workers: int, verbose: bool) -> i
             counts[m] += 1
     with multiprocessing.get_context("spawn").Pool(workers) as pool:
         passes = pool.map(_pass, jobs, chunksize=4)
+    if save is not None:
+        import pickle
+
+        save.write_bytes(pickle.dumps(passes))
     print(f"worlds {','.join(map(str, seeds))}: {len(passes)} passes of {frames} frames")
     print("\n".join(holes_table(passes)))
     if verbose:

@@ -73,10 +73,10 @@ class AnnounceGate:
 
     **The absorbing-surface vote** (:meth:`surface_held`): a hole that at least
     ``surface_min_views`` viewpoints measured against its rim's plane, of which at least
-    ``surface_min_share`` read its inside *on* the plane and at most
-    ``surface_max_behind_share`` *behind* it, is a surface that returns no infrared (soot,
-    char, a wet black patch) more likely than a void, whose walls some view shows behind
-    the plane. It is never announced, whatever its ``p_hole``: it is for review if it
+    ``surface_min_share`` read its inside *on* the plane, and at most
+    ``surface_max_behind_ratio`` times as many *behind* it, is a surface that returns no
+    infrared (soot, char, a wet black patch) more likely than a void, whose walls views
+    show behind the plane and never on it. It is never announced, whatever its ``p_hole``: it is for review if it
     would otherwise have been announced or reaches ``review_min_p_hole`` (recall first: the
     vote never drops a hole below review, it only keeps it from being announced).
 
@@ -111,7 +111,7 @@ class AnnounceGate:
     separation_fraction: float = 0.5
     surface_min_views: int = 3
     surface_min_share: float = 0.5
-    surface_max_behind_share: float = 0.2
+    surface_max_behind_ratio: float = 0.5
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.min_p_hole <= _P_HOLE_MAX:
@@ -126,10 +126,10 @@ class AnnounceGate:
                 f"review min_p_hole must be in [0, {_P_HOLE_MAX}], got {self.review_min_p_hole}"
             )
         if self.surface_min_views < 1 or not (
-            0.0 <= self.surface_min_share <= 1.0 and 0.0 <= self.surface_max_behind_share <= 1.0
+            0.0 <= self.surface_min_share <= 1.0 and self.surface_max_behind_ratio >= 0.0
         ):
             raise InputError(
-                "surface vote: min_views must be >= 1, min_share and max_behind_share in [0, 1]"
+                "surface vote: min_views must be >= 1, min_share in [0, 1], max_behind_ratio >= 0"
             )
 
     def summary(self) -> str:
@@ -157,7 +157,7 @@ class AnnounceGate:
         """True when the absorbing-surface vote holds ``hole`` back from announcement: at
         least ``surface_min_views`` viewpoints measured its inside against the rim plane,
         at least ``surface_min_share`` of them read it on the plane, at most
-        ``surface_max_behind_share`` behind it (holes from older logs: never).
+        ``surface_max_behind_ratio`` times as many behind it (holes from older logs: never).
 
         >>> from holescan.geotag import Hole
         >>> h = Hole(1, 0, 0, 0, 1, 0.9, 9, 0, 10**9, 3, (0, 0, 9, 9), 0.7, 0.5, 0.99, 6)
@@ -168,7 +168,7 @@ class AnnounceGate:
         >>> stain = replace(h, plane_views=4, surface_views=2, behind_views=0)
         >>> gate.surface_held(stain), gate.tier(stain)
         (True, 'review')
-        >>> void = replace(stain, behind_views=1)  # one view in four saw behind the plane
+        >>> void = replace(stain, behind_views=2)  # as many views saw behind the plane
         >>> gate.surface_held(void), gate.tier(void)
         (False, 'announced')
         """
@@ -176,7 +176,7 @@ class AnnounceGate:
         return (
             n >= self.surface_min_views
             and hole.surface_views >= self.surface_min_share * n
-            and hole.behind_views <= self.surface_max_behind_share * n
+            and hole.behind_views <= self.surface_max_behind_ratio * hole.surface_views
         )
 
     def tiers(self, holes: Sequence[Hole], announced: Iterable[int] = ()) -> dict[int, Tier]:

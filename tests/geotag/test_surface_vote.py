@@ -71,10 +71,13 @@ def test_a_void_seen_behind_its_plane_is_announced() -> None:
     # two views in five read on the plane, one behind: not half, announced
     mixed = _hole(_pass(["surface", "behind", "surface", "unread", "unread"]))
     assert not gate.surface_held(mixed) and gate.tier(mixed) == "announced"
-    # half on the plane, but a view in four sees behind it: a void's wall (recall first)
-    walls = _hole(_pass(["surface", "surface", "behind", "unread"]))
-    assert (walls.surface_views, walls.behind_views) == (2, 1)
+    # half on the plane, but as many views see behind it: a void's walls (recall first)
+    walls = _hole(_pass(["surface", "surface", "behind", "behind"]))
+    assert (walls.surface_views, walls.behind_views) == (2, 2)
     assert not gate.surface_held(walls) and gate.tier(walls) == "announced"
+    # one view behind for two on the plane: few, held
+    few = _hole(_pass(["surface", "surface", "behind", "unread"]))
+    assert gate.surface_held(few) and gate.tier(few) == "review"
 
 
 def test_fewer_than_three_views_never_vote() -> None:
@@ -127,6 +130,8 @@ def test_the_vote_settings_are_checked() -> None:
         AnnounceGate(surface_min_views=0)
     with pytest.raises(InputError, match="surface vote"):
         AnnounceGate(surface_min_share=1.5)
+    with pytest.raises(InputError, match="surface vote"):
+        AnnounceGate(surface_max_behind_ratio=-1.0)
     off = AnnounceGate(surface_min_views=10**9)
     stain = _hole(_pass(["surface"] * 4))
     assert off.tier(stain) == "announced" and AnnounceGate().tier(stain) == "review"
