@@ -76,9 +76,10 @@ class AnnounceGate:
     ``surface_min_share`` read its inside *on* the plane, and at most
     ``surface_max_behind_ratio`` times as many *behind* it, is a surface that returns no
     infrared (soot, char, a wet black patch) more likely than a void, whose walls views
-    show behind the plane and never on it. It is never announced, whatever its ``p_hole``: it is for review if it
-    would otherwise have been announced or reaches ``review_min_p_hole`` (recall first: the
-    vote never drops a hole below review, it only keeps it from being announced).
+    show behind the plane and never on it. It is never announced, whatever its
+    ``p_hole``: it is for review if it would otherwise have been announced or reaches
+    ``review_min_p_hole`` (recall first: the vote never drops a hole below review, it only
+    keeps it from being announced).
 
     ``p_hole`` is the hole-level confidence of all its sightings (:attr:`Hole.p_hole`,
     :class:`geotag.ConfidenceModel`); holes read from logs that predate it use the best
