@@ -176,6 +176,35 @@ def test_hole_running_under_the_unread_band_is_cut_not_open(floor_m: float) -> N
     assert not inside.border_cut
 
 
+def _px_hole(
+    x0: int, y0: int, x1: int, y1: int, floor_m: float, z0: float = 2.8
+) -> tuple[float, float, float, float, float]:
+    """A :func:`scene` hole given by its pixel box on a floor at ``z0``."""
+    return ((x0 + x1) / 2, (y0 + y1) / 2, (x1 - x0) * z0 / F, (y1 - y0) * z0 / F, floor_m)
+
+
+def test_hole_in_a_depression_the_border_cuts_is_the_hole_not_the_depression() -> None:
+    # A depression 0.5 m deep running into the right border, a void inside it with 30 px
+    # of the depression's floor (read) between it and the border: the basin closed across
+    # the border holds the void and scores higher, but it is the depression around the
+    # hole, its depth measured against a rim assumed at the border.
+    depression, void = _px_hole(300, 170, 640, 370, 3.3), _px_hole(330, 200, 610, 340, 5.0)
+    rgb, depth, boxes = scene(holes=(depression, void))
+    d = top(detect_holes(rgb, depth, CAM))
+    assert not d.border_cut
+    assert iou(d.box, boxes[1]) > 0.8
+
+
+def test_hole_the_border_cuts_keeps_its_box_over_its_unread_part() -> None:
+    # A hole with a read floor 0.9 m down cut by the right border, its unread middle
+    # reaching to 8 px from the border: the hole is the bridged basin, box to the border.
+    hole, void = _px_hole(480, 170, 640, 370, 3.7), _px_hole(500, 190, 632, 350, 5.0)
+    rgb, depth, boxes = scene(holes=(hole, void))
+    d = top(detect_holes(rgb, depth, CAM))
+    assert d.border_cut and d.box[0] + d.box[2] == 640
+    assert iou(d.box, boxes[0]) > 0.8
+
+
 def test_range_fade_is_not_a_hole() -> None:
     # A floor tilting away until it passes the sensor's range: no reading at the far side.
     rgb, depth, _ = scene(z0=3.0)
