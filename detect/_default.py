@@ -79,6 +79,7 @@ from holescan.detect._regions import (
     basin_regions,
     block_depth,
     no_reading_regions,
+    trim_spurs,
     unread_bands,
 )
 from holescan.detect._scores import (
@@ -138,15 +139,20 @@ BRIDGED_DARK = (0.1, 0.25)
 INNER_SCORE_RATIO = 0.5
 
 
-def _nms(found: list[_Measured], iou_max: float, contained: float, near_px: int) -> list[_Measured]:
+def _nms(
+    found: list[_Measured], iou_max: float, contained: float, near_px: int | None
+) -> list[_Measured]:
     """Suppress overlaps (IoU > ``iou_max``) and containers of a better detection.
 
     A region that holds a higher-scoring one (most of it inside) is a depression or a
     no-reading area around that hole, not a second hole. "Better" is the score, except
-    between a bridged basin and a basin inside it (:func:`_priorities`).
+    between a bridged basin and a basin inside it (:func:`_priorities`; ``near_px`` None:
+    the score alone, ``options.seen_rim_first`` off).
     """
     keep: list[_Measured] = []
-    rank = _priorities(found, contained, near_px)
+    rank = [m.det.score for m in found]
+    if near_px is not None:
+        rank = _priorities(found, contained, near_px)
     for _, m in sorted(zip(rank, found, strict=True), key=lambda p: -p[0]):
         d = m.det
         if all(box_iou(d.box, k.det.box) <= iou_max for k in keep) and not any(
@@ -204,6 +210,10 @@ def _inside(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> float
     ix = max(0, min(a[0] + a[2], b[0] + b[2]) - max(a[0], b[0]))
     iy = max(0, min(a[1] + a[3], b[1] + b[3]) - max(a[1], b[1]))
     return ix * iy / max(a[2] * a[3], 1)
+
+
+def _as_is(region: Candidate) -> Candidate:
+    return region
 
 
 def _unique(regions: list[Candidate]) -> list[Candidate]:
@@ -523,16 +533,20 @@ def detect_default(
     # farthest depth in view, in work pixels.
     min_side_px = s.min_fraction * s.minor_m * cam.fx / max(z_far, 0.5)
     min_px = max(2, int(0.25 * min_side_px**2))
+    spurs = trim_spurs if o.trim_spurs else _as_is
     regions = _unique(
-        basin_regions(pit, min_px, o.depression_ratio)
-        + no_reading_regions(invalid, pit, min_px, o.neck_radii_px)
+        [
+            spurs(r)
+            for r in basin_regions(pit, min_px, o.depression_ratio)
+            + no_reading_regions(invalid, pit, min_px, o.neck_radii_px)
+        ]
     )
     # Basins the border cuts, closed there (their rim beyond is unknown): candidates beside
     # the spilled view's (the better-scoring one of a pair wins in NMS).
     bridged: list[Candidate] = []
     if depths.closed is not None:
         bridged = [
-            r
+            spurs(r)
             for r in basin_regions(depths.closed, min_px, o.depression_ratio)
             if _touches_border(r, z.shape)
         ]
@@ -542,13 +556,16 @@ def detect_default(
     if o.dark_split:
         rel_smooth = cv2.blur(rel.astype(np.float32), (DARK_SMOOTH_PX, DARK_SMOOTH_PX))
         dark_blobs = invalid & (rel_smooth < DARK_CUT)
-        dark = _unique(no_reading_regions(dark_blobs, pit, min_px, o.neck_radii_px))
+        dark = _unique(
+            [spurs(r) for r in no_reading_regions(dark_blobs, pit, min_px, o.neck_radii_px)]
+        )
 
     frame = _FrameData(z, invalid, y_img, rel, cam, z_far, range_m, factor, bands)
     found = [m for r in regions if (m := _measure(r, frame, params)) is not None]
     found += [m for r in dark if (m := _measure(r, frame, params, dark_cut=True)) is not None]
     found += [m for r in bridged if (m := _measure(r, frame, params, bridged=True)) is not None]
-    kept = _nms(found, params.nms_iou, o.contained, RING_PX + o.grow_px)
+    near_cut = RING_PX + o.grow_px if o.seen_rim_first else None
+    kept = _nms(found, params.nms_iou, o.contained, near_cut)
     return [replace(d, p_hole=p_hole_of_score(d.score)) for d in (_place(m, cam) for m in kept)]
 
 

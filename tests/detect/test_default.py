@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -193,6 +195,8 @@ def test_hole_in_a_depression_the_border_cuts_is_the_hole_not_the_depression() -
     d = top(detect_holes(rgb, depth, CAM))
     assert not d.border_cut
     assert iou(d.box, boxes[1]) > 0.8
+    by_score = replace(DEFAULT, options=replace(DEFAULT.options, seen_rim_first=False))
+    assert top(detect_holes(rgb, depth, CAM, by_score)).border_cut
 
 
 def test_hole_the_border_cuts_keeps_its_box_over_its_unread_part() -> None:
@@ -203,6 +207,18 @@ def test_hole_the_border_cuts_keeps_its_box_over_its_unread_part() -> None:
     d = top(detect_holes(rgb, depth, CAM))
     assert d.border_cut and d.box[0] + d.box[2] == 640
     assert iou(d.box, boxes[0]) > 0.8
+
+
+def test_projector_shadow_line_joining_a_hole_does_not_stretch_its_box() -> None:
+    # A void with a line of no reading 4 px wide (a nearer edge's projector shadow) running
+    # 200 px from its side across the floor: the same region, not a wider opening.
+    rgb, depth, boxes = scene(holes=((240, 240, 0.7, 0.7, 5.0),))
+    x, y, w, h = (round(v) for v in boxes[0])
+    depth[y + h // 2 : y + h // 2 + 4, x + w - 2 : x + w + 200] = 0
+    d = top(detect_holes(rgb, depth, CAM))
+    assert iou(d.box, boxes[0]) > 0.8
+    kept = replace(DEFAULT, options=replace(DEFAULT.options, trim_spurs=False))
+    assert iou(top(detect_holes(rgb, depth, CAM, kept)).box, boxes[0]) < 0.6
 
 
 def test_range_fade_is_not_a_hole() -> None:
