@@ -371,9 +371,9 @@ def trim_spurs(region: Candidate) -> Candidate:
     On a structured-light frame a line of unread pixels a block or two wide runs along
     every nearer edge (the projector's shadow, the edge's dropouts); where it meets a hole
     it joins the hole's region and can double its box. No person passes through a line
-    :data:`SPUR_PX` work pixels wide: the region is opened with a disk that wide and its
-    largest part kept, when that takes at least :data:`SPUR_BOX_CUT` of the box's area off
-    the box (else the region is returned as it is: its edge is not stretched).
+    :data:`SPUR_PX` work pixels wide: the region is opened with a disk that wide and, when
+    that takes at least :data:`SPUR_BOX_CUT` of the box's area off the box, its largest
+    part kept (else the region is returned as it is: its edge is not stretched).
 
     >>> m = np.zeros((12, 30), bool); m[2:10, 2:10] = True; m[5, 10:30] = True
     >>> trim_spurs(Candidate(m, (0, 0, 30, 12), True)).box
@@ -383,6 +383,9 @@ def trim_spurs(region: Candidate) -> Candidate:
     opened = np.asarray(
         cv2.morphologyEx(region.mask.astype(np.uint8), cv2.MORPH_OPEN, _SPUR_KERNEL), np.uint8
     )
+    _, _, ow, oh = cv2.boundingRect(opened)  # the largest part's box lies inside it
+    if ow * oh > (1.0 - SPUR_BOX_CUT) * w * h:
+        return region
     n, lab, stats = components(opened)
     if n < 2:
         return region
