@@ -26,6 +26,10 @@ BAND_MAX_PX = 64
 BORDER_BRIDGE = 0.5
 # ... and at least this many pixels long.
 BRIDGE_MIN_PX = 3
+# _fill checks for stability after this many geodesic erosions (a work-grid frame needs
+# 80-170).
+_FILL_CHECK_STEPS = 16
+_K3 = np.ones((3, 3), np.uint8)
 
 
 def block_depth(
@@ -105,7 +109,8 @@ def _heights(z: npt.NDArray[np.float32]) -> tuple[npt.NDArray[np.float64], npt.N
     """``(height, invalid)``: ``-z``, no reading set below every reading."""
     invalid = np.isnan(z)
     height = -z.astype(np.float64)
-    height[invalid] = -(float(np.nanmax(z)) + 1.0)
+    # A float32 value, as every other height is (what _fill's exactness rests on).
+    height[invalid] = -float(np.float32(np.nanmax(z)) + np.float32(1.0))
     return height, invalid
 
 
@@ -127,9 +132,34 @@ def _border_seed(height: npt.NDArray[np.float64], closed_border: bool) -> npt.ND
 def _fill(
     seed: npt.NDArray[np.float64], height: npt.NDArray[np.float64]
 ) -> npt.NDArray[np.float64]:
-    """Grey-level reconstruction by erosion of ``height`` from ``seed``: every basin filled
-    to its spill level."""
-    return np.asarray(reconstruction(seed, height, method="erosion"), np.float64)  # type: ignore[no-untyped-call]
+    """Grey-level reconstruction by erosion of ``height`` from ``seed`` (``seed >= height``):
+    every basin filled to its spill level.
+
+    Equal to ``skimage.morphology.reconstruction(seed, height, method="erosion")`` (8-
+    neighbourhood), computed as its definition: the geodesic erosion (a 3x3 erosion, then
+    no lower than ``height``) repeated until nothing changes. A reconstruction only
+    compares and copies values, so on float32 copies it gives the same values whenever
+    every value is a float32 one, as the heights of block-averaged float32 depth are; on a
+    work grid (160 x 120) OpenCV's float32 erosion makes that ~2.5x cheaper than skimage,
+    which sorts the whole image twice. Other values go to skimage.
+
+    >>> h = np.array([[3, 3, 3, 3], [3, 1, 0, 3], [3, 2, 3, 3], [3, 3, 3, 3]], np.float64)
+    >>> h[0, 1] = 2.0  # the rim's lowest point: the basin spills there
+    >>> seed = h.copy(); seed[1:-1, 1:-1] = h.max()
+    >>> _fill(seed, h)[1:3, 1:3].tolist()
+    [[2.0, 2.0], [2.0, 3.0]]
+    """
+    s32, h32 = seed.astype(np.float32), height.astype(np.float32)
+    if not (np.array_equal(s32, seed) and np.array_equal(h32, height)):
+        return np.asarray(reconstruction(seed, height, method="erosion"), np.float64)  # type: ignore[no-untyped-call]
+    cur, eroded, before = s32, np.empty_like(s32), np.empty_like(s32)
+    while True:
+        before[...] = cur
+        for _ in range(_FILL_CHECK_STEPS):
+            cv2.erode(cur, _K3, dst=eroded)  # outside the image counts as +inf
+            np.maximum(eroded, h32, out=cur)
+        if np.array_equal(cur, before):
+            return cur.astype(np.float64)
 
 
 def _pit(
