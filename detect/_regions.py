@@ -27,8 +27,8 @@ BORDER_BRIDGE = 0.5
 # ... and at least this many pixels long.
 BRIDGE_MIN_PX = 3
 # _fill checks for stability after this many geodesic erosions (a work-grid frame needs
-# 80-170).
-_FILL_CHECK_STEPS = 16
+# 50-130).
+_FILL_CHECK_STEPS = 8
 _K3 = np.ones((3, 3), np.uint8)
 
 
@@ -140,8 +140,15 @@ def _fill(
     no lower than ``height``) repeated until nothing changes. A reconstruction only
     compares and copies values, so on float32 copies it gives the same values whenever
     every value is a float32 one, as the heights of block-averaged float32 depth are; on a
-    work grid (160 x 120) OpenCV's float32 erosion makes that ~2.5x cheaper than skimage,
+    work grid (160 x 120) OpenCV's float32 erosion makes that ~3x cheaper than skimage,
     which sorts the whole image twice. Other values go to skimage.
+
+    The erosions start from a tighter marker than ``seed``: each pixel lowered to the
+    least, over the four straight paths from it along its row and column to the border, of
+    the path's highest height (or its seed where it leaves, if higher). Water can drain
+    along each of those paths, so the marker stays between the result and ``seed``, and
+    the erosions from it reach the same result (reconstruction is monotone in the
+    marker), in about half as many steps.
 
     >>> h = np.array([[3, 3, 3, 3], [3, 1, 0, 3], [3, 2, 3, 3], [3, 3, 3, 3]], np.float64)
     >>> h[0, 1] = 2.0  # the rim's lowest point: the basin spills there
@@ -152,7 +159,12 @@ def _fill(
     s32, h32 = seed.astype(np.float32), height.astype(np.float32)
     if not (np.array_equal(s32, seed) and np.array_equal(h32, height)):
         return np.asarray(reconstruction(seed, height, method="erosion"), np.float64)  # type: ignore[no-untyped-call]
-    cur, eroded, before = s32, np.empty_like(s32), np.empty_like(s32)
+    top = np.maximum.accumulate
+    cur = np.minimum(s32, np.maximum(top(h32, axis=1), s32[:, :1]))
+    np.minimum(cur, np.maximum(top(h32[:, ::-1], axis=1)[:, ::-1], s32[:, -1:]), out=cur)
+    np.minimum(cur, np.maximum(top(h32, axis=0), s32[:1, :]), out=cur)
+    np.minimum(cur, np.maximum(top(h32[::-1], axis=0)[::-1], s32[-1:, :]), out=cur)
+    eroded, before = np.empty_like(s32), np.empty_like(s32)
     while True:
         before[...] = cur
         for _ in range(_FILL_CHECK_STEPS):
