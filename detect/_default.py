@@ -244,14 +244,15 @@ def _measure(
     rv, ru = np.nonzero(ring)
     rim_u, rim_v = ru.astype(np.float64) + x0, rv.astype(np.float64) + y0
     rim_zs = zc[ring].astype(np.float64)
-    occ = occluders(rim_u, rim_v, rim_zs, f.cam, o.occluder_step_m)
+    occ, rim_plane = occluders(rim_u, rim_v, rim_zs, f.cam, o.occluder_step_m)
     if occ.any() and (~occ).sum() >= 3:
         rim_u, rim_v, rim_zs = rim_u[~occ], rim_v[~occ], rim_zs[~occ]
     # How much of the opening's outline is bordered by rim we saw: not the image border,
     # not unread pixels, not a nearer edge standing in front.
     rim_seen = min(1.0, (n_rim - int(occ.sum())) / (int(ring_all.sum()) + RING_PX * open_px))
     region_uv = (us.astype(np.float64) + x0, vs.astype(np.float64) + y0)
-    opening = measure_opening(region_uv, (rim_u, rim_v, rim_zs), f.cam)
+    # The rim's plane: the one the occluder test fitted to these very points, if it did.
+    opening = measure_opening(region_uv, (rim_u, rim_v, rim_zs), f.cam, plane=rim_plane)
     major, minor_pca, area, rim_z = (
         opening.major_m,
         opening.minor_m,

@@ -319,13 +319,16 @@ def occluders(
     rz: npt.NDArray[np.float64],
     cam: CameraIntrinsics,
     step_m: float = DefaultOptions.occluder_step_m,
-) -> npt.NDArray[np.bool_]:
+) -> tuple[npt.NDArray[np.bool_], tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]] | None]:
     """Rim points that stand well in front of the plane of the others: a nearer edge.
 
     ru, rv : pixel coordinates of the rim; rz : their depth (m). A slab lying across the
     opening hides its near part; its edge borders the visible part of the hole and is no
     rim. Points more than ``step_m`` nearer than the plane fitted to the rim
     (refitted once without them) are flagged.
+
+    Returns ``(flagged, plane)``: plane is :func:`fit_plane` of the points not flagged
+    when that is the last plane fitted (the rim's plane, not fitted twice), else None.
     """
     near = np.zeros(len(rz), bool)
     rays = rays_of(ru, rv, cam)
@@ -337,6 +340,6 @@ def occluders(
         z_plane = float(centre @ normal) / _along(normal, rays[:, 0], rays[:, 1])
         now = rz < z_plane - step_m
         if not now.any() or np.array_equal(now, near):
-            return now
+            return now, ((normal, centre) if np.array_equal(~now, keep) else None)
         near = now
-    return near
+    return near, None
