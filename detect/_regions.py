@@ -85,12 +85,12 @@ def _closed_profile(profile: npt.NDArray[np.float64], length: int) -> npt.NDArra
     [3.0, 2.0, 2.0, 2.0, 1.0, 0.5]
     """
     n = max(1, length)
-    pad_l = np.concatenate([np.full(n, profile[0]), profile])
-    pad_r = np.concatenate([profile, np.full(n, profile[-1])])
-    win = np.lib.stride_tricks.sliding_window_view
-    left = win(pad_l, n + 1).max(axis=1)
-    right = win(pad_r, n + 1).max(axis=1)
-    return np.asarray(np.minimum(left, right), np.float64)
+    line = np.ascontiguousarray(profile, np.float64)[None, :]
+    kernel = np.ones((1, n + 1), np.uint8)
+    # Running maxima over [i - n, i] and [i, i + n] (a dilation: exact, no window copies).
+    left = cv2.dilate(line, kernel, anchor=(n, 0), borderType=cv2.BORDER_REPLICATE)
+    right = cv2.dilate(line, kernel, anchor=(0, 0), borderType=cv2.BORDER_REPLICATE)
+    return np.asarray(np.minimum(left, right)[0], np.float64)
 
 
 def _bridged(profile: npt.NDArray[np.float64], length: int) -> npt.NDArray[np.float64]:
