@@ -398,3 +398,41 @@ def no_reading_regions(
             mask, (bx, by, bw, bh) = _crop(lab2, stats2, j)
             regions.append(Candidate(mask, (bx + x0, by + y0, bw, bh), False))
     return regions
+
+
+# Spurs (trim_spurs): parts of a region no wider than this many work pixels, ...
+SPUR_PX = 2
+# ... trimmed when that takes this fraction of its box's area or more off the box.
+SPUR_BOX_CUT = 0.25
+_SPUR_KERNEL = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (SPUR_PX + 1, SPUR_PX + 1))
+
+
+def trim_spurs(region: Candidate) -> Candidate:
+    """``region`` without the thin spurs that stretch its box.
+
+    On a structured-light frame a line of unread pixels a block or two wide runs along
+    every nearer edge (the projector's shadow, the edge's dropouts); where it meets a hole
+    it joins the hole's region and can double its box. No person passes through a line
+    :data:`SPUR_PX` work pixels wide: the region is opened with a disk that wide and, when
+    that takes at least :data:`SPUR_BOX_CUT` of the box's area off the box, its largest
+    part kept (else the region is returned as it is: its edge is not stretched).
+
+    >>> m = np.zeros((12, 30), bool); m[2:10, 2:10] = True; m[5, 10:30] = True
+    >>> trim_spurs(Candidate(m, (0, 0, 30, 12), True)).box
+    (2, 2, 9, 8)
+    """
+    x, y, w, h = region.box
+    opened = np.asarray(
+        cv2.morphologyEx(region.mask.astype(np.uint8), cv2.MORPH_OPEN, _SPUR_KERNEL), np.uint8
+    )
+    _, _, ow, oh = cv2.boundingRect(opened)  # the largest part's box lies inside it
+    if ow * oh > (1.0 - SPUR_BOX_CUT) * w * h:
+        return region
+    n, lab, stats = components(opened)
+    if n < 2:
+        return region
+    i = int(np.argmax(stats[1:, cv2.CC_STAT_AREA])) + 1
+    mask, (bx, by, bw, bh) = _crop(lab, stats, i)
+    if bw * bh > (1.0 - SPUR_BOX_CUT) * w * h:
+        return region
+    return Candidate(mask, (bx + x, by + y, bw, bh), region.enclosed)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from skimage.morphology import reconstruction
@@ -198,6 +200,49 @@ def test_hole_running_under_the_unread_band_is_cut_not_open(floor_m: float) -> N
     assert d.rim_seen is not None and d.rim_seen < 0.9
     inside = top(detect_holes(*scene(holes=((320, 250, 0.6, 0.8, floor_m),))[:2], CAM))
     assert not inside.border_cut
+
+
+def _px_hole(
+    x0: int, y0: int, x1: int, y1: int, floor_m: float, z0: float = 2.8
+) -> tuple[float, float, float, float, float]:
+    """A :func:`scene` hole given by its pixel box on a floor at ``z0``."""
+    return ((x0 + x1) / 2, (y0 + y1) / 2, (x1 - x0) * z0 / F, (y1 - y0) * z0 / F, floor_m)
+
+
+def test_hole_in_a_depression_the_border_cuts_is_the_hole_not_the_depression() -> None:
+    # A depression 0.5 m deep running into the right border, a void inside it with 30 px
+    # of the depression's floor (read) between it and the border: the basin closed across
+    # the border holds the void and scores higher, but it is the depression around the
+    # hole, its depth measured against a rim assumed at the border.
+    depression, void = _px_hole(300, 170, 640, 370, 3.3), _px_hole(330, 200, 610, 340, 5.0)
+    rgb, depth, boxes = scene(holes=(depression, void))
+    d = top(detect_holes(rgb, depth, CAM))
+    assert not d.border_cut
+    assert iou(d.box, boxes[1]) > 0.8
+    by_score = replace(DEFAULT, options=replace(DEFAULT.options, seen_rim_first=False))
+    assert top(detect_holes(rgb, depth, CAM, by_score)).border_cut
+
+
+def test_hole_the_border_cuts_keeps_its_box_over_its_unread_part() -> None:
+    # A hole with a read floor 0.9 m down cut by the right border, its unread middle
+    # reaching to 8 px from the border: the hole is the bridged basin, box to the border.
+    hole, void = _px_hole(480, 170, 640, 370, 3.7), _px_hole(500, 190, 632, 350, 5.0)
+    rgb, depth, boxes = scene(holes=(hole, void))
+    d = top(detect_holes(rgb, depth, CAM))
+    assert d.border_cut and d.box[0] + d.box[2] == 640
+    assert iou(d.box, boxes[0]) > 0.8
+
+
+def test_projector_shadow_line_joining_a_hole_does_not_stretch_its_box() -> None:
+    # A void with a line of no reading 4 px wide (a nearer edge's projector shadow) running
+    # 200 px from its side across the floor: the same region, not a wider opening.
+    rgb, depth, boxes = scene(holes=((240, 240, 0.7, 0.7, 5.0),))
+    x, y, w, h = (round(v) for v in boxes[0])
+    depth[y + h // 2 : y + h // 2 + 4, x + w - 2 : x + w + 200] = 0
+    d = top(detect_holes(rgb, depth, CAM))
+    assert iou(d.box, boxes[0]) > 0.8
+    kept = replace(DEFAULT, options=replace(DEFAULT.options, trim_spurs=False))
+    assert iou(top(detect_holes(rgb, depth, CAM, kept)).box, boxes[0]) < 0.6
 
 
 def test_range_fade_is_not_a_hole() -> None:
