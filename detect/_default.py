@@ -338,6 +338,11 @@ def _measure(
         minor = inscribed
     else:
         minor = min(minor_pca, inscribed)
+    s = params.searcher
+    sw = width_score(major, minor, s.major_m, s.minor_m, s.min_fraction)
+    sw *= 1.0 - ramp(major, OVERSIZE_START_M, OVERSIZE_END_M)
+    if sw == 0.0 and params.min_score > 0.0:
+        return None  # too narrow (or too broad) to enter: scores 0 whatever the rest is
     floor_valid = inside & ~inv_c
     no_read = float(np.count_nonzero(inside & inv_c)) / float(np.count_nonzero(inside))
     seen = float(np.percentile(zc[floor_valid], 90) - rim_z) if floor_valid.any() else 0.0
@@ -345,7 +350,6 @@ def _measure(
     y_in, y_ring = float(yc[inside].mean()), float(yc[ring].mean())
     sb = darkness_score(y_in, params.dark_threshold)
     sc = contrast_score(y_in, y_ring, params.contrast_threshold)
-    s = params.searcher
     beyond = no_read > 0.3
     rel_in = float(np.median(f.rel[y0:y1, x0:x1][inside & inv_c])) if beyond else 0.0
     if beyond:
@@ -360,8 +364,6 @@ def _measure(
     else:
         depth_rel = seen
         sd = ramp(depth_rel, s.depth_low_m, s.depth_high_m)
-    sw = width_score(major, minor, s.major_m, s.minor_m, s.min_fraction)
-    sw *= 1.0 - ramp(major, OVERSIZE_START_M, OVERSIZE_END_M)
     fill = area / (major * minor_pca) if major * minor_pca > 0 else 0.0
     sr = ramp(fill, 0.3, 0.7)
     score = combined_score(sd, sw, sr, sb, sc, o.depth_exponent)

@@ -110,7 +110,7 @@ def _heights(z: npt.NDArray[np.float32]) -> tuple[npt.NDArray[np.float64], npt.N
     invalid = np.isnan(z)
     height = -z.astype(np.float64)
     # A float32 value, as every other height is (what _fill's exactness rests on).
-    height[invalid] = -float(np.float32(np.nanmax(z)) + np.float32(1.0))
+    height[invalid] = -float(np.fmax.reduce(z, axis=None) + np.float32(1.0))  # fmax: NaN-blind
     return height, invalid
 
 
