@@ -62,7 +62,7 @@ def fit_plane(
     Falls back to a fronto-parallel plane when the points are too few, collinear, or the
     plane would be seen edge-on (normal more than ~72 deg from the optical axis).
     """
-    centre = points.mean(axis=0)
+    centre = np.ones(len(points)) @ points / len(points)  # the mean (a BLAS product)
     normal = np.array([0.0, 0.0, 1.0])
     if len(points) >= 6:
         # The right singular vectors of the centred points are the eigenvectors of their
