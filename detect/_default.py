@@ -79,6 +79,7 @@ from holescan.detect._regions import (
     basin_regions,
     block_depth,
     no_reading_regions,
+    trim_spurs,
     unread_bands,
 )
 from holescan.detect._scores import (
@@ -131,16 +132,28 @@ BRIDGED_SD = (0.2, 0.35)
 # this (p_hole ~0.1): below, it could only lower what is not shown anyway.
 SURFACE_GATE = 0.2
 BRIDGED_DARK = (0.1, 0.25)
+# NMS between a bridged basin and a basin inside it with its rim seen all round
+# (_priorities): the inner one counts when it scores at least this fraction of the bridged
+# one (a much weaker dip is a dip in the hole's floor), and it runs on to the cut when it
+# comes within its ring and walls of it (RING_PX + options.grow_px work pixels).
+INNER_SCORE_RATIO = 0.5
 
 
-def _nms(found: list[_Measured], iou_max: float, contained: float) -> list[_Measured]:
+def _nms(
+    found: list[_Measured], iou_max: float, contained: float, near_px: int | None
+) -> list[_Measured]:
     """Suppress overlaps (IoU > ``iou_max``) and containers of a better detection.
 
     A region that holds a higher-scoring one (most of it inside) is a depression or a
-    no-reading area around that hole, not a second hole.
+    no-reading area around that hole, not a second hole. "Better" is the score, except
+    between a bridged basin and a basin inside it (:func:`_priorities`; ``near_px`` None:
+    the score alone, ``options.seen_rim_first`` off).
     """
     keep: list[_Measured] = []
-    for m in sorted(found, key=lambda m: -m.det.score):
+    rank = [m.det.score for m in found]
+    if near_px is not None:
+        rank = _priorities(found, contained, near_px)
+    for _, m in sorted(zip(rank, found, strict=True), key=lambda p: -p[0]):
         d = m.det
         if all(box_iou(d.box, k.det.box) <= iou_max for k in keep) and not any(
             _inside(k.det.box, d.box) > contained for k in keep
@@ -149,11 +162,58 @@ def _nms(found: list[_Measured], iou_max: float, contained: float) -> list[_Meas
     return keep
 
 
+def _priorities(found: list[_Measured], contained: float, near_px: int) -> list[float]:
+    """The order of NMS: each candidate's score, but a bridged basin (closed by a rim
+    assumed across the border cut) and a basin inside it whose rim was seen all round
+    (not bridged, not cut) and that scores at least :data:`INNER_SCORE_RATIO` of it:
+
+    * when the inner basin comes within ``near_px`` of a side the bridged one is cut by,
+      it is the deep part of a hole that runs on to the cut: the bridged basin goes first
+      (its box is the hole's);
+    * otherwise seen rim lies between the inner basin and the cut: the bridged basin is
+      the depression around that hole, its depth measured against a rim partly assumed;
+      the inner basin goes first (and the bridged one, holding it, is dropped).
+    """
+    rank = [m.det.score for m in found]
+    for i, b in enumerate(found):
+        if b.read is None or not b.read.bridged:
+            continue
+        for j, e in enumerate(found):
+            if (
+                e.read is None
+                or e.read.bridged
+                or e.det.border_cut
+                or e.det.score < INNER_SCORE_RATIO * b.det.score
+                or _inside(e.det.box, b.det.box) <= contained
+            ):
+                continue
+            first, then = (i, j) if _near_cut(e.read, b.read, near_px) else (j, i)
+            if rank[first] <= rank[then]:
+                rank[first] = np.nextafter(rank[then], np.inf)
+    return rank
+
+
+def _near_cut(inner: _ReadBox, outer: _ReadBox, near: int) -> bool:
+    """Whether ``inner`` comes within ``near`` work pixels of a side of the read area
+    that ``outer`` reaches."""
+    (ix0, iy0, ix1, iy1), (ox0, oy0, ox1, oy1), (ww, hh) = inner.box, outer.box, outer.size
+    return (
+        (ox0 == 0 and ix0 <= near)
+        or (oy0 == 0 and iy0 <= near)
+        or (ox1 == ww and ww - ix1 <= near)
+        or (oy1 == hh and hh - iy1 <= near)
+    )
+
+
 def _inside(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> float:
     """Fraction of box ``a`` that lies inside box ``b``."""
     ix = max(0, min(a[0] + a[2], b[0] + b[2]) - max(a[0], b[0]))
     iy = max(0, min(a[1] + a[3], b[1] + b[3]) - max(a[1], b[1]))
     return ix * iy / max(a[2] * a[3], 1)
+
+
+def _as_is(region: Candidate) -> Candidate:
+    return region
 
 
 def _unique(regions: list[Candidate]) -> list[Candidate]:
@@ -244,14 +304,15 @@ def _measure(
     rv, ru = np.nonzero(ring)
     rim_u, rim_v = ru.astype(np.float64) + x0, rv.astype(np.float64) + y0
     rim_zs = zc[ring].astype(np.float64)
-    occ = occluders(rim_u, rim_v, rim_zs, f.cam, o.occluder_step_m)
+    occ, rim_plane = occluders(rim_u, rim_v, rim_zs, f.cam, o.occluder_step_m)
     if occ.any() and (~occ).sum() >= 3:
         rim_u, rim_v, rim_zs = rim_u[~occ], rim_v[~occ], rim_zs[~occ]
     # How much of the opening's outline is bordered by rim we saw: not the image border,
     # not unread pixels, not a nearer edge standing in front.
     rim_seen = min(1.0, (n_rim - int(occ.sum())) / (int(ring_all.sum()) + RING_PX * open_px))
     region_uv = (us.astype(np.float64) + x0, vs.astype(np.float64) + y0)
-    opening = measure_opening(region_uv, (rim_u, rim_v, rim_zs), f.cam)
+    # The rim's plane: the one the occluder test fitted to these very points, if it did.
+    opening = measure_opening(region_uv, (rim_u, rim_v, rim_zs), f.cam, plane=rim_plane)
     major, minor_pca, area, rim_z = (
         opening.major_m,
         opening.minor_m,
@@ -335,10 +396,11 @@ def _measure(
     )
     # Sizes (and so the score) come from the rim's plane; where the opening is, from the
     # terrain's when the border cuts it: placed once the detection has outlived NMS.
+    read = _ReadBox((gx0, gy0, gx1, gy1), (ww, hh), bridged)
     if not (open_px and o.cut_circle):
-        return _Measured(det, None)
+        return _Measured(det, None, read)
     return _Measured(
-        det, _Cut(opening, region_uv, (rim_u, rim_v, rim_zs), inside, inv_c, zc, (x0, y0))
+        det, _Cut(opening, region_uv, (rim_u, rim_v, rim_zs), inside, inv_c, zc, (x0, y0)), read
     )
 
 
@@ -354,9 +416,18 @@ class _Cut(NamedTuple):
     origin: tuple[int, int]
 
 
+class _ReadBox(NamedTuple):
+    """Where a measured region lies on the read area (work pixels), for NMS."""
+
+    box: tuple[int, int, int, int]  # x0, y0, x1, y1
+    size: tuple[int, int]  # the read area's width, height
+    bridged: bool  # a basin closed by bridging its cut at the border
+
+
 class _Measured(NamedTuple):
     det: Detection
     cut: _Cut | None
+    read: _ReadBox | None = None
 
 
 def _place(m: _Measured, cam: CameraIntrinsics) -> Detection:
@@ -463,16 +534,20 @@ def detect_default(
     # farthest depth in view, in work pixels.
     min_side_px = s.min_fraction * s.minor_m * cam.fx / max(z_far, 0.5)
     min_px = max(2, int(0.25 * min_side_px**2))
+    spurs = trim_spurs if o.trim_spurs else _as_is
     regions = _unique(
-        basin_regions(pit, min_px, o.depression_ratio)
-        + no_reading_regions(invalid, pit, min_px, o.neck_radii_px)
+        [
+            spurs(r)
+            for r in basin_regions(pit, min_px, o.depression_ratio)
+            + no_reading_regions(invalid, pit, min_px, o.neck_radii_px)
+        ]
     )
     # Basins the border cuts, closed there (their rim beyond is unknown): candidates beside
     # the spilled view's (the better-scoring one of a pair wins in NMS).
     bridged: list[Candidate] = []
     if depths.closed is not None:
         bridged = [
-            r
+            spurs(r)
             for r in basin_regions(depths.closed, min_px, o.depression_ratio)
             if _touches_border(r, z.shape)
         ]
@@ -482,13 +557,16 @@ def detect_default(
     if o.dark_split:
         rel_smooth = cv2.blur(rel.astype(np.float32), (DARK_SMOOTH_PX, DARK_SMOOTH_PX))
         dark_blobs = invalid & (rel_smooth < DARK_CUT)
-        dark = _unique(no_reading_regions(dark_blobs, pit, min_px, o.neck_radii_px))
+        dark = _unique(
+            [spurs(r) for r in no_reading_regions(dark_blobs, pit, min_px, o.neck_radii_px)]
+        )
 
     frame = _FrameData(z, invalid, y_img, rel, cam, z_far, range_m, factor, bands)
     found = [m for r in regions if (m := _measure(r, frame, params)) is not None]
     found += [m for r in dark if (m := _measure(r, frame, params, dark_cut=True)) is not None]
     found += [m for r in bridged if (m := _measure(r, frame, params, bridged=True)) is not None]
-    kept = _nms(found, params.nms_iou, o.contained)
+    near_cut = RING_PX + o.grow_px if o.seen_rim_first else None
+    kept = _nms(found, params.nms_iou, o.contained, near_cut)
     return [replace(d, p_hole=p_hole_of_score(d.score)) for d in (_place(m, cam) for m in kept)]
 
 
