@@ -291,29 +291,31 @@ def _measure(
     ring = ring_all & ~inv_c
     # The image border counts as rim we could not see.
     gx0, gy0, gx1, gy1 = bx0 + x0, by0 + y0, bx1 + x0, by1 + y0
-    open_px = int(inside[:, 0].sum()) if gx0 == 0 else 0
-    open_px += int(inside[:, -1].sum()) if gx1 == ww else 0
-    open_px += int(inside[0, :].sum()) if gy0 == 0 else 0
-    open_px += int(inside[-1, :].sum()) if gy1 == hh else 0
-    n_ring = int(ring.sum())
+    open_px = np.count_nonzero(inside[:, 0]) if gx0 == 0 else 0
+    open_px += np.count_nonzero(inside[:, -1]) if gx1 == ww else 0
+    open_px += np.count_nonzero(inside[0, :]) if gy0 == 0 else 0
+    open_px += np.count_nonzero(inside[-1, :]) if gy1 == hh else 0
+    n_ring = np.count_nonzero(ring)
     if n_ring < 3:
         return None
     n_rim = n_ring
     if dark_cut:  # cut from bright unread pixels by colour: those are seen rim too
-        n_rim += int((ring_all & inv_c & (f.rel[y0:y1, x0:x1] >= DARK_CUT)).sum())
-    if not enclosed and n_rim < MIN_RIM_VALID * (int(ring_all.sum()) + RING_PX * open_px):
+        n_rim += np.count_nonzero(ring_all & inv_c & (f.rel[y0:y1, x0:x1] >= DARK_CUT))
+    if not enclosed and n_rim < MIN_RIM_VALID * (np.count_nonzero(ring_all) + RING_PX * open_px):
         return None
     rv, ru = np.nonzero(ring)
     rim_u, rim_v = ru.astype(np.float64) + x0, rv.astype(np.float64) + y0
     rim_zs = zc[ring].astype(np.float64)
-    occ = occluders(rim_u, rim_v, rim_zs, f.cam, o.occluder_step_m)
-    if occ.any() and (~occ).sum() >= 3:
+    occ, rim_plane = occluders(rim_u, rim_v, rim_zs, f.cam, o.occluder_step_m)
+    if occ.any() and np.count_nonzero(~occ) >= 3:
         rim_u, rim_v, rim_zs = rim_u[~occ], rim_v[~occ], rim_zs[~occ]
     # How much of the opening's outline is bordered by rim we saw: not the image border,
     # not unread pixels, not a nearer edge standing in front.
-    rim_seen = min(1.0, (n_rim - int(occ.sum())) / (int(ring_all.sum()) + RING_PX * open_px))
+    outline = np.count_nonzero(ring_all) + RING_PX * open_px
+    rim_seen = min(1.0, (n_rim - np.count_nonzero(occ)) / outline)
     region_uv = (us.astype(np.float64) + x0, vs.astype(np.float64) + y0)
-    opening = measure_opening(region_uv, (rim_u, rim_v, rim_zs), f.cam)
+    # The rim's plane: the one the occluder test fitted to these very points, if it did.
+    opening = measure_opening(region_uv, (rim_u, rim_v, rim_zs), f.cam, plane=rim_plane)
     major, minor_pca, area, rim_z = (
         opening.major_m,
         opening.minor_m,
@@ -338,14 +340,18 @@ def _measure(
         minor = inscribed
     else:
         minor = min(minor_pca, inscribed)
+    s = params.searcher
+    sw = width_score(major, minor, s.major_m, s.minor_m, s.min_fraction)
+    sw *= 1.0 - ramp(major, OVERSIZE_START_M, OVERSIZE_END_M)
+    if sw == 0.0 and params.min_score > 0.0:
+        return None  # too narrow (or too broad) to enter: scores 0 whatever the rest is
     floor_valid = inside & ~inv_c
-    no_read = float((inside & inv_c).sum()) / float(inside.sum())
+    no_read = float(np.count_nonzero(inside & inv_c)) / float(np.count_nonzero(inside))
     seen = float(np.percentile(zc[floor_valid], 90) - rim_z) if floor_valid.any() else 0.0
     yc = f.y_img[y0:y1, x0:x1]
     y_in, y_ring = float(yc[inside].mean()), float(yc[ring].mean())
     sb = darkness_score(y_in, params.dark_threshold)
     sc = contrast_score(y_in, y_ring, params.contrast_threshold)
-    s = params.searcher
     beyond = no_read > 0.3
     rel_in = float(np.median(f.rel[y0:y1, x0:x1][inside & inv_c])) if beyond else 0.0
     if beyond:
@@ -360,8 +366,6 @@ def _measure(
     else:
         depth_rel = seen
         sd = ramp(depth_rel, s.depth_low_m, s.depth_high_m)
-    sw = width_score(major, minor, s.major_m, s.minor_m, s.min_fraction)
-    sw *= 1.0 - ramp(major, OVERSIZE_START_M, OVERSIZE_END_M)
     fill = area / (major * minor_pca) if major * minor_pca > 0 else 0.0
     sr = ramp(fill, 0.3, 0.7)
     score = combined_score(sd, sw, sr, sb, sc, o.depth_exponent)

@@ -30,6 +30,10 @@ BRIDGE_MIN_PX = 3
 # their one side, when that side rises as a wall's (by DEEP_M within CORNER_STEP_PX).
 CORNER_BRIDGE = 0.25
 CORNER_STEP_PX = 2
+# _fill checks for stability after this many geodesic erosions (a work-grid frame needs
+# 50-130).
+_FILL_CHECK_STEPS = 8
+_K3 = np.ones((3, 3), np.uint8)
 
 
 def block_depth(
@@ -93,14 +97,16 @@ def _closed_profile(
     [2.0, 2.0, 2.0, 2.0, 2.0, 2.0]
     """
     n = max(1, length)
-    lo = _end_rim(profile, end) if end else profile[0]
-    hi = _end_rim(profile[::-1], end) if end else profile[-1]
-    pad_l = np.concatenate([np.full(n, lo), profile])
-    pad_r = np.concatenate([profile, np.full(n, hi)])
-    win = np.lib.stride_tricks.sliding_window_view
-    left = win(pad_l, n + 1).max(axis=1)
-    right = win(pad_r, n + 1).max(axis=1)
-    return np.asarray(np.minimum(left, right), np.float64)
+    lo = _end_rim(profile, end) if end else float(profile[0])
+    hi = _end_rim(profile[::-1], end) if end else float(profile[-1])
+    line = np.ascontiguousarray(profile, np.float64)[None, :]
+    kernel = np.ones((1, n + 1), np.uint8)
+    # Running maxima over [i - n, i] and [i, i + n] (a dilation: exact, no window copies),
+    # the line continued by ``lo`` before its start and ``hi`` after its end.
+    const = cv2.BORDER_CONSTANT
+    left = cv2.dilate(line, kernel, anchor=(n, 0), borderType=const, borderValue=lo)
+    right = cv2.dilate(line, kernel, anchor=(0, 0), borderType=const, borderValue=hi)
+    return np.asarray(np.minimum(left, right)[0], np.float64)
 
 
 def _end_rim(profile: npt.NDArray[np.float64], end: int) -> float:
@@ -139,7 +145,8 @@ def _heights(z: npt.NDArray[np.float32]) -> tuple[npt.NDArray[np.float64], npt.N
     """``(height, invalid)``: ``-z``, no reading set below every reading."""
     invalid = np.isnan(z)
     height = -z.astype(np.float64)
-    height[invalid] = -(float(np.nanmax(z)) + 1.0)
+    # A float32 value, as every other height is (what _fill's exactness rests on).
+    height[invalid] = -float(np.fmax.reduce(z, axis=None) + np.float32(1.0))  # fmax: NaN-blind
     return height, invalid
 
 
@@ -162,9 +169,46 @@ def _border_seed(height: npt.NDArray[np.float64], closed_border: bool) -> npt.ND
 def _fill(
     seed: npt.NDArray[np.float64], height: npt.NDArray[np.float64]
 ) -> npt.NDArray[np.float64]:
-    """Grey-level reconstruction by erosion of ``height`` from ``seed``: every basin filled
-    to its spill level."""
-    return np.asarray(reconstruction(seed, height, method="erosion"), np.float64)  # type: ignore[no-untyped-call]
+    """Grey-level reconstruction by erosion of ``height`` from ``seed`` (``seed >= height``):
+    every basin filled to its spill level.
+
+    Equal to ``skimage.morphology.reconstruction(seed, height, method="erosion")`` (8-
+    neighbourhood), computed as its definition: the geodesic erosion (a 3x3 erosion, then
+    no lower than ``height``) repeated until nothing changes. A reconstruction only
+    compares and copies values, so on float32 copies it gives the same values whenever
+    every value is a float32 one, as the heights of block-averaged float32 depth are; on a
+    work grid (160 x 120) OpenCV's float32 erosion makes that ~3x cheaper than skimage,
+    which sorts the whole image twice. Other values go to skimage.
+
+    The erosions start from a tighter marker than ``seed``: each pixel lowered to the
+    least, over the four straight paths from it along its row and column to the border, of
+    the path's highest height (or its seed where it leaves, if higher). Water can drain
+    along each of those paths, so the marker stays between the result and ``seed``, and
+    the erosions from it reach the same result (reconstruction is monotone in the
+    marker), in about half as many steps.
+
+    >>> h = np.array([[3, 3, 3, 3], [3, 1, 0, 3], [3, 2, 3, 3], [3, 3, 3, 3]], np.float64)
+    >>> h[0, 1] = 2.0  # the rim's lowest point: the basin spills there
+    >>> seed = h.copy(); seed[1:-1, 1:-1] = h.max()
+    >>> _fill(seed, h)[1:3, 1:3].tolist()
+    [[2.0, 2.0], [2.0, 3.0]]
+    """
+    s32, h32 = seed.astype(np.float32), height.astype(np.float32)
+    if not (np.array_equal(s32, seed) and np.array_equal(h32, height)):
+        return np.asarray(reconstruction(seed, height, method="erosion"), np.float64)  # type: ignore[no-untyped-call]
+    top = np.maximum.accumulate
+    cur = np.minimum(s32, np.maximum(top(h32, axis=1), s32[:, :1]))
+    np.minimum(cur, np.maximum(top(h32[:, ::-1], axis=1)[:, ::-1], s32[:, -1:]), out=cur)
+    np.minimum(cur, np.maximum(top(h32, axis=0), s32[:1, :]), out=cur)
+    np.minimum(cur, np.maximum(top(h32[::-1], axis=0)[::-1], s32[-1:, :]), out=cur)
+    eroded, before = np.empty_like(s32), np.empty_like(s32)
+    while True:
+        before[...] = cur
+        for _ in range(_FILL_CHECK_STEPS):
+            cv2.erode(cur, _K3, dst=eroded)  # outside the image counts as +inf
+            np.maximum(eroded, h32, out=cur)
+        if np.array_equal(cur, before):
+            return cur.astype(np.float64)
 
 
 def _pit(

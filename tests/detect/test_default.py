@@ -6,6 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from skimage.morphology import reconstruction
 
 from holescan.detect import DEFAULT, DOG, CameraIntrinsics, Detection, detect_holes
 from holescan.detect._default import basin_depth, block_depth, opening_axes
@@ -151,6 +152,29 @@ def test_both_basin_views_at_once_equal_each_computed_alone(seed: int) -> None:
         assert both.closed is None
     else:
         assert both.closed is not None and np.array_equal(both.closed, closed)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_basin_depth_is_skimage_reconstruction(seed: int) -> None:
+    # basin_depth fills by its own iterated erosion (float32): the same pit, every value,
+    # as skimage's reconstruction by erosion of the heights from the border, in float64.
+    rng = np.random.default_rng(seed)
+    hh, ww = 50, 70
+    vv, uu = np.mgrid[0:hh, 0:ww]
+    z = (2.0 + 0.01 * vv + 0.02 * rng.standard_normal((hh, ww))).astype(np.float32)
+    for _ in range(8):
+        cy, cx, r = rng.integers(0, hh), rng.integers(0, ww), rng.integers(2, 14)
+        z[(vv - cy) ** 2 + (uu - cx) ** 2 < r * r] += rng.uniform(0.05, 1.5)
+    z[rng.random((hh, ww)) < 0.05] = np.nan
+    pit, invalid, _ = basin_depth(z)
+    height = -z.astype(np.float64)
+    height[invalid] = -(float(np.nanmax(z)) + 3.0)  # any level below every reading
+    marker = height.copy()
+    marker[1:-1, 1:-1] = height.max()
+    expect = reconstruction(marker, height, method="erosion") - height
+    expect[invalid & (expect > 0)] = np.inf
+    assert np.array_equal(pit, expect)
+    assert (pit[~invalid] > 0.04).any()  # there are basins
 
 
 def _banded(depth: np.ndarray, ltrb: tuple[int, int, int, int]) -> np.ndarray:
