@@ -166,8 +166,9 @@ def _nms(
 
 def _priorities(found: list[_Measured], contained: float, near_px: int) -> list[float]:
     """The order of NMS: each candidate's score, but a bridged basin (closed by a rim
-    assumed across the border cut) and a basin inside it whose rim was seen all round
-    (not bridged, not cut) and that scores at least :data:`INNER_SCORE_RATIO` of it:
+    assumed across the border cut) and a basin inside it whose rim was seen all round (an
+    enclosed pit, not bridged, not cut) that scores at least :data:`INNER_SCORE_RATIO` of
+    it:
 
     * when the inner basin comes within ``near_px`` of a side the bridged one is cut by,
       it is the deep part of a hole that runs on to the cut: the bridged basin goes first
@@ -184,6 +185,7 @@ def _priorities(found: list[_Measured], contained: float, near_px: int) -> list[
             if (
                 e.read is None
                 or e.read.bridged
+                or not e.read.enclosed
                 or e.det.border_cut
                 or e.det.score < INNER_SCORE_RATIO * b.det.score
                 or _inside(e.det.box, b.det.box) <= contained
@@ -428,7 +430,7 @@ def _measure(
     )
     # Sizes (and so the score) come from the rim's plane; where the opening is, from the
     # terrain's when the border cuts it: placed once the detection has outlived NMS.
-    read = _ReadBox((gx0, gy0, gx1, gy1), (ww, hh), bridged)
+    read = _ReadBox((gx0, gy0, gx1, gy1), (ww, hh), bridged, enclosed)
     if not (open_px and o.cut_circle):
         return _Measured(det, None, read)
     return _Measured(
@@ -454,6 +456,7 @@ class _ReadBox(NamedTuple):
     box: tuple[int, int, int, int]  # x0, y0, x1, y1
     size: tuple[int, int]  # the read area's width, height
     bridged: bool  # a basin closed by bridging its cut at the border
+    enclosed: bool  # a pit of the basin analysis (its rim holds all round)
 
 
 class _Measured(NamedTuple):
