@@ -26,6 +26,10 @@ BAND_MAX_PX = 64
 BORDER_BRIDGE = 0.5
 # ... and at least this many pixels long.
 BRIDGE_MIN_PX = 3
+# Dips running into a corner up to this fraction of the line are bridged at the rim on
+# their one side, when that side rises as a wall's (by DEEP_M within CORNER_STEP_PX).
+CORNER_BRIDGE = 0.25
+CORNER_STEP_PX = 2
 # _fill checks for stability after this many geodesic erosions (a work-grid frame needs
 # 50-130).
 _FILL_CHECK_STEPS = 8
@@ -77,27 +81,59 @@ def unread_bands(unread: npt.NDArray[np.bool_], max_px: int) -> tuple[int, int, 
     return run(cols), run(rows), run(cols[::-1]), run(rows[::-1])
 
 
-def _closed_profile(profile: npt.NDArray[np.float64], length: int) -> npt.NDArray[np.float64]:
+def _closed_profile(
+    profile: npt.NDArray[np.float64], length: int, end: int = 0
+) -> npt.NDArray[np.float64]:
     """Dips along a border line shorter than ``length`` bridged: each point raised to the
     lower of the highest points within ``length`` on its two sides (itself included).
 
+    With ``end``, a dip running into an end of the line (a corner of the frame) within
+    ``end`` of it is bridged at the rim on its one side when it is a wall's step, not a
+    slope (:func:`_end_rim`).
+
     >>> _closed_profile(np.array([3.0, 1.0, 0.0, 2.0, 1.0, 0.5]), 3).tolist()
     [3.0, 2.0, 2.0, 2.0, 1.0, 0.5]
+    >>> _closed_profile(np.array([0.0, 0.0, 2.0, 2.0, 2.0, 2.0]), 3, end=3).tolist()
+    [2.0, 2.0, 2.0, 2.0, 2.0, 2.0]
     """
     n = max(1, length)
+    lo = _end_rim(profile, end) if end else float(profile[0])
+    hi = _end_rim(profile[::-1], end) if end else float(profile[-1])
     line = np.ascontiguousarray(profile, np.float64)[None, :]
     kernel = np.ones((1, n + 1), np.uint8)
-    # Running maxima over [i - n, i] and [i, i + n] (a dilation: exact, no window copies).
-    left = cv2.dilate(line, kernel, anchor=(n, 0), borderType=cv2.BORDER_REPLICATE)
-    right = cv2.dilate(line, kernel, anchor=(0, 0), borderType=cv2.BORDER_REPLICATE)
+    # Running maxima over [i - n, i] and [i, i + n] (a dilation: exact, no window copies),
+    # the line continued by ``lo`` before its start and ``hi`` after its end.
+    const = cv2.BORDER_CONSTANT
+    left = cv2.dilate(line, kernel, anchor=(n, 0), borderType=const, borderValue=lo)
+    right = cv2.dilate(line, kernel, anchor=(0, 0), borderType=const, borderValue=hi)
     return np.asarray(np.minimum(left, right)[0], np.float64)
 
 
-def _bridged(profile: npt.NDArray[np.float64], length: int) -> npt.NDArray[np.float64]:
+def _end_rim(profile: npt.NDArray[np.float64], end: int) -> float:
+    """The height beyond ``profile[0]`` (the line's end): the rim of a dip that runs into
+    the end, when the dip lies within ``end`` of it and its side rises by :data:`DEEP_M`
+    within :data:`CORNER_STEP_PX` (a wall: terrain sloping toward the corner is no dip);
+    else ``profile[0]`` itself (the end drains).
+
+    >>> _end_rim(np.array([-3.0, -3.0, -3.0, -2.0, -2.0, -2.0]), 4)  # a hole's wall
+    -2.0
+    >>> _end_rim(-3.0 + 0.05 * np.arange(12), 8)  # a slope
+    -3.0
+    """
+    rim = float(profile[: end + 1].max())
+    edge = int(np.argmax(profile >= rim - DEEP_M))  # the dip: profile[:edge]
+    if edge == 0 or float(profile[edge : edge + CORNER_STEP_PX + 1].max()) < rim - 0.2 * DEEP_M:
+        return float(profile[0])
+    return rim
+
+
+def _bridged(
+    profile: npt.NDArray[np.float64], length: int, end: int = 0
+) -> npt.NDArray[np.float64]:
     """The border line with its deep dips bridged: where the closed profile stands more
     than :data:`DEEP_M` above it (a hole or its unread floor crossing the border), not at
     shallow undulations of the terrain (those drain there as before)."""
-    closed = _closed_profile(profile, length)
+    closed = _closed_profile(profile, length, end)
     deep = (closed - profile > DEEP_M).astype(np.uint8)[None, :]
     # Runs shorter than BRIDGE_MIN_PX (stray unread pixels at the border) are left alone.
     k = np.ones((1, BRIDGE_MIN_PX), np.uint8)
@@ -110,7 +146,7 @@ def _heights(z: npt.NDArray[np.float32]) -> tuple[npt.NDArray[np.float64], npt.N
     invalid = np.isnan(z)
     height = -z.astype(np.float64)
     # A float32 value, as every other height is (what _fill's exactness rests on).
-    height[invalid] = -float(np.float32(np.nanmax(z)) + np.float32(1.0))
+    height[invalid] = -float(np.fmax.reduce(z, axis=None) + np.float32(1.0))  # fmax: NaN-blind
     return height, invalid
 
 
@@ -122,10 +158,11 @@ def _border_seed(height: npt.NDArray[np.float64], closed_border: bool) -> npt.ND
     if closed_border and min(height.shape) >= 3:
         hh, ww = height.shape
         lw, lh = round(BORDER_BRIDGE * ww), round(BORDER_BRIDGE * hh)
-        seed[0, :] = _bridged(height[0, :], lw)
-        seed[-1, :] = _bridged(height[-1, :], lw)
-        seed[:, 0] = np.maximum(seed[:, 0], _bridged(height[:, 0], lh))
-        seed[:, -1] = np.maximum(seed[:, -1], _bridged(height[:, -1], lh))
+        ew, eh = round(CORNER_BRIDGE * ww), round(CORNER_BRIDGE * hh)
+        seed[0, :] = _bridged(height[0, :], lw, ew)
+        seed[-1, :] = _bridged(height[-1, :], lw, ew)
+        seed[:, 0] = np.maximum(seed[:, 0], _bridged(height[:, 0], lh, eh))
+        seed[:, -1] = np.maximum(seed[:, -1], _bridged(height[:, -1], lh, eh))
     return seed
 
 

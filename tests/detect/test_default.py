@@ -245,6 +245,29 @@ def test_projector_shadow_line_joining_a_hole_does_not_stretch_its_box() -> None
     assert iou(top(detect_holes(rgb, depth, CAM, kept)).box, boxes[0]) < 0.6
 
 
+@pytest.mark.parametrize("floor_m", [3.7, 5.0])  # a read floor 0.9 m down; a void
+@pytest.mark.parametrize("centre", [(60, 60), (600, 430), (40, 420)])
+def test_hole_in_a_corner_is_cut_there_not_open(floor_m: float, centre: tuple[int, int]) -> None:
+    # Cut by two sides of the read area (a corner, bands on): its dip runs into the end of
+    # both border lines, closed there at the rim on its one side.
+    rgb, depth, boxes = scene(holes=((*centre, 0.7, 0.6, floor_m),))
+    depth = _banded(depth, (4, 10, 36, 8))
+    x, y, w, h = boxes[0]
+    x0, y0 = max(x, 0.0), max(y, 0.0)
+    clipped = (x0, y0, min(x + w, 640.0) - x0, min(y + h, 480.0) - y0)
+    d = top(detect_holes(rgb, depth, CAM))
+    assert d.border_cut and iou(d.box, clipped) > 0.85
+    assert d.p_hole is not None and d.p_hole > 0.5
+
+
+def test_terrain_sloping_down_into_a_corner_is_not_closed_there() -> None:
+    v, u = np.mgrid[0:480, 0:640].astype(np.float64)
+    z = 2.2 + 0.004 * np.hypot(640 - u, 480 - v)  # 0.9 m deeper toward the top-left
+    rgb = np.full((480, 640, 3), 100, np.uint8)
+    depth = _banded(np.round(z * 1000).astype(np.uint16), (4, 10, 36, 8))
+    assert detect_holes(rgb, depth, CAM) == []
+
+
 def test_range_fade_is_not_a_hole() -> None:
     # A floor tilting away until it passes the sensor's range: no reading at the far side.
     rgb, depth, _ = scene(z0=3.0)
