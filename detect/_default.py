@@ -8,7 +8,8 @@ the *basins* of the depth image instead, found at every scale at once:
 1. Depth is block-averaged to ``work_scale`` (valid readings only) and turned into a height
    ``H = -Z`` (camera axial depth ``Z``, metres). Pixels with no reading get a height below
    every reading: enclosed by valid rubble, no reading means *deeper than the sensor's range*.
-2. Grey-level reconstruction by erosion (``skimage.morphology.reconstruction``) fills every
+2. Grey-level reconstruction by erosion (the values of ``skimage.morphology.reconstruction``,
+   computed as iterated OpenCV erosions: :func:`detect._regions.basin_depth`) fills every
    basin of ``H`` up to its spill level; ``pit = filled - H`` is how far each pixel lies below
    the lowest point of the rim around it. A tilted plane has no basin; a basin open to the
    image border spills there, so holes cut by the border are not reported (the dataset marks
@@ -49,8 +50,9 @@ the *basins* of the depth image instead, found at every scale at once:
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
-from typing import NamedTuple
+from collections.abc import Callable, Hashable
+from dataclasses import dataclass, field, replace
+from typing import NamedTuple, TypeVar, cast
 
 import cv2
 import numpy as np
@@ -240,6 +242,9 @@ def box_iou(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> float
     return overlap(a, b, "iou")
 
 
+_T = TypeVar("_T")
+
+
 @dataclass(frozen=True)
 class _FrameData:
     z: npt.NDArray[np.float32]
@@ -252,6 +257,16 @@ class _FrameData:
     factor: int
     #: The read area's place in the work grid: unread bands (left, top, right, bottom).
     bands: tuple[int, int, int, int] = (0, 0, 0, 0)
+    #: What measuring a region found that the way it was found does not change (:meth:`once`).
+    memo: dict[Hashable, object] = field(default_factory=dict, compare=False)
+
+    def once(self, key: Hashable, compute: Callable[[], _T]) -> _T:
+        """``compute()``, or what it gave for ``key`` before in this frame: a region found
+        twice (a no-reading blob that is also a basin closed at the border, a blob that is
+        all dark) has its walls, rim plane, opening and widest disk measured once."""
+        if key not in self.memo:
+            self.memo[key] = compute()
+        return cast(_T, self.memo[key])
 
 
 _RING_KERNEL = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * RING_PX + 1, 2 * RING_PX + 1))
@@ -283,7 +298,11 @@ def _measure(
     zc, inv_c = f.z[y0:y1, x0:x1], f.invalid[y0:y1, x0:x1]
     inside = np.zeros((y1 - y0, x1 - x0), bool)
     inside[y - y0 : y - y0 + h, x - x0 : x - x0 + w] = mask
-    inside = grow_walls(inside, zc, ~inv_c, (x0, y0), f.cam, RING_PX, o.grow_px)
+    key = (region.box, mask.tobytes())  # what follows depends on the region, not its flags
+    inside = f.once(
+        (key, "walls"),
+        lambda: grow_walls(inside, zc, ~inv_c, (x0, y0), f.cam, RING_PX, o.grow_px),
+    )
     big = inside.astype(np.uint8)
     vs, us = np.nonzero(inside)
     bx0, by0, bx1, by1 = int(us.min()), int(vs.min()), int(us.max()) + 1, int(vs.max()) + 1
@@ -306,7 +325,9 @@ def _measure(
     rv, ru = np.nonzero(ring)
     rim_u, rim_v = ru.astype(np.float64) + x0, rv.astype(np.float64) + y0
     rim_zs = zc[ring].astype(np.float64)
-    occ, rim_plane = occluders(rim_u, rim_v, rim_zs, f.cam, o.occluder_step_m)
+    occ, rim_plane = f.once(
+        (key, "occluders"), lambda: occluders(rim_u, rim_v, rim_zs, f.cam, o.occluder_step_m)
+    )
     if occ.any() and np.count_nonzero(~occ) >= 3:
         rim_u, rim_v, rim_zs = rim_u[~occ], rim_v[~occ], rim_zs[~occ]
     # How much of the opening's outline is bordered by rim we saw: not the image border,
@@ -315,7 +336,10 @@ def _measure(
     rim_seen = min(1.0, (n_rim - np.count_nonzero(occ)) / outline)
     region_uv = (us.astype(np.float64) + x0, vs.astype(np.float64) + y0)
     # The rim's plane: the one the occluder test fitted to these very points, if it did.
-    opening = measure_opening(region_uv, (rim_u, rim_v, rim_zs), f.cam, plane=rim_plane)
+    opening = f.once(
+        (key, "opening"),
+        lambda: measure_opening(region_uv, (rim_u, rim_v, rim_zs), f.cam, plane=rim_plane),
+    )
     major, minor_pca, area, rim_z = (
         opening.major_m,
         opening.minor_m,
@@ -332,8 +356,13 @@ def _measure(
         f.bands[2] if gx1 == ww else 0,
         f.bands[3] if gy1 == hh else 0,
     )
-    dist = cv2.distanceTransform(np.pad(_extrude(big, cut_sides), 1), cv2.DIST_L2, 5)
-    inscribed = 2.0 * float(dist.max()) * rim_z / f.cam.fx
+    widest = f.once(
+        (key, "disk"),
+        lambda: float(
+            cv2.distanceTransform(np.pad(_extrude(big, cut_sides), 1), cv2.DIST_L2, 5).max()
+        ),
+    )
+    inscribed = 2.0 * widest * rim_z / f.cam.fx
     if not o.passable_width:
         minor = minor_pca
     elif any(cut_sides):
