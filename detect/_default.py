@@ -71,6 +71,7 @@ from holescan.detect._geometry import (
     rim_circle_centre,
     terrain_plane,
 )
+from holescan.detect._order_stats import median, percentile
 from holescan.detect._photometry import relative_luminance, void_evidence
 from holescan.detect._regions import (
     BAND_MAX_PX,
@@ -376,13 +377,13 @@ def _measure(
         return None  # too narrow (or too broad) to enter: scores 0 whatever the rest is
     floor_valid = inside & ~inv_c
     no_read = float(np.count_nonzero(inside & inv_c)) / float(np.count_nonzero(inside))
-    seen = float(np.percentile(zc[floor_valid], 90) - rim_z) if floor_valid.any() else 0.0
+    seen = float(percentile(zc[floor_valid], 90) - rim_z) if floor_valid.any() else 0.0
     yc = f.y_img[y0:y1, x0:x1]
     y_in, y_ring = float(yc[inside].mean()), float(yc[ring].mean())
     sb = darkness_score(y_in, params.dark_threshold)
     sc = contrast_score(y_in, y_ring, params.contrast_threshold)
     beyond = no_read > 0.3
-    rel_in = float(np.median(f.rel[y0:y1, x0:x1][inside & inv_c])) if beyond else 0.0
+    rel_in = float(median(f.rel[y0:y1, x0:x1][inside & inv_c])) if beyond else 0.0
     if beyond:
         # The floor gave no reading. It lies at least as far as the sensor's range; and the
         # nearer the rim is than the farthest reading of the frame, the surer it is that a

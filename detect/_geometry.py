@@ -11,6 +11,7 @@ import numpy as np
 import numpy.typing as npt
 
 from holescan.detect._options import DefaultOptions
+from holescan.detect._order_stats import median
 from holescan.detect._types import CameraIntrinsics
 
 # Walls: regions grow (DefaultOptions.grow_px) into readings this far below the opening plane.
@@ -220,19 +221,7 @@ def measure_opening(
         4.0 * math.sqrt(max(half + spread, 0.0)),
         4.0 * math.sqrt(max(half - spread, 0.0)),
     )
-    return Opening(major, minor, area, _median(rz), mid, normal)
-
-
-def _median(values: npt.NDArray[np.float64]) -> float:
-    """``np.median`` of a non-empty 1-D array without NaN (the same value), for less.
-
-    >>> _median(np.array([3.0, 1.0, 2.0])), _median(np.array([4.0, 1.0, 2.0, 3.0]))
-    (2.0, 2.5)
-    """
-    k = values.size // 2
-    if values.size % 2:
-        return float(np.partition(values, k)[k])
-    return float(np.mean(np.partition(values, (k - 1, k))[k - 1 : k + 1]))
+    return Opening(major, minor, area, float(median(rz)), mid, normal)
 
 
 def rim_circle_centre(
