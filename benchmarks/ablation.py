@@ -36,6 +36,8 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "unread border bands not cut off (frame = read area)": {"bands": False},
     "basins cut by the border spill (not closed)": {"closed_border": False},
     "no rim-plane test of unread regions (absorbing surfaces)": {"surface_plane": False},
+    "thin spurs kept on candidate regions": {"trim_spurs": False},
+    "NMS by score alone between bridged and seen-rim basins": {"seen_rim_first": False},
 }
 
 _DATASETS: dict[Path, Any] = {}

@@ -17,7 +17,10 @@ at ``p_hole >= 0.3``, and by failure mode:
   ``cast_shadow``).
 
 A detection lies on a distractor when half of its box is inside the distractor's box and it
-matches no hole.
+matches no hole. The false positives at ``p_hole >= 0.3`` (those the AP's matching counts
+as such: crowd boxes take theirs) are split by the same labels into **absorbing** (on an
+absorbing stain), **shadow** (on a cast shadow), **border** (within 2 px of the read area's
+edge) and **other**, in that order.
 """
 
 from __future__ import annotations
@@ -73,8 +76,18 @@ def _iou(a: tuple[float, ...], b: tuple[float, ...]) -> float:
     return inter / max(a[2] * a[3] + b[2] * b[3] - inter, 1e-9)
 
 
+def _near_edge(box: tuple[float, ...], read: tuple[float, ...]) -> bool:
+    """Whether ``box`` comes within ``EDGE_PX`` of the read area's edge (x, y, w, h)."""
+    return (
+        box[0] <= read[0] + EDGE_PX
+        or box[1] <= read[1] + EDGE_PX
+        or box[0] + box[2] >= read[0] + read[2] - EDGE_PX
+        or box[1] + box[3] >= read[1] + read[3] - EDGE_PX
+    )
+
+
 def evaluate(root: Path, workers: int, off: tuple[str, ...] = ()) -> dict[str, Any]:
-    from holescan.detect import ScoredBox, evaluate_detections
+    from holescan.detect import GroundTruthBox, ScoredBox, evaluate_detections, match_image
     from holescan.ground import ground_truth, load_dataset
 
     ds = load_dataset(root)
@@ -99,6 +112,10 @@ def evaluate(root: Path, workers: int, off: tuple[str, ...] = ()) -> dict[str, A
         "half_read": [0, 0, 0],
     }
     on = {"stain": 0, "absorbing": 0, "absorbing_announced": 0, "cast_shadow": 0}
+    fp_modes = {"border": 0, "absorbing": 0, "shadow": 0, "other": 0}
+    gt_by_image: dict[int, list[GroundTruthBox]] = {}
+    for g in gt:
+        gt_by_image.setdefault(g.image_id, []).append(g)
     for image_id, im in images.items():
         w, h = float(im["width"]), float(im["height"])
         sensor = (im.get("scene") or {}).get("sensor") or {}
@@ -108,12 +125,7 @@ def evaluate(root: Path, workers: int, off: tuple[str, ...] = ()) -> dict[str, A
         holes = [a for a in anns.get(image_id, []) if a.get("category_id", 1) == 1]
         for a in holes:
             box = tuple(float(v) for v in a["bbox"])
-            near_edge = (
-                box[0] <= read[0] + EDGE_PX
-                or box[1] <= read[1] + EDGE_PX
-                or box[0] + box[2] >= read[0] + read[2] - EDGE_PX
-                or box[1] + box[3] >= read[1] + read[3] - EDGE_PX
-            )
+            near_edge = _near_edge(box, read)
             hit_any = any(_iou(d[0], box) > 0.5 for d in dets)
             hit_shown = any(_iou(d[0], box) > 0.5 and d[2] >= P_SHOWN for d in dets)
             rows = []
@@ -126,6 +138,36 @@ def evaluate(root: Path, workers: int, off: tuple[str, ...] = ()) -> dict[str, A
                 counts[r][1] += hit_any
                 counts[r][2] += hit_shown
         absorbing_ids = set(map(str, (sensor.get("absorbing_stains") or {}).keys()))
+        dists = [
+            (
+                "absorbing"
+                if x["kind"] == "stain" and str(x.get("feature_id")) in absorbing_ids
+                else "shadow"
+                if x["kind"] == "cast_shadow"
+                else "",
+                tuple(float(v) for v in x["bbox"]),
+            )
+            for x in im.get("distractors") or []
+        ]
+        shown_here = sorted((d for d in dets if d[2] >= P_SHOWN), key=lambda d: -d[2])
+        outcomes = match_image(
+            [ScoredBox(image_id, d[0], d[2]) for d in shown_here],
+            gt_by_image.get(image_id, []),
+            "iou",
+            0.5,
+        )
+        for d, (_, outcome) in zip(shown_here, outcomes, strict=True):
+            if outcome != 0:
+                continue
+            on_kind = {k for k, b in dists if k and _inside(d[0], b) >= 0.5}
+            if "absorbing" in on_kind:
+                fp_modes["absorbing"] += 1
+            elif "shadow" in on_kind:
+                fp_modes["shadow"] += 1
+            elif _near_edge(d[0], read):
+                fp_modes["border"] += 1
+            else:
+                fp_modes["other"] += 1
         for d in dets:
             if d[2] < P_SHOWN or any(_iou(d[0], tuple(a["bbox"])) > 0.5 for a in holes):
                 continue
@@ -148,6 +190,7 @@ def evaluate(root: Path, workers: int, off: tuple[str, ...] = ()) -> dict[str, A
         "fp_p03": fp_shown,
         "modes": {k: tuple(v) for k, v in counts.items()},
         "on_distractors_p03": on,
+        "fp_p03_modes": fp_modes,
     }
 
 
@@ -172,15 +215,15 @@ def main(argv: list[str] | None = None) -> int:
     print(
         "| set | frames | holes | AP IoU | recall | FP p>=0.3 | border recall (p>=0.3) | "
         "interior recall (p>=0.3) | >= half in read area: recall (p>=0.3) | on stain / "
-        "absorbing / announced | on shadow |"
+        "absorbing / announced | on shadow | FP p>=0.3: border / absorbing / shadow / other |"
     )
-    print("|---|" + "---|" * 10)
+    print("|---|" + "---|" * 11)
     for root in args.datasets:
         if not (root / "annotations.json").is_file():
             print(f"{root}: not a dataset folder (no annotations.json)", file=sys.stderr)
             return 2
         r = evaluate(root, args.workers, tuple(args.off))
-        m, on = r["modes"], r["on_distractors_p03"]
+        m, on, fm = r["modes"], r["on_distractors_p03"], r["fp_p03_modes"]
 
         def rec(k: str, m: dict[str, tuple[int, int, int]] = m) -> str:
             n, a, s = m[k]
@@ -190,7 +233,8 @@ def main(argv: list[str] | None = None) -> int:
             f"| {r['dataset']} | {r['images']} | {r['holes']} | {r['ap_iou']:.3f} | "
             f"{r['recall']:.3f} | {r['fp_p03']} | {rec('border')} | {rec('interior')} | "
             f"{rec('half_read')} | {on['stain']} / {on['absorbing']} / "
-            f"{on['absorbing_announced']} | {on['cast_shadow']} |",
+            f"{on['absorbing_announced']} | {on['cast_shadow']} | "
+            f"{fm['border']} / {fm['absorbing']} / {fm['shadow']} / {fm['other']} |",
             flush=True,
         )
     return 0

@@ -1,9 +1,11 @@
 """The statistics real structured-light frames were measured by, on any depth frames.
 
     python benchmarks/sensor_stats.py [DATASET ...] [--sim N] [--basic]
+        [--recording PATH [--camera CAMERA.json]] ...
 
 Prints one markdown column per source (the simulator's frames through the structured-light
-model, ``--sim N`` frames; each DATASET folder's depth PNGs) with: unread fraction, border
+model, ``--sim N`` frames; each DATASET folder's depth PNGs; each real recording holescan
+reads, e.g. the OpenNI2 frame in ``tests/data/real/mrpt-openni2``) with: unread fraction, border
 band widths (:func:`ground.recordings.depthstats.unread_stats`), the projector shadow's side
 and width against ``1.2 f b (1/Z_near - 1/Z_far)``, the disparity quantisation step at 2 /
 2.5 / 3 m, flat-surface noise against 1.425e-3 Z^2 and the flying-pixel rate at edge
@@ -175,18 +177,54 @@ def _dataset_frames(root: Path, limit: int) -> tuple[list[npt.NDArray[np.uint16]
     return frames, float(cam["fx"])
 
 
+def _recording_frames(
+    path: Path, camera: Path | None, limit: int
+) -> tuple[list[npt.NDArray[np.uint16]], float]:
+    from holescan.ground import read_camera
+    from holescan.ground.recordings import open_recording
+
+    cam = read_camera(camera) if camera is not None else None
+    frames = []
+    with open_recording(path, camera=cam) as source:
+        for frame in source:
+            frames.append(np.asarray(frame.depth, np.uint16))
+            if len(frames) >= limit:
+                break
+        fx = source.camera.fx
+    return frames, float(fx)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("datasets", nargs="*", type=Path)
     ap.add_argument("--sim", type=int, default=12, help="simulated frames (0: none)")
     ap.add_argument("--limit", type=int, default=20, help="frames per dataset")
     ap.add_argument("--basic", action="store_true", help="also the basic depth model")
+    ap.add_argument(
+        "--recording",
+        type=Path,
+        action="append",
+        default=[],
+        help="a real recording (TUM folder, ROS bag, .oni, flight log); repeatable",
+    )
+    ap.add_argument(
+        "--camera", type=Path, help="camera.json for the recordings that carry no intrinsics"
+    )
     args = ap.parse_args(argv)
+    from holescan.errors import InputError
+
+    try:
+        real = {p: _recording_frames(p, args.camera, args.limit) for p in args.recording}
+    except (InputError, OSError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
     cols: dict[str, dict[str, str]] = {"real Kinect v1 (FIELD-NOTES)": REAL}
     if args.sim:
         cols["sim, structured light"] = summarise(*_sim_frames(args.sim, True))
         if args.basic:
             cols["sim, basic"] = summarise(*_sim_frames(args.sim, False))
+    for path, (frames, fx) in real.items():
+        cols[f"real: {path.name}"] = summarise(frames, fx)
     for root in args.datasets:
         cols[root.name] = summarise(*_dataset_frames(root, args.limit))
     names = list(cols)

@@ -8,7 +8,8 @@ the *basins* of the depth image instead, found at every scale at once:
 1. Depth is block-averaged to ``work_scale`` (valid readings only) and turned into a height
    ``H = -Z`` (camera axial depth ``Z``, metres). Pixels with no reading get a height below
    every reading: enclosed by valid rubble, no reading means *deeper than the sensor's range*.
-2. Grey-level reconstruction by erosion (``skimage.morphology.reconstruction``) fills every
+2. Grey-level reconstruction by erosion (the values of ``skimage.morphology.reconstruction``,
+   computed as iterated OpenCV erosions: :func:`detect._regions.basin_depth`) fills every
    basin of ``H`` up to its spill level; ``pit = filled - H`` is how far each pixel lies below
    the lowest point of the rim around it. A tilted plane has no basin; a basin open to the
    image border spills there, so holes cut by the border are not reported (the dataset marks
@@ -49,8 +50,9 @@ the *basins* of the depth image instead, found at every scale at once:
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
-from typing import NamedTuple
+from collections.abc import Callable, Hashable
+from dataclasses import dataclass, field, replace
+from typing import NamedTuple, TypeVar, cast
 
 import cv2
 import numpy as np
@@ -69,6 +71,7 @@ from holescan.detect._geometry import (
     rim_circle_centre,
     terrain_plane,
 )
+from holescan.detect._order_stats import median, percentile
 from holescan.detect._photometry import relative_luminance, void_evidence
 from holescan.detect._regions import (
     BAND_MAX_PX,
@@ -79,6 +82,7 @@ from holescan.detect._regions import (
     basin_regions,
     block_depth,
     no_reading_regions,
+    trim_spurs,
     unread_bands,
 )
 from holescan.detect._scores import (
@@ -131,16 +135,28 @@ BRIDGED_SD = (0.2, 0.35)
 # this (p_hole ~0.1): below, it could only lower what is not shown anyway.
 SURFACE_GATE = 0.2
 BRIDGED_DARK = (0.1, 0.25)
+# NMS between a bridged basin and a basin inside it with its rim seen all round
+# (_priorities): the inner one counts when it scores at least this fraction of the bridged
+# one (a much weaker dip is a dip in the hole's floor), and it runs on to the cut when it
+# comes within its ring and walls of it (RING_PX + options.grow_px work pixels).
+INNER_SCORE_RATIO = 0.5
 
 
-def _nms(found: list[_Measured], iou_max: float, contained: float) -> list[_Measured]:
+def _nms(
+    found: list[_Measured], iou_max: float, contained: float, near_px: int | None
+) -> list[_Measured]:
     """Suppress overlaps (IoU > ``iou_max``) and containers of a better detection.
 
     A region that holds a higher-scoring one (most of it inside) is a depression or a
-    no-reading area around that hole, not a second hole.
+    no-reading area around that hole, not a second hole. "Better" is the score, except
+    between a bridged basin and a basin inside it (:func:`_priorities`; ``near_px`` None:
+    the score alone, ``options.seen_rim_first`` off).
     """
     keep: list[_Measured] = []
-    for m in sorted(found, key=lambda m: -m.det.score):
+    rank = [m.det.score for m in found]
+    if near_px is not None:
+        rank = _priorities(found, contained, near_px)
+    for _, m in sorted(zip(rank, found, strict=True), key=lambda p: -p[0]):
         d = m.det
         if all(box_iou(d.box, k.det.box) <= iou_max for k in keep) and not any(
             _inside(k.det.box, d.box) > contained for k in keep
@@ -149,11 +165,60 @@ def _nms(found: list[_Measured], iou_max: float, contained: float) -> list[_Meas
     return keep
 
 
+def _priorities(found: list[_Measured], contained: float, near_px: int) -> list[float]:
+    """The order of NMS: each candidate's score, but a bridged basin (closed by a rim
+    assumed across the border cut) and a basin inside it whose rim was seen all round (an
+    enclosed pit, not bridged, not cut) that scores at least :data:`INNER_SCORE_RATIO` of
+    it:
+
+    * when the inner basin comes within ``near_px`` of a side the bridged one is cut by,
+      it is the deep part of a hole that runs on to the cut: the bridged basin goes first
+      (its box is the hole's);
+    * otherwise seen rim lies between the inner basin and the cut: the bridged basin is
+      the depression around that hole, its depth measured against a rim partly assumed;
+      the inner basin goes first (and the bridged one, holding it, is dropped).
+    """
+    rank = [m.det.score for m in found]
+    for i, b in enumerate(found):
+        if b.read is None or not b.read.bridged:
+            continue
+        for j, e in enumerate(found):
+            if (
+                e.read is None
+                or e.read.bridged
+                or not e.read.enclosed
+                or e.det.border_cut
+                or e.det.score < INNER_SCORE_RATIO * b.det.score
+                or _inside(e.det.box, b.det.box) <= contained
+            ):
+                continue
+            first, then = (i, j) if _near_cut(e.read, b.read, near_px) else (j, i)
+            if rank[first] <= rank[then]:
+                rank[first] = np.nextafter(rank[then], np.inf)
+    return rank
+
+
+def _near_cut(inner: _ReadBox, outer: _ReadBox, near: int) -> bool:
+    """Whether ``inner`` comes within ``near`` work pixels of a side of the read area
+    that ``outer`` reaches."""
+    (ix0, iy0, ix1, iy1), (ox0, oy0, ox1, oy1), (ww, hh) = inner.box, outer.box, outer.size
+    return (
+        (ox0 == 0 and ix0 <= near)
+        or (oy0 == 0 and iy0 <= near)
+        or (ox1 == ww and ww - ix1 <= near)
+        or (oy1 == hh and hh - iy1 <= near)
+    )
+
+
 def _inside(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> float:
     """Fraction of box ``a`` that lies inside box ``b``."""
     ix = max(0, min(a[0] + a[2], b[0] + b[2]) - max(a[0], b[0]))
     iy = max(0, min(a[1] + a[3], b[1] + b[3]) - max(a[1], b[1]))
     return ix * iy / max(a[2] * a[3], 1)
+
+
+def _as_is(region: Candidate) -> Candidate:
+    return region
 
 
 def _unique(regions: list[Candidate]) -> list[Candidate]:
@@ -178,6 +243,9 @@ def box_iou(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> float
     return overlap(a, b, "iou")
 
 
+_T = TypeVar("_T")
+
+
 @dataclass(frozen=True)
 class _FrameData:
     z: npt.NDArray[np.float32]
@@ -190,6 +258,16 @@ class _FrameData:
     factor: int
     #: The read area's place in the work grid: unread bands (left, top, right, bottom).
     bands: tuple[int, int, int, int] = (0, 0, 0, 0)
+    #: What measuring a region found that the way it was found does not change (:meth:`once`).
+    memo: dict[Hashable, object] = field(default_factory=dict, compare=False)
+
+    def once(self, key: Hashable, compute: Callable[[], _T]) -> _T:
+        """``compute()``, or what it gave for ``key`` before in this frame: a region found
+        twice (a no-reading blob that is also a basin closed at the border, a blob that is
+        all dark) has its walls, rim plane, opening and widest disk measured once."""
+        if key not in self.memo:
+            self.memo[key] = compute()
+        return cast(_T, self.memo[key])
 
 
 _RING_KERNEL = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * RING_PX + 1, 2 * RING_PX + 1))
@@ -221,7 +299,11 @@ def _measure(
     zc, inv_c = f.z[y0:y1, x0:x1], f.invalid[y0:y1, x0:x1]
     inside = np.zeros((y1 - y0, x1 - x0), bool)
     inside[y - y0 : y - y0 + h, x - x0 : x - x0 + w] = mask
-    inside = grow_walls(inside, zc, ~inv_c, (x0, y0), f.cam, RING_PX, o.grow_px)
+    key = (region.box, mask.tobytes())  # what follows depends on the region, not its flags
+    inside = f.once(
+        (key, "walls"),
+        lambda: grow_walls(inside, zc, ~inv_c, (x0, y0), f.cam, RING_PX, o.grow_px),
+    )
     big = inside.astype(np.uint8)
     vs, us = np.nonzero(inside)
     bx0, by0, bx1, by1 = int(us.min()), int(vs.min()), int(us.max()) + 1, int(vs.max()) + 1
@@ -229,29 +311,36 @@ def _measure(
     ring = ring_all & ~inv_c
     # The image border counts as rim we could not see.
     gx0, gy0, gx1, gy1 = bx0 + x0, by0 + y0, bx1 + x0, by1 + y0
-    open_px = int(inside[:, 0].sum()) if gx0 == 0 else 0
-    open_px += int(inside[:, -1].sum()) if gx1 == ww else 0
-    open_px += int(inside[0, :].sum()) if gy0 == 0 else 0
-    open_px += int(inside[-1, :].sum()) if gy1 == hh else 0
-    n_ring = int(ring.sum())
+    open_px = np.count_nonzero(inside[:, 0]) if gx0 == 0 else 0
+    open_px += np.count_nonzero(inside[:, -1]) if gx1 == ww else 0
+    open_px += np.count_nonzero(inside[0, :]) if gy0 == 0 else 0
+    open_px += np.count_nonzero(inside[-1, :]) if gy1 == hh else 0
+    n_ring = np.count_nonzero(ring)
     if n_ring < 3:
         return None
     n_rim = n_ring
     if dark_cut:  # cut from bright unread pixels by colour: those are seen rim too
-        n_rim += int((ring_all & inv_c & (f.rel[y0:y1, x0:x1] >= DARK_CUT)).sum())
-    if not enclosed and n_rim < MIN_RIM_VALID * (int(ring_all.sum()) + RING_PX * open_px):
+        n_rim += np.count_nonzero(ring_all & inv_c & (f.rel[y0:y1, x0:x1] >= DARK_CUT))
+    if not enclosed and n_rim < MIN_RIM_VALID * (np.count_nonzero(ring_all) + RING_PX * open_px):
         return None
     rv, ru = np.nonzero(ring)
     rim_u, rim_v = ru.astype(np.float64) + x0, rv.astype(np.float64) + y0
     rim_zs = zc[ring].astype(np.float64)
-    occ = occluders(rim_u, rim_v, rim_zs, f.cam, o.occluder_step_m)
-    if occ.any() and (~occ).sum() >= 3:
+    occ, rim_plane = f.once(
+        (key, "occluders"), lambda: occluders(rim_u, rim_v, rim_zs, f.cam, o.occluder_step_m)
+    )
+    if occ.any() and np.count_nonzero(~occ) >= 3:
         rim_u, rim_v, rim_zs = rim_u[~occ], rim_v[~occ], rim_zs[~occ]
     # How much of the opening's outline is bordered by rim we saw: not the image border,
     # not unread pixels, not a nearer edge standing in front.
-    rim_seen = min(1.0, (n_rim - int(occ.sum())) / (int(ring_all.sum()) + RING_PX * open_px))
+    outline = np.count_nonzero(ring_all) + RING_PX * open_px
+    rim_seen = min(1.0, (n_rim - np.count_nonzero(occ)) / outline)
     region_uv = (us.astype(np.float64) + x0, vs.astype(np.float64) + y0)
-    opening = measure_opening(region_uv, (rim_u, rim_v, rim_zs), f.cam)
+    # The rim's plane: the one the occluder test fitted to these very points, if it did.
+    opening = f.once(
+        (key, "opening"),
+        lambda: measure_opening(region_uv, (rim_u, rim_v, rim_zs), f.cam, plane=rim_plane),
+    )
     major, minor_pca, area, rim_z = (
         opening.major_m,
         opening.minor_m,
@@ -268,24 +357,33 @@ def _measure(
         f.bands[2] if gx1 == ww else 0,
         f.bands[3] if gy1 == hh else 0,
     )
-    dist = cv2.distanceTransform(np.pad(_extrude(big, cut_sides), 1), cv2.DIST_L2, 5)
-    inscribed = 2.0 * float(dist.max()) * rim_z / f.cam.fx
+    widest = f.once(
+        (key, "disk"),
+        lambda: float(
+            cv2.distanceTransform(np.pad(_extrude(big, cut_sides), 1), cv2.DIST_L2, 5).max()
+        ),
+    )
+    inscribed = 2.0 * widest * rim_z / f.cam.fx
     if not o.passable_width:
         minor = minor_pca
     elif any(cut_sides):
         minor = inscribed
     else:
         minor = min(minor_pca, inscribed)
+    s = params.searcher
+    sw = width_score(major, minor, s.major_m, s.minor_m, s.min_fraction)
+    sw *= 1.0 - ramp(major, OVERSIZE_START_M, OVERSIZE_END_M)
+    if sw == 0.0 and params.min_score > 0.0:
+        return None  # too narrow (or too broad) to enter: scores 0 whatever the rest is
     floor_valid = inside & ~inv_c
-    no_read = float((inside & inv_c).sum()) / float(inside.sum())
-    seen = float(np.percentile(zc[floor_valid], 90) - rim_z) if floor_valid.any() else 0.0
+    no_read = float(np.count_nonzero(inside & inv_c)) / float(np.count_nonzero(inside))
+    seen = float(percentile(zc[floor_valid], 90) - rim_z) if floor_valid.any() else 0.0
     yc = f.y_img[y0:y1, x0:x1]
     y_in, y_ring = float(yc[inside].mean()), float(yc[ring].mean())
     sb = darkness_score(y_in, params.dark_threshold)
     sc = contrast_score(y_in, y_ring, params.contrast_threshold)
-    s = params.searcher
     beyond = no_read > 0.3
-    rel_in = float(np.median(f.rel[y0:y1, x0:x1][inside & inv_c])) if beyond else 0.0
+    rel_in = float(median(f.rel[y0:y1, x0:x1][inside & inv_c])) if beyond else 0.0
     if beyond:
         # The floor gave no reading. It lies at least as far as the sensor's range; and the
         # nearer the rim is than the farthest reading of the frame, the surer it is that a
@@ -298,8 +396,6 @@ def _measure(
     else:
         depth_rel = seen
         sd = ramp(depth_rel, s.depth_low_m, s.depth_high_m)
-    sw = width_score(major, minor, s.major_m, s.minor_m, s.min_fraction)
-    sw *= 1.0 - ramp(major, OVERSIZE_START_M, OVERSIZE_END_M)
     fill = area / (major * minor_pca) if major * minor_pca > 0 else 0.0
     sr = ramp(fill, 0.3, 0.7)
     score = combined_score(sd, sw, sr, sb, sc, o.depth_exponent)
@@ -340,10 +436,11 @@ def _measure(
     )
     # Sizes (and so the score) come from the rim's plane; where the opening is, from the
     # terrain's when the border cuts it: placed once the detection has outlived NMS.
+    read = _ReadBox((gx0, gy0, gx1, gy1), (ww, hh), bridged, enclosed)
     if not (open_px and o.cut_circle):
-        return _Measured(det, None)
+        return _Measured(det, None, read)
     return _Measured(
-        det, _Cut(opening, region_uv, (rim_u, rim_v, rim_zs), inside, inv_c, zc, (x0, y0))
+        det, _Cut(opening, region_uv, (rim_u, rim_v, rim_zs), inside, inv_c, zc, (x0, y0)), read
     )
 
 
@@ -359,9 +456,19 @@ class _Cut(NamedTuple):
     origin: tuple[int, int]
 
 
+class _ReadBox(NamedTuple):
+    """Where a measured region lies on the read area (work pixels), for NMS."""
+
+    box: tuple[int, int, int, int]  # x0, y0, x1, y1
+    size: tuple[int, int]  # the read area's width, height
+    bridged: bool  # a basin closed by bridging its cut at the border
+    enclosed: bool  # a pit of the basin analysis (its rim holds all round)
+
+
 class _Measured(NamedTuple):
     det: Detection
     cut: _Cut | None
+    read: _ReadBox | None = None
 
 
 def _place(m: _Measured, cam: CameraIntrinsics) -> Detection:
@@ -468,16 +575,20 @@ def detect_default(
     # farthest depth in view, in work pixels.
     min_side_px = s.min_fraction * s.minor_m * cam.fx / max(z_far, 0.5)
     min_px = max(2, int(0.25 * min_side_px**2))
+    spurs = trim_spurs if o.trim_spurs else _as_is
     regions = _unique(
-        basin_regions(pit, min_px, o.depression_ratio)
-        + no_reading_regions(invalid, pit, min_px, o.neck_radii_px)
+        [
+            spurs(r)
+            for r in basin_regions(pit, min_px, o.depression_ratio)
+            + no_reading_regions(invalid, pit, min_px, o.neck_radii_px)
+        ]
     )
     # Basins the border cuts, closed there (their rim beyond is unknown): candidates beside
     # the spilled view's (the better-scoring one of a pair wins in NMS).
     bridged: list[Candidate] = []
     if depths.closed is not None:
         bridged = [
-            r
+            spurs(r)
             for r in basin_regions(depths.closed, min_px, o.depression_ratio)
             if _touches_border(r, z.shape)
         ]
@@ -487,13 +598,16 @@ def detect_default(
     if o.dark_split:
         rel_smooth = cv2.blur(rel.astype(np.float32), (DARK_SMOOTH_PX, DARK_SMOOTH_PX))
         dark_blobs = invalid & (rel_smooth < DARK_CUT)
-        dark = _unique(no_reading_regions(dark_blobs, pit, min_px, o.neck_radii_px))
+        dark = _unique(
+            [spurs(r) for r in no_reading_regions(dark_blobs, pit, min_px, o.neck_radii_px)]
+        )
 
     frame = _FrameData(z, invalid, y_img, rel, cam, z_far, range_m, factor, bands)
     found = [m for r in regions if (m := _measure(r, frame, params)) is not None]
     found += [m for r in dark if (m := _measure(r, frame, params, dark_cut=True)) is not None]
     found += [m for r in bridged if (m := _measure(r, frame, params, bridged=True)) is not None]
-    kept = _nms(found, params.nms_iou, o.contained)
+    near_cut = RING_PX + o.grow_px if o.seen_rim_first else None
+    kept = _nms(found, params.nms_iou, o.contained, near_cut)
     return [replace(d, p_hole=p_hole_of_score(d.score)) for d in (_place(m, cam) for m in kept)]
 
 

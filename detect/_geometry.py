@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cache
 
 import cv2
 import numpy as np
 import numpy.typing as npt
 
 from holescan.detect._options import DefaultOptions
+from holescan.detect._order_stats import median
 from holescan.detect._types import CameraIntrinsics
 
 # Walls: regions grow (DefaultOptions.grow_px) into readings this far below the opening plane.
@@ -22,12 +24,35 @@ PLANE_TOL_PER_M2 = 3e-3
 TERRAIN_RIM_SHARE = 0.3
 # RANSAC scores its candidate planes on at most this many points.
 RANSAC_SCORED = 400
+_K3 = np.ones((3, 3), np.uint8)
 
 
 def rays_of(
     us: npt.NDArray[np.float64], vs: npt.NDArray[np.float64], cam: CameraIntrinsics
 ) -> npt.NDArray[np.float64]:
     return np.stack([(us - cam.cx) / cam.fx, (vs - cam.cy) / cam.fy, np.ones_like(us)], axis=1)
+
+
+def _along(
+    normal: npt.NDArray[np.float64], x: npt.NDArray[np.float64], y: npt.NDArray[np.float64]
+) -> npt.NDArray[np.float64]:
+    """``rays @ normal`` for the rays ``(x, y, 1)``, from their components (no (N, 3) array)."""
+    return np.asarray(x * float(normal[0]) + y * float(normal[1]) + float(normal[2]))
+
+
+def _plane_basis(
+    normal: npt.NDArray[np.float64],
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Two unit vectors spanning the plane of unit ``normal``: ``normal x (0, 1, 0)``
+    (``normal x (1, 0, 0)`` when that is degenerate) and ``normal x`` the first."""
+    n0, n1, n2 = (float(c) for c in normal)
+    e1 = np.array([-n2, 0.0, n0])
+    if np.linalg.norm(e1) < 1e-6:
+        e1 = np.array([0.0, n2, -n1])
+    e1 /= np.linalg.norm(e1)
+    a0, a1, a2 = (float(c) for c in e1)
+    e2 = np.array([n1 * a2 - n2 * a1, n2 * a0 - n0 * a2, n0 * a1 - n1 * a0])
+    return e1, e2
 
 
 def fit_plane(
@@ -38,12 +63,16 @@ def fit_plane(
     Falls back to a fronto-parallel plane when the points are too few, collinear, or the
     plane would be seen edge-on (normal more than ~72 deg from the optical axis).
     """
-    centre = points.mean(axis=0)
+    centre = np.ones(len(points)) @ points / len(points)  # the mean (a BLAS product)
     normal = np.array([0.0, 0.0, 1.0])
     if len(points) >= 6:
-        _, sv, vt = np.linalg.svd(points - centre, full_matrices=False)
-        if sv[1] > 1e-6 and abs(vt[2][2]) > 0.3:
-            normal = vt[2] / np.linalg.norm(vt[2])
+        # The right singular vectors of the centred points are the eigenvectors of their
+        # 3 x 3 scatter matrix, the squared singular values its eigenvalues (ascending):
+        # the same plane as an SVD of the (N, 3) points, for much less.
+        d = points - centre
+        eig, vec = np.linalg.eigh(d.T @ d)
+        if eig[1] > 1e-12 and abs(vec[2, 0]) > 0.3:
+            normal = vec[:, 0] / np.linalg.norm(vec[:, 0])
     return normal, centre
 
 
@@ -163,25 +192,36 @@ def measure_opening(
     normal, centre = fit_plane(rays_of(ru, rv, cam) * rz[:, None]) if plane is None else plane
     if normal @ centre > 0:
         normal = -normal
-    rays = rays_of(region_uv[0], region_uv[1], cam)
-    t = (centre @ normal) / (rays @ normal)
-    pts = rays * t[:, None]
-    # In-plane basis.
-    e1 = np.cross(normal, [0.0, 1.0, 0.0])
-    if np.linalg.norm(e1) < 1e-6:
-        e1 = np.cross(normal, [1.0, 0.0, 0.0])
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(normal, e1)
-    cos_incidence = np.abs(rays @ normal) / np.linalg.norm(rays, axis=1)
+    # Each pixel's ray (x, y, 1) meets the plane at t (its axial depth) in the point t * ray;
+    # computed per component (regions run to thousands of pixels).
+    x = (region_uv[0] - cam.cx) / cam.fx
+    y = (region_uv[1] - cam.cy) / cam.fy
+    along = _along(normal, x, y)
+    t = float(centre @ normal) / along
+    cos_incidence = np.abs(along) / np.sqrt(x * x + y * y + 1.0)
     pix_area = (t**2) / (cam.fx * cam.fy) / np.maximum(cos_incidence, 0.2)
     area = float(pix_area.sum())
-    mid = (pix_area[:, None] * pts).sum(axis=0) / area
-    p2 = np.stack([(pts - mid) @ e1, (pts - mid) @ e2], axis=1)
-    cov = np.cov(p2.T) if len(p2) > 1 else np.zeros((2, 2))
-    cov = cov + np.eye(2) * float(np.mean(pix_area)) / 12.0
-    lam = np.sort(np.linalg.eigvalsh(cov))[::-1]
-    major, minor = 4.0 * math.sqrt(max(lam[0], 0.0)), 4.0 * math.sqrt(max(lam[1], 0.0))
-    return Opening(major, minor, area, float(np.median(rz)), mid, normal)
+    wt = pix_area * t
+    mid = np.array([float(wt @ x), float(wt @ y), float(wt.sum())]) / area
+    e1, e2 = _plane_basis(normal)
+    # In-plane coordinates of the points, about their mean, and their covariance.
+    px, py, pz = x * t - mid[0], y * t - mid[1], t - mid[2]
+    a = px * e1[0] + py * e1[1] + pz * e1[2]
+    b = px * e2[0] + py * e2[1] + pz * e2[2]
+    saa = sab = sbb = 0.0
+    if len(a) > 1:
+        a -= a.mean()
+        b -= b.mean()
+        saa, sab, sbb = (float(u @ v) / (len(a) - 1) for u, v in ((a, a), (a, b), (b, b)))
+    # Plus each pixel's own footprint (a square's variance), then the eigenvalues.
+    foot = float(np.mean(pix_area)) / 12.0
+    saa, sbb = saa + foot, sbb + foot
+    half, spread = 0.5 * (saa + sbb), math.hypot(0.5 * (saa - sbb), sab)
+    major, minor = (
+        4.0 * math.sqrt(max(half + spread, 0.0)),
+        4.0 * math.sqrt(max(half - spread, 0.0)),
+    )
+    return Opening(major, minor, area, float(median(rz)), mid, normal)
 
 
 def rim_circle_centre(
@@ -200,12 +240,7 @@ def rim_circle_centre(
     if len(rz) < 8:
         return None
     pts = rays_of(ru, rv, cam) * rz[:, None]
-    n = opening.normal
-    e1 = np.cross(n, [0.0, 1.0, 0.0])
-    if np.linalg.norm(e1) < 1e-6:
-        e1 = np.cross(n, [1.0, 0.0, 0.0])
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(n, e1)
+    e1, e2 = _plane_basis(opening.normal)
     rel = pts - opening.centre
     x, y = rel @ e1, rel @ e2
     a = np.column_stack([2.0 * x, 2.0 * y, np.ones_like(x)])
@@ -231,7 +266,9 @@ def opening_axes(
     return o.major_m, o.minor_m, o.area_m2, o.rim_depth_m
 
 
+@cache
 def disk(r: int) -> npt.NDArray[np.uint8]:
+    """The disk of radius ``r`` (an OpenCV ellipse kernel); shared: do not write to it."""
     return np.asarray(
         cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1)), np.uint8
     )
@@ -254,27 +291,27 @@ def grow_walls(
     wall joins the opening (its box is the rim's).
     """
     u8 = inside.astype(np.uint8)
-    outer = (cv2.dilate(u8, disk(ring_px + 3)) > 0) & ~(cv2.dilate(u8, disk(ring_px)) > 0)
-    outer &= valid
-    if outer.sum() < 6:
+    # The ring between the two dilations (the smaller disk lies inside the larger).
+    outer = (cv2.dilate(u8, disk(ring_px + 3)) > cv2.dilate(u8, disk(ring_px))) & valid
+    if np.count_nonzero(outer) < 6:
         return inside
     ov, ou = np.nonzero(outer)
     normal, centre = fit_plane(
         rays_of(ou.astype(np.float64) + uv0[0], ov.astype(np.float64) + uv0[1], cam)
         * zc[outer].astype(np.float64)[:, None]
     )
-    vv, uu = np.mgrid[0 : zc.shape[0], 0 : zc.shape[1]]
-    rays = rays_of(uu.ravel() + float(uv0[0]), vv.ravel() + float(uv0[1]), cam)
-    z_plane = ((centre @ normal) / (rays @ normal)).reshape(zc.shape)
-    below = valid & (zc > z_plane + WALL_MARGIN_M)
-    region = inside.copy()
-    k3 = np.ones((3, 3), np.uint8)
+    # The plane's depth along every pixel's ray, from a row and a column of ray components.
+    x = (np.arange(zc.shape[1], dtype=np.float64) + uv0[0] - cam.cx) / cam.fx
+    y = (np.arange(zc.shape[0], dtype=np.float64) + uv0[1] - cam.cy) / cam.fy
+    z_plane = float(centre @ normal) / _along(normal, x[None, :], y[:, None])
+    below = (valid & (zc > z_plane + WALL_MARGIN_M)).view(np.uint8)
+    region = u8
     for _ in range(grow_px):
-        add = (cv2.dilate(region.astype(np.uint8), k3) > 0) & below & ~region
-        if not add.any():
+        grown = (np.asarray(cv2.dilate(region, _K3), np.uint8) & below) | region
+        if np.count_nonzero(grown) == np.count_nonzero(region):  # grown holds region
             break
-        region |= add
-    return region
+        region = grown
+    return region.view(bool)
 
 
 def occluders(
@@ -283,24 +320,27 @@ def occluders(
     rz: npt.NDArray[np.float64],
     cam: CameraIntrinsics,
     step_m: float = DefaultOptions.occluder_step_m,
-) -> npt.NDArray[np.bool_]:
+) -> tuple[npt.NDArray[np.bool_], tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]] | None]:
     """Rim points that stand well in front of the plane of the others: a nearer edge.
 
     ru, rv : pixel coordinates of the rim; rz : their depth (m). A slab lying across the
     opening hides its near part; its edge borders the visible part of the hole and is no
     rim. Points more than ``step_m`` nearer than the plane fitted to the rim
     (refitted once without them) are flagged.
+
+    Returns ``(flagged, plane)``: plane is :func:`fit_plane` of the points not flagged
+    when that is the last plane fitted (the rim's plane, not fitted twice), else None.
     """
     near = np.zeros(len(rz), bool)
+    rays = rays_of(ru, rv, cam)
     for _ in range(2):
         keep = ~near
-        if keep.sum() < 6:
+        if np.count_nonzero(keep) < 6:
             break
-        rays = rays_of(ru, rv, cam)
         normal, centre = fit_plane(rays[keep] * rz[keep, None])
-        z_plane = (centre @ normal) / (rays @ normal)
+        z_plane = float(centre @ normal) / _along(normal, rays[:, 0], rays[:, 1])
         now = rz < z_plane - step_m
         if not now.any() or np.array_equal(now, near):
-            return now
+            return now, ((normal, centre) if np.array_equal(~now, keep) else None)
         near = now
-    return near
+    return near, None

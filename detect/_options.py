@@ -41,6 +41,10 @@ class DefaultOptions:
     surface_plane : an unread region whose readings well inside its outline lie on its rim
         plane is a surface that returns no infrared (soot, char, wet), not a void: its
         score falls (``detect._surface``).
+    trim_spurs : cut thin spurs (a projector shadow's unread line) off candidate regions
+        (``detect._regions.trim_spurs``).
+    seen_rim_first : in NMS a basin closed across the border cut does not outrank a basin
+        inside it whose rim was seen all round, unless that one runs on to the cut.
     """
 
     grow_px: int = 4
@@ -58,3 +62,5 @@ class DefaultOptions:
     bands: bool = True
     closed_border: bool = True
     surface_plane: bool = True
+    trim_spurs: bool = True
+    seen_rim_first: bool = True

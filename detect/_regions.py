@@ -13,6 +13,7 @@ import numpy.typing as npt
 from skimage.morphology import reconstruction
 
 from holescan.detect._options import DefaultOptions
+from holescan.detect._order_stats import percentile
 
 # Region thresholds (metres below the spill level). SHALLOW is a few block-averaged noise
 # sigmas at 4 m (Xtion: 1.425e-6 Z^2 mm per pixel -> 23 mm, /4 after 4x4 averaging).
@@ -26,6 +27,14 @@ BAND_MAX_PX = 64
 BORDER_BRIDGE = 0.5
 # ... and at least this many pixels long.
 BRIDGE_MIN_PX = 3
+# Dips running into a corner up to this fraction of the line are bridged at the rim on
+# their one side, when that side rises as a wall's (by DEEP_M within CORNER_STEP_PX).
+CORNER_BRIDGE = 0.25
+CORNER_STEP_PX = 2
+# _fill checks for stability after this many geodesic erosions (a work-grid frame needs
+# 50-130).
+_FILL_CHECK_STEPS = 8
+_K3 = np.ones((3, 3), np.uint8)
 
 
 def block_depth(
@@ -73,27 +82,59 @@ def unread_bands(unread: npt.NDArray[np.bool_], max_px: int) -> tuple[int, int, 
     return run(cols), run(rows), run(cols[::-1]), run(rows[::-1])
 
 
-def _closed_profile(profile: npt.NDArray[np.float64], length: int) -> npt.NDArray[np.float64]:
+def _closed_profile(
+    profile: npt.NDArray[np.float64], length: int, end: int = 0
+) -> npt.NDArray[np.float64]:
     """Dips along a border line shorter than ``length`` bridged: each point raised to the
     lower of the highest points within ``length`` on its two sides (itself included).
 
+    With ``end``, a dip running into an end of the line (a corner of the frame) within
+    ``end`` of it is bridged at the rim on its one side when it is a wall's step, not a
+    slope (:func:`_end_rim`).
+
     >>> _closed_profile(np.array([3.0, 1.0, 0.0, 2.0, 1.0, 0.5]), 3).tolist()
     [3.0, 2.0, 2.0, 2.0, 1.0, 0.5]
+    >>> _closed_profile(np.array([0.0, 0.0, 2.0, 2.0, 2.0, 2.0]), 3, end=3).tolist()
+    [2.0, 2.0, 2.0, 2.0, 2.0, 2.0]
     """
     n = max(1, length)
-    pad_l = np.concatenate([np.full(n, profile[0]), profile])
-    pad_r = np.concatenate([profile, np.full(n, profile[-1])])
-    win = np.lib.stride_tricks.sliding_window_view
-    left = win(pad_l, n + 1).max(axis=1)
-    right = win(pad_r, n + 1).max(axis=1)
-    return np.asarray(np.minimum(left, right), np.float64)
+    lo = _end_rim(profile, end) if end else float(profile[0])
+    hi = _end_rim(profile[::-1], end) if end else float(profile[-1])
+    line = np.ascontiguousarray(profile, np.float64)[None, :]
+    kernel = np.ones((1, n + 1), np.uint8)
+    # Running maxima over [i - n, i] and [i, i + n] (a dilation: exact, no window copies),
+    # the line continued by ``lo`` before its start and ``hi`` after its end.
+    const = cv2.BORDER_CONSTANT
+    left = cv2.dilate(line, kernel, anchor=(n, 0), borderType=const, borderValue=lo)
+    right = cv2.dilate(line, kernel, anchor=(0, 0), borderType=const, borderValue=hi)
+    return np.asarray(np.minimum(left, right)[0], np.float64)
 
 
-def _bridged(profile: npt.NDArray[np.float64], length: int) -> npt.NDArray[np.float64]:
+def _end_rim(profile: npt.NDArray[np.float64], end: int) -> float:
+    """The height beyond ``profile[0]`` (the line's end): the rim of a dip that runs into
+    the end, when the dip lies within ``end`` of it and its side rises by :data:`DEEP_M`
+    within :data:`CORNER_STEP_PX` (a wall: terrain sloping toward the corner is no dip);
+    else ``profile[0]`` itself (the end drains).
+
+    >>> _end_rim(np.array([-3.0, -3.0, -3.0, -2.0, -2.0, -2.0]), 4)  # a hole's wall
+    -2.0
+    >>> _end_rim(-3.0 + 0.05 * np.arange(12), 8)  # a slope
+    -3.0
+    """
+    rim = float(profile[: end + 1].max())
+    edge = int(np.argmax(profile >= rim - DEEP_M))  # the dip: profile[:edge]
+    if edge == 0 or float(profile[edge : edge + CORNER_STEP_PX + 1].max()) < rim - 0.2 * DEEP_M:
+        return float(profile[0])
+    return rim
+
+
+def _bridged(
+    profile: npt.NDArray[np.float64], length: int, end: int = 0
+) -> npt.NDArray[np.float64]:
     """The border line with its deep dips bridged: where the closed profile stands more
     than :data:`DEEP_M` above it (a hole or its unread floor crossing the border), not at
     shallow undulations of the terrain (those drain there as before)."""
-    closed = _closed_profile(profile, length)
+    closed = _closed_profile(profile, length, end)
     deep = (closed - profile > DEEP_M).astype(np.uint8)[None, :]
     # Runs shorter than BRIDGE_MIN_PX (stray unread pixels at the border) are left alone.
     k = np.ones((1, BRIDGE_MIN_PX), np.uint8)
@@ -105,7 +146,8 @@ def _heights(z: npt.NDArray[np.float32]) -> tuple[npt.NDArray[np.float64], npt.N
     """``(height, invalid)``: ``-z``, no reading set below every reading."""
     invalid = np.isnan(z)
     height = -z.astype(np.float64)
-    height[invalid] = -(float(np.nanmax(z)) + 1.0)
+    # A float32 value, as every other height is (what _fill's exactness rests on).
+    height[invalid] = -float(np.fmax.reduce(z, axis=None) + np.float32(1.0))  # fmax: NaN-blind
     return height, invalid
 
 
@@ -117,19 +159,57 @@ def _border_seed(height: npt.NDArray[np.float64], closed_border: bool) -> npt.ND
     if closed_border and min(height.shape) >= 3:
         hh, ww = height.shape
         lw, lh = round(BORDER_BRIDGE * ww), round(BORDER_BRIDGE * hh)
-        seed[0, :] = _bridged(height[0, :], lw)
-        seed[-1, :] = _bridged(height[-1, :], lw)
-        seed[:, 0] = np.maximum(seed[:, 0], _bridged(height[:, 0], lh))
-        seed[:, -1] = np.maximum(seed[:, -1], _bridged(height[:, -1], lh))
+        ew, eh = round(CORNER_BRIDGE * ww), round(CORNER_BRIDGE * hh)
+        seed[0, :] = _bridged(height[0, :], lw, ew)
+        seed[-1, :] = _bridged(height[-1, :], lw, ew)
+        seed[:, 0] = np.maximum(seed[:, 0], _bridged(height[:, 0], lh, eh))
+        seed[:, -1] = np.maximum(seed[:, -1], _bridged(height[:, -1], lh, eh))
     return seed
 
 
 def _fill(
     seed: npt.NDArray[np.float64], height: npt.NDArray[np.float64]
 ) -> npt.NDArray[np.float64]:
-    """Grey-level reconstruction by erosion of ``height`` from ``seed``: every basin filled
-    to its spill level."""
-    return np.asarray(reconstruction(seed, height, method="erosion"), np.float64)  # type: ignore[no-untyped-call]
+    """Grey-level reconstruction by erosion of ``height`` from ``seed`` (``seed >= height``):
+    every basin filled to its spill level.
+
+    Equal to ``skimage.morphology.reconstruction(seed, height, method="erosion")`` (8-
+    neighbourhood), computed as its definition: the geodesic erosion (a 3x3 erosion, then
+    no lower than ``height``) repeated until nothing changes. A reconstruction only
+    compares and copies values, so on float32 copies it gives the same values whenever
+    every value is a float32 one, as the heights of block-averaged float32 depth are; on a
+    work grid (160 x 120) OpenCV's float32 erosion makes that ~3x cheaper than skimage,
+    which sorts the whole image twice. Other values go to skimage.
+
+    The erosions start from a tighter marker than ``seed``: each pixel lowered to the
+    least, over the four straight paths from it along its row and column to the border, of
+    the path's highest height (or its seed where it leaves, if higher). Water can drain
+    along each of those paths, so the marker stays between the result and ``seed``, and
+    the erosions from it reach the same result (reconstruction is monotone in the
+    marker), in about half as many steps.
+
+    >>> h = np.array([[3, 3, 3, 3], [3, 1, 0, 3], [3, 2, 3, 3], [3, 3, 3, 3]], np.float64)
+    >>> h[0, 1] = 2.0  # the rim's lowest point: the basin spills there
+    >>> seed = h.copy(); seed[1:-1, 1:-1] = h.max()
+    >>> _fill(seed, h)[1:3, 1:3].tolist()
+    [[2.0, 2.0], [2.0, 3.0]]
+    """
+    s32, h32 = seed.astype(np.float32), height.astype(np.float32)
+    if not (np.array_equal(s32, seed) and np.array_equal(h32, height)):
+        return np.asarray(reconstruction(seed, height, method="erosion"), np.float64)  # type: ignore[no-untyped-call]
+    top = np.maximum.accumulate
+    cur = np.minimum(s32, np.maximum(top(h32, axis=1), s32[:, :1]))
+    np.minimum(cur, np.maximum(top(h32[:, ::-1], axis=1)[:, ::-1], s32[:, -1:]), out=cur)
+    np.minimum(cur, np.maximum(top(h32, axis=0), s32[:1, :]), out=cur)
+    np.minimum(cur, np.maximum(top(h32[::-1], axis=0)[::-1], s32[-1:, :]), out=cur)
+    eroded, before = np.empty_like(s32), np.empty_like(s32)
+    while True:
+        before[...] = cur
+        for _ in range(_FILL_CHECK_STEPS):
+            cv2.erode(cur, _K3, dst=eroded)  # outside the image counts as +inf
+            np.maximum(eroded, h32, out=cur)
+        if np.array_equal(cur, before):
+            return cur.astype(np.float64)
 
 
 def _pit(
@@ -189,7 +269,7 @@ def basin_depths(z: npt.NDArray[np.float32], closed_border: bool = True) -> Basi
     neighbours lie at their own height in both views, so the box holds all it depends on.
     """
     height, invalid = _heights(z)
-    z_far = float(np.percentile(z[~invalid], 99.5))  # robust to a few outliers
+    z_far = float(percentile(z[~invalid], 99.5))  # robust to a few outliers
     spilled_seed = _border_seed(height, False)
     closed_seed = _border_seed(height, closed_border)
     if not closed_border or np.array_equal(closed_seed, spilled_seed):
@@ -268,7 +348,7 @@ def basin_regions(
         core, (x, y, w, h) = _crop(lab_b, stats_b, b)
         depths = pit[y : y + h, x : x + w][core]
         finite = depths[np.isfinite(depths)]
-        d = float(np.percentile(finite, 90)) if finite.size > 0.5 * depths.size else 1.0
+        d = float(percentile(finite, 90)) if finite.size > 0.5 * depths.size else 1.0
         tau = min(DEEP_M, max(SHALLOW_M, 0.25 * d))
         if tau not in levels:
             levels[tau] = components(pit > tau)
@@ -356,3 +436,41 @@ def no_reading_regions(
             mask, (bx, by, bw, bh) = _crop(lab2, stats2, j)
             regions.append(Candidate(mask, (bx + x0, by + y0, bw, bh), False))
     return regions
+
+
+# Spurs (trim_spurs): parts of a region no wider than this many work pixels, ...
+SPUR_PX = 2
+# ... trimmed when that takes this fraction of its box's area or more off the box.
+SPUR_BOX_CUT = 0.25
+_SPUR_KERNEL = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (SPUR_PX + 1, SPUR_PX + 1))
+
+
+def trim_spurs(region: Candidate) -> Candidate:
+    """``region`` without the thin spurs that stretch its box.
+
+    On a structured-light frame a line of unread pixels a block or two wide runs along
+    every nearer edge (the projector's shadow, the edge's dropouts); where it meets a hole
+    it joins the hole's region and can double its box. No person passes through a line
+    :data:`SPUR_PX` work pixels wide: the region is opened with a disk that wide and, when
+    that takes at least :data:`SPUR_BOX_CUT` of the box's area off the box, its largest
+    part kept (else the region is returned as it is: its edge is not stretched).
+
+    >>> m = np.zeros((12, 30), bool); m[2:10, 2:10] = True; m[5, 10:30] = True
+    >>> trim_spurs(Candidate(m, (0, 0, 30, 12), True)).box
+    (2, 2, 9, 8)
+    """
+    x, y, w, h = region.box
+    opened = np.asarray(
+        cv2.morphologyEx(region.mask.astype(np.uint8), cv2.MORPH_OPEN, _SPUR_KERNEL), np.uint8
+    )
+    _, _, ow, oh = cv2.boundingRect(opened)  # the largest part's box lies inside it
+    if ow * oh > (1.0 - SPUR_BOX_CUT) * w * h:
+        return region
+    n, lab, stats = components(opened)
+    if n < 2:
+        return region
+    i = int(np.argmax(stats[1:, cv2.CC_STAT_AREA])) + 1
+    mask, (bx, by, bw, bh) = _crop(lab, stats, i)
+    if bw * bh > (1.0 - SPUR_BOX_CUT) * w * h:
+        return region
+    return Candidate(mask, (bx + x, by + y, bw, bh), region.enclosed)

@@ -34,6 +34,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from holescan.detect._order_stats import median
 from holescan.detect._scores import ramp
 from holescan.detect._types import CameraIntrinsics
 
@@ -134,7 +135,7 @@ def plane_evidence(
         return NO_EVIDENCE
     normal, point = plane
     resid = (rim - point) @ normal
-    rough = float(np.median(np.abs(resid - np.median(resid)))) * 1.4826 if len(rim) else 0.0
+    rough = float(median(np.abs(resid - median(resid)))) * 1.4826 if len(rim) else 0.0
     pick = inner & read
     if not pick.any():
         return PlaneEvidence(n_inner, 0.0, 0.0, 0.0)
@@ -146,7 +147,7 @@ def plane_evidence(
     tol = np.maximum(PLANE_TOL_M + PLANE_TOL_PER_M2 * zs**2, ROUGHNESS_K * rough)
     on = int((np.abs(d) <= tol).sum())
     behind = int((d < -tol).sum())
-    return PlaneEvidence(n_inner, on / n_inner, behind / n_inner, float(np.median(tol)))
+    return PlaneEvidence(n_inner, on / n_inner, behind / n_inner, float(median(tol)))
 
 
 # A surface when at least ON_PLANE[1] of the interior is read on the plane (ramp from

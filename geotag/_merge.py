@@ -17,8 +17,12 @@ How sightings are matched (deterministic; no clocks, no randomness):
   major axis)`` (a big hole's detected centre wanders with the view), and the two major
   axes differ by less than ``max_size_ratio``.
 * Sightings of one frame are different holes: each hole takes at most one sighting per
-  frame, assigned greedily by normalised distance (ties: lower hole id, earlier sighting).
-  This is what keeps two real holes 1.2 m apart separate when the GPS error is metres.
+  frame, assigned greedily by the sighting's negative log-likelihood under each hole's
+  2-D Gaussian (standard deviation ``gate / n_sigma``; ties: lower hole id, earlier
+  sighting): with equal gates that is the normalised distance, and a hole with a tight gate
+  that fits wins over one with a loose gate (another flight's, gated on an independent GPS
+  error of metres) that is farther in metres but nearer in gate widths. This is what keeps
+  two real holes 1.2 m apart separate when the GPS error is metres.
 * Sightings from another GPS source (another flight or vehicle: :meth:`HoleTracker.update`'s
   ``source``) carry an independent GPS error: for them the bias drift is at its cap at
   once, however close in time the flights were.
@@ -30,9 +34,11 @@ How sightings are matched (deterministic; no clocks, no randomness):
   takes that one. A view cut by
   the image border shows part of the opening: its size is not compared with the hole's.
   Two holes whose openings come to overlap (their estimates closer than half the sum of
-  their major axes) and that were never seen apart in one frame are one opening: the
-  younger is fused into the older, whose id stays; the younger id is retired (never
-  reused; :meth:`HoleTracker.merged` maps it to the survivor).
+  their major axes), that were never seen apart in one frame and whose estimates were last
+  updated from the same GPS source (two estimates each in its own flight's GPS frame cannot
+  be compared) are one opening: the younger is fused into the older, whose id stays; the
+  younger id is retired (never reused; :meth:`HoleTracker.merged` maps it to the
+  survivor).
 * A sighting that joins no hole starts a new one. A single false detection therefore
   becomes a hole with ``sightings == 1``: consumers ask :meth:`HoleTracker.confirmed`.
 
@@ -364,7 +370,12 @@ class HoleTracker:
                 gate = max(floor, p.n_sigma * math.sqrt(var))
                 dist = math.hypot(ned[0] - t.kn, ned[1] - t.ke)
                 if dist < gate:
-                    pairs.append((dist / gate, ti, i))
+                    # The sighting's negative log-likelihood under the hole's 2-D Gaussian
+                    # (sigma = gate / n_sigma): a tight hole that fits beats a loose one
+                    # (another flight's, gated on its independent GPS error) that fits
+                    # "relatively" better; holes with equal gates rank by distance / gate.
+                    sigma = gate / p.n_sigma
+                    pairs.append((0.5 * (dist / sigma) ** 2 + 2.0 * math.log(sigma), ti, i))
         pairs.sort()
         used_tracks: set[int] = set()
         assigned: dict[int, int] = {}
@@ -393,13 +404,17 @@ class HoleTracker:
 
     def _fuse(self, t: _Track) -> None:
         """Fuse ``t`` with every other hole whose opening overlaps its own (see the module
-        docstring); the older id survives."""
+        docstring); the older id survives. Only holes last seen from the same source: each
+        estimate follows its last source's GPS bias (another flight's or vehicle's first
+        sighting moves it into that source's frame), and two estimates in two frames cannot
+        be compared by their openings' overlap (two openings 2 m apart were once fused)."""
         while True:
             other = next(
                 (
                     o
                     for o in self._tracks
                     if o is not t
+                    and o.source == t.source
                     and o.id not in t.apart
                     and t.id not in o.apart
                     and (

@@ -14,6 +14,7 @@ from holescan.sim._raster import rasterise_view
 from holescan.sim._raycast import cast_rays
 from holescan.sim._sensor import colour_image, depth_image
 from holescan.sim._world import AccessHole, RubbleWorld
+from holescan.sim.registration_bands import Bands
 from holescan.sim.structured_light import (
     Motion,
     SensorCamera,
@@ -98,6 +99,7 @@ def render(
     rng: np.random.Generator,
     conditions: Conditions | None = None,
     motion: Motion | None = None,
+    bands: Bands | None = None,
 ) -> tuple[npt.NDArray[np.uint8], npt.NDArray[np.uint16], tuple[GtBox, ...]]:
     """One registered RGB-D frame as the Xtion would deliver it, and its true access holes.
 
@@ -114,6 +116,8 @@ def render(
         through the basic model of :func:`sim._sensor.depth_image`.
     motion : the camera's image motion during the frame (blur, depth/colour time offset);
         still when None.
+    bands : the flight's unread border bands (:func:`sim.registration_bands.draw_bands`,
+        once per flight); drawn for this frame alone when None.
 
     Returns
     -------
@@ -144,6 +148,7 @@ def render(
         surface=Surface(ir_unread=surf[..., 3]),
         motion=motion,
         params=params,
+        bands=bands,
     )
     assert frame.rgb is not None
     return frame.rgb, frame.depth_mm, hole_boxes(world, pose, camera)

@@ -27,6 +27,7 @@ from holescan.geotag import (
 from holescan.sim._camera_model import CameraPose, Conditions, project_points, random_conditions
 from holescan.sim._render import GtBox, render
 from holescan.sim._world import RubbleWorld
+from holescan.sim.registration_bands import draw_bands
 from holescan.sim.structured_light import Motion
 
 PoseAtMono = Callable[[int], VehiclePose]
@@ -62,6 +63,8 @@ def camera_pose_in_world(pose: VehiclePose, mount: CameraMount, anchor: WorldAnc
 
 #: Time step over which the camera's image motion is measured.
 _MOTION_DT_NS = 10_000_000
+#: Seed-stream tag of a flight's border bands.
+_BANDS_STREAM = 0xBA4D
 #: Colour exposure at dawn (s): what the motion blurs over.
 _EXPOSURE_S = 0.012
 
@@ -89,7 +92,8 @@ class SimSource:
     pose_at_mono : vehicle pose at a companion monotonic time (the simulator's truth).
     camera, mount : intrinsics and how the camera sits on the vehicle.
     fps : frame rate; max_frames : stop after this many (None: run until closed).
-    seed : noise of the frames (deterministic for a given pose sequence).
+    seed : noise of the frames (deterministic for a given pose sequence) and the flight's
+        unread border bands (``bands``, drawn once: :mod:`sim.registration_bands`).
     """
 
     def __init__(
@@ -114,6 +118,9 @@ class SimSource:
         self._pose_at_mono = pose_at_mono
         self._rng = np.random.default_rng(seed)
         self._conditions = conditions or Conditions()
+        # The unread border bands are the registration's: one draw for the whole flight, from
+        # a stream of their own.
+        self.bands = draw_bands(np.random.default_rng([seed, _BANDS_STREAM]), self.camera.width)
         self._closed = False
         self.late_frames = 0
         self.render_ms: list[float] = []
@@ -137,7 +144,9 @@ class SimSource:
             self._pose_at_mono(t_mono_ns + _MOTION_DT_NS), self.mount, self.anchor
         )
         motion = image_motion(cam_pose, later, self.camera, _MOTION_DT_NS * 1e-9)
-        rgb, depth, boxes = render(self.world, cam_pose, self.camera, self._rng, cond, motion)
+        rgb, depth, boxes = render(
+            self.world, cam_pose, self.camera, self._rng, cond, motion, self.bands
+        )
         return rgb, depth, pose, boxes
 
     def __iter__(self) -> Iterator[Frame]:

@@ -23,6 +23,7 @@ from holescan.ground import Sample, write_dataset
 from holescan.sim._camera_model import CameraPose, random_conditions
 from holescan.sim._render import render
 from holescan.sim._world import RubbleWorld, make_world
+from holescan.sim.registration_bands import draw_bands
 from holescan.sim.structured_light import random_motion
 
 log = logging.getLogger(__name__)
@@ -73,15 +74,20 @@ def synth_samples(
     """``n`` rendered frames with their ground-truth boxes (a new world every few frames).
 
     ``structured_light``: depth through :mod:`sim.structured_light` (the default) with the
-    drone's motion (0-1.5 m/s, 5-20 ms exposures); else the basic depth model, still.
+    drone's motion (0-1.5 m/s, 5-20 ms exposures) and one recording's border bands per world
+    (:mod:`sim.registration_bands`); else the basic depth model, still.
     """
     if n < 1:
         raise InputError(f"--n must be at least 1, got {n}")
     rng = np.random.default_rng(seed)
     world: RubbleWorld | None = None
+    bands = None
     for i in range(n):
         if i % images_per_world == 0:
             world = make_world(int(rng.integers(2**31)), (16.0, 16.0))
+            # one recording per world: its border bands from a stream of their own
+            r_b = np.random.default_rng([seed, i // images_per_world, 0xBA4D])
+            bands = draw_bands(r_b, camera.width)
         assert world is not None
         pose = sample_pose(world, rng)
         cond = replace(random_conditions(rng), structured_light=structured_light)
@@ -89,7 +95,7 @@ def synth_samples(
         if structured_light:  # its own stream: the same poses and worlds either way
             r_m = np.random.default_rng([seed, i, 0x30])
             motion = random_motion(r_m, camera.fx, float(pose.position[2] - world.height.mean()))
-        rgb, depth, boxes = render(world, pose, camera, rng, cond, motion)
+        rgb, depth, boxes = render(world, pose, camera, rng, cond, motion, bands)
         yield Sample(
             name=f"s{seed}_{i:05d}",
             rgb=rgb,

@@ -22,8 +22,12 @@ the statistics of this model's frames with the real ones):
   (incidence cosine below ~0.1-0.25) lose theirs;
 * **RGB-to-depth misregistration** (a 1-4 px shift and ~1 % scale) plus the depth/colour
   **time offset** (up to ~16 ms) times the image motion;
-* **unread registration bands** at the frame border (right 24-43 px, top 8-14, bottom
-  6-12, left 0-11 at 640 px wide);
+* **unread registration bands** at the frame border, fixed for a recording (the warp of the
+  depth onto the colour camera is the device's and the driver's): one :class:`BandProfile`
+  per way of registering, drawn per flight or recording with :func:`draw_bands` (Kinect v1
+  registered on the host: right 24-45 px, top 8-15, bottom 6-13, left 0-14; OpenNI2's own
+  registration, as on an Xtion: left 19-27, right 12-20, top 14-18, bottom 4-8; at 640 px
+  wide; :mod:`sim.registration_bands`);
 * colour **motion blur** over the exposure (shot noise at dawn exposures is the colour
   pipelines' own: :func:`sim._sensor.colour_image` and the scene generators' cameras).
 
@@ -52,6 +56,7 @@ from holescan.sim._xorshift import normal as _normal
 from holescan.sim._xorshift import normal_table as _normal_table
 from holescan.sim._xorshift import stream_state as _state
 from holescan.sim._xorshift import uniform as _uniform
+from holescan.sim.registration_bands import BAND_PROFILES, BandProfile, Bands, draw_bands
 
 __all__ = [
     "FrameDraws",
@@ -95,10 +100,8 @@ class StructuredLight:
     fattening_px: tuple[int, int] = (1, 2)
     flying_fraction: Range = (0.01, 0.18)
     bands: bool = True
-    band_right_px: tuple[int, int] = (24, 43)
-    band_top_px: tuple[int, int] = (8, 14)
-    band_bottom_px: tuple[int, int] = (6, 12)
-    band_left_px: tuple[int, int] = (0, 11)
+    #: The ways of registering a recording can come from (one drawn per recording).
+    band_profiles: tuple[BandProfile, ...] = BAND_PROFILES
     misregistration_px: Range = (1.0, 4.0)
     misregistration_scale: float = 0.01
     max_time_offset_s: float = 0.016
@@ -120,6 +123,8 @@ class StructuredLight:
             raise ValueError("baseline_m and disparity_step_px must be positive")
         if not 0 <= self.min_range_m < self.max_range_m <= 65.0:
             raise ValueError("need 0 <= min_range_m < max_range_m <= 65 (uint16 millimetres)")
+        if self.bands and not self.band_profiles:
+            raise ValueError("bands=True needs at least one band profile")
 
 
 @dataclass(frozen=True)
@@ -174,6 +179,8 @@ class FrameDraws:
     time_offset_s: float
     #: Correlation length of this frame's absorbing-surface dropout clumps.
     dropout_clump_px: float = 0.0
+    #: The band profile of the recording ("" without bands).
+    band_profile: str = ""
 
 
 @dataclass(frozen=True)
@@ -474,6 +481,7 @@ def structured_light_frame(
     surface: Surface | None = None,
     motion: Motion | None = None,
     params: StructuredLight | None = None,
+    bands: Bands | None = None,
 ) -> SensorFrame:
     """The sensor's registered depth (and colour) for an ideal frame (module docstring).
 
@@ -485,6 +493,8 @@ def structured_light_frame(
     camera : intrinsics of the frame.
     seed : seed or generator of the frame's randomness (same seed, same frame).
     surface, motion, params : see :class:`Surface`, :class:`Motion`, :class:`StructuredLight`.
+    bands : the recording's border bands (:func:`draw_bands`, once per flight or recording);
+        when None (and ``params.bands``) the frame is a recording of its own and draws them.
     """
     p = params if params is not None else StructuredLight()
     m = motion if motion is not None else Motion()
@@ -496,15 +506,12 @@ def structured_light_frame(
     z = np.where(np.isfinite(z) & (z > 0), z, np.float32(0.0))
     h, w = z.shape
     k = w / 640.0
-    if p.bands:
-        bands = (
-            _draw_int(rng, p.band_left_px, k),
-            _draw_int(rng, p.band_right_px, k),
-            _draw_int(rng, p.band_top_px, k),
-            _draw_int(rng, p.band_bottom_px, k),
-        )
+    if not p.bands:
+        bd = Bands(0, 0, 0, 0)
+    elif bands is None:
+        bd = draw_bands(rng, w, p.band_profiles)
     else:
-        bands = (0, 0, 0, 0)
+        bd = bands
     fat = int(rng.integers(p.fattening_px[0], p.fattening_px[1] + 1))
     fat = max(0, round(fat * k)) if k < 1 else fat
     fly = float(rng.uniform(*p.flying_fraction))
@@ -516,10 +523,10 @@ def structured_light_frame(
     scale = 1.0 + float(rng.uniform(-p.misregistration_scale, p.misregistration_scale))
     dt = float(rng.uniform(-p.max_time_offset_s, p.max_time_offset_s))
     draws = FrameDraws(
-        band_left=bands[0],
-        band_right=bands[1],
-        band_top=bands[2],
-        band_bottom=bands[3],
+        band_left=bd.left,
+        band_right=bd.right,
+        band_top=bd.top,
+        band_bottom=bd.bottom,
         fattening_px=fat,
         flying_fraction=round(fly, 4),
         noise_fraction=round(noise_frac, 4),
@@ -528,6 +535,7 @@ def structured_light_frame(
         scale=round(scale, 5),
         time_offset_s=round(dt, 5),
         dropout_clump_px=round(clump * max(k, 0.25), 2),
+        band_profile=bd.profile,
     )
 
     # Surfaces that return nothing: grazing, absorbing; judged on the true geometry.
@@ -577,7 +585,7 @@ def structured_light_frame(
     vv = (np.arange(h, dtype=np.float64) - camera.cy) * scale + camera.cy + sy
     mm = _resample_nearest(mm, uu, vv)
     fl = _resample_nearest(flying, uu, vv) if flying.any() else flying
-    left, right, top, bottom = bands
+    left, right, top, bottom = bd.left, bd.right, bd.top, bd.bottom
     if left:
         mm[:, :left] = 0
     if right:

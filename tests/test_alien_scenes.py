@@ -168,3 +168,48 @@ def test_hole_interiors_lie_in_their_boxes_and_read_deep(alien: ModuleType) -> N
 def test_rejects_an_empty_request(alien: ModuleType, tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="n must be"):
         alien.generate_dataset(tmp_path, 0, 1)
+
+
+def test_a_recordings_frames_share_their_border_bands(dataset: Path) -> None:
+    coco = json.loads((dataset / "annotations.json").read_text())
+    sensors = [im["scene"]["sensor"] for im in coco["images"]]
+    assert {s["recording"] for s in sensors} == {0}  # the first 10 frames: one recording
+    assert len({(tuple(s["bands_ltrb_px"]), s["band_profile"]) for s in sensors}) == 1
+    for im in coco["images"]:
+        depth = cv2.imread(str(dataset / im["depth_file_name"]), cv2.IMREAD_UNCHANGED)
+        left, top, right, bottom = im["scene"]["sensor"]["bands_ltrb_px"]
+        assert not depth[:, :left].any() and not depth[:, 640 - right :].any()
+        assert not depth[:top].any() and not depth[480 - bottom :].any()
+        absorbing = im["scene"]["sensor"]["absorbing_stains"]
+        for d in im["distractors"]:
+            assert d["kind"] == "stain"
+            x, y, w, h = d["bbox"]
+            assert x >= 0 and y >= 0 and x + w <= 640 and y + h <= 480
+            if "ir_unread" in d:
+                assert absorbing[str(d["feature_id"])] == d["ir_unread"]
+
+
+def test_absorbing_stains_swallow_55_to_76_percent(alien: ModuleType) -> None:
+    from types import SimpleNamespace
+
+    h, w = 120, 160
+    stain = np.zeros((h, w), np.int32)
+    stain[20:60, 20:80] = 1  # wet: always absorbing
+    stain[70:110, 90:150] = 2  # dry: soot or char, or not
+    ir = np.full((h, w), 0.5)
+    ir[:10, :10] = 0.04  # a dark surface: 0.76 x (0.14 - ir) / 0.1
+    s = SimpleNamespace(Z=np.full((h, w), 2.0), ir=ir, stain=stain)
+    st = alien.Stain(np.zeros(2), np.ones(2), 0.0, 0.5, True)
+    dry = alien.Stain(np.zeros(2), np.ones(2), 0.0, 0.5, False)
+    offview = alien.Stain(np.zeros(2), np.ones(2), 0.0, 0.5, True)
+    seen_dry = set()
+    for seed in range(12):
+        sc = SimpleNamespace(stains=[st, dry, offview])
+        unread, absorbing = alien.absorbing_stains(np.random.default_rng(seed), sc, s)
+        assert 1 in absorbing and 3 not in absorbing  # the third is not in view
+        seen_dry.add(2 in absorbing)
+        for sid, frac in absorbing.items():
+            assert 0.55 <= frac <= 0.76
+            assert np.allclose(unread[stain == sid], frac, atol=1e-3)
+        assert unread[0, 0] == pytest.approx(0.76, abs=1e-6) and unread[15, 100] == 0
+    assert seen_dry == {True, False}  # dry stains: some absorb, some do not

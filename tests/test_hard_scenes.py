@@ -132,3 +132,15 @@ def test_sensor_model() -> None:
     flat = depth[250:450, 50:550].astype(float)
     flat = flat[flat > 0]
     assert abs(np.median(flat) - 3000) < 20 and 8 < np.std(flat) < 25  # sigma 12.8 mm at 3 m
+
+
+def test_a_recordings_frames_share_their_border_bands(datasets: tuple[Path, Path]) -> None:
+    coco = json.loads((datasets[0] / "annotations.json").read_text())
+    sensors = [im["scene"]["sensor"] for im in coco["images"]]
+    assert {s["recording"] for s in sensors} == {0}  # the first 10 frames: one recording
+    assert len({(tuple(s["bands_ltrb_px"]), s["band_profile"]) for s in sensors}) == 1
+    for im in coco["images"]:
+        depth = cv2.imread(str(datasets[0] / im["depth_file_name"]), cv2.IMREAD_UNCHANGED)
+        left, top, right, bottom = im["scene"]["sensor"]["bands_ltrb_px"]
+        assert not depth[:, :left].any() and not depth[:, 256 - right :].any()
+        assert not depth[:top].any() and not depth[192 - bottom :].any()

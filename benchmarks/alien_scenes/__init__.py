@@ -31,7 +31,13 @@ Depth: Z along the optical axis with surface roughness, lateral jitter and misre
 IR projector shadows (projector 75 mm to the right), axial noise sigma = k 1.425e-6 Z_mm^2 mm
 (k = 0.6-1.0, partly spatially correlated), 1/8-pixel disparity quantisation, per-scene
 maximum range 3.5-4.5 m, dropouts at grazing angles, on dark or wet surfaces, along depth
-edges, in speckles and blobs, and an invalid band at the left border.
+edges, in speckles and blobs, and an invalid band at the left border. That is ``--sensor basic``; by
+default (``--sensor structured-light``) the depth goes through the project's measured
+structured-light model (``holescan.sim.structured_light``): every wet stain and 60 % of
+the dry ones (soot, char) swallow 55-76 % of the pattern (listed in the image's
+``distractors`` as kind ``stain`` with ``ir_unread``), and the unread border bands are a
+recording's: every 10 consecutive frames (``scene.sensor.recording``) share one draw from a
+registration profile (``scene.sensor.band_profile``).
 
 Ground truth: each access hole (opening at least 0.7 m x 0.45 m across the shaft axis, at
 most 1.6 m, inscribed circle at least 0.42 m) is labelled with the bounding box of its rim

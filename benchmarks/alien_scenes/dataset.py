@@ -89,7 +89,34 @@ def _annotate(sc: Scene, cam: CameraModel, s: Surface) -> list[dict[str, Any]]:
     return anns
 
 
+def _stains(sc: Scene, s: Surface, absorbing: dict[int, float]) -> list[dict[str, Any]]:
+    """Distractor records of the stains in view (their cores, at least ``_MIN_STAIN_PX``):
+    box (pixel i spans [i, i+1)), wet or not, and the fraction of the pattern an absorbing
+    one swallows (``ir_unread``)."""
+    out = []
+    for k, st in enumerate(sc.stains):
+        ys, xs = np.nonzero(s.stain == k + 1)
+        if ys.size < _MIN_STAIN_PX:
+            continue
+        x0, y0 = int(xs.min()), int(ys.min())
+        e: dict[str, Any] = {
+            "kind": "stain",
+            "feature_id": k + 1,
+            "bbox": [x0, y0, int(xs.max()) + 1 - x0, int(ys.max()) + 1 - y0],
+            "pixels": int(ys.size),
+            "wet": bool(st.wet),
+        }
+        if k + 1 in absorbing:
+            e["ir_unread"] = absorbing[k + 1]
+        out.append(e)
+    return out
+
+
 # --------------------------------------------------------------------------- dataset
+
+#: Frames per recording: consecutive frames share their border bands (one registration).
+RECORDING_FRAMES = 10
+_MIN_STAIN_PX = 60
 
 
 @dataclass(frozen=True)
@@ -115,11 +142,18 @@ def _render_image(
     surf = shade(rng, sc, view, tex)
     rgb = rgb_sensor(rng, sc, surf.radiance)
     if job.sensor == "structured-light":
+        from holescan.sim.registration_bands import draw_bands  # the project's sensor model
+
         rng_sl = np.random.default_rng([job.seed, job.index, 2])
-        depth, rgb, sensor = structured_light_sensor(rng_sl, sc, job.cam, surf, rgb)
+        # the border bands are the recording's registration: one draw per RECORDING_FRAMES
+        recording = job.index // RECORDING_FRAMES
+        bands = draw_bands(np.random.default_rng([job.seed, recording, 0xBA4D]), job.cam.width)
+        depth, rgb, sensor = structured_light_sensor(rng_sl, sc, job.cam, surf, rgb, bands)
+        sensor["recording"] = recording
     else:
         depth, sensor = depth_sensor(rng, sc, job.cam, surf), {}
     anns = _annotate(sc, job.cam, surf)
+    distractors = _stains(sc, surf, sensor.get("absorbing_stains", {}))
     name = f"alien_{job.index:05d}.png"
     if not cv2.imwrite(str(job.out / "rgb" / name), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)):
         raise OSError(f"cannot write {job.out / 'rgb' / name}")
@@ -138,6 +172,7 @@ def _render_image(
             "sensor_model": job.sensor,
             "sensor": sensor,
         },
+        "distractors": distractors,
     }
     return image, anns
 

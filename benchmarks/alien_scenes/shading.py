@@ -79,6 +79,7 @@ class Surface:
     ir: F64  # IR reflectance
     cos_inc: F64  # |cos| of the incidence angle
     radiance: F32
+    stain: NDArray[np.int32]  # 1 + index into Scene.stains where that stain's core is, else 0
 
 
 def shade(rng: np.random.Generator, sc: Scene, view: PerspectiveView, tex: Textures) -> Surface:
@@ -111,12 +112,14 @@ def shade(rng: np.random.Generator, sc: Scene, view: PerspectiveView, tex: Textu
     dust = np.array([0.42, 0.40, 0.37]) * rng.uniform(0.8, 1.1)
     f = dust_k * np.clip(mm(n, sc.up), 0, 1) ** 2 * np.clip(0.6 + 0.3 * smooth, 0, 1)
     albedo = albedo * (1 - f[:, None]) + dust * f[:, None]
-    for st in sc.stains:
+    stain_id = np.zeros(len(P), np.int32)
+    for k, st in enumerate(sc.stains):
         c, s_ = math.cos(st.angle), math.sin(st.angle)
         d = P[:, :2] - st.centre
         q = (mm(d, [c, s_]) / st.axes[0]) ** 2 + (mm(d, [-s_, c]) / st.axes[1]) ** 2
         m = np.clip((1.15 - q * (1 + 0.3 * smooth)) / 0.3, 0, 1) * (P[:, 2] < 0.6) * valid
         albedo *= (1 - st.strength * m)[:, None]
+        stain_id[m > 0.5] = k + 1
         if st.wet:
             ir *= 1 - 0.85 * m
     kind = mat[:, M_KIND].astype(np.int64)
@@ -175,6 +178,7 @@ def shade(rng: np.random.Generator, sc: Scene, view: PerspectiveView, tex: Textu
         ir=ir.reshape(h, w),
         cos_inc=cos_inc.reshape(h, w),
         radiance=rad,
+        stain=stain_id.reshape(h, w),
     )
 
 
@@ -275,12 +279,47 @@ def depth_sensor(
     return out.astype(np.uint16)
 
 
+#: A dry stain is soot or char (absorbing) with this probability; wet ones always absorb.
+ABSORBING_DRY_STAIN_P = 0.6
+#: Fraction of the pattern an absorbing stain swallows (real soot, char, wet patches).
+ABSORBING_UNREAD = (0.55, 0.76)
+
+
+def absorbing_stains(
+    rng: np.random.Generator, sc: Scene, s: Surface
+) -> tuple[NDArray[np.float32], dict[int, float]]:
+    """Per pixel, the fraction of the pattern lost on absorbing surfaces, and the absorbing
+    stains in view (stain id of ``s.stain`` -> that fraction).
+
+    Dark or wet surfaces (IR reflectance under 0.14) lose up to 76 % in proportion; every
+    wet stain and ``ABSORBING_DRY_STAIN_P`` of the dry ones (soot, char) lose a fraction
+    drawn in ``ABSORBING_UNREAD`` over their whole core, as on real frames.
+    """
+    h, w = s.Z.shape
+    unread = (np.clip((0.14 - s.ir) / 0.1, 0, 1) * 0.76).reshape(h, w).astype(np.float32)
+    out: dict[int, float] = {}
+    for k, st in enumerate(sc.stains):  # a draw per stain in the scene, in view or not
+        absorbs = st.wet or rng.random() < ABSORBING_DRY_STAIN_P
+        frac = float(rng.uniform(*ABSORBING_UNREAD))
+        sel = s.stain == k + 1
+        if absorbs and sel.any():
+            unread[sel] = np.maximum(unread[sel], np.float32(frac))
+            out[k + 1] = round(frac, 3)
+    return unread, out
+
+
 def structured_light_sensor(
-    rng: np.random.Generator, sc: Scene, cam: CameraModel, s: Surface, rgb: NDArray[np.uint8]
+    rng: np.random.Generator,
+    sc: Scene,
+    cam: CameraModel,
+    s: Surface,
+    rgb: NDArray[np.uint8],
+    bands: Any = None,
 ) -> tuple[NDArray[np.uint16], NDArray[np.uint8], dict[str, Any]]:
     """The project's measured structured-light model (``holescan.sim.structured_light``,
-    ``docs/sensor-model.md``) on this scene's true depth and infrared reflectance: wet and
-    dark surfaces (IR reflectance under 0.14) swallow up to 76 % of the pattern."""
+    ``docs/sensor-model.md``) on this scene's true depth and infrared reflectance (absorbing
+    surfaces: :func:`absorbing_stains`); ``bands``: the recording's border bands
+    (``holescan.sim.registration_bands.Bands``; drawn for this frame alone when None)."""
     from holescan.sim.structured_light import (
         SensorCamera,
         StructuredLight,
@@ -292,7 +331,7 @@ def structured_light_sensor(
     h, w = s.Z.shape
     Z = np.asarray(s.Z + s.disp, np.float64)
     finite = np.isfinite(Z)
-    unread = (np.clip((0.14 - s.ir) / 0.1, 0, 1) * 0.76).reshape(h, w).astype(np.float32)
+    unread, absorbing = absorbing_stains(rng, sc, s)
     centre = float(np.median(Z[finite])) if finite.any() else 2.5
     motion = random_motion(rng, cam.fx, centre)
     params = StructuredLight(max_range_m=sc.zmax, fade_range_m=sc.zmax - 0.3)
@@ -304,6 +343,7 @@ def structured_light_sensor(
         surface=IrSurface(unread, s.cos_inc.reshape(h, w).astype(np.float32)),
         motion=motion,
         params=params,
+        bands=bands,
     )
     d = fr.draws
     assert fr.rgb is not None
@@ -312,8 +352,10 @@ def structured_light_sensor(
         fr.rgb,
         {
             "bands_ltrb_px": [d.band_left, d.band_top, d.band_right, d.band_bottom],
+            "band_profile": d.band_profile,
             "misregistration_px": list(d.shift_px),
             "time_offset_s": d.time_offset_s,
             "velocity_px_s": list(motion.velocity_px_s),
+            "absorbing_stains": absorbing,
         },
     )

@@ -13,6 +13,11 @@ from shade import develop, radiance
 from terrain import build_terrain
 from world import NO_RETURN, Grid, caster_field, horizon_field
 
+from holescan.sim.registration_bands import draw_bands
+
+#: Frames per recording: consecutive frames share their border bands (one registration).
+RECORDING_FRAMES = 10
+
 REGION_KINDS = (
     "no_return_metal",
     "no_return_puddle",
@@ -53,6 +58,10 @@ def render_frame(
     r_plan, r_world, r_light, r_sensor = (np.random.default_rng(s) for s in ss.spawn(4))
     # Its own stream, so that the scenes are the same whichever sensor model renders them.
     r_sl = np.random.default_rng(np.random.SeedSequence([seed, index, 0x5E]))
+    # The unread border bands are the recording's (the registration), not the frame's: one
+    # draw per RECORDING_FRAMES consecutive frames, from a stream of its own.
+    recording = index // RECORDING_FRAMES
+    r_bands = np.random.default_rng(np.random.SeedSequence([seed, recording, 0xBA4D]))
     intr = intr_full.scaled(scale)
     W, H = intr.width, intr.height
     plan = sample_plan(r_plan, intr)
@@ -86,9 +95,11 @@ def render_frame(
     no_ret = np.isin(mats, NO_RETURN).reshape(H, W)
     cos_inc = np.abs(np.sum(hits.normal * D, 1)).reshape(H, W)
     if sensor_model == "structured-light":
+        bands = draw_bands(r_bands, W)
         depth, rgb, sensor = structured_light(
-            r_sl, intr, Z, rgb, no_ret, stain.reshape(H, W), plan.max_range
+            r_sl, intr, Z, rgb, no_ret, stain.reshape(H, W), plan.max_range, bands
         )
+        sensor["recording"] = recording
     else:
         depth, sensor = xtion_depth(r_sensor, intr, Z, no_ret, cos_inc, plan.max_range)
 

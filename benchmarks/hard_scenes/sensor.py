@@ -21,6 +21,7 @@ import numpy as np
 from camera import BASELINE_M, MIN_RANGE_M, Intrinsics
 from shapes import smooth_noise
 
+from holescan.sim.registration_bands import Bands
 from holescan.sim.structured_light import (
     SensorCamera,
     StructuredLight,
@@ -41,8 +42,10 @@ def structured_light(
     no_return: np.ndarray,
     stain: np.ndarray,
     max_range: float,
+    bands: Bands | None = None,
 ) -> tuple[np.ndarray, np.ndarray, dict]:
-    """True Z (H, W; inf = nothing) -> (uint16 mm depth, motion-blurred RGB, settings)."""
+    """True Z (H, W; inf = nothing) -> (uint16 mm depth, motion-blurred RGB, settings);
+    ``bands``: the recording's border bands (drawn for this frame alone when None)."""
     unread = np.where(no_return, 0.97, 0.0).astype(np.float32)
     absorbing = {}
     for sid in np.unique(stain[stain > 0]) if np.any(stain > 0) else ():
@@ -63,6 +66,7 @@ def structured_light(
         surface=Surface(ir_unread=unread),
         motion=motion,
         params=params,
+        bands=bands,
     )
     d = fr.draws
     return (
@@ -70,6 +74,7 @@ def structured_light(
         fr.rgb,
         {
             "bands_ltrb_px": [d.band_left, d.band_top, d.band_right, d.band_bottom],
+            "band_profile": d.band_profile,
             "fattening_px": d.fattening_px,
             "flying_fraction": d.flying_fraction,
             "misregistration_px": list(d.shift_px),

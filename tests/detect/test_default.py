@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
+from skimage.morphology import reconstruction
 
 from holescan.detect import DEFAULT, DOG, CameraIntrinsics, Detection, detect_holes
 from holescan.detect._default import basin_depth, block_depth, opening_axes
@@ -151,6 +154,29 @@ def test_both_basin_views_at_once_equal_each_computed_alone(seed: int) -> None:
         assert both.closed is not None and np.array_equal(both.closed, closed)
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_basin_depth_is_skimage_reconstruction(seed: int) -> None:
+    # basin_depth fills by its own iterated erosion (float32): the same pit, every value,
+    # as skimage's reconstruction by erosion of the heights from the border, in float64.
+    rng = np.random.default_rng(seed)
+    hh, ww = 50, 70
+    vv, uu = np.mgrid[0:hh, 0:ww]
+    z = (2.0 + 0.01 * vv + 0.02 * rng.standard_normal((hh, ww))).astype(np.float32)
+    for _ in range(8):
+        cy, cx, r = rng.integers(0, hh), rng.integers(0, ww), rng.integers(2, 14)
+        z[(vv - cy) ** 2 + (uu - cx) ** 2 < r * r] += rng.uniform(0.05, 1.5)
+    z[rng.random((hh, ww)) < 0.05] = np.nan
+    pit, invalid, _ = basin_depth(z)
+    height = -z.astype(np.float64)
+    height[invalid] = -(float(np.nanmax(z)) + 3.0)  # any level below every reading
+    marker = height.copy()
+    marker[1:-1, 1:-1] = height.max()
+    expect = reconstruction(marker, height, method="erosion") - height
+    expect[invalid & (expect > 0)] = np.inf
+    assert np.array_equal(pit, expect)
+    assert (pit[~invalid] > 0.04).any()  # there are basins
+
+
 def _banded(depth: np.ndarray, ltrb: tuple[int, int, int, int]) -> np.ndarray:
     """A registered structured-light frame's unread border bands."""
     left, top, right, bottom = ltrb
@@ -174,6 +200,72 @@ def test_hole_running_under_the_unread_band_is_cut_not_open(floor_m: float) -> N
     assert d.rim_seen is not None and d.rim_seen < 0.9
     inside = top(detect_holes(*scene(holes=((320, 250, 0.6, 0.8, floor_m),))[:2], CAM))
     assert not inside.border_cut
+
+
+def _px_hole(
+    x0: int, y0: int, x1: int, y1: int, floor_m: float, z0: float = 2.8
+) -> tuple[float, float, float, float, float]:
+    """A :func:`scene` hole given by its pixel box on a floor at ``z0``."""
+    return ((x0 + x1) / 2, (y0 + y1) / 2, (x1 - x0) * z0 / F, (y1 - y0) * z0 / F, floor_m)
+
+
+def test_hole_in_a_depression_the_border_cuts_is_the_hole_not_the_depression() -> None:
+    # A depression 0.5 m deep running into the right border, a void inside it with 30 px
+    # of the depression's floor (read) between it and the border: the basin closed across
+    # the border holds the void and scores higher, but it is the depression around the
+    # hole, its depth measured against a rim assumed at the border.
+    depression, void = _px_hole(300, 170, 640, 370, 3.3), _px_hole(330, 200, 610, 340, 5.0)
+    rgb, depth, boxes = scene(holes=(depression, void))
+    d = top(detect_holes(rgb, depth, CAM))
+    assert not d.border_cut
+    assert iou(d.box, boxes[1]) > 0.8
+    by_score = replace(DEFAULT, options=replace(DEFAULT.options, seen_rim_first=False))
+    assert top(detect_holes(rgb, depth, CAM, by_score)).border_cut
+
+
+def test_hole_the_border_cuts_keeps_its_box_over_its_unread_part() -> None:
+    # A hole with a read floor 0.9 m down cut by the right border, its unread middle
+    # reaching to 8 px from the border: the hole is the bridged basin, box to the border.
+    hole, void = _px_hole(480, 170, 640, 370, 3.7), _px_hole(500, 190, 632, 350, 5.0)
+    rgb, depth, boxes = scene(holes=(hole, void))
+    d = top(detect_holes(rgb, depth, CAM))
+    assert d.border_cut and d.box[0] + d.box[2] == 640
+    assert iou(d.box, boxes[0]) > 0.8
+
+
+def test_projector_shadow_line_joining_a_hole_does_not_stretch_its_box() -> None:
+    # A void with a line of no reading 4 px wide (a nearer edge's projector shadow) running
+    # 200 px from its side across the floor: the same region, not a wider opening.
+    rgb, depth, boxes = scene(holes=((240, 240, 0.7, 0.7, 5.0),))
+    x, y, w, h = (round(v) for v in boxes[0])
+    depth[y + h // 2 : y + h // 2 + 4, x + w - 2 : x + w + 200] = 0
+    d = top(detect_holes(rgb, depth, CAM))
+    assert iou(d.box, boxes[0]) > 0.8
+    kept = replace(DEFAULT, options=replace(DEFAULT.options, trim_spurs=False))
+    assert iou(top(detect_holes(rgb, depth, CAM, kept)).box, boxes[0]) < 0.6
+
+
+@pytest.mark.parametrize("floor_m", [3.7, 5.0])  # a read floor 0.9 m down; a void
+@pytest.mark.parametrize("centre", [(60, 60), (600, 430), (40, 420)])
+def test_hole_in_a_corner_is_cut_there_not_open(floor_m: float, centre: tuple[int, int]) -> None:
+    # Cut by two sides of the read area (a corner, bands on): its dip runs into the end of
+    # both border lines, closed there at the rim on its one side.
+    rgb, depth, boxes = scene(holes=((*centre, 0.7, 0.6, floor_m),))
+    depth = _banded(depth, (4, 10, 36, 8))
+    x, y, w, h = boxes[0]
+    x0, y0 = max(x, 0.0), max(y, 0.0)
+    clipped = (x0, y0, min(x + w, 640.0) - x0, min(y + h, 480.0) - y0)
+    d = top(detect_holes(rgb, depth, CAM))
+    assert d.border_cut and iou(d.box, clipped) > 0.85
+    assert d.p_hole is not None and d.p_hole > 0.5
+
+
+def test_terrain_sloping_down_into_a_corner_is_not_closed_there() -> None:
+    v, u = np.mgrid[0:480, 0:640].astype(np.float64)
+    z = 2.2 + 0.004 * np.hypot(640 - u, 480 - v)  # 0.9 m deeper toward the top-left
+    rgb = np.full((480, 640, 3), 100, np.uint8)
+    depth = _banded(np.round(z * 1000).astype(np.uint16), (4, 10, 36, 8))
+    assert detect_holes(rgb, depth, CAM) == []
 
 
 def test_range_fade_is_not_a_hole() -> None:

@@ -252,3 +252,33 @@ def test_another_flights_gps_bias_is_independent_of_this_ones() -> None:
     # all 40 sightings, but for a bias difference in the gate's 3-sigma tail (seed 26).
     merged = [b for b in seeds if _two_sorties("sortie-1", "sortie-2", b) == [40]]
     assert len(merged) >= 26, merged
+
+
+def test_another_flights_first_sighting_does_not_fuse_two_openings() -> None:
+    """Two openings 2.1 m apart, never in one frame, each its own hole after one flight. A
+    second flight's first sighting of one of them, off by that flight's GPS bias (0.9 m
+    towards the other) and cut by the frame's border, moves that hole's estimate into the
+    second flight's GPS frame, where the other hole's (still in the first flight's frame)
+    cannot be compared with it: they must stay two holes (a campaign once fused two such
+    openings into one: a hole lost), and its next view joins the hole it is nearest in
+    likelihood, not in gate widths."""
+    holes = [(0.0, 0.0), (0.0, 2.1)]
+    for seed in (3, 5, 7):
+        tracker = HoleTracker()
+        for k, f in enumerate(fly(holes, frames=30, seed=seed, eph_m=0.2, major_m=1.4)):
+            tracker.update([s for j, s in f if j == (8 <= k <= 11)], source="sortie")
+        before = [local(h.lat_deg, h.lon_deg) for h in tracker.holes()]
+        assert len(before) == 2
+        b = next(s for f in fly(holes, frames=30, seed=4) for j, s in f if j)
+        lat, lon, _ = geo(before[1][0], before[1][1] - 0.9)
+        cut = replace(b, lat_deg=lat, lon_deg=lon, cut_by_border=True)
+        tracker.update([cut], source="second")
+        assert [h.id for h in tracker.holes()] == [1, 2]
+        # The second flight's next, whole view of it, 0.45 m from the cut one: nearer hole 2
+        # (now in this flight's frame, a tight gate) than hole 1 (the first flight's frame,
+        # gated on both GPS errors, 5 m): it joins hole 2.
+        n_before = [h.sightings for h in tracker.holes()]
+        lat, lon, _ = geo(before[1][0], before[1][1] - 0.45)
+        whole = replace(b, lat_deg=lat, lon_deg=lon, t_boot_ns=b.t_boot_ns + 10**9)
+        tracker.update([whole], source="second")
+        assert [h.sightings for h in tracker.holes()] == [n_before[0], n_before[1] + 1]

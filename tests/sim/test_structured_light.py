@@ -2,10 +2,21 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import cv2
 import numpy as np
 import pytest
 
+from holescan.ground.recordings import unread_stats
+from holescan.sim.registration_bands import (
+    BAND_PROFILES,
+    KINECT_HOST_REGISTERED,
+    OPENNI2_REGISTERED,
+    BandProfile,
+    Bands,
+    draw_bands,
+)
 from holescan.sim.structured_light import (
     Motion,
     SensorCamera,
@@ -87,16 +98,76 @@ def test_flat_surface_noise_is_0_8_to_1_times_the_kinect_model() -> None:
 
 def test_border_bands_are_unread_and_within_the_measured_widths() -> None:
     z = np.full((480, 640), 2.0, np.float32)
-    for seed in range(6):
+    profiles = {p.name: p for p in BAND_PROFILES}
+    seen = set()
+    for seed in range(8):
         out = structured_light_frame(z, None, CAM, seed=seed)
         d = out.draws
-        assert 24 <= d.band_right <= 43 and 8 <= d.band_top <= 14
-        assert 6 <= d.band_bottom <= 12 and 0 <= d.band_left <= 11
+        prof = profiles[d.band_profile]
+        seen.add(d.band_profile)
+        assert prof.left_px[0] <= d.band_left <= prof.left_px[1]
+        assert prof.right_px[0] <= d.band_right <= prof.right_px[1]
+        assert prof.top_px[0] <= d.band_top <= prof.top_px[1]
+        assert prof.bottom_px[0] <= d.band_bottom <= prof.bottom_px[1]
         dm = out.depth_mm
         assert not dm[:, 640 - d.band_right :].any() and not dm[: d.band_top].any()
         assert not dm[480 - d.band_bottom :].any() and not dm[:, : d.band_left].any()
         inner = dm[d.band_top + 5 : 475 - d.band_bottom, d.band_left + 5 : 635 - d.band_right]
         assert (inner > 0).mean() > 0.99
+    assert seen == set(profiles)  # both ways of registering come up
+
+
+def test_a_recordings_bands_are_the_same_in_every_frame() -> None:
+    z = np.full((240, 320), 2.0, np.float32)
+    cam = SensorCamera(290.0, 159.5, 119.5)
+    bands = draw_bands(np.random.default_rng(5), 320)
+    assert bands == draw_bands(np.random.default_rng(5), 320)
+    for seed in range(4):  # other frames of the recording: other noise, the same bands
+        d = structured_light_frame(z, None, cam, seed=seed, bands=bands).draws
+        assert (d.band_left, d.band_top, d.band_right, d.band_bottom) == bands.ltrb
+        assert d.band_profile == bands.profile
+    # widths scale with the frame: half of 640 px, half the range
+    for seed in range(20):
+        b = draw_bands(np.random.default_rng(seed), 320, (OPENNI2_REGISTERED,))
+        assert 9 <= b.left <= 14 and 6 <= b.right <= 10 and 7 <= b.top <= 9 and 2 <= b.bottom <= 4
+    with pytest.raises(ValueError, match="profile"):
+        draw_bands(np.random.default_rng(0), 640, ())
+    with pytest.raises(ValueError, match="lo <= hi"):
+        BandProfile("bad", (3, 2), (0, 1), (0, 1), (0, 1))
+
+
+REAL_OPENNI2 = Path(__file__).resolve().parents[1] / "data" / "real" / "mrpt-openni2"
+# FIELD-NOTES.md and docs/real-recordings.md: registered Kinect v1 frames (TUM, SUN RGB-D),
+# (left, right, top, bottom) px as unread_stats measures them, and FIELD-NOTES' ranges.
+REAL_KINECT_REGISTERED = [(14, 33, 14, 13), (2, 45, 15, 10), (2, 28, 12, 8), (11, 43, 13, 10)]
+
+
+def _covers(prof: BandProfile, ltrb: tuple[int, int, int, int]) -> bool:
+    ranges = (prof.left_px, prof.right_px, prof.top_px, prof.bottom_px)
+    return all(lo <= v <= hi for v, (lo, hi) in zip(ltrb, ranges, strict=True))
+
+
+def test_the_band_profiles_cover_the_real_frames() -> None:
+    depth = cv2.imread(str(next((REAL_OPENNI2 / "depth").glob("*.png"))), cv2.IMREAD_UNCHANGED)
+    s = unread_stats(depth // 5)  # TUM convention, 5000 per metre
+    openni2 = (s.left, s.right, s.top, s.bottom)
+    assert openni2 == (23, 16, 16, 6)  # docs/real-recordings.md
+    assert _covers(OPENNI2_REGISTERED, openni2)
+    assert all(_covers(KINECT_HOST_REGISTERED, b) for b in REAL_KINECT_REGISTERED)
+    assert set(BAND_PROFILES) == {OPENNI2_REGISTERED, KINECT_HOST_REGISTERED}
+
+
+def test_a_simulated_openni2_frame_measures_like_the_real_one() -> None:
+    # the real frame's scene: a wall with shelves at 1.6-2.6 m; the bands measured with the
+    # function that measured the real frame, misregistration (1-4 px) included
+    z = np.full((480, 640), 2.2, np.float32)
+    z[150:330, 100:560] = 1.9
+    bands = Bands(23, 16, 16, 6, OPENNI2_REGISTERED.name)
+    out = structured_light_frame(z, None, CAM, seed=11, bands=bands)
+    s = unread_stats(out.depth_mm)
+    for measured, drawn in zip((s.left, s.top, s.right, s.bottom), bands.ltrb, strict=True):
+        assert drawn <= measured <= drawn + 5
+    assert 0.08 < s.unread < 0.2  # real frame: 11.1 %
 
 
 def test_absorbing_patch_loses_its_fraction_of_readings_in_blobs() -> None:
