@@ -116,10 +116,15 @@ def fit_plane_ransac(
     # (the plane most points lie on is the same; the cost no longer grows with the band).
     scored = points[:: max(1, n // RANSAC_SCORED)]
     tol = _depth_tol(scored)
-    dist = np.abs(normals @ scored.T - np.einsum("kj,kj->k", normals, a)[:, None])
+    # (In place: one (planes, points) array instead of five.)
+    cost = normals @ scored.T
+    np.subtract(cost, np.einsum("kj,kj->k", normals, a)[:, None], out=cost)
+    np.abs(cost, out=cost)  # the distances
     # MSAC: outliers cost a constant, inliers their squared residual, so of two planes
     # that hold the same points the closer one wins (not one tilted to reach a few more).
-    cost = np.minimum(dist / tol, 1.0) ** 2
+    np.divide(cost, tol, out=cost)
+    np.minimum(cost, 1.0, out=cost)
+    np.square(cost, out=cost)
     best = int(np.argmin(cost.sum(axis=1)))
     inliers = on_plane(points, (normals[best], a[best]))
     if inliers.sum() < 3:
