@@ -327,6 +327,20 @@ def holes_table(passes: list[dict[str, Any]]) -> list[str]:
                 f"| {name} ({n}) | {g} | {c['announced']} | {c['review']} | "
                 f"{c['candidate']} | {c['none']} |"
             )
+    # Every hole of every pass (a stain is often seen in a pass over a hole nearby)
+    lines += [
+        "",
+        "| holes of all passes, lying | vote | announced | review | candidate |",
+        "|---|---|---|---|---|",
+    ]
+    for kind, name in (("stain", "on an absorbing stain"), ("hole", "at an access hole")):
+        found = [h for p in passes for h, k, _ in p["holes"] if k == kind]
+        for g, gate in gates.items():
+            c = {t: sum(gate.tier(h) == t for h in found) for t in _TIER_RANK}
+            lines.append(
+                f"| {name} ({len(found)}) | {g} | {c['announced']} | {c['review']} | "
+                f"{c['candidate']} |"
+            )
     lines.append(
         f"\nother holes announced (neither stain nor access hole): "
         f"{false_announced['off']} before, {false_announced['on']} with the vote"
@@ -358,6 +372,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--holes", action="store_true", help="hole level: passes, tracker, tiers")
     ap.add_argument("--verbose", action="store_true", help="with --holes: every hole's views")
     ap.add_argument("--save", type=Path, help="with --holes: pickle the passes' holes here")
+    ap.add_argument("--tables", type=Path, help="the --holes tables of passes saved before")
     args = ap.parse_args(argv)
     try:
         seeds = [int(s) for s in args.worlds.split(",")]
@@ -367,6 +382,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.frames < 1 or args.workers < 1:
         print("--frames and --workers must be at least 1", file=sys.stderr)
         return 2
+    if args.tables is not None:
+        return _tables_of(args.tables)
     if args.holes:
         return _main_holes(seeds, args.frames, args.workers, args.verbose, args.save)
     jobs = [(s, i, m) for s in seeds for m in ("stain", "hole") for i in range(args.frames)]
@@ -386,6 +403,15 @@ def main(argv: list[str] | None = None) -> int:
         )
     if args.rgb:
         print("\n".join(["", *rgb_table(frames)]))
+    return 0
+
+
+def _tables_of(saved: Path) -> int:
+    """The tables of passes saved before (``--save``), e.g. under another gate."""
+    import pickle
+
+    passes = pickle.loads(saved.read_bytes())
+    print("\n".join(holes_table(passes)))
     return 0
 
 

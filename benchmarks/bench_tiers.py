@@ -26,6 +26,9 @@ Printed per gate of a grid and for the chosen one, per flight kind and overall:
 * the same for the best-frame gate the vehicle used before (``p_hole_of_score(best
   score) >= 0.9``, two sightings over 0.3 s; no review tier).
 
+``--no-surface-vote``: the chosen gate without the absorbing-surface vote
+(:meth:`geotag.AnnounceGate.surface_held`), for comparison on the same flights.
+
 ``--holes``: where the thresholds can go. Per hole of every flight (true when it lies at an
 access hole, as above), the highest hole-level ``p_hole`` it reached at all (what the
 review threshold sees) and while seen ``min_sightings`` times over ``min_span_s`` (what the
@@ -204,6 +207,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--review", type=float, default=AnnounceGate.review_min_p_hole)
     ap.add_argument("--grid", action="store_true", help="print the threshold curves")
     ap.add_argument("--holes", action="store_true", help="print true/false holes' p_hole")
+    ap.add_argument(
+        "--no-surface-vote", action="store_true", help="the gate without the absorbing-surface vote"
+    )
     args = ap.parse_args(argv)
     a, _, b = args.seeds.partition("-")
     seeds = range(int(a), int(b or a) + 1)
@@ -226,10 +232,14 @@ def main(argv: list[str] | None = None) -> int:
                 if pr <= pa:
                     g = AnnounceGate(min_p_hole=pa, review_min_p_hole=pr)
                     print(_line(f"A>={pa:.2f} R>={pr:.2f}", score(everything, g)))
-    gate = AnnounceGate(min_p_hole=args.announce, review_min_p_hole=args.review)
+    vote = {"surface_min_views": 10**9} if args.no_surface_vote else {}
+    gate = AnnounceGate(min_p_hole=args.announce, review_min_p_hole=args.review, **vote)
     if args.holes:
         hole_levels(everything, gate)
-    print(f"gate: announce p_hole >= {gate.min_p_hole}, review p_hole >= {gate.review_min_p_hole}")
+    print(
+        f"gate: announce p_hole >= {gate.min_p_hole}, review p_hole >= {gate.review_min_p_hole}"
+        f", surface vote {'off' if args.no_surface_vote else 'on'}"
+    )
     for kind, rs in by_kind.items():
         print(_line(kind, score(rs, gate)))
     print(_line("all", score(everything, gate)))
