@@ -2,6 +2,7 @@
 test, over many stains and holes of the sortie simulator's rubble world.
 
     python benchmarks/absorbing_eval.py --worlds 51,52,53,54 --frames 12 [--workers 2] [--rgb]
+    python benchmarks/absorbing_eval.py --worlds 51,52,53,54 --frames 12 --holes
 
 Per world (14 x 14 m: 8 access holes, 24 stains of which two in three are soot, char or wet,
 and a few other distractors), ``--frames`` views centred near an absorbing stain and as many
@@ -11,6 +12,14 @@ frame) and the boxes of the absorbing stains. Prints, with the plane test off ("
 and on: holes found at ``p_hole >= 0.3`` and announced (``>= 0.9``), and detections lying
 on an absorbing stain (half the box inside it, matching no hole) shown and announced.
 Seeds 31, 32, 41-44 were used to set the test's cut-offs; use others to measure.
+
+``--holes`` measures the hole level instead (what reaches the crew): per world, a straight
+pass over each absorbing stain and each access hole (``--frames`` views 0.25 m apart, 2.5-
+3.5 m above, a small random tilt, the structured-light model under the vehicle's motion),
+every frame detected, geotagged and merged by :class:`geotag.HoleTracker`; then each hole's
+tier by :class:`geotag.AnnounceGate` with the absorbing-surface vote off ("before") and on.
+Per stain the best tier of the holes lying on it (inside its outline or within 0.5 m of its
+centre, not at an access hole); per access hole the best tier of the holes at its opening.
 
 ``--rgb`` also prints what the colour image says inside the unread part of each detection
 shown (``p_hole >= 0.3``) on a hole and on an absorbing stain: its brightness over the read
@@ -42,12 +51,9 @@ Box = tuple[float, float, float, float]
 _WORLDS: dict[int, Any] = {}
 
 
-def _frame(job: tuple[int, int, str]) -> dict[str, Any]:
-    from holescan.detect import DEFAULT, CameraIntrinsics, detect_holes
-    from holescan.sim import CameraPose, hole_boxes, make_world, random_conditions, render
-    from holescan.sim.structured_light import random_motion
+def _world(wseed: int) -> Any:
+    from holescan.sim import make_world
 
-    wseed, i, mode = job
     if wseed not in _WORLDS:
         _WORLDS.clear()
         _WORLDS[wseed] = make_world(
@@ -60,14 +66,26 @@ def _frame(job: tuple[int, int, str]) -> dict[str, Any]:
             n_depressions=4,
             n_shadows=4,
         )
-    world = _WORLDS[wseed]
-    rng = np.random.default_rng([wseed, i, 0 if mode == "stain" else 1])
+    return _WORLDS[wseed]
 
+
+def _absorbing_stains(world: Any) -> list[Any]:
     def absorbing(h: Any) -> bool:
         r, c = (round(v / world.cell_m) for v in h.centre_xy[::-1])
         return bool(world.ir_unread[r, c] > 0)
 
-    stains = [h for h in world.holes if h.kind == "stain" and absorbing(h)]
+    return [h for h in world.holes if h.kind == "stain" and absorbing(h)]
+
+
+def _frame(job: tuple[int, int, str]) -> dict[str, Any]:
+    from holescan.detect import DEFAULT, CameraIntrinsics, detect_holes
+    from holescan.sim import CameraPose, hole_boxes, random_conditions, render
+    from holescan.sim.structured_light import random_motion
+
+    wseed, i, mode = job
+    world = _world(wseed)
+    rng = np.random.default_rng([wseed, i, 0 if mode == "stain" else 1])
+    stains = _absorbing_stains(world)
     pool = stains if mode == "stain" else list(world.access_holes)
     target = pool[i % len(pool)]
     sx, sy = world.size_m
@@ -198,12 +216,148 @@ def summary(frames: list[dict[str, Any]], key: str) -> dict[str, int]:
     return out
 
 
+# A pass: views STEP_M apart along a random heading, the vehicle at PASS_SPEED_M_S.
+STEP_M = 0.25
+PASS_SPEED_M_S = 0.8
+_TIER_RANK = {"none": 0, "candidate": 1, "review": 2, "announced": 3}
+
+
+def _pass(job: tuple[int, int, str, int]) -> dict[str, Any]:
+    """One pass over a target (an absorbing stain or an access hole): the holes it made
+    and which lie on the target, on an absorbing stain or at an access hole."""
+    from shapely.geometry import Point, Polygon
+
+    from holescan.detect import CameraIntrinsics, detect_holes
+    from holescan.geotag import CameraMount, HolePipeline, VehiclePose
+    from holescan.sim import (
+        DEFAULT_ANCHOR,
+        camera_pose_in_world,
+        image_motion,
+        random_conditions,
+        render,
+    )
+
+    wseed, i, mode, n_frames = job
+    world = _world(wseed)
+    stains = _absorbing_stains(world)
+    pool = stains if mode == "stain" else list(world.access_holes)
+    target = pool[i]
+    rng = np.random.default_rng([wseed, i, 2 if mode == "stain" else 3])
+    cam, mount, anchor = CameraIntrinsics.xtion(), CameraMount(), DEFAULT_ANCHOR
+    heading = float(rng.uniform(0, 2 * math.pi))
+    d = (math.sin(heading), math.cos(heading))
+    side = float(rng.normal(0, 0.3))
+    above = float(rng.uniform(2.5, 3.5))
+    pipe = HolePipeline(cam, mount)
+    sx, sy = world.size_m
+
+    def pose_at(k: float, roll: float, pitch: float) -> VehiclePose:
+        along = (k - (n_frames - 1) / 2) * STEP_M
+        x = float(np.clip(target.centre_xy[0] + along * d[0] - side * d[1], 1.5, sx - 1.5))
+        y = float(np.clip(target.centre_xy[1] + along * d[1] + side * d[0], 1.5, sy - 1.5))
+        lat, lon, alt = anchor.to_geodetic(x, y, target.rim_z + above)
+        t = round((10.0 + k * STEP_M / PASS_SPEED_M_S) * 1e9)
+        return VehiclePose(t, lat, lon, alt, above, roll, pitch, heading)
+
+    for k in range(n_frames):
+        roll, pitch = (math.radians(float(v)) for v in rng.normal(0, 4, 2))
+        pose = pose_at(k, roll, pitch)
+        cam_pose = camera_pose_in_world(pose, mount, anchor)
+        dk = 0.01 * PASS_SPEED_M_S / STEP_M
+        later = camera_pose_in_world(pose_at(k + dk, roll, pitch), mount, anchor)
+        motion = image_motion(cam_pose, later, cam, 0.01)
+        rgb, depth, _ = render(world, cam_pose, cam, rng, random_conditions(rng), motion)
+        pipe.add(k, detect_holes(rgb, depth, cam), lambda pose=pose: pose)
+
+    def where(h: Any) -> tuple[str, int]:
+        x, y, _ = anchor.to_world(h.lat_deg, h.lon_deg, h.alt_m)
+        pt = Point(float(x), float(y))
+        for kind, group in (("hole", world.access_holes), ("stain", stains)):
+            for t in group:
+                near = math.hypot(float(x) - t.centre_xy[0], float(y) - t.centre_xy[1]) <= 0.5
+                if near or Polygon(t.opening).contains(pt):
+                    return kind, t.id
+        return "other", -1
+
+    holes = pipe.holes()
+    return {
+        "mode": mode,
+        "target": (wseed, target.id),
+        "holes": [(h, *where(h)) for h in holes],
+    }
+
+
+def holes_table(passes: list[dict[str, Any]]) -> list[str]:
+    """Per target kind, the tier its own pass gave it (the best of the holes lying on it)
+    with the vote off and on; the holes elsewhere announced; the holes the vote held."""
+    from holescan.geotag import AnnounceGate
+
+    gates = {"off": AnnounceGate(surface_min_views=10**9), "on": AnnounceGate()}
+    tiers: dict[str, list[tuple[str, str]]] = {g: [] for g in gates}
+    held: list[str] = []
+    false_announced = dict.fromkeys(gates, 0)
+    for p in passes:
+        wseed, tid = p["target"]
+        best = dict.fromkeys(gates, "none")
+        for h, kind, at in p["holes"]:
+            for g, gate in gates.items():
+                t = gate.tier(h)
+                if kind == "other":
+                    false_announced[g] += t == "announced"
+                elif (kind, at) == (p["mode"], tid) and _TIER_RANK[t] > _TIER_RANK[best[g]]:
+                    best[g] = t
+            if gates["on"].surface_held(h):
+                held.append(
+                    f"{kind} {wseed}/{at} (pass over {p['mode']} {tid}): p_hole "
+                    f"{h.p_hole:.2f}, {h.sightings} sightings, plane views {h.plane_views} "
+                    f"(surface {h.surface_views}, behind {h.behind_views}) -> "
+                    f"{gates['off'].tier(h)} before"
+                )
+        for g in gates:
+            tiers[g].append((p["mode"], best[g]))
+    lines = [
+        "| pass over | vote | announced | review | candidate | not found |",
+        "|---|---|---|---|---|---|",
+    ]
+    for kind, name in (("stain", "absorbing stains"), ("hole", "access holes")):
+        n = sum(m == kind for m, _ in tiers["off"])
+        for g in gates:
+            c = {t: sum(m == kind and v == t for m, v in tiers[g]) for t in _TIER_RANK}
+            lines.append(
+                f"| {name} ({n}) | {g} | {c['announced']} | {c['review']} | "
+                f"{c['candidate']} | {c['none']} |"
+            )
+    lines.append(
+        f"\nother holes announced (neither stain nor access hole): "
+        f"{false_announced['off']} before, {false_announced['on']} with the vote"
+    )
+    lines.append(f"holes the vote held back ({len(held)}):")
+    lines += [f"  {s}" for s in held]
+    return lines
+
+
+def plane_views_table(passes: list[dict[str, Any]]) -> list[str]:
+    """Per target kind: holes on targets with their plane-view counts (for tuning)."""
+    lines = []
+    for p in passes:
+        for h, kind, tid in p["holes"]:
+            if kind != "other" and h.plane_views:
+                lines.append(
+                    f"  {kind} {p['target'][0]}/{tid}: p {h.p_hole:.2f} views {h.views} "
+                    f"plane {h.plane_views} surface {h.surface_views} behind {h.behind_views}"
+                )
+    return sorted(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--worlds", default="51,52,53,54", help="comma-separated world seeds")
     ap.add_argument("--frames", type=int, default=12, help="views per world and kind")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--rgb", action="store_true", help="also the colour image's evidence")
+    ap.add_argument("--holes", action="store_true", help="hole level: passes, tracker, tiers")
+    ap.add_argument("--verbose", action="store_true", help="with --holes: every hole's views")
+    ap.add_argument("--save", type=Path, help="with --holes: pickle the passes' holes here")
     args = ap.parse_args(argv)
     try:
         seeds = [int(s) for s in args.worlds.split(",")]
@@ -213,6 +367,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.frames < 1 or args.workers < 1:
         print("--frames and --workers must be at least 1", file=sys.stderr)
         return 2
+    if args.holes:
+        return _main_holes(seeds, args.frames, args.workers, args.verbose, args.save)
     jobs = [(s, i, m) for s in seeds for m in ("stain", "hole") for i in range(args.frames)]
     with multiprocessing.get_context("spawn").Pool(args.workers) as pool:
         frames = pool.map(_frame, jobs, chunksize=args.frames)
@@ -230,6 +386,34 @@ def main(argv: list[str] | None = None) -> int:
         )
     if args.rgb:
         print("\n".join(["", *rgb_table(frames)]))
+    return 0
+
+
+def _main_holes(
+    seeds: list[int], frames: int, workers: int, verbose: bool, save: Path | None
+) -> int:
+    jobs = []
+    for s in seeds:
+        world = _world(s)
+        inside = [
+            (m, h)
+            for m, group in (("stain", _absorbing_stains(world)), ("hole", world.access_holes))
+            for h in group
+        ]
+        counts = {"stain": 0, "hole": 0}
+        for m, _ in inside:
+            jobs.append((s, counts[m], m, frames))
+            counts[m] += 1
+    with multiprocessing.get_context("spawn").Pool(workers) as pool:
+        passes = pool.map(_pass, jobs, chunksize=4)
+    if save is not None:
+        import pickle
+
+        save.write_bytes(pickle.dumps(passes))
+    print(f"worlds {','.join(map(str, seeds))}: {len(passes)} passes of {frames} frames")
+    print("\n".join(holes_table(passes)))
+    if verbose:
+        print("\n".join(plane_views_table(passes)))
     return 0
 
 

@@ -22,6 +22,7 @@ from holescan.detect._options import DefaultOptions
 from holescan.detect._paper import detect_paper, paper_superpixels
 from holescan.detect._regions import BAND_MAX_PX, unread_bands
 from holescan.detect._scores import combined_score, luminance, ramp
+from holescan.detect._surface import PLANE_VERDICTS, PlaneVerdict, plane_verdict
 from holescan.detect._types import (
     DEFAULT,
     DOG,
@@ -43,6 +44,7 @@ __all__ = [
     "DOG",
     "HUMAN",
     "PAPER",
+    "PLANE_VERDICTS",
     "ROBOT",
     "SEARCHERS",
     "CameraIntrinsics",
@@ -55,6 +57,7 @@ __all__ = [
     "GroundTruthBox",
     "Mode",
     "PRResult",
+    "PlaneVerdict",
     "ScoredBox",
     "Searcher",
     "basin_labels",
@@ -70,6 +73,7 @@ __all__ = [
     "match_image",
     "p_hole_of_score",
     "paper_superpixels",
+    "plane_verdict",
     "ramp",
     "unread_bands",
 ]

@@ -71,6 +71,7 @@ from holescan.detect._geometry import (
     rim_circle_centre,
     terrain_plane,
 )
+from holescan.detect._order_stats import median, percentile
 from holescan.detect._photometry import relative_luminance, void_evidence
 from holescan.detect._regions import (
     BAND_MAX_PX,
@@ -91,7 +92,7 @@ from holescan.detect._scores import (
     ramp,
     width_score,
 )
-from holescan.detect._surface import plane_evidence, surface_factor
+from holescan.detect._surface import MIN_INNER_PX, plane_evidence, surface_factor
 from holescan.detect._types import CameraIntrinsics, Detection, DetectParams, FeatureScores
 from holescan.detect._validate import check_frame
 
@@ -376,13 +377,13 @@ def _measure(
         return None  # too narrow (or too broad) to enter: scores 0 whatever the rest is
     floor_valid = inside & ~inv_c
     no_read = float(np.count_nonzero(inside & inv_c)) / float(np.count_nonzero(inside))
-    seen = float(np.percentile(zc[floor_valid], 90) - rim_z) if floor_valid.any() else 0.0
+    seen = float(percentile(zc[floor_valid], 90) - rim_z) if floor_valid.any() else 0.0
     yc = f.y_img[y0:y1, x0:x1]
     y_in, y_ring = float(yc[inside].mean()), float(yc[ring].mean())
     sb = darkness_score(y_in, params.dark_threshold)
     sc = contrast_score(y_in, y_ring, params.contrast_threshold)
     beyond = no_read > 0.3
-    rel_in = float(np.median(f.rel[y0:y1, x0:x1][inside & inv_c])) if beyond else 0.0
+    rel_in = float(median(f.rel[y0:y1, x0:x1][inside & inv_c])) if beyond else 0.0
     if beyond:
         # The floor gave no reading. It lies at least as far as the sensor's range; and the
         # nearer the rim is than the farthest reading of the frame, the surer it is that a
@@ -398,6 +399,7 @@ def _measure(
     fill = area / (major * minor_pca) if major * minor_pca > 0 else 0.0
     sr = ramp(fill, 0.3, 0.7)
     score = combined_score(sd, sw, sr, sb, sc, o.depth_exponent)
+    plane_read: tuple[float, float] | None = None
     if beyond:
         # No reading: a void only if it looks like one (dark against the rubble around it),
         # and not a surface that returns no infrared (read islands on its rim plane).
@@ -408,6 +410,8 @@ def _measure(
                 inside, zc, ~inv_c, (x0, y0), f.cam, (opening.normal, opening.centre), rim_pts
             )
             score *= surface_factor(ev)
+            if ev.inner_px >= MIN_INNER_PX:
+                plane_read = (round(ev.on_plane, 4), round(ev.behind, 4))
     elif bridged:
         score *= max(ramp(sd, *BRIDGED_SD), ramp(sb, *BRIDGED_DARK))
     if score < params.min_score:
@@ -427,6 +431,8 @@ def _measure(
         rim_normal=_xyz(opening.normal),
         rim_seen=round(max(rim_seen, 0.0), 3),
         border_cut=bool(open_px),
+        inside_on_plane=plane_read[0] if plane_read else None,
+        inside_behind=plane_read[1] if plane_read else None,
     )
     # Sizes (and so the score) come from the rim's plane; where the opening is, from the
     # terrain's when the border cuts it: placed once the detection has outlived NMS.

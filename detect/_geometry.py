@@ -11,6 +11,7 @@ import numpy as np
 import numpy.typing as npt
 
 from holescan.detect._options import DefaultOptions
+from holescan.detect._order_stats import median
 from holescan.detect._types import CameraIntrinsics
 
 # Walls: regions grow (DefaultOptions.grow_px) into readings this far below the opening plane.
@@ -115,10 +116,15 @@ def fit_plane_ransac(
     # (the plane most points lie on is the same; the cost no longer grows with the band).
     scored = points[:: max(1, n // RANSAC_SCORED)]
     tol = _depth_tol(scored)
-    dist = np.abs(normals @ scored.T - np.einsum("kj,kj->k", normals, a)[:, None])
+    # (In place: one (planes, points) array instead of five.)
+    cost = normals @ scored.T
+    np.subtract(cost, np.einsum("kj,kj->k", normals, a)[:, None], out=cost)
+    np.abs(cost, out=cost)  # the distances
     # MSAC: outliers cost a constant, inliers their squared residual, so of two planes
     # that hold the same points the closer one wins (not one tilted to reach a few more).
-    cost = np.minimum(dist / tol, 1.0) ** 2
+    np.divide(cost, tol, out=cost)
+    np.minimum(cost, 1.0, out=cost)
+    np.square(cost, out=cost)
     best = int(np.argmin(cost.sum(axis=1)))
     inliers = on_plane(points, (normals[best], a[best]))
     if inliers.sum() < 3:
@@ -220,19 +226,7 @@ def measure_opening(
         4.0 * math.sqrt(max(half + spread, 0.0)),
         4.0 * math.sqrt(max(half - spread, 0.0)),
     )
-    return Opening(major, minor, area, _median(rz), mid, normal)
-
-
-def _median(values: npt.NDArray[np.float64]) -> float:
-    """``np.median`` of a non-empty 1-D array without NaN (the same value), for less.
-
-    >>> _median(np.array([3.0, 1.0, 2.0])), _median(np.array([4.0, 1.0, 2.0, 3.0]))
-    (2.0, 2.5)
-    """
-    k = values.size // 2
-    if values.size % 2:
-        return float(np.partition(values, k)[k])
-    return float(np.mean(np.partition(values, (k - 1, k))[k - 1 : k + 1]))
+    return Opening(major, minor, area, float(median(rz)), mid, normal)
 
 
 def rim_circle_centre(

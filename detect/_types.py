@@ -202,6 +202,13 @@ class Detection:
         None when not measured.
     border_cut : the opening is cut by the frame's border or an unread band along it: its
         rim there is unknown (not open), its box runs to the frame's edge.
+    inside_on_plane, inside_behind : for a region without readings (``beyond_range``),
+        the fractions of its interior (well inside the outline) read *on* the rim's plane
+        (what an absorbing surface's islands of readings do) and *behind* it (a void's
+        walls and floor): the rim-plane test's evidence (:func:`detect.plane_verdict`
+        turns it into a verdict the tracker counts over views). Both 0: nothing read
+        inside. None when not measured (a region with readings, too small a region, a
+        low score, paper mode, older logs).
     """
 
     box: tuple[int, int, int, int]
@@ -218,6 +225,8 @@ class Detection:
     rim_normal: tuple[float, float, float] | None = None
     rim_seen: float | None = None
     border_cut: bool = False
+    inside_on_plane: float | None = None
+    inside_behind: float | None = None
 
     @property
     def centre_px(self) -> tuple[float, float]:
@@ -238,6 +247,11 @@ class Detection:
             if self.relative_brightness is None
             else f"; inside {self.relative_brightness:.2f}x as bright as the rubble around"
         )
+        if self.inside_on_plane is not None and self.inside_behind is not None:
+            light += (
+                f"; inside read {100 * self.inside_on_plane:.0f} % on the rim's plane, "
+                f"{100 * self.inside_behind:.0f} % behind it"
+            )
         return (
             f"{prob}score {self.score:.2f}: {self.major_m:.2f} x {self.minor_m:.2f} m opening, "
             f"{depth} deep; depth {f.depth:.2f} width {f.width:.2f} fill {f.fill:.2f} "

@@ -26,8 +26,9 @@ def detection_json(det: Detection) -> dict[str, Any]:
 
 def decode_detection(obj: Mapping[str, Any]) -> Detection:
     """Inverse of :func:`detection_json`; logs written before ``p_hole``,
-    ``relative_brightness``, ``opening_m``, ``rim_normal`` and ``rim_seen`` existed (or in
-    paper mode) give None for them, and False for ``border_cut``."""
+    ``relative_brightness``, ``opening_m``, ``rim_normal``, ``rim_seen``,
+    ``inside_on_plane`` and ``inside_behind`` existed (or in paper mode) give None for
+    them, and False for ``border_cut``."""
     f = obj["features"]
     x, y, w, h = (int(v) for v in obj["box"])
     return Detection(
@@ -47,7 +48,17 @@ def decode_detection(obj: Mapping[str, Any]) -> Detection:
         rim_normal=_opt_xyz(obj.get("rim_normal")),
         rim_seen=float_or_none(obj.get("rim_seen")),
         border_cut=bool(obj.get("border_cut", False)),
+        inside_on_plane=_opt_fraction(obj.get("inside_on_plane")),
+        inside_behind=_opt_fraction(obj.get("inside_behind")),
     )
+
+
+def _opt_fraction(value: Any) -> float | None:
+    """A logged fraction in [0, 1], or None (not measured)."""
+    v = float_or_none(value)
+    if v is not None and not 0.0 <= v <= 1.0:
+        raise InputError(f"expected a fraction in [0, 1] or null, got {value!r}")
+    return v
 
 
 def _opt_xyz(value: Any) -> tuple[float, float, float] | None:

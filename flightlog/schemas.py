@@ -127,6 +127,9 @@ _DETECTION_SCHEMA: Final[dict[str, Any]] = {
         "opening_m": {"oneOf": [_XYZ, {"type": "null"}]},
         "rim_normal": {"oneOf": [_XYZ, {"type": "null"}]},
         "rim_seen": {"type": ["number", "null"]},
+        "border_cut": {"type": "boolean"},
+        "inside_on_plane": {"type": ["number", "null"]},
+        "inside_behind": {"type": ["number", "null"]},
     },
 }
 

@@ -20,7 +20,12 @@ model over what the sightings say together (:class:`HoleEvidence`):
   over the opening's size (the GPS error is shared by sightings close in time, so it does
   not spread them; a detection that wanders over the rubble does);
 * whether its rim was seen (the best ``rim_seen`` of its sightings) and how often it was
-  only partly in view (cut by the image border).
+  only partly in view (cut by the image border);
+* what its views read inside an opening without readings, against the rim's plane
+  (:attr:`HoleSighting.plane`): how many viewpoints measured it, how many read it *on* the
+  plane (an absorbing surface: soot, char, a wet black patch) and how many *behind* it (a
+  void's walls and floor). Not a model input: the announce gate's vote
+  (:func:`geotag.surface_vote`).
 
 The coefficients are data (:mod:`geotag._confidence_table`), fitted by
 ``benchmarks/calibrate_confidence.py`` on hole-level truth; pure, no files or clocks.
@@ -85,6 +90,9 @@ class HoleEvidence:
     rim_seen : the best fraction of the rim seen (0.5 when never measured).
     cut_fraction : fraction of the sightings whose box the image border cut.
     span_s : seconds between first and last sighting.
+    plane_views, surface_views, behind_views : viewpoints whose sightings measured the
+        inside against the rim plane, and of those the ones that read it on the plane
+        (most of their sightings ``surface``) and behind it (half or more ``behind``).
     """
 
     sightings: int
@@ -97,6 +105,9 @@ class HoleEvidence:
     rim_seen: float
     cut_fraction: float
     span_s: float
+    plane_views: int = 0
+    surface_views: int = 0
+    behind_views: int = 0
 
     def features(self, names: Sequence[str] = FEATURES) -> tuple[float, ...]:
         """The model's inputs ``names`` (see :data:`FEATURE_NAMES`), in that order."""
@@ -167,12 +178,17 @@ class EvidenceAccumulator:
         self._rim: float | None = None
         self._cut = 0
         self._t = (0, 0)
+        # viewpoint -> sightings measured against the rim plane, read surface, read behind
+        self._planes: dict[tuple[int, int, int], tuple[int, int, int]] = {}
 
     def add(self, s: HoleSighting, north_m: float, east_m: float) -> None:
         p = p_hole_of_score(s.score)
         bisect.insort(self._ps, p)
         v = viewpoint_of(s)
         self._views[v] = max(self._views.get(v, 0.0), p)
+        if s.plane is not None:
+            n, su, be = self._planes.get(v, (0, 0, 0))
+            self._planes[v] = (n + 1, su + (s.plane == "surface"), be + (s.plane == "behind"))
         if not s.cut_by_border and s.major_m > 0:
             bisect.insort(self._majors, s.major_m)
         if math.isfinite(s.major_m):
@@ -195,6 +211,9 @@ class EvidenceAccumulator:
             bisect.insort(self._ps, p)
         for v, p in other._views.items():
             self._views[v] = max(self._views.get(v, 0.0), p)
+        for v, (n, su, be) in other._planes.items():
+            n0, su0, be0 = self._planes.get(v, (0, 0, 0))
+            self._planes[v] = (n0 + n, su0 + su, be0 + be)
         for m in other._majors:
             bisect.insort(self._majors, m)
         self._major_max = max(self._major_max, other._major_max)
@@ -236,6 +255,9 @@ class EvidenceAccumulator:
             rim_seen=self._rim if self._rim is not None else 0.5,
             cut_fraction=self._cut / n,
             span_s=(self._t[1] - self._t[0]) * 1e-9,
+            plane_views=len(self._planes),
+            surface_views=sum(2 * su > m for m, su, _ in self._planes.values()),
+            behind_views=sum(2 * be >= m for m, _, be in self._planes.values()),
         )
 
 

@@ -122,6 +122,10 @@ class Hole:
     p_hole : probability that it is a true access hole, from all its sightings
         (:class:`geotag.ConfidenceModel`); NaN for holes read from logs written before.
     views : distinct viewpoints it was seen from (:func:`geotag.viewpoint_of`; 0: unknown).
+    plane_views, surface_views, behind_views : viewpoints that measured its inside against
+        its rim's plane, and of those the ones that read it on the plane (an absorbing
+        surface) and behind it (a void); 0 for holes read from logs written before
+        (:func:`geotag.surface_vote`).
     """
 
     id: int
@@ -139,6 +143,9 @@ class Hole:
     minor_m: float
     p_hole: float = math.nan
     views: int = 0
+    plane_views: int = 0
+    surface_views: int = 0
+    behind_views: int = 0
 
 
 class _Track:
@@ -473,6 +480,9 @@ class HoleTracker:
             minor_m=t.best.minor_m,
             p_hole=self.confidence.p_hole(ev),
             views=ev.views,
+            plane_views=ev.plane_views,
+            surface_views=ev.surface_views,
+            behind_views=ev.behind_views,
         )
 
     def holes(self) -> list[Hole]:

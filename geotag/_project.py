@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from holescan.detect import CameraIntrinsics, Detection, FeatureScores
+from holescan.detect import CameraIntrinsics, Detection, FeatureScores, PlaneVerdict, plane_verdict
 from holescan.errors import InputError
 from holescan.geotag._camera import (
     CameraMount,
@@ -120,6 +120,9 @@ class HoleSighting:
     rim_seen : fraction of the opening's rim the sensor saw (NaN: not measured).
     cut_by_border : the box touches the image border (the opening may go on beyond it: its
         size and centre are those of the part in view).
+    inside_on_plane, inside_behind : the detection's rim-plane reading
+        (:attr:`detect.Detection.inside_on_plane`, ``inside_behind``); NaN when not
+        measured. :attr:`plane` is its verdict, which the tracker counts over viewpoints.
     """
 
     lat_deg: float
@@ -140,6 +143,15 @@ class HoleSighting:
     view_angle_deg: float = float("nan")
     rim_seen: float = float("nan")
     cut_by_border: bool = False
+    inside_on_plane: float = float("nan")
+    inside_behind: float = float("nan")
+
+    @property
+    def plane(self) -> PlaneVerdict | None:
+        """What this view read inside an opening without readings, against its rim's plane
+        (:func:`detect.plane_verdict`: ``surface``, ``behind``, ``unread``, ``mixed``);
+        None when not measured."""
+        return plane_verdict(self.inside_on_plane, self.inside_behind)
 
 
 def _check_pose(pose: VehiclePose) -> None:
@@ -240,7 +252,13 @@ def geotag_detection(
         view_angle_deg=math.degrees(view),
         rim_seen=float(det.rim_seen) if det.rim_seen is not None else math.nan,
         cut_by_border=box_cut_by_border(det.box, camera.width, camera.height),
+        inside_on_plane=_nan_if_none(det.inside_on_plane),
+        inside_behind=_nan_if_none(det.inside_behind),
     )
+
+
+def _nan_if_none(v: float | None) -> float:
+    return math.nan if v is None else float(v)
 
 
 def box_cut_by_border(box: tuple[int, int, int, int], width: int, height: int) -> bool:

@@ -71,6 +71,16 @@ class AnnounceGate:
     * **candidate**: everything else; logged and in the flight's report, not in the crew's
       files.
 
+    **The absorbing-surface vote** (:meth:`surface_held`): a hole that at least
+    ``surface_min_views`` viewpoints measured against its rim's plane, of which at least
+    ``surface_min_share`` read its inside *on* the plane, and at most
+    ``surface_max_behind_ratio`` times as many *behind* it, is a surface that returns no
+    infrared (soot, char, a wet black patch) more likely than a void, whose walls views
+    show behind the plane and never on it. It is never announced, whatever its
+    ``p_hole``: it is for review if it would otherwise have been announced or reaches
+    ``review_min_p_hole`` (recall first: the vote never drops a hole below review, it only
+    keeps it from being announced).
+
     ``p_hole`` is the hole-level confidence of all its sightings (:attr:`Hole.p_hole`,
     :class:`geotag.ConfidenceModel`); holes read from logs that predate it use the best
     frame's (:func:`detect.p_hole_of_score` of the best score). It never leaves
@@ -100,6 +110,9 @@ class AnnounceGate:
     review_min_p_hole: float = 0.1
     min_separation_m: float = 0.5
     separation_fraction: float = 0.5
+    surface_min_views: int = 3
+    surface_min_share: float = 0.5
+    surface_max_behind_ratio: float = 0.5
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.min_p_hole <= _P_HOLE_MAX:
@@ -112,6 +125,12 @@ class AnnounceGate:
         if not 0.0 <= self.review_min_p_hole <= _P_HOLE_MAX:
             raise InputError(
                 f"review min_p_hole must be in [0, {_P_HOLE_MAX}], got {self.review_min_p_hole}"
+            )
+        if self.surface_min_views < 1 or not (
+            0.0 <= self.surface_min_share <= 1.0 and self.surface_max_behind_ratio >= 0.0
+        ):
+            raise InputError(
+                "surface vote: min_views must be >= 1, min_share in [0, 1], max_behind_ratio >= 0"
             )
 
     def summary(self) -> str:
@@ -131,7 +150,35 @@ class AnnounceGate:
         """``announced``, ``review`` or ``candidate`` (see the class docstring)."""
         if self.passes(hole):
             return "announced"
-        return "review" if self.p_hole(hole) >= self.review_min_p_hole else "candidate"
+        if self.p_hole(hole) >= self.review_min_p_hole or self._strong(hole):
+            return "review"
+        return "candidate"
+
+    def surface_held(self, hole: Hole) -> bool:
+        """True when the absorbing-surface vote holds ``hole`` back from announcement: at
+        least ``surface_min_views`` viewpoints measured its inside against the rim plane,
+        at least ``surface_min_share`` of them read it on the plane, at most
+        ``surface_max_behind_ratio`` times as many behind it (holes from older logs: never).
+
+        >>> from holescan.geotag import Hole
+        >>> h = Hole(1, 0, 0, 0, 1, 0.9, 9, 0, 10**9, 3, (0, 0, 9, 9), 0.7, 0.5, 0.99, 6)
+        >>> gate = AnnounceGate()
+        >>> gate.tier(h)
+        'announced'
+        >>> from dataclasses import replace
+        >>> stain = replace(h, plane_views=4, surface_views=2, behind_views=0)
+        >>> gate.surface_held(stain), gate.tier(stain)
+        (True, 'review')
+        >>> void = replace(stain, behind_views=2)  # as many views saw behind the plane
+        >>> gate.surface_held(void), gate.tier(void)
+        (False, 'announced')
+        """
+        n = hole.plane_views
+        return (
+            n >= self.surface_min_views
+            and hole.surface_views >= self.surface_min_share * n
+            and hole.behind_views <= self.surface_max_behind_ratio * hole.surface_views
+        )
 
     def tiers(self, holes: Sequence[Hole], announced: Iterable[int] = ()) -> dict[int, Tier]:
         """Every hole's tier, as the vehicle gives it: :meth:`select` (announced, less
@@ -178,7 +225,12 @@ class AnnounceGate:
         return sorted(kept, key=lambda h: h.id)
 
     def passes(self, hole: Hole) -> bool:
-        """True when ``hole`` is strong enough to be announced."""
+        """True when ``hole`` is strong enough to be announced and the absorbing-surface
+        vote does not hold it back (:meth:`surface_held`)."""
+        return self._strong(hole) and not self.surface_held(hole)
+
+    def _strong(self, hole: Hole) -> bool:
+        """Confident enough, seen often and long enough to be announced."""
         span_s = (hole.t_last_boot_ns - hole.t_first_boot_ns) * 1e-9
         return (
             self.p_hole(hole) >= self.min_p_hole

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+import cv2
 import numpy as np
 import pytest
 from skimage.morphology import reconstruction
 
 from holescan.detect import DEFAULT, DOG, CameraIntrinsics, Detection, detect_holes
 from holescan.detect._default import basin_depth, block_depth, opening_axes
-from holescan.detect._regions import basin_depths
+from holescan.detect._regions import basin_depths, components
 from holescan.errors import InputError
 
 CAM = CameraIntrinsics.xtion()
@@ -175,6 +176,31 @@ def test_basin_depth_is_skimage_reconstruction(seed: int) -> None:
     expect[invalid & (expect > 0)] = np.inf
     assert np.array_equal(pit, expect)
     assert (pit[~invalid] > 0.04).any()  # there are basins
+
+
+def test_components_label_as_opencv_default() -> None:
+    # components() asks OpenCV for its BBDT labelling: the same labels, numbering and stats
+    # as the default, on blobs, noise, boxes and odd sizes.
+    rng = np.random.default_rng(3)
+    for i in range(400):
+        hh, ww = int(rng.integers(1, 130)), int(rng.integers(1, 170))
+        if i % 3 == 0:
+            mask = rng.random((hh, ww)) < rng.random()
+        elif i % 3 == 1:
+            noise = rng.random((hh, ww)).astype(np.float32)
+            mask = cv2.GaussianBlur(noise, (0, 0), float(rng.uniform(0.5, 5.0))) > 0.5
+        else:
+            mask = np.zeros((hh, ww), bool)
+            for _ in range(int(rng.integers(0, 10))):
+                y, x, r = (
+                    int(rng.integers(0, hh)),
+                    int(rng.integers(0, ww)),
+                    int(rng.integers(1, 20)),
+                )
+                mask[max(0, y - r) : y + r, max(0, x - r) : x + r] = True
+        n, lab, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
+        got = components(mask)
+        assert got[0] == n and np.array_equal(got[1], lab) and np.array_equal(got[2], stats)
 
 
 def _banded(depth: np.ndarray, ltrb: tuple[int, int, int, int]) -> np.ndarray:

@@ -875,3 +875,38 @@ def test_detection_opening_centre_round_trips(tmp_path: Path) -> None:
     )
     with pytest.raises(InputError, match="3 numbers"):
         decode_detection({**detection_json(det), "opening_m": [1.0, 2.0]})
+
+
+def test_detection_plane_reading_and_hole_votes_round_trip(tmp_path: Path) -> None:
+    """What a view read inside against the rim plane, and a hole's plane views, come back
+    from the log; logs from before read with None and 0 (no vote)."""
+    det = dataclasses.replace(make_detection(1), inside_on_plane=0.31, inside_behind=0.0)
+    hole = Hole(
+        7, 45.0, 7.0, 100.0, 0.3, 0.9, 9, 0, 2 * 10**9, 3, (0, 0, 9, 9), 0.7, 0.5,
+        p_hole=0.97, views=5, plane_views=4, surface_views=3, behind_views=0,
+    )  # fmt: skip
+    with FlightLogWriter(tmp_path / "f", SMALL) as w:
+        assert w.write_detections(4, [det], T0_UNIX_NS)
+        assert w.write_holes([hole], T0_UNIX_NS)
+    recs = list(read_flight_log(w.paths[0]))
+    (got,) = [r for r in recs if isinstance(r, LoggedDetections)]
+    assert list(got.detections) == [det]
+    (holes,) = [r for r in recs if isinstance(r, LoggedHoles)]
+    assert holes.as_holes() == (hole,)
+    old = {
+        k: v
+        for k, v in detection_json(det).items()
+        if k not in ("inside_on_plane", "inside_behind")
+    }
+    assert decode_detection(old) == dataclasses.replace(
+        det, inside_on_plane=None, inside_behind=None
+    )
+    old_hole = {
+        k: v
+        for k, v in holes.holes[0].items()
+        if k not in ("plane_views", "surface_views", "behind_views")
+    }
+    (back,) = LoggedHoles(0, 0, (old_hole,)).as_holes()
+    assert back == dataclasses.replace(hole, plane_views=0, surface_views=0, behind_views=0)
+    with pytest.raises(InputError, match="fraction"):
+        decode_detection({**detection_json(det), "inside_on_plane": 1.5})
