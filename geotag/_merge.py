@@ -25,7 +25,9 @@ How sightings are matched (deterministic; no clocks, no randomness):
   two real holes 1.2 m apart separate when the GPS error is metres.
 * Sightings from another GPS source (another flight or vehicle: :meth:`HoleTracker.update`'s
   ``source``) carry an independent GPS error: for them the bias drift is at its cap at
-  once, however close in time the flights were.
+  once, however close in time the flights were. The first whole view from the new source
+  moves the hole's estimate into that source's frame; a view cut by the image border
+  (its centre the visible part's) joins the hole without moving it.
 * **One opening, one hole**, however the detector boxes it. Sightings of one frame whose
   openings overlap (centres closer than half the sum of their major axes: in one frame
   the GPS error is shared, so their separation is exact to centimetres) are parts of one
@@ -211,6 +213,14 @@ class _Track:
         params: MergeParams,
         source: str | None = None,
     ) -> None:
+        if s.cut_by_border and source != self.source:
+            # Another source's view cut by the image border: its centre is the visible
+            # part's, off the opening's by up to half of it. It counts as a sighting but does
+            # not carry the estimate into that source's GPS frame (with the independent GPS
+            # error the gain is ~1: the estimate would land on the cut view's centre, and
+            # the source's next whole views of the opening would no longer match it).
+            self._add(s, ned)
+            return
         p = self.predicted_var(s, params, source)
         self.source = source
         r = _rel_var(s)

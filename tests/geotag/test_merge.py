@@ -254,31 +254,54 @@ def test_another_flights_gps_bias_is_independent_of_this_ones() -> None:
     assert len(merged) >= 26, merged
 
 
-def test_another_flights_first_sighting_does_not_fuse_two_openings() -> None:
-    """Two openings 2.1 m apart, never in one frame, each its own hole after one flight. A
-    second flight's first sighting of one of them, off by that flight's GPS bias (0.9 m
-    towards the other) and cut by the frame's border, moves that hole's estimate into the
-    second flight's GPS frame, where the other hole's (still in the first flight's frame)
-    cannot be compared with it: they must stay two holes (a campaign once fused two such
-    openings into one: a hole lost), and its next view joins the hole it is nearest in
-    likelihood, not in gate widths."""
-    holes = [(0.0, 0.0), (0.0, 2.1)]
+def _sortie_over_two_openings(seed: int) -> tuple[HoleTracker, list[tuple[float, float]]]:
+    """Two openings 2.1 m apart, never in one frame, each its own hole after one flight
+    (GPS error 0.5 m): the tracker and the two holes' positions (north, east)."""
+    tracker = HoleTracker()
+    for k, f in enumerate(fly(TWO_OPENINGS, frames=30, seed=seed, eph_m=0.5, major_m=1.4)):
+        tracker.update([s for j, s in f if j == (8 <= k <= 11)], source="sortie")
+    holes = [local(h.lat_deg, h.lon_deg) for h in tracker.holes()]
+    assert len(holes) == 2
+    return tracker, holes
+
+
+TWO_OPENINGS = [(0.0, 0.0), (0.0, 2.1)]
+
+
+def _view_of(hole: int, at: tuple[float, float], dt_s: float, cut: bool = False) -> HoleSighting:
+    """A view of opening ``hole`` from another flight, geotagged at ``at`` (north, east)."""
+    b = next(s for f in fly(TWO_OPENINGS, frames=30, seed=4) for j, s in f if j == hole)
+    lat, lon, _ = geo(*at)
+    return replace(
+        b, lat_deg=lat, lon_deg=lon, t_boot_ns=b.t_boot_ns + int(dt_s * 1e9), cut_by_border=cut
+    )
+
+
+def test_another_flights_view_does_not_fuse_two_openings() -> None:
+    """A second flight's first view of opening 2, off by that flight's GPS bias (0.9 m
+    towards opening 1), moves hole 2's estimate into the second flight's GPS frame, where
+    hole 1's (still in the first flight's frame) cannot be compared with it: they stay two
+    holes (a campaign once fused two such openings into one: a hole lost). Its next view,
+    0.45 m from the first, joins hole 2 (a tight gate in its own frame), not hole 1 (gated
+    on both flights' GPS errors, 5 m, but farther)."""
     for seed in (3, 5, 7):
-        tracker = HoleTracker()
-        for k, f in enumerate(fly(holes, frames=30, seed=seed, eph_m=0.2, major_m=1.4)):
-            tracker.update([s for j, s in f if j == (8 <= k <= 11)], source="sortie")
-        before = [local(h.lat_deg, h.lon_deg) for h in tracker.holes()]
-        assert len(before) == 2
-        b = next(s for f in fly(holes, frames=30, seed=4) for j, s in f if j)
-        lat, lon, _ = geo(before[1][0], before[1][1] - 0.9)
-        cut = replace(b, lat_deg=lat, lon_deg=lon, cut_by_border=True)
-        tracker.update([cut], source="second")
+        tracker, (_, b) = _sortie_over_two_openings(seed)
+        tracker.update([_view_of(1, (b[0], b[1] - 0.9), 0.0)], source="second")
+        n = [h.sightings for h in tracker.holes()]
         assert [h.id for h in tracker.holes()] == [1, 2]
-        # The second flight's next, whole view of it, 0.45 m from the cut one: nearer hole 2
-        # (now in this flight's frame, a tight gate) than hole 1 (the first flight's frame,
-        # gated on both GPS errors, 5 m): it joins hole 2.
-        n_before = [h.sightings for h in tracker.holes()]
-        lat, lon, _ = geo(before[1][0], before[1][1] - 0.45)
-        whole = replace(b, lat_deg=lat, lon_deg=lon, t_boot_ns=b.t_boot_ns + 10**9)
-        tracker.update([whole], source="second")
-        assert [h.sightings for h in tracker.holes()] == [n_before[0], n_before[1] + 1]
+        tracker.update([_view_of(1, (b[0], b[1] - 0.45), 1.0)], source="second")
+        assert [h.sightings for h in tracker.holes()] == [n[0], n[1] + 1]
+
+
+def test_another_flights_view_cut_by_the_border_does_not_move_a_hole() -> None:
+    """A second flight's view of opening 2 cut by the image border (its centre the visible
+    part's, here 0.9 m towards opening 1) joins hole 2 but leaves its estimate where it was:
+    the flight's next whole view of opening 1 (off by its GPS bias, 0.7 m towards opening 2)
+    joins hole 1, not hole 2 (a campaign once gave such a view to the wrong hole)."""
+    for seed in (3, 5, 7):
+        tracker, (a, b) = _sortie_over_two_openings(seed)
+        tracker.update([_view_of(1, (b[0], b[1] - 0.9), 0.0, cut=True)], source="second")
+        n = [h.sightings for h in tracker.holes()]
+        assert n[1] >= 2 and [h.id for h in tracker.holes()] == [1, 2]
+        tracker.update([_view_of(0, (a[0], a[1] + 0.7), 1.0)], source="second")
+        assert [h.sightings for h in tracker.holes()] == [n[0] + 1, n[1]]
