@@ -132,7 +132,9 @@ DARK_SMOOTH_PX = 5
 # running into the border closes that way too.
 BRIDGED_SD = (0.2, 0.35)
 # The rim-plane test (options.surface_plane) only for unread candidates scoring at least
-# this (p_hole ~0.1): below, it could only lower what is not shown anyway.
+# this (p_hole ~0.1): below, it could only lower what is not shown anyway. A candidate it
+# lowers keeps at least SURFACE_GATE x SURFACE_FLOOR = 0.08, above the default min_score:
+# it stays a detection, and a sighting whose reading the hole-level vote counts.
 SURFACE_GATE = 0.2
 BRIDGED_DARK = (0.1, 0.25)
 # NMS between a bridged basin and a basin inside it with its rim seen all round

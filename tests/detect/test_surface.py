@@ -127,3 +127,19 @@ def test_real_hole_with_dropouts_keeps_its_score(seed: int) -> None:
     assert hit, [(d.box, d.p_hole) for d in dets]
     without = _on(detect_holes(rgb, depth, CAM, OFF), box)
     assert max(d.score for d in hit) == pytest.approx(max(d.score for d in without))
+
+
+def test_a_candidate_the_plane_test_lowers_stays_a_detection() -> None:
+    """The hole-level vote counts the views the frame-level test lowered: the lowest score
+    the test can leave (the gate times the floor) is above the detector's score cut; and a
+    void's detections carry their reading, behind the plane."""
+    from holescan.detect import plane_verdict
+    from holescan.detect._default import SURFACE_GATE
+    from holescan.detect._surface import SURFACE_FLOOR
+
+    assert DEFAULT.min_score < SURFACE_GATE * SURFACE_FLOOR
+    for seed in range(3):
+        rgb, depth, box = _frame("hole", seed)
+        (d,) = _on(detect_holes(rgb, depth, CAM, DEFAULT), box)
+        assert d.beyond_range and d.inside_on_plane is not None
+        assert plane_verdict(d.inside_on_plane, d.inside_behind) == "behind"
