@@ -40,8 +40,9 @@ COARSE_M = 0.5
 def truth_seen(
     sortie: SimSortie, frame: LocalFrame, grid: tuple[float, float, int, int]
 ) -> np.ndarray:
-    """Cells of ``COARSE_M`` the simulator's exact view reaches within the Xtion's range,
-    from the true pose of every 3rd rendered frame. grid: (west, north, nx, ny) in ``frame``."""
+    """Cells of ``COARSE_M`` the simulator's exact view reaches within the Xtion's range
+    outside the flight's unread registration bands (the sensor reads nothing there), from the
+    true pose of every 3rd rendered frame. grid: (west, north, nx, ny) in ``frame``."""
     world, anchor = sortie.world, sortie.params.anchor
     assert world is not None
     cam = CameraIntrinsics.xtion()
@@ -51,17 +52,21 @@ def truth_seen(
     # the map's frame in the world's (ENU at the anchor): a shift (tangent planes metres apart)
     dx, dy, _ = anchor.to_world(frame.lat0_deg, frame.lon0_deg, anchor.alt_m)
     seen = np.zeros((ny, nx), bool)
-    poses = [pose for src in sortie.sources for pose, _ in src.truth.values()]
-    for pose in poses[::3]:
-        cp = camera_pose_in_world(pose, sortie.mount, anchor)
-        z, _ = render_exact(world, cp, cam)
-        z = z[::4, ::4]
-        ok = (z > 0) & (z < 4.0)  # the Xtion reads to ~3.5-4 m
-        hit = cp.position + (rays[ok] * z[ok, None]) @ cp.rotation.T
-        col = np.floor((hit[:, 0] - dx - west) / COARSE_M).astype(int)
-        row = np.floor((north - (hit[:, 1] - dy)) / COARSE_M).astype(int)
-        inside = (col >= 0) & (col < nx) & (row >= 0) & (row < ny)
-        seen[row[inside], col[inside]] = True
+    for src in sortie.sources:
+        b = src.bands  # the flight's: one draw per flight
+        read = (
+            (u >= b.left) & (u < cam.width - b.right) & (v >= b.top) & (v < cam.height - b.bottom)
+        )
+        for pose, _ in list(src.truth.values())[::3]:
+            cp = camera_pose_in_world(pose, sortie.mount, anchor)
+            z, _ = render_exact(world, cp, cam)
+            z = z[::4, ::4]
+            ok = read & (z > 0) & (z < 4.0)  # the Xtion reads to ~3.5-4 m
+            hit = cp.position + (rays[ok] * z[ok, None]) @ cp.rotation.T
+            col = np.floor((hit[:, 0] - dx - west) / COARSE_M).astype(int)
+            row = np.floor((north - (hit[:, 1] - dy)) / COARSE_M).astype(int)
+            inside = (col >= 0) & (col < nx) & (row >= 0) & (row < ny)
+            seen[row[inside], col[inside]] = True
     return seen
 
 
