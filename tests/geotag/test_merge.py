@@ -254,6 +254,9 @@ def test_another_flights_gps_bias_is_independent_of_this_ones() -> None:
     assert len(merged) >= 26, merged
 
 
+TWO_OPENINGS = [(0.0, 0.0), (0.0, 2.1)]
+
+
 def _sortie_over_two_openings(seed: int) -> tuple[HoleTracker, list[tuple[float, float]]]:
     """Two openings 2.1 m apart, never in one frame, each its own hole after one flight
     (GPS error 0.5 m): the tracker and the two holes' positions (north, east)."""
@@ -263,9 +266,6 @@ def _sortie_over_two_openings(seed: int) -> tuple[HoleTracker, list[tuple[float,
     holes = [local(h.lat_deg, h.lon_deg) for h in tracker.holes()]
     assert len(holes) == 2
     return tracker, holes
-
-
-TWO_OPENINGS = [(0.0, 0.0), (0.0, 2.1)]
 
 
 def _view_of(hole: int, at: tuple[float, float], dt_s: float, cut: bool = False) -> HoleSighting:
