@@ -82,6 +82,7 @@ def test_pipeline_geotag_error_and_every_hole_once(
             # A loaded CI machine can stall the renderer for seconds: no sensor reopen
             # here (frame indices must stay those of the one simulated source).
             frame_timeout_s=60.0,
+            pose_wait_s=1.0,  # a loaded machine can delay telemetry; the flight waits
         )
         flight = Flight(cfg, sortie.source, sortie.camera, mavlink=sortie.mavlink)
         sightings: list[HoleSighting] = []
