@@ -117,7 +117,9 @@ class LiveMapStats:
     tile cut (layers + encoding). offer_ns : wall time of each :meth:`LiveMap.offer`.
     tile_bytes : the sizes of the tiles encoded, by layer. These four keep the last
     ``SAMPLES`` values (a long flight's memory stays bounded); the totals are exact.
-    tiles_encoded : tiles put in the outbox.
+    tiles_encoded : tiles put in the outbox. fused_t_mono_ns : the capture time
+    (:attr:`detect.Frame.t_mono_ns`) of each fused frame, so what the map was made of can be
+    checked against the sensor's truth (the last ``SAMPLES`` too).
     """
 
     offered: int = 0
@@ -132,6 +134,7 @@ class LiveMapStats:
     tile_bytes: dict[str, deque[int]] = field(
         default_factory=lambda: {"cov": deque(maxlen=SAMPLES), "ortho": deque(maxlen=SAMPLES)}
     )
+    fused_t_mono_ns: deque[int] = field(default_factory=lambda: deque(maxlen=SAMPLES))
     cpu_ms: float = 0.0
     """The map thread's CPU time so far (fusing and tile cutting), ms."""
 
@@ -268,6 +271,7 @@ class LiveMap:
             done = m.add_frame(frame.depth, frame.rgb, self.camera, cam)
         cost = (time.thread_time() - t0) * 1000.0
         self.stats.fused += 1
+        self.stats.fused_t_mono_ns.append(frame.t_mono_ns)
         self.stats.outside += done.outside
         self.stats.fuse_cpu_ms.append(cost)
         self.stats.cpu_ms += cost

@@ -58,6 +58,8 @@ def test_fused_frames_become_tiles_coverage_first(frames: list[tuple[Frame, Vehi
     lm = LiveMap(CAM, CameraMount(), LiveMapConfig(cov_resend_s=0.0, ortho_resend_s=0.0))
     for f, pose in frames:
         lm.fuse(f, pose)
+    # what the map was made of, by capture time (the flight test's truth is built from it)
+    assert list(lm.stats.fused_t_mono_ns) == [f.t_mono_ns for f, _ in frames]
     n = lm.publish()
     assert n >= 4 and n % 2 == 0 and lm.publish() == 0  # nothing changed since
     assert lm.map is not None

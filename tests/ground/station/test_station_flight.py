@@ -33,13 +33,12 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from devtools import Tab
+from devtools import CHROMIUM, Tab, start_chromium
 from test_station import PytakReceiver, Relay, parse_tak, wait_for
 
 from holescan.link import mavlink
 from tests._support import SIM_TOML, free_udp_port
 
-CHROMIUM = Path("/usr/bin/chromium")
 ROOT = Path(__file__).resolve().parents[3]
 
 
@@ -146,37 +145,16 @@ class Chromium(Tab):
     """Headless Chromium driven over the DevTools protocol: its first tab."""
 
     def __init__(self, url: str, profile: Path) -> None:
-        port = free_udp_port()
-        self.proc = subprocess.Popen(
-            [
-                str(CHROMIUM),
-                "--headless",
-                "--no-sandbox",
-                "--disable-gpu",
-                "--disable-background-networking",
-                "--disable-component-update",
-                "--disable-sync",
-                "--no-first-run",
-                f"--user-data-dir={profile}",
-                f"--remote-debugging-port={port}",
-                "--window-size=1280,800",
-                url,
-            ],
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
-        )
+        self.proc, port = start_chromium(profile, url)
         targets: list[dict[str, Any]] = []
 
         def page_up() -> bool:
             nonlocal targets
-            try:
-                with urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list", timeout=2) as r:
-                    targets = [t for t in json.loads(r.read()) if t.get("type") == "page"]
-            except OSError:
-                return False
+            with urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list", timeout=20) as r:
+                targets = [t for t in json.loads(r.read()) if t.get("type") == "page"]
             return bool(targets)
 
-        wait_for(page_up, 30.0, "Chromium's DevTools endpoint")
+        wait_for(page_up, 60.0, "Chromium's first tab")
         super().__init__(targets[0]["webSocketDebuggerUrl"])
 
     def close(self) -> None:
