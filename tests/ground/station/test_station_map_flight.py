@@ -127,7 +127,7 @@ def test_flight_map_reaches_the_station_and_matches_the_simulators_view(tmp_path
                     return False
             return True
 
-        wait_for(all_there, 20.0, "every tile of the flight at the station")
+        wait_for(all_there, 60.0, "every tile of the flight at the station")
         assert station.link is not None
         assert all(p.cards.dropped == 0 for p in station.link.peers.values())
         assert station.link.tiles_received == report.tiles_sent
@@ -142,7 +142,7 @@ def test_flight_map_reaches_the_station_and_matches_the_simulators_view(tmp_path
             try:
                 n = len(tiles) // 2
                 q = "document.querySelectorAll('g.maplayer[data-layer=\"%s\"] image').length"
-                wait_for(lambda: browser.js(q % "cov") == n, 20.0, "coverage drawn")
+                wait_for(lambda: browser.js(q % "cov") == n, 60.0, "coverage drawn")
                 assert browser.js(q % "ortho") == n
                 time.sleep(1.0)  # the images decode
                 browser.screenshot(art / "live-map.png")
