@@ -173,6 +173,7 @@ class LiveMap:
         self._lock = threading.Lock()  # the map
         self._out_lock = threading.Lock()  # the outbox (the sender's thread)
         self._stop = False
+        self._sealed = False  # closed: nothing more is fused (the last cut holds it all)
         self._credit_ms = 0.0
         self._since_fused = 0
         self._published = 0
@@ -190,12 +191,19 @@ class LiveMap:
         self.close()
 
     def close(self) -> None:
-        """Stop the thread (the frame waiting is dropped); the last changes are cut."""
+        """Stop the thread (the frame waiting is dropped); the last changes are cut.
+
+        A frame the thread (low priority: a loaded machine may not run it for seconds) has
+        not fused by then never is: every frame :attr:`LiveMapStats.fused` counts is in
+        the last cut's tiles.
+        """
         with self._cond:
             self._stop = True
             self._cond.notify_all()
         if self._thread.is_alive():
             self._thread.join(timeout=5.0)
+        with self._lock:
+            self._sealed = True
         self.publish()
 
     # -- the capture thread -----------------------------------------------------------
@@ -239,6 +247,8 @@ class LiveMap:
                     self.fuse(*item)
                 except Exception:  # the map is nice to have; never stop the flight
                     _log.exception("live map: frame %d not fused", item[0].index)
+            if self._stop:  # close() cuts the last tiles
+                return
             if self._clock() >= self._next_publish:
                 t0 = time.thread_time()
                 try:
@@ -261,9 +271,12 @@ class LiveMap:
         return SearchMap(grid, frame, params=FuseParams(pixel_stride=cfg.pixel_stride))
 
     def fuse(self, frame: Frame, pose: VehiclePose) -> None:
-        """Fuse one frame now (the map thread calls it; a benchmark may call it directly)."""
+        """Fuse one frame now (the map thread calls it; a benchmark may call it directly);
+        after :meth:`close` nothing is fused."""
         t0 = time.thread_time()
         with self._lock:
+            if self._sealed:
+                return
             if self.map is None:
                 self.map = self._make_map(pose)
             m = self.map

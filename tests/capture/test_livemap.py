@@ -142,6 +142,19 @@ def test_budget_holds_whatever_the_machine(frames: list[tuple[Frame, VehiclePose
     assert s.skipped_budget >= offered - s.fused - 1
 
 
+def test_a_frame_late_for_the_close_is_not_fused(frames: list[tuple[Frame, VehiclePose]]) -> None:
+    """close() cuts the last tiles; a frame the (low priority) map thread fuses after that
+    would be counted but in no tile: it is not fused at all."""
+    lm = LiveMap(CAM, CameraMount())
+    lm.fuse(*frames[0])
+    lm.close()
+    tiles = lm.outbox()
+    assert tiles
+    lm.fuse(*frames[1])  # the map thread's frame, late
+    assert lm.stats.fused == 1 and list(lm.stats.fused_t_mono_ns) == [frames[0][0].t_mono_ns]
+    assert lm.publish() == 0 and lm.outbox() == tiles
+
+
 def test_offer_never_waits_for_a_busy_map(frames: list[tuple[Frame, VehiclePose]]) -> None:
     """While the map thread is stuck fusing, capture's offers return and replace the waiting
     frame (counted as skipped), they do not queue."""
