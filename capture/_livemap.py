@@ -113,6 +113,9 @@ class LiveMapStats:
 
     offered : frames offered by capture. fused : frames fused. unposed : offered without a
     pose. skipped_budget : frames passed over for lack of CPU credit or ``frame_every``.
+    dropped : frames taken for the map that :meth:`LiveMap.close` came before (the one
+    waiting, and one the map thread had not fused yet). Every offered frame is one of
+    fused, unposed, skipped_budget and dropped (a frame whose fusing failed is logged).
     fuse_cpu_ms : thread CPU of each fused frame (fusing only). publish_cpu_ms : of each
     tile cut (layers + encoding). offer_ns : wall time of each :meth:`LiveMap.offer`.
     tile_bytes : the sizes of the tiles encoded, by layer. These four keep the last
@@ -126,6 +129,7 @@ class LiveMapStats:
     fused: int = 0
     unposed: int = 0
     skipped_budget: int = 0
+    dropped: int = 0
     outside: int = 0
     fuse_cpu_ms: deque[float] = field(default_factory=lambda: deque(maxlen=SAMPLES))
     publish_cpu_ms: deque[float] = field(default_factory=lambda: deque(maxlen=SAMPLES))
@@ -191,7 +195,7 @@ class LiveMap:
         self.close()
 
     def close(self) -> None:
-        """Stop the thread (the frame waiting is dropped); the last changes are cut.
+        """Stop the thread (the frame waiting is dropped and counted); the last changes are cut.
 
         A frame the thread (low priority: a loaded machine may not run it for seconds) has
         not fused by then never is: every frame :attr:`LiveMapStats.fused` counts is in
@@ -204,6 +208,10 @@ class LiveMap:
             self._thread.join(timeout=5.0)
         with self._lock:
             self._sealed = True
+            with self._cond:
+                if self._slot is not None:
+                    self._slot = None
+                    self.stats.dropped += 1
         self.publish()
 
     # -- the capture thread -----------------------------------------------------------
@@ -276,6 +284,7 @@ class LiveMap:
         t0 = time.thread_time()
         with self._lock:
             if self._sealed:
+                self.stats.dropped += 1
                 return
             if self.map is None:
                 self.map = self._make_map(pose)

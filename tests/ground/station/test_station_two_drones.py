@@ -28,6 +28,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 import urllib.request
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -119,6 +120,20 @@ def test_two_drones_one_station(tmp_path: Path) -> None:
                 if f.poll() is None:
                     f.send_signal(signal.SIGINT)
                     f.wait(timeout=60)
+        # the flights have ended; what they sent last may still be on its way in: the
+        # station's holes are read once they stay the same for 3 s
+        seen: list[list[tuple[int, list[tuple[int, int]]]]] = []
+        since = [time.monotonic()]
+
+        def settled() -> bool:
+            _, hs, _ = station.state.snapshot()
+            now = [(h.id, [(v.sysid, v.hole_id) for v in h.vehicles]) for h in hs]
+            if not seen or now != seen[-1]:
+                seen.append(now)
+                since[0] = time.monotonic()
+            return time.monotonic() - since[0] >= 3.0
+
+        wait_for(settled, 60.0, "the station's holes to settle")
         _, holes, track = station.state.snapshot()
         # both vehicles followed, each on its own link, each with its own track
         assert {p.sysid for p in track} == {1, 2}
