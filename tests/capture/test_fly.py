@@ -399,7 +399,12 @@ def test_garbage_on_the_mavlink_link_is_ignored_and_counted(tmp_path: Path) -> N
                     ap.inject_garbage(bad_crc)
                     injected["bad"] += 1
 
-        cfg = FlightConfig(log_prefix=tmp_path / "flight", max_frames=90, health_period_s=0.5)
+        # pose_wait_s: each frame waits (held, never the capture thread) for the telemetry
+        # after it; long enough here for a loaded machine, whose in-process simulator and
+        # receiver run tenths of a second late: what is tested is that frames are posed.
+        cfg = FlightConfig(
+            log_prefix=tmp_path / "flight", max_frames=90, health_period_s=0.5, pose_wait_s=3.0
+        )
         flight = Flight(cfg, lambda: FloorSource(200, cam), cam, mavlink=f"udpin:127.0.0.1:{port}")
         injector = threading.Thread(target=inject, daemon=True)
         injector.start()
