@@ -132,7 +132,9 @@ class Flight:
         self._views = BestViews()
         self._lock = threading.Lock()
         # Captured frames waiting (at most pose_wait_s) for the telemetry after them.
-        self._held: deque[Frame] = deque()
+        # (frame, its Unix and boot times read at capture: a clock re-synchronised while
+        # a frame is held, after an autopilot reboot, does not restamp it).
+        self._held: deque[tuple[Frame, int, int | None]] = deque()
         self._finished = False  # ended by a limit or the source's end, not by a stop
 
     # -- clocks (the autopilot link's) --------------------------------------------------------
@@ -292,7 +294,8 @@ class Flight:
         c = self.counters
         frame = replace(frame, index=c.frames_captured)
         c.frames_captured += 1
-        self._held.append(frame)
+        t = frame.t_mono_ns
+        self._held.append((frame, self.unix_ns(t), self._link.boot_ns(t)))
         self._release()
 
     def _release(self, flush: bool = False) -> None:
@@ -305,20 +308,19 @@ class Flight:
         held = self._held
         wait_s = self.config.pose_wait_s
         while held:
-            if not flush and self._link.pose_pending(held[0].t_mono_ns, wait_s):
+            if not flush and self._link.pose_pending(held[0][0].t_mono_ns, wait_s):
                 return
-            self._log_and_offer(held.popleft(), wait_s if flush else 0.0)
+            self._log_and_offer(*held.popleft(), wait_s=wait_s if flush else 0.0)
 
-    def _log_and_offer(self, frame: Frame, wait_s: float) -> None:
+    def _log_and_offer(
+        self, frame: Frame, t_unix: int, t_boot: int | None, *, wait_s: float
+    ) -> None:
         assert self._writer is not None and self._worker is not None
         c = self.counters
         pose = self.pose(frame.t_mono_ns, wait_s=wait_s)
         if pose is None:
             c.frames_unposed += 1
-        t_boot = self._link.boot_ns(frame.t_mono_ns)
-        if not self._writer.write_frame(
-            frame, self.unix_ns(frame.t_mono_ns), pose=pose, t_boot_ns=t_boot
-        ):
+        if not self._writer.write_frame(frame, t_unix, pose=pose, t_boot_ns=t_boot):
             c.frames_log_dropped += 1
         self._views.add_frame(frame.index, frame.rgb)
         if self._writer.frames_queued > self._shed_above:  # short of CPU: log first
