@@ -90,29 +90,38 @@ def floor_flight(cfg: FlightConfig, port: int) -> tuple[Flight, list[Telemetry]]
 @pytest.mark.slow
 def test_link_gone_10_s_then_a_rebooted_autopilot(tmp_path: Path) -> None:
     port = free_udp_port()
-    # pose_wait_s: each frame waits (held, never the capture thread) for the telemetry
-    # after it; long enough here for a loaded machine, whose in-process simulator and
-    # receiver run tenths of a second late: what is tested is that frames are posed.
-    cfg = FlightConfig(
-        log_prefix=tmp_path / "f", max_duration_s=26.0, startup_sync_s=5.0, pose_wait_s=3.0
-    )
+    # Driven by what the flight did, not by wall time (a loaded machine starts late): the
+    # link goes once 60 frames were posed, and the flight is stopped once 45 were posed
+    # after it came back. pose_wait_s: each frame waits (held, never the capture thread)
+    # for the telemetry after it; long enough here for a loaded machine, whose in-process
+    # simulator and receiver run tenths of a second late: what is tested is that frames
+    # are posed.
+    cfg = FlightConfig(log_prefix=tmp_path / "f", startup_sync_s=5.0, pose_wait_s=3.0)
     flight, telemetry = floor_flight(cfg, port)
+    c = flight.counters
+
+    def posed() -> int:
+        return c.frames_captured - c.frames_unposed
+
     marks: dict[str, float] = {}
     box: dict[str, object] = {}
     ap = SimAutopilot(f"udpout:127.0.0.1:{port}", PATH).__enter__()
-    runner = threading.Thread(target=lambda: box.setdefault("s", flight.run()))
+    runner = threading.Thread(target=lambda: box.setdefault("s", flight.run()), daemon=True)
     runner.start()
     try:
-        time.sleep(8.0)
+        wait_for(lambda: posed() >= 60, 120.0, "60 posed frames")
         marks["gone"] = time.monotonic()
         ap.close()  # the link is gone: not a byte for 10 s
         time.sleep(10.0)
+        gone = posed()
         marks["back"] = time.monotonic()
         ap = SimAutopilot(
             f"udpout:127.0.0.1:{port}", PATH, uptime_at_start_s=0.0, seed=2
         ).__enter__()  # rebooted: boot clock from 0, only the heartbeat streams
-        runner.join(60)
+        wait_for(lambda: posed() >= gone + 45, 120.0, "45 posed frames after the link came back")
     finally:
+        flight.stop.set()
+        runner.join(60)
         ap.close()
     summary = box["s"]
     frames = posed_times(summary.log.files)  # type: ignore[attr-defined]
@@ -120,6 +129,7 @@ def test_link_gone_10_s_then_a_rebooted_autopilot(tmp_path: Path) -> None:
     # to synchronise the clocks: frames before are rightly unposed), as after the reboot.
     first = next(t for t, p in frames if p)
     before = [p for t, p in frames if first <= t < marks["gone"]]
+    assert sum(before) >= 60
     during = [p for t, p in frames if marks["gone"] + 0.5 < t < marks["back"]]
     after = [(t, p) for t, p in frames if t > marks["back"]]
     first_posed = next(t for t, p in after if p) - marks["back"]

@@ -427,7 +427,11 @@ def test_garbage_on_the_mavlink_link_is_ignored_and_counted(tmp_path: Path) -> N
     # The link kept working: every frame logged, (nearly) all posed, the hole found.
     assert summary.frames_logged == c.frames_captured == 90 and c.frames_log_dropped == 0
     assert c.frames_unposed <= 30, c
-    assert len(summary.holes) == 1 and summary.holes[0].sightings >= 10
+    # The hole found from what the detector read (as many frames as a loaded machine
+    # lets it): one sighting of the one hole per detection on a posed frame.
+    posed_detections = c.detections - c.pose_refusals
+    assert len(summary.holes) == 1 and posed_detections >= 3, c
+    assert summary.holes[0].sightings >= 0.8 * posed_detections, (summary.holes, c)
     health = [
         r.values
         for r in read_flight_log(summary.log.files, kinds={LoggedHealth})
