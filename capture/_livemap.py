@@ -113,17 +113,23 @@ class LiveMapStats:
 
     offered : frames offered by capture. fused : frames fused. unposed : offered without a
     pose. skipped_budget : frames passed over for lack of CPU credit or ``frame_every``.
+    dropped : frames taken for the map that :meth:`LiveMap.close` came before (the one
+    waiting, and one the map thread had not fused yet). Every offered frame is one of
+    fused, unposed, skipped_budget and dropped (a frame whose fusing failed is logged).
     fuse_cpu_ms : thread CPU of each fused frame (fusing only). publish_cpu_ms : of each
     tile cut (layers + encoding). offer_ns : wall time of each :meth:`LiveMap.offer`.
     tile_bytes : the sizes of the tiles encoded, by layer. These four keep the last
     ``SAMPLES`` values (a long flight's memory stays bounded); the totals are exact.
-    tiles_encoded : tiles put in the outbox.
+    tiles_encoded : tiles put in the outbox. fused_t_mono_ns : the capture time
+    (:attr:`detect.Frame.t_mono_ns`) of each fused frame, so what the map was made of can be
+    checked against the sensor's truth (the last ``SAMPLES`` too).
     """
 
     offered: int = 0
     fused: int = 0
     unposed: int = 0
     skipped_budget: int = 0
+    dropped: int = 0
     outside: int = 0
     fuse_cpu_ms: deque[float] = field(default_factory=lambda: deque(maxlen=SAMPLES))
     publish_cpu_ms: deque[float] = field(default_factory=lambda: deque(maxlen=SAMPLES))
@@ -132,6 +138,7 @@ class LiveMapStats:
     tile_bytes: dict[str, deque[int]] = field(
         default_factory=lambda: {"cov": deque(maxlen=SAMPLES), "ortho": deque(maxlen=SAMPLES)}
     )
+    fused_t_mono_ns: deque[int] = field(default_factory=lambda: deque(maxlen=SAMPLES))
     cpu_ms: float = 0.0
     """The map thread's CPU time so far (fusing and tile cutting), ms."""
 
@@ -170,6 +177,7 @@ class LiveMap:
         self._lock = threading.Lock()  # the map
         self._out_lock = threading.Lock()  # the outbox (the sender's thread)
         self._stop = False
+        self._sealed = False  # closed: nothing more is fused (the last cut holds it all)
         self._credit_ms = 0.0
         self._since_fused = 0
         self._published = 0
@@ -187,12 +195,23 @@ class LiveMap:
         self.close()
 
     def close(self) -> None:
-        """Stop the thread (the frame waiting is dropped); the last changes are cut."""
+        """Stop the thread (the frame waiting is dropped and counted); the last changes are cut.
+
+        A frame the thread (low priority: a loaded machine may not run it for seconds) has
+        not fused by then never is: every frame :attr:`LiveMapStats.fused` counts is in
+        the last cut's tiles.
+        """
         with self._cond:
             self._stop = True
             self._cond.notify_all()
         if self._thread.is_alive():
             self._thread.join(timeout=5.0)
+        with self._lock:
+            self._sealed = True
+            with self._cond:
+                if self._slot is not None:
+                    self._slot = None
+                    self.stats.dropped += 1
         self.publish()
 
     # -- the capture thread -----------------------------------------------------------
@@ -241,6 +260,8 @@ class LiveMap:
                     self.fuse(*item)
                 except Exception:  # the map is nice to have; never stop the flight
                     _log.exception("live map: frame %d not fused", item[0].index)
+            if self._stop:  # close() cuts the last tiles
+                return
             if self._clock() >= self._next_publish:
                 t0 = time.thread_time()
                 try:
@@ -263,9 +284,13 @@ class LiveMap:
         return SearchMap(grid, frame, params=FuseParams(pixel_stride=cfg.pixel_stride))
 
     def fuse(self, frame: Frame, pose: VehiclePose) -> None:
-        """Fuse one frame now (the map thread calls it; a benchmark may call it directly)."""
+        """Fuse one frame now (the map thread calls it; a benchmark may call it directly);
+        after :meth:`close` nothing is fused."""
         t0 = time.thread_time()
         with self._lock:
+            if self._sealed:
+                self.stats.dropped += 1
+                return
             if self.map is None:
                 self.map = self._make_map(pose)
             m = self.map
@@ -273,6 +298,7 @@ class LiveMap:
             done = m.add_frame(frame.depth, frame.rgb, self.camera, cam)
         cost = (time.thread_time() - t0) * 1000.0
         self.stats.fused += 1
+        self.stats.fused_t_mono_ns.append(frame.t_mono_ns)
         self.stats.outside += done.outside
         self.stats.fuse_cpu_ms.append(cost)
         self.stats.cpu_ms += cost

@@ -126,3 +126,26 @@ def test_eval_on_a_tiny_dataset(tmp_path: Path, capsys: pytest.CaptureFixture[st
     rows = json.loads((tmp_path / "r.json").read_text())
     assert rows[0]["image_id"] == 1 and rows[0]["category_id"] == 1
     assert (tmp_path / "pr.png").stat().st_size > 10_000
+
+
+def test_a_verb_loads_only_its_own_modules() -> None:
+    """`holescan log ...` registers the log verb alone: neither the detector nor the ground
+    station is imported (seconds of CPU on a companion computer); `--help` and an unknown
+    verb still see every verb."""
+    probe = (
+        "import sys; from holescan.cli import build_parser, COMMANDS\n"
+        "p = build_parser(['-v', 'log', 'info', 'x.mcap'])\n"
+        "print(sorted(m for m in ('holescan.detect', 'holescan.ground') if m in sys.modules))\n"
+    )
+    r = subprocess.run(
+        [sys.executable, "-c", probe], capture_output=True, text=True, timeout=120, check=True
+    )
+    assert r.stdout.strip() == "[]", r.stdout
+    listing = _run(["--help"])
+    assert listing.returncode == 0
+    from holescan.cli import COMMANDS
+
+    assert all(verb in listing.stdout for verb in COMMANDS)
+    typo = _run(["detcet"])
+    assert typo.returncode == 2 and "invalid choice" in typo.stderr
+    assert all(repr(verb) in typo.stderr for verb in COMMANDS), typo.stderr

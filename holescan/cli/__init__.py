@@ -1,7 +1,7 @@
 """``holescan <verb>``: parse arguments, call one library function, map errors to exit codes.
 
-Each verb lives in a ``holescan/_cmd_*.py`` module exposing ``register(subparsers)``; the
-module sets ``func`` on its parser. No logic here.
+Each verb lives in a ``holescan/cli/_cmd_*.py`` module exposing ``register(subparsers)``
+(:data:`COMMANDS`); the module sets ``func`` on its parser. No logic here.
 """
 
 from __future__ import annotations
@@ -27,37 +27,47 @@ GROUND_ONLY = frozenset(
 )
 """Import names of what pyproject's ``ground`` extra installs (the flight install lacks them)."""
 
-_COMMAND_MODULES = (
-    "holescan.cli._cmd_detect",
-    "holescan.cli._cmd_dataset",
-    "holescan.cli._cmd_eval",
-    "holescan.cli._cmd_log",
-    "holescan.cli._cmd_export_oni",
-    "holescan.cli._cmd_plan",
-    "holescan.cli._cmd_holes",
-    "holescan.cli._cmd_fly",
-    "holescan.cli._cmd_check",
-    "holescan.cli._cmd_reprocess",
-    "holescan.cli._cmd_campaign",
-    "holescan.cli._cmd_demo",
-    "holescan.cli._cmd_ground",
-    "holescan.cli._cmd_pair",
-)
+COMMANDS: dict[str, str] = {
+    "detect": "holescan.cli._cmd_detect",
+    "dataset": "holescan.cli._cmd_dataset",
+    "eval": "holescan.cli._cmd_eval",
+    "log": "holescan.cli._cmd_log",
+    "export-oni": "holescan.cli._cmd_export_oni",
+    "plan": "holescan.cli._cmd_plan",
+    "holes": "holescan.cli._cmd_holes",
+    "fly": "holescan.cli._cmd_fly",
+    "check": "holescan.cli._cmd_check",
+    "reprocess": "holescan.cli._cmd_reprocess",
+    "campaign": "holescan.cli._cmd_campaign",
+    "demo": "holescan.cli._cmd_demo",
+    "ground": "holescan.cli._cmd_ground",
+    "pair": "holescan.cli._cmd_pair",
+}
+"""Each verb and the module that registers it, in the order ``holescan --help`` lists them."""
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The parser of ``holescan``. With ``argv`` naming a verb, only that verb's module is
+    imported and registered: a verb pays for its own imports only (``holescan log info``
+    does not load the detector or the ground station, which cost seconds of CPU on a
+    companion computer). Without a verb (``--help``, a typo) every verb is registered, so
+    the listing and the "invalid choice" error name them all."""
     parser = argparse.ArgumentParser(prog="holescan", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"holescan {__version__}")
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     sub = parser.add_subparsers(dest="verb", required=True, metavar="VERB")
-    for name in _COMMAND_MODULES:
+    # The top-level options take no value, so the first other word is the verb.
+    verb = next((a for a in (argv or ()) if not a.startswith("-")), None)
+    names = [COMMANDS[verb]] if verb in COMMANDS else list(COMMANDS.values())
+    for name in names:
         importlib.import_module(name).register(sub)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    words = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser(words)
+    args = parser.parse_args(words)
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.INFO,
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",

@@ -58,6 +58,8 @@ def test_fused_frames_become_tiles_coverage_first(frames: list[tuple[Frame, Vehi
     lm = LiveMap(CAM, CameraMount(), LiveMapConfig(cov_resend_s=0.0, ortho_resend_s=0.0))
     for f, pose in frames:
         lm.fuse(f, pose)
+    # what the map was made of, by capture time (the flight test's truth is built from it)
+    assert list(lm.stats.fused_t_mono_ns) == [f.t_mono_ns for f, _ in frames]
     n = lm.publish()
     assert n >= 4 and n % 2 == 0 and lm.publish() == 0  # nothing changed since
     assert lm.map is not None
@@ -142,6 +144,20 @@ def test_budget_holds_whatever_the_machine(frames: list[tuple[Frame, VehiclePose
     assert s.skipped_budget >= offered - s.fused - 1
 
 
+def test_a_frame_late_for_the_close_is_not_fused(frames: list[tuple[Frame, VehiclePose]]) -> None:
+    """close() cuts the last tiles; a frame the (low priority) map thread fuses after that
+    would be counted but in no tile: it is not fused at all."""
+    lm = LiveMap(CAM, CameraMount())
+    lm.fuse(*frames[0])
+    lm.close()
+    tiles = lm.outbox()
+    assert tiles
+    lm.fuse(*frames[1])  # the map thread's frame, late
+    assert lm.stats.fused == 1 and list(lm.stats.fused_t_mono_ns) == [frames[0][0].t_mono_ns]
+    assert lm.stats.dropped == 1  # counted: every frame offered is accounted for
+    assert lm.publish() == 0 and lm.outbox() == tiles
+
+
 def test_offer_never_waits_for_a_busy_map(frames: list[tuple[Frame, VehiclePose]]) -> None:
     """While the map thread is stuck fusing, capture's offers return and replace the waiting
     frame (counted as skipped), they do not queue."""
@@ -152,8 +168,8 @@ def test_offer_never_waits_for_a_busy_map(frames: list[tuple[Frame, VehiclePose]
             lm.offer(f, pose)
         assert lm.stats.fused == 0
     lm.close()
-    assert lm.stats.offered == len(frames)
-    assert lm.stats.fused + lm.stats.skipped_budget >= len(frames) - 1
+    s = lm.stats
+    assert s.offered == len(frames) == s.fused + s.skipped_budget + s.dropped, s
 
 
 def test_bad_settings_are_refused() -> None:

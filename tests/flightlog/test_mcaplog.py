@@ -675,12 +675,9 @@ def test_cli_log_info_and_recover(
     chunked_log: tuple[Path, list[Frame]],
     tmp_path: Path,
     capsys: pytest.CaptureFixture[str],
-    monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     from holescan import cli
 
-    # The real entry point with only this verb registered (other verbs are tested elsewhere).
-    monkeypatch.setattr(cli, "_COMMAND_MODULES", ("holescan.cli._cmd_log",))
     main = cli.main
     path, _ = chunked_log
     assert main(["log", "info", str(path)]) == 0

@@ -4,10 +4,12 @@ behaviour only (what a ground station downloads before and after)."""
 
 from __future__ import annotations
 
+import logging
 import os
 import shutil
 import signal
 import subprocess
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -31,7 +33,7 @@ def download(port: int) -> list[tuple[int, int]]:
     """The served mission as a ground station sees it: (lat degE7, lon degE7) per item."""
     gcs = open_link(f"udpin:127.0.0.1:{port}", source_system=255, source_component=190)
     try:
-        deadline = time.monotonic() + 10
+        deadline = time.monotonic() + 60  # a hang guard (an answer takes ms)
         count = None
         while count is None and time.monotonic() < deadline:
             gcs.mav.mission_request_list_send(SYSID, 191)
@@ -41,7 +43,7 @@ def download(port: int) -> list[tuple[int, int]]:
         items = []
         for seq in range(count):
             gcs.mav.mission_request_int_send(SYSID, 191, seq)
-            item: Any = gcs.recv_match(type="MISSION_ITEM_INT", blocking=True, timeout=3)
+            item: Any = gcs.recv_match(type="MISSION_ITEM_INT", blocking=True, timeout=20)
             assert item is not None and item.seq == seq
             items.append((item.x, item.y))
         return items
@@ -50,7 +52,9 @@ def download(port: int) -> list[tuple[int, int]]:
 
 
 @pytest.mark.slow
-def test_mavproxy_upload_and_clear_leave_the_holes_unchanged(tmp_path: Path) -> None:
+def test_mavproxy_upload_and_clear_leave_the_holes_unchanged(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
     mavproxy = shutil.which("mavproxy.py")
     if mavproxy is None:
         pytest.skip("MAVProxy is not installed (pip install MAVProxy: a test dependency)")
@@ -61,6 +65,7 @@ def test_mavproxy_upload_and_clear_leave_the_holes_unchanged(tmp_path: Path) -> 
         "1\t0\t3\t16\t0\t0\t0\t0\t10.001\t10.001\t20\t1\n"
         "2\t0\t3\t21\t0\t0\t0\t0\t10.002\t10.002\t0\t1\n"
     )
+    caplog.set_level(logging.INFO)
     port = free_udp_port()
     with HoleMissionServer(f"udpout:127.0.0.1:{port}", SYSID) as srv:
         srv.update_holes(HOLES)
@@ -76,15 +81,41 @@ def test_mavproxy_upload_and_clear_leave_the_holes_unchanged(tmp_path: Path) -> 
             cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
             env=dict(os.environ, MAVLINK20="1"),
         )  # fmt: skip
+        lines: list[str] = []
+        assert proc.stdout is not None
+        reader = threading.Thread(target=lambda: lines.extend(proc.stdout or ()), daemon=True)
+        reader.start()  # read as it comes: a full pipe would stall MAVProxy
+
+        def refused(kind: str) -> bool:
+            return any(
+                r.getMessage().startswith(f"refusing {kind} from (255, ") for r in caplog.records
+            )
+
+        def tried() -> bool:  # MAVProxy's upload and clear reached the server and were denied
+            out = "".join(lines)
+            return (
+                refused("MISSION_COUNT")
+                and refused("MISSION_CLEAR_ALL")
+                and "Loaded 3 waypoints" in out
+                and out.count("MISSION_ACK: TYPE_MISSION: DENIED") >= 2
+            )
+
         try:
-            time.sleep(9.0)  # wp load at ~2 s, wp clear at ~5 s, their retries
+            # wp load every 2 s, wp clear every 5 s once MAVProxy runs: its start (seconds
+            # alone, far more on a loaded machine) is waited for, not guessed
+            deadline = time.monotonic() + 180.0  # a hang guard
+            while not tried() and proc.poll() is None and time.monotonic() < deadline:
+                time.sleep(0.1)
         finally:
             proc.send_signal(signal.SIGINT)
             try:
-                log, _ = proc.communicate(timeout=20)
+                proc.wait(timeout=30)
             except subprocess.TimeoutExpired:
                 proc.kill()
-                log, _ = proc.communicate()
+                proc.wait()
+            reader.join(timeout=10)
+        log = "".join(lines)
+        assert refused("MISSION_COUNT") and refused("MISSION_CLEAR_ALL"), log[-2000:]
         after = download(port)
     assert "Loaded 3 waypoints" in log, log[-2000:]  # the upload was really tried
     assert log.count("MISSION_ACK: TYPE_MISSION: DENIED") >= 2, log[-2000:]  # load and clear

@@ -165,9 +165,7 @@ Main = Callable[[Sequence[str] | None], int]
 
 
 @pytest.fixture
-def main(monkeypatch: pytest.MonkeyPatch) -> Main:
-    # The real entry point with only this verb registered (other verbs are tested elsewhere).
-    monkeypatch.setattr(cli, "_COMMAND_MODULES", ("holescan.cli._cmd_holes",))
+def main() -> Main:
     return cli.main
 
 

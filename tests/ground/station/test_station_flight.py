@@ -33,13 +33,12 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from devtools import Tab
+from devtools import CHROMIUM, Tab, start_chromium
 from test_station import PytakReceiver, Relay, parse_tak, wait_for
 
 from holescan.link import mavlink
-from tests._support import SIM_TOML, free_udp_port
+from tests._support import SIM_TOML, free_tcp_port, free_udp_port
 
-CHROMIUM = Path("/usr/bin/chromium")
 ROOT = Path(__file__).resolve().parents[3]
 
 
@@ -146,37 +145,16 @@ class Chromium(Tab):
     """Headless Chromium driven over the DevTools protocol: its first tab."""
 
     def __init__(self, url: str, profile: Path) -> None:
-        port = free_udp_port()
-        self.proc = subprocess.Popen(
-            [
-                str(CHROMIUM),
-                "--headless",
-                "--no-sandbox",
-                "--disable-gpu",
-                "--disable-background-networking",
-                "--disable-component-update",
-                "--disable-sync",
-                "--no-first-run",
-                f"--user-data-dir={profile}",
-                f"--remote-debugging-port={port}",
-                "--window-size=1280,800",
-                url,
-            ],
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
-        )
+        self.proc, port = start_chromium(profile, url)
         targets: list[dict[str, Any]] = []
 
         def page_up() -> bool:
             nonlocal targets
-            try:
-                with urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list", timeout=2) as r:
-                    targets = [t for t in json.loads(r.read()) if t.get("type") == "page"]
-            except OSError:
-                return False
+            with urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list", timeout=20) as r:
+                targets = [t for t in json.loads(r.read()) if t.get("type") == "page"]
             return bool(targets)
 
-        wait_for(page_up, 30.0, "Chromium's DevTools endpoint")
+        wait_for(page_up, 60.0, "Chromium's first tab")
         super().__init__(targets[0]["webSocketDebuggerUrl"])
 
     def close(self) -> None:
@@ -224,7 +202,7 @@ def test_flight_mavproxy_ground_page_tak(tmp_path: Path) -> None:
     art = Path(os.environ.get("HOLESCAN_ARTEFACTS", tmp_path))
     art.mkdir(parents=True, exist_ok=True)
     gcs, ground_port = free_udp_port(), free_udp_port()
-    http, cot = free_udp_port(), free_udp_port()
+    http, cot = free_tcp_port(), free_udp_port()  # the page is TCP, CoT UDP
     relay = Relay(ground_port)
     relay_in = relay.port
     rx = PytakReceiver(f"udp+ro://127.0.0.1:{cot}")
@@ -268,7 +246,7 @@ def test_flight_mavproxy_ground_page_tak(tmp_path: Path) -> None:
     fly: subprocess.Popen[str] | None = None
     try:
         page = f"http://127.0.0.1:{http}/"
-        wait_for(lambda: _up(page), 30.0, "the ground station's page")
+        wait_for(lambda: _up(page), 120.0, "the ground station's page")
         # the operator's pairing link, issued while the station runs (never in its log)
         pair = subprocess.run(
             [
@@ -284,7 +262,7 @@ def test_flight_mavproxy_ground_page_tak(tmp_path: Path) -> None:
         link = pair.stdout.strip().split(": ", 1)[1]
         assert link.startswith(f"{page}?token=")
         browser = Chromium(link, tmp_path / "profile")
-        wait_for(lambda: browser.js("document.readyState") == "complete", 20.0, "page load")
+        wait_for(lambda: browser.js("document.readyState") == "complete", 60.0, "page load")
         fly = holescan(
             "fly",
             "--config",
@@ -298,7 +276,7 @@ def test_flight_mavproxy_ground_page_tak(tmp_path: Path) -> None:
             log=tmp_path / "fly.log",
         )
         # the first hole appears on the page without a reload
-        wait_for(lambda: browser.js("document.querySelectorAll('.hole').length") > 0, 120, "hole")
+        wait_for(lambda: browser.js("document.querySelectorAll('.hole').length") > 0, 200, "hole")
         t_seen = time.time()
         first = announced_at(tmp_path / "fly.log", "HOLE|REVIEW")
         assert first, (tmp_path / "fly.log").read_text()[-3000:]
@@ -327,7 +305,7 @@ def test_flight_mavproxy_ground_page_tak(tmp_path: Path) -> None:
         # the operator confirms the first hole with a click on the page
         hid = min(announced)
         n_cot = len(rx.got)
-        wait_for(lambda: browser.js("document.body.dataset.canMark") == "yes", 10.0, "paired")
+        wait_for(lambda: browser.js("document.body.dataset.canMark") == "yes", 30.0, "paired")
         browser.js(
             f'document.querySelector(\'button[data-id="{hid}"][data-mark="confirmed"]\').click()'
         )
@@ -336,7 +314,7 @@ def test_flight_mavproxy_ground_page_tak(tmp_path: Path) -> None:
                 h["id"] == hid and h["mark"] == "confirmed"
                 for h in json.loads(state_path.read_text())["holes"]
             ),
-            5.0,
+            30.0,
             "the mark in the state file",
         )
         audit = [json.loads(x) for x in (station_dir / "audit.jsonl").read_text().splitlines()]
@@ -344,7 +322,7 @@ def test_flight_mavproxy_ground_page_tak(tmp_path: Path) -> None:
         assert audit[-1]["pairing"] == "p2"  # p1: "operator 1", issued at the station's start
         token = link.split("?token=", 1)[1]
         assert token not in (tmp_path / "ground.log").read_text()
-        wait_for(lambda: len(rx.got) > n_cot, 5.0, "CoT after the click")
+        wait_for(lambda: len(rx.got) > n_cot, 30.0, "CoT after the click")
         ev = [e for e in parse_tak(rx.got[n_cot:]) if e.uid == f"holescan-ground-hole-{hid}"][-1]
         assert "operator: confirmed" in ev.detail.xmlDetail
         kml = (station_dir / "holes.kml").read_text()
@@ -353,7 +331,7 @@ def test_flight_mavproxy_ground_page_tak(tmp_path: Path) -> None:
             lambda: (
                 browser.js(f"document.getElementById('hole-{hid}').dataset.mark") == "confirmed"
             ),
-            5.0,
+            30.0,
             "the page to show the mark",
         )
         # the autopilot's telemetry through MAVProxy: the track and the camera's footprints

@@ -8,8 +8,9 @@ tiles to a real :class:`ground.GroundStation` over loopback UDP. Checked:
   coverage there is what the flight's own map held;
 * against truth the code under test did not produce: the simulator's exact view
   (:func:`sim.render_exact`, noise-free depth of its world) from the true poses of the
-  rendered frames marks the cells the sensor saw; at 0.5 m cells the station's seen /
-  not seen agrees with it;
+  frames the live map fused (its CPU budget passes frames over, more of them on a loaded
+  machine: :attr:`capture.LiveMapStats.fused_t_mono_ns` says which it took) marks the
+  cells the sensor saw; at 0.5 m cells the station's seen / not seen agrees with it;
 * the live page draws the layers (headless Chromium); its screenshot goes to
   ``HOLESCAN_ARTEFACTS`` (else the test's folder).
 """
@@ -19,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import time
+from collections.abc import Collection
 from pathlib import Path
 
 import numpy as np
@@ -38,13 +40,20 @@ COARSE_M = 0.5
 
 
 def truth_seen(
-    sortie: SimSortie, frame: LocalFrame, grid: tuple[float, float, int, int]
-) -> np.ndarray:
+    sortie: SimSortie,
+    frame: LocalFrame,
+    grid: tuple[float, float, int, int],
+    fused_t_mono_ns: Collection[int],
+) -> tuple[np.ndarray, int]:
     """Cells of ``COARSE_M`` the simulator's exact view reaches within the Xtion's range
     outside the flight's unread registration bands (the sensor reads nothing there), from the
-    true pose of every 3rd rendered frame. grid: (west, north, nx, ny) in ``frame``."""
-    world, anchor = sortie.world, sortie.params.anchor
-    assert world is not None
+    true pose of every rendered frame the live map fused (by capture time); and how many
+    frames that is. grid: (west, north, nx, ny) in ``frame``."""
+    world, anchor, ap = sortie.world, sortie.params.anchor, sortie.autopilot
+    assert world is not None and ap is not None
+    # the autopilot's boot time of each fused frame: the key of its true pose
+    fused = {ap.boot_ns_at_mono(t) for t in fused_t_mono_ns}
+    used = 0
     cam = CameraIntrinsics.xtion()
     v, u = np.mgrid[0 : cam.height : 4, 0 : cam.width : 4]
     rays = np.stack([(u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy, np.ones(u.shape)], -1)
@@ -57,7 +66,10 @@ def truth_seen(
         read = (
             (u >= b.left) & (u < cam.width - b.right) & (v >= b.top) & (v < cam.height - b.bottom)
         )
-        for pose, _ in list(src.truth.values())[::3]:
+        for pose, _ in src.truth.values():
+            if pose.t_boot_ns not in fused:
+                continue
+            used += 1
             cp = camera_pose_in_world(pose, sortie.mount, anchor)
             z, _ = render_exact(world, cp, cam)
             z = z[::4, ::4]
@@ -67,7 +79,7 @@ def truth_seen(
             row = np.floor((north - (hit[:, 1] - dy)) / COARSE_M).astype(int)
             inside = (col >= 0) & (col < nx) & (row >= 0) & (row < ny)
             seen[row[inside], col[inside]] = True
-    return seen
+    return seen, used
 
 
 @pytest.mark.slow
@@ -94,7 +106,11 @@ def test_flight_map_reaches_the_station_and_matches_the_simulators_view(tmp_path
             report = fly(cfg, SensorSetup(sortie.source, sortie.camera, sortie.mavlink))
             took_s = time.monotonic() - t0  # the flight and the last pictures and tiles
         ms = report.map_stats
-        assert ms is not None and ms.fused > 20, ms
+        # How many frames the map fuses is its CPU budget's call (fewer on a loaded machine;
+        # tests/capture/test_livemap.py checks the budget): here every offered frame is
+        # accounted for, and the truth below is made of the frames it did fuse.
+        assert ms is not None and ms.fused >= 1, ms
+        assert ms.offered == ms.fused + ms.unposed + ms.skipped_budget + ms.dropped, ms
         tiles = report.map_tiles
         assert len(tiles) >= 8  # coverage and orthophoto of >= 4 places
         store = station.map_store
@@ -110,7 +126,7 @@ def test_flight_map_reaches_the_station_and_matches_the_simulators_view(tmp_path
                     return False
             return True
 
-        wait_for(all_there, 20.0, "every tile of the flight at the station")
+        wait_for(all_there, 60.0, "every tile of the flight at the station")
         assert station.link is not None
         assert all(p.cards.dropped == 0 for p in station.link.peers.values())
         assert station.link.tiles_received == report.tiles_sent
@@ -125,7 +141,7 @@ def test_flight_map_reaches_the_station_and_matches_the_simulators_view(tmp_path
             try:
                 n = len(tiles) // 2
                 q = "document.querySelectorAll('g.maplayer[data-layer=\"%s\"] image').length"
-                wait_for(lambda: browser.js(q % "cov") == n, 20.0, "coverage drawn")
+                wait_for(lambda: browser.js(q % "cov") == n, 60.0, "coverage drawn")
                 assert browser.js(q % "ortho") == n
                 time.sleep(1.0)  # the images decode
                 browser.screenshot(art / "live-map.png")
@@ -151,13 +167,16 @@ def test_flight_map_reaches_the_station_and_matches_the_simulators_view(tmp_path
     north = (sw.ty * n + cov.shape[0]) * cell
     ny, nx = cov.shape[0] // k, cov.shape[1] // k
     ours = (cov[: ny * k, : nx * k] > 0).reshape(ny, k, nx, k).any(axis=(1, 3))
-    truth = truth_seen(sortie, LocalFrame(sw.lat0_deg, sw.lon0_deg), (west, north, nx, ny))
+    truth, used = truth_seen(
+        sortie, LocalFrame(sw.lat0_deg, sw.lon0_deg), (west, north, nx, ny), ms.fused_t_mono_ns
+    )
+    assert used == ms.fused, (used, ms)  # every fused frame is a rendered one, found by time
     both = (ours & truth).sum()
     recall = both / truth.sum()
     precision = both / ours.sum()
     print(
-        f"seen at {COARSE_M} m: truth {truth.sum()} cells, station {ours.sum()}, "
-        f"recall {recall:.3f}, precision {precision:.3f}"
+        f"seen at {COARSE_M} m from {used} fused frames: truth {truth.sum()} cells, "
+        f"station {ours.sum()}, recall {recall:.3f}, precision {precision:.3f}"
     )
     assert truth.sum() > 50
     assert recall >= 0.9 and precision >= 0.9

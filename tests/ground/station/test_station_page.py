@@ -38,11 +38,23 @@ document.addEventListener("securitypolicyviolation",
 """
 
 
-@pytest.fixture
-def browser(tmp_path: Path) -> Iterator[Browser]:
-    b = Browser(tmp_path / "profile")
+@pytest.fixture(scope="module")
+def chromium(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Browser]:
+    """One Chromium for the module: one start, not one per test (each start takes tens of
+    seconds on a loaded machine)."""
+    b = Browser(tmp_path_factory.mktemp("chromium") / "profile")
     yield b
     b.close()
+
+
+@pytest.fixture
+def browser(chromium: Browser) -> Iterator[Browser]:
+    """The module's Chromium; the test's tabs (each in a browser context of its own: own
+    cookies and storage, as a separate browser) are closed after it, so no page of one test
+    reconnects to the next one's station."""
+    yield chromium
+    for p in list(chromium.pages):
+        chromium.close_page(p)
 
 
 def _open(browser: Browser, url: str) -> Page:
@@ -72,8 +84,8 @@ def test_bad_pairing_links_say_so_and_the_page_still_works(
     with StationWeb(state, "127.0.0.1", 0) as web:
         for query in ("?token=%E2%82%AC", "?token=" + "Q" * 43, "?token="):
             page = _open(browser, web.url + query)
-            wait_for(lambda p=page: len(p.ids()) == 4, 20.0, "the queue")
-            wait_for(lambda p=page: "not valid" in _text(p, "notice"), 10.0, "the notice")
+            wait_for(lambda p=page: len(p.ids()) == 4, 60.0, "the queue")
+            wait_for(lambda p=page: "not valid" in _text(p, "notice"), 30.0, "the notice")
             assert page.js("document.getElementById('notice').className") == "error"
             assert page.js("document.body.dataset.canMark") == "no"
             assert "read-only" in _text(page, "pairing")
@@ -90,7 +102,7 @@ def test_a_good_link_pairs_without_leaving_the_token_behind(
     with StationWeb(state, "127.0.0.1", 0) as web:
         _, token = web.pairings.issue("Ana")
         page = _open(browser, web.pair_url(token))
-        wait_for(lambda: page.js("document.body.dataset.canMark") == "yes", 20.0, "pairing")
+        wait_for(lambda: page.js("document.body.dataset.canMark") == "yes", 60.0, "pairing")
         assert "as Ana (p1)" in _text(page, "notice")
         assert _text(page, "pairing") == "paired as Ana (p1)"
         # not in the address bar, nor in the tab's history, nor anywhere the script reads
@@ -104,16 +116,16 @@ def test_a_good_link_pairs_without_leaving_the_token_behind(
         assert c["httpOnly"] and c["sameSite"] == "Strict" and c["session"]
         # a reload stays paired (the cookie), with no link in sight
         page.call("Page.reload")
-        wait_for(lambda: page.js("document.body.dataset.canMark") == "yes", 20.0, "reload")
+        wait_for(lambda: page.js("document.body.dataset.canMark") == "yes", 60.0, "reload")
         assert page.js("document.getElementById('notice').hidden") is True
         # a mark from the page is audited under the pairing
         page.js("Review.select(1)")
         page.key("c")
-        wait_for(lambda: state.holes[1].mark == "confirmed", 10.0, "the mark")
+        wait_for(lambda: state.holes[1].mark == "confirmed", 30.0, "the mark")
         assert page.js("window.__csp") == []
         # the watch is real: an inline style is refused and reported
         page.js("document.body.insertAdjacentHTML('beforeend', '<b style=\"color:red\">x</b>')")
-        wait_for(lambda: page.js("window.__csp.length") == 1, 5.0, "the violation seen")
+        wait_for(lambda: page.js("window.__csp.length") == 1, 15.0, "the violation seen")
 
 
 def test_the_page_reconnects_its_event_stream_on_its_own(tmp_path: Path, browser: Browser) -> None:
@@ -128,17 +140,17 @@ def test_the_page_reconnects_its_event_stream_on_its_own(tmp_path: Path, browser
             assert s.recv(4096).startswith(b"HTTP/1.1 200")
             held.append(s)
         page = _open(browser, web.url)
-        wait_for(lambda: len(page.ids()) == 4, 20.0, "the queue (read once)")
-        wait_for(lambda: web.events.refused >= 1, 10.0, "the page's stream refused")
+        wait_for(lambda: len(page.ids()) == 4, 60.0, "the queue (read once)")
+        wait_for(lambda: web.events.refused >= 1, 30.0, "the page's stream refused")
         assert page.js("document.body.dataset.live") == "no"
         for s in held:
             s.close()
-        wait_for(lambda: page.js("document.body.dataset.live") == "yes", 30.0, "reconnected")
+        wait_for(lambda: page.js("document.body.dataset.live") == "yes", 60.0, "reconnected")
         # the station ends each stream after 3 s; the page keeps up across them
         served = web.events.served
-        wait_for(lambda: web.events.served >= served + 2, 20.0, "streams renewed")
+        wait_for(lambda: web.events.served >= served + 2, 60.0, "streams renewed")
         state.on_statustext("HOLE 5 0.93 43.6534100 -79.3830500")
-        wait_for(lambda: 5 in page.ids(), 15.0, "the new hole without a reload")
+        wait_for(lambda: 5 in page.ids(), 45.0, "the new hole without a reload")
         assert page.js("window.__csp") == []
 
 

@@ -15,20 +15,18 @@ import base64
 import json
 import os
 import subprocess
+import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
-from devtools import Tab
+from devtools import CHROMIUM, Tab, start_chromium
 from test_station import picture, wait_for
 
 from holescan.ground import StationState
 from holescan.ground.station.audit import AuditTrail
 from holescan.ground.station.web import StationWeb
-from tests._support import free_udp_port
-
-CHROMIUM = Path("/usr/bin/chromium")
 
 
 class Page(Tab):
@@ -48,41 +46,9 @@ class Browser:
     def __init__(self, profile: Path) -> None:
         import websocket
 
-        self.port = free_udp_port()
-        self.proc = subprocess.Popen(
-            [
-                str(CHROMIUM),
-                "--headless",
-                "--no-sandbox",
-                "--disable-gpu",
-                "--disable-background-networking",
-                "--disable-component-update",
-                "--disable-sync",
-                "--no-first-run",
-                f"--user-data-dir={profile}",
-                f"--remote-debugging-port={self.port}",
-                "--window-size=1280,800",
-                "about:blank",
-            ],
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
-        )
-        version: dict[str, Any] = {}
-
-        def up() -> bool:
-            nonlocal version
-            import urllib.request
-
-            try:
-                with urllib.request.urlopen(
-                    f"http://127.0.0.1:{self.port}/json/version", timeout=2
-                ) as r:
-                    version = json.loads(r.read())
-            except OSError:
-                return False
-            return True
-
-        wait_for(up, 30.0, "Chromium's DevTools endpoint")
+        self.proc, self.port = start_chromium(profile)
+        with urllib.request.urlopen(f"http://127.0.0.1:{self.port}/json/version", timeout=20) as r:
+            version: dict[str, Any] = json.loads(r.read())
         self.browser = websocket.create_connection(version["webSocketDebuggerUrl"], timeout=20)
         self._id = 0
         self.pages: list[Page] = []
