@@ -121,7 +121,15 @@ def test_flight_log_ground_station_and_files(demo: tuple[Path, str]) -> None:
     doc = json.loads((out / "demo.json").read_text())
     logs = [Path(p) for p in doc["log_files"]]
     info = log_info(logs)  # every CRC of the flight log
-    assert info.frames == doc["frames_captured"] > 50
+    # The flight is bounded by wall time and the simulated Xtion renders as fast as the CPU
+    # lets it (4-5 frames/s here alone, 3 on a loaded 2-core CI), so how many frames is the
+    # machine's; what is not: every frame the sensor numbered is in the log, none dropped,
+    # and the printed count and rate are the log's.
+    n = info.frames
+    assert n == doc["frames_captured"] >= doc["frames_detected"] > 0
+    assert not info.dropped_frames and not info.frame_index_gaps, info
+    rate = n / doc["capture_s"]
+    assert f"frames: {n} captured ({rate:.1f}/s), {doc['frames_detected']} detected" in text
     assert "/mavlink/raw" in info.topics and "/holes" in info.topics
     confirmed = doc["found"] + doc["false"]
     # Each confirmed hole was announced to the ground station and served as a waypoint;

@@ -22,6 +22,8 @@ from __future__ import annotations
 import logging
 import math
 import statistics
+import threading
+import time
 from pathlib import Path
 from typing import Any
 
@@ -45,6 +47,12 @@ PARAMS = SortieParams(
     wobble_deg=1.5,
 )
 DURATION_S = 25.0
+MIN_FRAMES = 150
+"""The sortie lasts DURATION_S of flight *and* MIN_FRAMES frames: the vehicle flies in real
+time (25 s cover the survey's holes) while the renderer delivers what the CPU lets it
+(6-10 frames/s alone; on a loaded 2-core machine 1-3, when 25 s gave a hole 4 views), so
+on a slow machine the flight goes on until the holes had as many views as on a fast one."""
+HANG_GUARD_S = 300.0
 MIN_SIGHTINGS = 3  # the daemon's announce_min_sightings: "reported"
 IN_VIEW_FRAMES = 5  # a hole wholly in view in this many frames must be reported
 MATCH_M = 0.5
@@ -63,7 +71,7 @@ def pct(values: list[float], q: float) -> float:
     return float(np.percentile(values, q))
 
 
-@pytest.mark.timeout(150)
+@pytest.mark.timeout(HANG_GUARD_S + 100)
 @pytest.mark.slow
 def test_pipeline_geotag_error_and_every_hole_once(
     tmp_path: Path, caplog: pytest.LogCaptureFixture
@@ -73,11 +81,12 @@ def test_pipeline_geotag_error_and_every_hole_once(
     with SimSortie(PARAMS) as sortie:
         cfg = FlightConfig(
             log_prefix=tmp_path / "flight",
-            max_duration_s=DURATION_S,
+            max_duration_s=HANG_GUARD_S,
             announce_min_sightings=MIN_SIGHTINGS,
             # A loaded CI machine can stall the renderer for seconds: no sensor reopen
             # here (frame indices must stay those of the one simulated source).
             frame_timeout_s=60.0,
+            pose_wait_s=1.0,  # a loaded machine can delay telemetry; the flight waits
         )
         flight = Flight(cfg, sortie.source, sortie.camera, mavlink=sortie.mavlink)
         sightings: list[HoleSighting] = []
@@ -88,6 +97,25 @@ def test_pipeline_geotag_error_and_every_hole_once(
             return tracker_update(batch)
 
         flight.tracker.update = record  # type: ignore[method-assign,assignment]
+        refused: set[int] = set()  # frames detected but never placed (no pose in time)
+        pipeline_add = flight.hole_pipeline.add
+
+        def add(frame_index: int, *args: Any) -> Any:
+            step = pipeline_add(frame_index, *args)
+            if step.refused:
+                refused.add(frame_index)
+            return step
+
+        flight.hole_pipeline.add = add  # type: ignore[method-assign]
+
+        def stop_when_flown() -> None:
+            t0 = time.monotonic()
+            while not flight.stop.wait(0.2):
+                flown = time.monotonic() - t0 >= DURATION_S
+                if flown and flight.counters.frames_captured >= MIN_FRAMES:
+                    flight.stop.set()
+
+        threading.Thread(target=stop_when_flown, daemon=True).start()
         summary = flight.run()
     truth = sortie.truth
     (source,) = sortie.sources
@@ -116,13 +144,21 @@ def test_pipeline_geotag_error_and_every_hole_once(
         if d <= MATCH_M:
             (cut_to_truth if det.border_cut else to_truth).append(d)
 
-    # Holes in view: wholly inside the image in IN_VIEW_FRAMES frames or more.
+    # Holes in view: wholly inside the image in IN_VIEW_FRAMES frames or more; looked at:
+    # so in frames the detector took and the flight placed. The detector takes the newest
+    # frame whenever it is free and the telemetry may come too late to place one, so
+    # which frames those are is the machine's (fewer under load): a hole must be
+    # reported when the flight looked at it, not when it flew over it.
     whole: dict[int, int] = {}
-    for _, boxes in source.truth.values():
+    looked: dict[int, int] = {}
+    for i, (_, boxes) in source.truth.items():
         for b in boxes:
             if not b.iscrowd:
                 whole[b.hole_id] = whole.get(b.hole_id, 0) + 1
+                if i in dets and i not in refused:
+                    looked[b.hole_id] = looked.get(b.hole_id, 0) + 1
     in_view = {t.id for t in truth if whole.get(t.id, 0) >= IN_VIEW_FRAMES}
+    looked_at = {t.id for t in truth if looked.get(t.id, 0) >= IN_VIEW_FRAMES}
     reported = [h for h in summary.holes if h.sightings >= MIN_SIGHTINGS]
     matches: dict[int, list[float]] = {}
     false_holes = 0
@@ -146,8 +182,9 @@ def test_pipeline_geotag_error_and_every_hole_once(
         f"{statistics.median(cut_to_truth) if cut_to_truth else float('nan'):.3f} m "
         f"(n={len(cut_to_truth)})"
         f"\n  merged hole vs true hole: {', '.join(f'{d:.3f}' for d in hole_err)} m"
-        f"\n  access holes in view {sorted(in_view)} (frames wholly in view: {whole}); "
-        f"found {sorted(matches)}, missed {sorted(in_view - set(matches))}, duplicated "
+        f"\n  access holes in view {sorted(in_view)} (frames wholly in view: {whole}; "
+        f"of them detected and placed: {looked}); "
+        f"found {sorted(matches)}, missed {sorted(looked_at - set(matches))}, duplicated "
         f"{sorted(k for k, v in matches.items() if len(v) > 1)}; {false_holes} reported "
         f"holes match no access hole (distractors)"
     )
@@ -158,8 +195,10 @@ def test_pipeline_geotag_error_and_every_hole_once(
     assert len(added) >= 12
     assert statistics.median(added) <= 0.10
     assert pct(added, 90) <= 0.20
-    for hole_id in in_view:
+    assert looked_at, looked
+    for hole_id in looked_at:
         assert len(matches.get(hole_id, [])) == 1, (hole_id, matches)
+    assert all(len(v) == 1 for v in matches.values()), matches  # none twice
     # Placed at the opening's centre: before, the box centre put sightings a median
     # 0.11 m and merged holes up to 0.20 m from the truth in this flight.
     # Keeping views cut by the image border (one opening, one hole): they place

@@ -26,10 +26,11 @@ from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
 from mcap.reader import make_reader
 from mcap.records import Channel, Message, Metadata, Schema
 from rasterio.warp import transform as warp_transform
+from shapely.geometry import Point, Polygon
 
 from holescan import cli
 from holescan.capture import FlightSummary
-from holescan.detect import DetectParams
+from holescan.detect import CameraIntrinsics, DetectParams
 from holescan.errors import InputError
 from holescan.flightlog import (
     TOPIC_COLOR,
@@ -39,11 +40,12 @@ from holescan.flightlog import (
     McapFile,
     ScanState,
     decode_compressed,
+    decode_detection,
     log_info,
     read_flight_log,
     scan_records,
 )
-from holescan.geotag import FOUND_TIERS, AnnounceGate, Hole
+from holescan.geotag import FOUND_TIERS, AnnounceGate, Hole, box_cut_by_border
 from holescan.ground import (
     Progress,
     ReprocessOptions,
@@ -53,10 +55,12 @@ from holescan.ground import (
     read_flight_holes,
 )
 from holescan.ground import reprocess as _reprocess
+from holescan.sim import RubbleWorld
 from tests._support import free_tcp_port
 
 Flown = tuple[list[Path], FlightSummary]
 GATE = AnnounceGate(min_p_hole=0.5, review_min_p_hole=0.05)  # conftest's sorties fly with it
+ANCHOR = (43.6532, -79.3832)  # conftest's world's south-west corner
 
 SMALL = 0.15  # MiB per partition: a dozen partitions in the 40-frame flight
 
@@ -84,12 +88,15 @@ def sidecar(path: Path) -> dict[str, list[tuple[int, int, bytes]]]:
     return dict(out)
 
 
-def same_holes(a: tuple[Hole, ...], b: tuple[Hole, ...], tol_m: float) -> None:
+def same_holes(
+    a: tuple[Hole, ...], b: tuple[Hole, ...], tol_m: float, *, best_frame: bool = True
+) -> None:
     assert [h.id for h in a] == [h.id for h in b]
     for x, y in zip(a, b, strict=True):
         e, n, _ = pymap3d.geodetic2enu(x.lat_deg, x.lon_deg, 0, y.lat_deg, y.lon_deg, 0)
         assert math.hypot(e, n) < tol_m, (x, y)
-        assert x.sightings == y.sightings and x.best_frame_index == y.best_frame_index
+        assert x.sightings == y.sightings, (x, y)
+        assert not best_frame or x.best_frame_index == y.best_frame_index, (x, y)
 
 
 REFLY = {"refly.plan", "refly.waypoints"}
@@ -102,8 +109,16 @@ def reference(flight: Flown, tmp_path_factory: pytest.TempPathFactory) -> Reproc
     return reprocess(files, tmp_path_factory.mktemp("ref"), opts(cache=False))
 
 
+def off_opening_m(world: RubbleWorld, h: Hole) -> float:
+    """How far ``h`` lies from the nearest opening of the world (access hole or
+    distractor), metres; 0 inside one."""
+    x, y, _ = pymap3d.geodetic2enu(h.lat_deg, h.lon_deg, 0.0, *ANCHOR, 0.0)
+    p = Point(float(x), float(y))
+    return min(Polygon(w.opening).distance(p) for w in world.holes)
+
+
 def test_in_process_run_reads_every_frame_and_writes_a_sidecar(
-    flight: Flown, reference: ReprocessResult
+    flight: Flown, reference: ReprocessResult, world: RubbleWorld
 ) -> None:
     _files, summary = flight
     (f,) = reference.flights
@@ -113,7 +128,14 @@ def test_in_process_run_reads_every_frame_and_writes_a_sidecar(
     found = [h for h in summary.holes if told[h.id] in FOUND_TIERS]
     assert len(f.flight_matches) == len(found) >= 1
     for m in f.flight_matches:  # every hole the flight found, found again, in place
-        assert m.found is not None and m.distance_m < 0.3, m
+        assert m.found is not None, m
+        if m.distance_m >= 0.3:
+            # Reprocessing fuses every frame, posed from the telemetry around it; the
+            # flight only the frames its detector took, posed as telemetry had arrived
+            # (on a loaded machine: fewer, and later). Where the two differ that much,
+            # reprocessing's hole must still be in place: at an opening of the world.
+            new, old = f.holes[m.found], found[m.reference]
+            assert off_opening_m(world, new) < 0.3, (m, off_opening_m(world, old))
     (path,) = f.outputs
     assert path.name == "sortie_reprocess.mcap"
     new = sidecar(path)
@@ -198,7 +220,18 @@ def test_flight_frames_reproduce_the_flights_holes(flight: Flown, tmp_path: Path
     ), f.flight_matches
     if c.pose_refusals == 0 and c.frames_unposed < c.frames_captured:
         same_holes(f.holes, summary.holes, tol_m=0.01)
-        assert f.flight_same_ids == len(f.flight_matches)
+        # The same holes, so the same tiers (the one gate), but for reprocessing's own
+        # rule: a hole seen fewer than min_sightings times is a candidate in its files (in
+        # flight it may reach the crew for review at once: recall first). How many holes the
+        # flight saw once depends on how many frames its detector took (fewer on a loaded
+        # machine); each is named as a tier change, and not counted as found again.
+        told = f.flight_tiers
+        once = {h.id for h in summary.holes if h.sightings < opts().min_sightings}
+        expect = {h.id: "candidate" if h.id in once else told[h.id] for h in summary.holes}
+        assert f.tiers == expect, (f.tiers, told)
+        found_once = {i for i in once if told[i] in FOUND_TIERS}
+        assert f.flight_same_ids == len(f.flight_matches) - len(found_once)
+        assert {(i, told[i], "candidate") for i in found_once} <= set(f.tier_changes)
 
 
 def test_the_flights_recorded_gate_gives_the_tiers(
@@ -312,8 +345,59 @@ def test_a_compressed_log_finds_the_holes_of_the_raw_log(
     if tol_m == 0.0:
         assert f.holes == ref.holes
     else:
-        same_holes(f.holes, ref.holes, tol_m)
+        # A hole's best view is its best-rated sighting; JPEG moves a detection's score by
+        # a few thousandths (measured: <= 0.003 here), so where two views of the lossless
+        # run rate within that, JPEG may pick the other one. The same holes otherwise.
+        same_holes(f.holes, ref.holes, tol_m, best_frame=False)
+        rated = view_ratings(ref.outputs[0])
+        for x, y in zip(f.holes, ref.holes, strict=True):
+            if x.best_frame_index != y.best_frame_index:
+                assert x.best_frame_index is not None and y.best_frame_index is not None
+                theirs = rated_at(rated, x.best_frame_index, x.best_box)
+                best = rated_at(rated, y.best_frame_index, y.best_box)
+                assert abs(theirs - best) < VIEW_TIE, (x, y, theirs, best)
     assert f.tiers == ref.tiers  # the same tiers (the one gate)
+
+
+VIEW_TIE = 0.02
+"""Two views rated this close are a tie JPEG may break either way (>= 6 times the largest
+score change JPEG colour made on the 40-frame flight's detections)."""
+
+
+def view_ratings(path: Path) -> dict[int, list[tuple[tuple[int, int, int, int], float]]]:
+    """frame index -> [(box, view rating)] of a reprocessing sidecar's detections, rated as
+    the hole tracker picks a hole's best view: ``score * (1 - off_centre / 2)``, 1 less for
+    a box cut by the image border (geotag: ``Hole.best_frame_index``)."""
+    cam = CameraIntrinsics.xtion()
+    half_diag = math.hypot(cam.width / 2.0, cam.height / 2.0)
+    out: dict[int, list[tuple[tuple[int, int, int, int], float]]] = {}
+    for _, _, data in sidecar(path)["/reprocess/detections"]:
+        rec = json.loads(data)
+        for d in map(decode_detection, rec["detections"]):
+            u, v = d.centre_px
+            off_centre = min(1.0, math.hypot(u - cam.cx, v - cam.cy) / half_diag)
+            cut = box_cut_by_border(d.box, cam.width, cam.height)
+            rating = d.score * (1.0 - 0.5 * off_centre) - (1.0 if cut else 0.0)
+            out.setdefault(rec["frame_index"], []).append((d.box, rating))
+    return out
+
+
+def rated_at(
+    rated: dict[int, list[tuple[tuple[int, int, int, int], float]]],
+    frame: int,
+    box: tuple[int, int, int, int],
+) -> float:
+    """The rating of the detection in ``frame`` whose box is nearest ``box``."""
+    views = rated[frame]
+
+    def apart(b: tuple[int, int, int, int]) -> float:
+        return math.dist(
+            (b[0] + b[2] / 2, b[1] + b[3] / 2), (box[0] + box[2] / 2, box[1] + box[3] / 2)
+        )
+
+    near, rating = min(views, key=lambda v: apart(v[0]))
+    assert apart(near) < 8.0, (frame, box, views)  # the same opening, a pixel or two moved
+    return rating
 
 
 def tiers_in(geojson: Path) -> dict[int, str]:
