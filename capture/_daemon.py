@@ -3,9 +3,13 @@
 Threads and processes of one flight:
 
 - **capture** (the caller's thread): reads frames from the source through a pump thread
-  with a timeout, stamps each on the autopilot's clock, queues it to the log writer and
-  offers it to the detection worker and the live map. Nothing makes it wait; when the log
-  falls behind (short of CPU), the frame is logged and not offered: detection sheds first.
+  with a timeout, stamps each on the autopilot's clock, holds it until the telemetry after
+  it has arrived (at most ``pose_wait_s`` after its time: a loaded computer reads its
+  telemetry late, and a frame posed at once could only extrapolate, or not be posed at
+  all), then queues it to the log writer with its pose and offers it to the detection
+  worker and the live map. Nothing makes it wait (held frames go on as later frames come,
+  all of them when the sensor fails or capture ends); when the log falls behind (short of
+  CPU), the frame is logged and not offered: detection sheds first.
 - **log writer** thread (:class:`flightlog.FlightLogWriter`); **detection worker**
   process (:class:`capture._worker.DetectionWorker`); **telemetry** receiver thread
   (:class:`capture._mavlink.Telemetry`): each message logged raw, each position also as a pose.
@@ -29,6 +33,7 @@ import contextlib
 import logging
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import replace
 from typing import Any
@@ -126,6 +131,10 @@ class Flight:
         self._policy = AnnouncePolicy(self._gate)
         self._views = BestViews()
         self._lock = threading.Lock()
+        # Captured frames waiting (at most pose_wait_s) for the telemetry after them.
+        # (frame, its Unix and boot times read at capture: a clock re-synchronised while
+        # a frame is held, after an autopilot reboot, does not restamp it).
+        self._held: deque[tuple[Frame, int, int | None]] = deque()
         self._finished = False  # ended by a limit or the source's end, not by a stop
 
     # -- clocks (the autopilot link's) --------------------------------------------------------
@@ -170,6 +179,9 @@ class Flight:
             self._writer.write_health(event.record())
 
     def _on_sensor_failed(self, event: SensorFailed) -> None:
+        # On the capture thread (the sensor's retries run in its loop): the frames held
+        # for their telemetry go on now, not after the reopen.
+        self._release(flush=True)
         self.counters.sensor_failures += 1
         if self._writer is not None:
             self._writer.write_health(event.record())
@@ -279,17 +291,36 @@ class Flight:
     # -- capture ----------------------------------------------------------------------------
 
     def _on_frame(self, frame: Frame) -> None:
-        assert self._writer is not None and self._worker is not None
         c = self.counters
         frame = replace(frame, index=c.frames_captured)
         c.frames_captured += 1
-        pose = self.pose(frame.t_mono_ns)
+        t = frame.t_mono_ns
+        self._held.append((frame, self.unix_ns(t), self._link.boot_ns(t)))
+        self._release()
+
+    def _release(self, flush: bool = False) -> None:
+        """Log and offer the held frames, oldest first, each once the telemetry after it
+        has arrived (its pose interpolated) or ``pose_wait_s`` after its time (extrapolated
+        if the newest telemetry is recent enough, else unposed). Never waits: a frame still
+        waiting stays held (and the ones after it) until a later frame comes.
+        ``flush``: all of them now, when no frame is coming (the end of capture, a sensor
+        failure): their telemetry is waited for, until ``pose_wait_s`` after the last."""
+        held = self._held
+        wait_s = self.config.pose_wait_s
+        while held:
+            if not flush and self._link.pose_pending(held[0][0].t_mono_ns, wait_s):
+                return
+            self._log_and_offer(*held.popleft(), wait_s=wait_s if flush else 0.0)
+
+    def _log_and_offer(
+        self, frame: Frame, t_unix: int, t_boot: int | None, *, wait_s: float
+    ) -> None:
+        assert self._writer is not None and self._worker is not None
+        c = self.counters
+        pose = self.pose(frame.t_mono_ns, wait_s=wait_s)
         if pose is None:
             c.frames_unposed += 1
-        t_boot = self._link.boot_ns(frame.t_mono_ns)
-        if not self._writer.write_frame(
-            frame, self.unix_ns(frame.t_mono_ns), pose=pose, t_boot_ns=t_boot
-        ):
+        if not self._writer.write_frame(frame, t_unix, pose=pose, t_boot_ns=t_boot):
             c.frames_log_dropped += 1
         self._views.add_frame(frame.index, frame.rgb)
         if self._writer.frames_queued > self._shed_above:  # short of CPU: log first
@@ -304,13 +335,19 @@ class Flight:
 
     def _capture(self, t_end: float | None) -> None:
         cfg = self.config
-        with contextlib.closing(self._sensor.frames(self.stop)) as frames:
-            for frame in frames:
-                self._on_frame(frame)
-                if cfg.max_frames is not None and self.counters.frames_captured >= cfg.max_frames:
-                    self._finish()
-                if t_end is not None and time.monotonic() >= t_end:
-                    self._finish()
+        try:
+            with contextlib.closing(self._sensor.frames(self.stop)) as frames:
+                for frame in frames:
+                    self._on_frame(frame)
+                    if (
+                        cfg.max_frames is not None
+                        and self.counters.frames_captured >= cfg.max_frames
+                    ):
+                        self._finish()
+                    if t_end is not None and time.monotonic() >= t_end:
+                        self._finish()
+        finally:
+            self._release(flush=True)  # the last frames, posed as far as they can be
         if not self.stop.is_set():
             self._finished = True  # the recording ended by itself
 

@@ -28,7 +28,8 @@ class FlightConfig:
     review_min_p_hole : a hole not announced whose ``p_hole`` reaches this is sent to the
         ground for review (its card, not a waypoint). Weaker holes stay candidates
         (logged, never sent).
-    pose_wait_s : how long the results thread waits for telemetry after a frame's time.
+    pose_wait_s : how long after a frame's time its pose waits for the telemetry after it
+        (the frame is held, never the capture thread; the results thread waits for the rest).
     startup_sync_s : at start, wait up to this long for the clock sync and a first pose
         (the sensor opens only then; a silent autopilot just delays the start).
     max_frames, max_duration_s : stop after this many frames / seconds (None: until the

@@ -250,6 +250,11 @@ class LiveMap:
                 if self._stop:
                     return
                 item, self._slot = self._slot, None
+                if item is not None and self._credit_ms <= 0:
+                    # Offered while the frame before was being fused, on the credit before
+                    # that frame's cost was spent: the credit decides again now.
+                    self.stats.skipped_budget += 1
+                    item = None
             if item is not None:
                 try:
                     self.fuse(*item)

@@ -124,7 +124,8 @@ class Telemetry(RateRequests):
         message arrival times).
     heartbeat_timeout_s : how long :meth:`__enter__` waits for the autopilot.
     command_timeout_s, command_retries : per COMMAND_LONG attempt / attempts.
-    on_message : called from the receiver thread for every parsed message; keep it quick.
+    on_message : called from the receiver thread for every parsed message, after the link
+        took it in (a position is in :attr:`poses` already); keep it quick.
     poses, clock : bring your own (e.g. tuned) buffer / clock; defaults are created.
     signing_key : MAVLink 2 signing secret (32 bytes, :func:`read_signing_key`): outgoing
         packets are signed, incoming ones without a valid signature are dropped as bad.
@@ -415,12 +416,17 @@ class Telemetry(RateRequests):
         if mtype == "BAD_DATA":
             self._count_bad(msg, t_mono_ns)
             return
-        if self._on_message is not None:
-            try:
-                self._on_message(msg, t_mono_ns)
-            except Exception:
-                self._callback_errors += 1
-                _log.exception("on_message callback failed for %s", mtype)
+        try:
+            self._take(msg, mtype, t_mono_ns)
+        finally:  # after the link has it: a position's pose is the position itself
+            if self._on_message is not None:
+                try:
+                    self._on_message(msg, t_mono_ns)
+                except Exception:
+                    self._callback_errors += 1
+                    _log.exception("on_message callback failed for %s", mtype)
+
+    def _take(self, msg: Any, mtype: str, t_mono_ns: int) -> None:
         if mtype.startswith("UNKNOWN_"):
             self._unknown_packets += 1
             if self._unknown_packets == 1:

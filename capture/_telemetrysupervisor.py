@@ -158,16 +158,33 @@ class TelemetrySupervisor:
         except ClockUnavailable:
             return None
 
+    def pose_pending(self, t_mono_ns: int, wait_s: float) -> bool:
+        """Whether the telemetry after a companion monotonic time may still come: the link
+        is up and synchronised, nothing as new as the time has arrived yet, and the time
+        is less than ``wait_s`` old. Never waits (the capture thread asks)."""
+        tel = self._telemetry
+        if tel is None or time.monotonic_ns() - t_mono_ns >= wait_s * 1e9:
+            return False
+        try:
+            t_boot_ns = tel.clock.mono_to_boot_ns(t_mono_ns)
+        except ClockUnavailable:
+            return False
+        newest = tel.poses.newest_t_boot_ns
+        return newest is None or newest < t_boot_ns
+
     def pose(
         self, t_mono_ns: int, wait_s: float = 0.0, invalid: list[str] | None = None
     ) -> VehiclePose | None:
         """The vehicle pose at a companion monotonic time, or None: no link, not
         synchronised, or a position the autopilot does not have (:class:`PoseInvalid`: no
         fix, EKF without a position, 0/0, a jump; the reason appended to ``invalid``, kept
-        in :attr:`invalid`). ``wait_s``: wait that long for telemetry after the time."""
+        in :attr:`invalid`). ``wait_s``: wait for the telemetry after the time until
+        ``wait_s`` after it (no longer: a frame held that long already is not waited for
+        again)."""
         tel = self._telemetry
         if tel is None:
             return None
+        wait_s = max(0.0, wait_s - (time.monotonic_ns() - t_mono_ns) / 1e9)
         try:
             return tel.pose_at_mono(t_mono_ns, wait_s=wait_s)
         except PoseInvalid as err:

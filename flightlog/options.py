@@ -40,7 +40,9 @@ class LogOptions:
         (Foxglove shows it; 5-10x slower) or ``raw`` (see :mod:`~flightlog.images`).
     image_reserve_bytes : when the log's disk has less free space than this, the writer
         stops logging frames (colour, depth) and keeps everything else (telemetry,
-        detections, holes, health); 0 = never stop. Checked every ``sync_interval_s``.
+        detections, holes, health); 0 = never stop. Checked before each frame is written
+        (and every ``sync_interval_s``): frames still queued when it is reached are not
+        logged either.
     """
 
     chunk_size: int = 1 << 20

@@ -363,6 +363,15 @@ class FlightLogWriter:
         pose: VehiclePose | None,
         t_boot_ns: int | None,
     ) -> None:
+        # The reserve is checked before every frame, not only every sync: a writer behind
+        # capture (short of CPU) would otherwise write the frames queued before the check
+        # past the reserve, and fill the disk.
+        self._check_disk(time.time_ns())
+        if self._images_stopped_ns is not None:  # queued before the disk reached the reserve
+            with self._lock:
+                self._frames_queued -= 1
+                self._frames_not_logged += 1
+            return
         t0 = time.perf_counter_ns()
         cpu0 = time.thread_time_ns()
         info = {

@@ -2,17 +2,20 @@
 
 from __future__ import annotations
 
+import bisect
+import math
 import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
+import pymap3d
 import pytest
 
-from holescan.capture import Flight, FlightConfig
+from holescan.capture import DEFAULT_RATES_HZ, Flight, FlightConfig, Telemetry
 from holescan.detect import CameraIntrinsics, Frame
-from holescan.flightlog import read_flight_log
+from holescan.flightlog import LoggedFrame, LoggedPose, read_flight_log
 from holescan.sim import SimAutopilot, SimPath
 from tests._support import free_udp_port
 
@@ -65,8 +68,8 @@ def test_flight_logs_every_frame_poses_them_and_finds_the_hole(tmp_path: Path) -
     assert c.frames_captured == 90
     assert summary.frames_logged == 90 and c.frames_log_dropped == 0
     assert c.frames_detected >= 10
-    # Frames are posed without waiting (capture never waits); under heavy CPU load the
-    # telemetry thread can lag past the 0.2 s extrapolation limit for a few frames.
+    # Frames wait for their telemetry at most pose_wait_s (0.15 s); under heavy CPU load
+    # the telemetry thread can lag longer than that for a few frames.
     assert c.frames_unposed <= 30, c
     assert len(summary.holes) == 1 and summary.holes[0].sightings >= 10
     records = list(read_flight_log(summary.log.files))
@@ -81,6 +84,53 @@ def test_flight_logs_every_frame_poses_them_and_finds_the_hole(tmp_path: Path) -
     } <= kinds
     frames = [r for r in records if type(r).__name__ == "LoggedFrame"]
     assert [f.frame.index for f in frames] == list(range(90))
+
+
+def test_each_frame_waits_for_the_telemetry_after_it(tmp_path: Path) -> None:
+    # Positions 0.25 s apart, more than the 0.2 s a pose is extrapolated: a frame posed the
+    # moment it is captured could not be, late in each interval. Each frame is held (never
+    # the capture thread) until the position after it has arrived, then logged with its
+    # pose interpolated between the two. pose_wait_s is long enough here for a loaded
+    # machine's late telemetry: what is tested is that frames wait, not how fast it comes.
+    port = free_udp_port()
+    rates = {**DEFAULT_RATES_HZ, "GLOBAL_POSITION_INT": 4.0}
+
+    def slow_positions(conn: str, **kw: object) -> Telemetry:
+        return Telemetry(conn, rates_hz=rates, command_timeout_s=5.0, **kw)  # type: ignore[arg-type]
+
+    cfg = FlightConfig(
+        log_prefix=tmp_path / "flight", max_frames=60, pose_wait_s=3.0, startup_sync_s=60.0
+    )
+    with SimAutopilot(f"udpout:127.0.0.1:{port}", hover_path()) as ap:
+        flight = Flight(
+            cfg,
+            lambda: ScriptedSource(100, fps=15.0),
+            CAM,
+            mavlink=f"udpin:127.0.0.1:{port}",
+            telemetry_factory=slow_positions,
+        )
+        summary = flight.run()
+        records = list(read_flight_log(summary.log.files, kinds={LoggedFrame, LoggedPose}))
+        frames = [r for r in records if isinstance(r, LoggedFrame)]
+        samples = sorted(r.pose.t_boot_ns for r in records if isinstance(r, LoggedPose))
+        truth = {f.frame.index: ap.truth_pose(f.pose.t_boot_ns) for f in frames if f.pose}
+    assert len(frames) == 60 and summary.counters.frames_unposed == sum(not f.pose for f in frames)
+    late = 0  # frames more than 0.2 s after the position before them: posed only by waiting
+    for f in frames:
+        assert f.t_boot_ns is not None
+        i = bisect.bisect_right(samples, f.t_boot_ns)
+        before, after = samples[i - 1], samples[i]  # the flight ended after its last frame
+        late += f.t_boot_ns - before > 200_000_000
+        # Unposed only where the autopilot's positions themselves are more than the pose
+        # buffer's 0.5 s apart (a simulator starved of CPU sends late).
+        assert f.pose is not None or after - before > 500_000_000, (f.frame.index, before, after)
+        if f.pose is not None:
+            t = truth[f.frame.index]
+            e, n, _ = pymap3d.geodetic2enu(
+                f.pose.lat_deg, f.pose.lon_deg, t.alt_m, t.lat_deg, t.lon_deg, t.alt_m
+            )
+            assert math.hypot(e, n) < 0.05, (f.frame.index, e, n)  # interpolated, not guessed
+    assert late > 0, "no frame came late in an interval: the test proves nothing"
 
 
 def test_mavlink_silent_frames_still_logged_unposed(tmp_path: Path) -> None:

@@ -198,6 +198,9 @@ def test_near_full_stops_frames_and_keeps_everything_else(tmp_path: Path) -> Non
         for i in range(5):
             assert w.write_frame(frame(i), time.time_ns())
             assert w.write_pose(pose(i), time.time_ns())
+        deadline = time.monotonic() + 30  # written first (the reserve is read before each)
+        while w.stats().written.get("frames", 0) < 5 and time.monotonic() < deadline:
+            time.sleep(0.01)
         disk.free = 4 * MB  # under the reserve from now on
         deadline = time.monotonic() + 10
         while w.stats().images_stopped_t_unix_ns is None and time.monotonic() < deadline:
@@ -224,6 +227,32 @@ def test_near_full_stops_frames_and_keeps_everything_else(tmp_path: Path) -> Non
     assert health[-1]["frames_not_logged"] == 5
     info = log_info(w.paths)
     assert info.frames == 5 and info.dropped_frames == ()  # no gap: nothing was dropped
+
+
+class FullAfter:
+    """A disk that has room for ``calls`` answers, then is under any reserve."""
+
+    def __init__(self, calls: int) -> None:
+        self.calls = calls
+
+    def free_bytes(self, folder: str | os.PathLike[str]) -> int:
+        self.calls -= 1
+        return 10 * MB if self.calls >= 0 else MB
+
+
+def test_frames_queued_past_the_reserve_are_not_logged(tmp_path: Path) -> None:
+    # However far behind capture the writer is, the reserve is read before each frame is
+    # written: the writer is asked once when it opens, then once per frame (no periodic
+    # sync in this test), so exactly the 3 frames before the disk fell under it are logged.
+    options = LogOptions(image_reserve_bytes=5 * MB, sync_interval_s=3600.0)
+    with FlightLogWriter(tmp_path / "q", SMALL, options=options, disk=FullAfter(4)) as w:
+        for i in range(8):  # all queued at once: the writer thread has not caught up
+            assert w.write_frame(frame(i), time.time_ns())
+    st = w.stats()
+    assert st.written["frames"] == 3 and st.frames_not_logged == 5, st
+    assert st.dropped == {} and w.frames_queued == 0
+    info = log_info(w.paths)
+    assert info.frames == 3 and info.dropped_frames == ()
 
 
 def test_a_disk_already_under_the_reserve_logs_no_frame(tmp_path: Path) -> None:

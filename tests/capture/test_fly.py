@@ -399,7 +399,12 @@ def test_garbage_on_the_mavlink_link_is_ignored_and_counted(tmp_path: Path) -> N
                     ap.inject_garbage(bad_crc)
                     injected["bad"] += 1
 
-        cfg = FlightConfig(log_prefix=tmp_path / "flight", max_frames=90, health_period_s=0.5)
+        # pose_wait_s: each frame waits (held, never the capture thread) for the telemetry
+        # after it; long enough here for a loaded machine, whose in-process simulator and
+        # receiver run tenths of a second late: what is tested is that frames are posed.
+        cfg = FlightConfig(
+            log_prefix=tmp_path / "flight", max_frames=90, health_period_s=0.5, pose_wait_s=3.0
+        )
         flight = Flight(cfg, lambda: FloorSource(200, cam), cam, mavlink=f"udpin:127.0.0.1:{port}")
         injector = threading.Thread(target=inject, daemon=True)
         injector.start()
@@ -422,7 +427,11 @@ def test_garbage_on_the_mavlink_link_is_ignored_and_counted(tmp_path: Path) -> N
     # The link kept working: every frame logged, (nearly) all posed, the hole found.
     assert summary.frames_logged == c.frames_captured == 90 and c.frames_log_dropped == 0
     assert c.frames_unposed <= 30, c
-    assert len(summary.holes) == 1 and summary.holes[0].sightings >= 10
+    # The hole found from what the detector read (as many frames as a loaded machine
+    # lets it): one sighting of the one hole per detection on a posed frame.
+    posed_detections = c.detections - c.pose_refusals
+    assert len(summary.holes) == 1 and posed_detections >= 3, c
+    assert summary.holes[0].sightings >= 0.8 * posed_detections, (summary.holes, c)
     health = [
         r.values
         for r in read_flight_log(summary.log.files, kinds={LoggedHealth})

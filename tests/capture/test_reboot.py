@@ -15,7 +15,7 @@ from holescan.capture import FlightConfig
 from holescan.flightlog import LoggedFrame, read_flight_log
 from holescan.geotag import local_en_m
 from holescan.sim import SimAutopilot, SimPath
-from tests._support import free_udp_port
+from tests._support import free_udp_port, wait_for
 from tests.capture.test_faults import floor_flight
 
 # 1 m/s: a pose from the wrong side of a 1.5 s reboot is metres off.
@@ -23,19 +23,33 @@ PATH = SimPath(waypoints_enu=((0.0, 0.0, 3.0), (6.0, 0.0, 3.0), (6.0, 6.0, 3.0))
 
 
 def test_autopilot_reboot_in_flight(tmp_path: Path) -> None:
+    # Driven by what the flight did, not by wall time (a loaded machine starts and
+    # re-synchronises late): the reboot once 30 frames were posed, the flight stopped once
+    # 45 more were posed after it. pose_wait_s: each frame waits for the telemetry after
+    # it, long enough here for a loaded machine's late simulator and receiver.
     port = free_udp_port()
-    cfg = FlightConfig(log_prefix=tmp_path / "f", max_duration_s=16.0, startup_sync_s=3.0)
+    cfg = FlightConfig(log_prefix=tmp_path / "f", startup_sync_s=3.0, pose_wait_s=3.0)
     flight, telemetry = floor_flight(cfg, port)
+    c = flight.counters
+
+    def posed() -> int:
+        return c.frames_captured - c.frames_unposed
+
     with SimAutopilot(f"udpout:127.0.0.1:{port}", PATH) as ap:
         box: dict[str, object] = {}
-        runner = threading.Thread(target=lambda: box.setdefault("s", flight.run()))
+        runner = threading.Thread(target=lambda: box.setdefault("s", flight.run()), daemon=True)
         runner.start()
-        time.sleep(6.0)
-        assert "GLOBAL_POSITION_INT" in ap.rates_hz()
-        t_reboot = time.monotonic_ns()
-        ap.reboot(1.5)
-        assert set(ap.rates_hz()) == {"HEARTBEAT"}  # intervals forgotten
-        runner.join(60)
+        try:
+            wait_for(lambda: posed() >= 30, 120.0, "30 posed frames")
+            assert "GLOBAL_POSITION_INT" in ap.rates_hz()
+            t_reboot = time.monotonic_ns()
+            ap.reboot(1.5)
+            assert set(ap.rates_hz()) == {"HEARTBEAT"}  # intervals forgotten
+            before = posed()  # nothing is posed while the autopilot is down
+            wait_for(lambda: posed() >= before + 45, 120.0, "45 posed frames after the reboot")
+        finally:
+            flight.stop.set()
+            runner.join(60)
         rates_after = ap.rates_hz()
         frames = [r for r in read_flight_log(box["s"].log.files) if isinstance(r, LoggedFrame)]  # type: ignore[attr-defined]
         truth = {r.sequence: ap.truth_pose(ap.boot_ns_at_mono(r.frame.t_mono_ns)) for r in frames}
@@ -44,8 +58,10 @@ def test_autopilot_reboot_in_flight(tmp_path: Path) -> None:
     assert "GLOBAL_POSITION_INT" in rates_after  # asked for again after the reboot
     after = [r for r in frames if r.frame.t_mono_ns > t_reboot + 1_500_000_000]
     posed_after = [r for r in after if r.pose is not None]
-    assert posed_after and posed_after[0].frame.t_mono_ns - t_reboot < 6e9  # re-synchronised
-    assert len(posed_after) >= 0.5 * len(after)
+    assert posed_after  # re-synchronised (how soon on a real ArduPilot: benchmarks/sitl_sortie.py)
+    # Posed again from the first posed frame after the reboot on.
+    resynced = [r for r in after if r.frame.t_mono_ns >= posed_after[0].frame.t_mono_ns]
+    assert len(posed_after) >= 0.8 * len(resynced)
     worst = 0.0
     for r in frames:
         if r.pose is None:
@@ -55,7 +71,8 @@ def test_autopilot_reboot_in_flight(tmp_path: Path) -> None:
             worst, math.hypot(*local_en_m(r.pose.lat_deg, r.pose.lon_deg, t.lat_deg, t.lon_deg))
         )
     print(
-        f"\nreboot in flight: {len(frames)} frames, {len(posed_after)}/{len(after)} posed after, "
+        f"\nreboot in flight: {len(frames)} frames, {len(posed_after)}/{len(after)} posed after "
+        f"({len(resynced)} from the first posed one), "
         f"worst pose error {worst:.2f} m"
     )
     assert worst < 0.5  # never a sample from the other side of the reboot
