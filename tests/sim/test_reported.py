@@ -55,7 +55,14 @@ def test_sim_camera_renders_from_the_reported_pose(tmp_path: Path) -> None:
     home = (plan.path[0].lat_deg, plan.path[0].lon_deg, params.anchor.alt_m)
     port = free_udp_port()
     cfg = parse_fly_config(
-        {"sensor": "sim", "sim": TABLE, "holes": {"announce_min_sightings": 3}},
+        {
+            "sensor": "sim",
+            "sim": TABLE,
+            "holes": {"announce_min_sightings": 3},
+            # a loaded machine can delay telemetry: the flight holds each frame up to 1 s
+            # for the telemetry after it (as the reprocessing sorties)
+            "capture": {"pose_wait_s": 1.0},
+        },
         # 60 frames, however long rendering takes on a busy machine (90 s: a hang guard)
         {
             "log_dir": tmp_path,
