@@ -60,8 +60,9 @@ def test_sim_camera_renders_from_the_reported_pose(tmp_path: Path) -> None:
             "sim": TABLE,
             "holes": {"announce_min_sightings": 3},
             # a loaded machine can delay telemetry: the flight holds each frame up to 1 s
-            # for the telemetry after it (as the reprocessing sorties)
-            "capture": {"pose_wait_s": 1.0},
+            # for the telemetry after it (as the reprocessing sorties); it can stall the
+            # renderer for seconds: no sensor reopen (as the sim accuracy test)
+            "capture": {"pose_wait_s": 1.0, "frame_timeout_s": 60.0},
         },
         # 60 frames, however long rendering takes on a busy machine (90 s: a hang guard)
         {
