@@ -13,7 +13,8 @@ One call runs what a real sortie runs, with no hardware:
   app (:class:`ground.GroundStation`, as ``holescan ground`` runs it) on a loopback link:
   it collects the holes, pictures and the hole mission into ``OUT/ground``.
 
-It stops after one lap of the survey (or ``duration_s`` of capture), then scores the holes
+It stops after one lap of the survey (or ``duration_s`` of capture; with ``min_frames``, not
+before the camera delivered that many frames), then scores the holes
 the flight confirmed against the simulator's truth: every true access hole the camera saw
 whole in at least ``min_frames_in_view`` frames is found (a confirmed hole within
 ``match_m`` of its centre or inside its opening) or missed; confirmed holes matching no
@@ -75,6 +76,9 @@ class DemoOptions:
     out : folder for everything (None: :func:`default_demo_out`, a new folder in the
         user's data folder). sortie : the simulated sortie.
     duration_s : seconds of capture (None: one lap of the survey).
+    min_frames : capture goes on past ``duration_s`` until the simulated camera delivered
+        this many frames (it renders as fast as the CPU lets it: on a slow or busy machine
+        the duration alone gives few frames, and the vehicle flies on meanwhile).
     gate : when a hole is announced (served, sent, scored, written); weaker holes stay
         candidates. card_bytes_per_s : byte budget of the holes' pictures.
     match_m : a confirmed hole this close to a true access hole's centre (or inside its
@@ -86,6 +90,7 @@ class DemoOptions:
     out: Path | None = None
     sortie: SortieParams = DEMO_SORTIE
     duration_s: float | None = None
+    min_frames: int = 0
     gate: AnnounceGate = dataclasses.field(default_factory=AnnounceGate)
     card_bytes_per_s: float = 1000.0
     match_m: float = 0.5
@@ -94,6 +99,8 @@ class DemoOptions:
     def __post_init__(self) -> None:
         if self.duration_s is not None and not self.duration_s > 0:
             raise InputError(f"duration must be > 0 s, got {self.duration_s}")
+        if self.min_frames < 0:
+            raise InputError(f"min_frames must be >= 0, got {self.min_frames}")
         if self.match_m <= 0 or self.min_frames_in_view < 1:
             raise InputError("min_frames_in_view >= 1 and match_m > 0 please")
 
@@ -388,7 +395,7 @@ def run_demo(
                 if c.frames_captured and not t_first:
                     t_first.append(time.monotonic())
                 elapsed = time.monotonic() - t_first[0] if t_first else 0.0
-                if elapsed >= duration:
+                if elapsed >= duration and c.frames_captured >= opts.min_frames:
                     stop.set()
                 report(
                     "flying",

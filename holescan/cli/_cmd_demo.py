@@ -1,4 +1,5 @@
-"""``holescan demo [--out DIR] [--duration S]``: the whole system on a simulated sortie."""
+"""``holescan demo [--out DIR] [--duration S] [--min-frames N]``: the whole system on a
+simulated sortie."""
 
 from __future__ import annotations
 
@@ -43,6 +44,14 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="seconds of capture (default: one lap of the survey, about 75 s)",
     )
     p.add_argument(
+        "--min-frames",
+        type=_count,
+        default=0,
+        metavar="N",
+        help="fly on past the duration until the simulated camera delivered N frames (it "
+        "renders as fast as the CPU lets it: a slow or busy machine gets few in the duration)",
+    )
+    p.add_argument(
         "--size",
         type=positive_float,
         nargs=2,
@@ -54,6 +63,17 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.set_defaults(func=run)
 
 
+def _count(text: str) -> int:
+    """A whole number >= 0 (argparse type)."""
+    try:
+        n = int(text)
+    except ValueError:
+        n = -1
+    if n < 0:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}")
+    return n
+
+
 class _Display:
     """A progress line (redrawn on a terminal, every 10 s elsewhere) and the announcements."""
 
@@ -63,6 +83,7 @@ class _Display:
         self._last = 0.0
         self._phase = ""
         self._open_line = False
+        self.at_least = ""  # ", at least N frames"
 
     def _line(self, text: str, final: bool) -> None:
         if self.tty:
@@ -80,7 +101,7 @@ class _Display:
             text = {
                 "world": "building the rubble world and planning the survey ...",
                 "start": f"starting autopilot, capture daemon, mission server; flying "
-                f"{p.duration_s:.0f} s ...",
+                f"{p.duration_s:.0f} s{self.at_least} ...",
                 "scoring": "landed; scoring against the truth, writing files ...",
             }.get(p.phase)
             if text:
@@ -120,7 +141,7 @@ def run(args: argparse.Namespace) -> int:
         sortie = dataclasses.replace(sortie, **changes)  # type: ignore[arg-type]
     out = args.out or default_demo_out()
     print(f"holescan demo: writing to {out}", file=sys.stderr, flush=True)
-    opts = DemoOptions(out=out, sortie=sortie, duration_s=args.duration)
+    opts = DemoOptions(out=out, sortie=sortie, duration_s=args.duration, min_frames=args.min_frames)
     stop = threading.Event()
 
     def on_sigint(signum: int, _frame: FrameType | None) -> None:
@@ -131,6 +152,8 @@ def run(args: argparse.Namespace) -> int:
         logging.getLogger().setLevel(logging.WARNING)
     previous = signal.signal(signal.SIGINT, on_sigint)
     display = _Display(sys.stderr)
+    if args.min_frames:
+        display.at_least = f", at least {args.min_frames} frames"
     try:
         result = run_demo(opts, progress=display, stop=stop)
     finally:
