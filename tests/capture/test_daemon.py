@@ -54,6 +54,22 @@ class ScriptedSource:
             yield Frame(i, rgb, depth, time.monotonic_ns(), i * 33_333_333)
 
 
+def unposed_with_telemetry(files: tuple[Path, ...]) -> list[tuple[int, int | None]]:
+    """(index, boot time) of each logged frame without a pose although the autopilot's
+    positions around it (as logged) are no more than the pose buffer's 0.5 s apart. A
+    simulator starved of CPU sends late: frames in such a gap are rightly unposed."""
+    records = list(read_flight_log(files, kinds={LoggedFrame, LoggedPose}))
+    samples = sorted(r.pose.t_boot_ns for r in records if isinstance(r, LoggedPose))
+    out: list[tuple[int, int | None]] = []
+    for r in records:
+        if not isinstance(r, LoggedFrame) or r.pose is not None:
+            continue
+        i = bisect.bisect_right(samples, r.t_boot_ns) if r.t_boot_ns is not None else 0
+        if r.t_boot_ns is None or (0 < i < len(samples) and samples[i] - samples[i - 1] <= 5e8):
+            out.append((r.frame.index, r.t_boot_ns))
+    return out
+
+
 def hover_path() -> SimPath:
     return SimPath(waypoints_enu=((0.0, 0.0, 2.5), (0.3, 0.0, 2.5), (0.3, 0.3, 2.5)), speed_m_s=0.2)
 
@@ -68,7 +84,7 @@ def test_flight_logs_every_frame_poses_them_and_finds_the_hole(tmp_path: Path) -
     assert c.frames_captured == 90
     assert summary.frames_logged == 90 and c.frames_log_dropped == 0
     assert c.frames_detected >= 10
-    # Frames wait for their telemetry at most pose_wait_s (0.15 s); under heavy CPU load
+    # Frames wait for their telemetry at most pose_wait_s (0.5 s); under heavy CPU load
     # the telemetry thread can lag longer than that for a few frames.
     assert c.frames_unposed <= 30, c
     assert len(summary.holes) == 1 and summary.holes[0].sightings >= 10

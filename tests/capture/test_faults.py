@@ -12,7 +12,7 @@ import signal
 import subprocess
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -28,8 +28,10 @@ from holescan.flightlog import (
     read_flight_log,
     recover_log,
 )
+from holescan.geotag import VehiclePose
 from holescan.sim import SimAutopilot, SimPath
 from tests._support import free_udp_port, group_members, wait_for
+from tests.capture.test_daemon import unposed_with_telemetry
 from tests.capture.test_shutdown import start_sim_flight
 
 CAM = CameraIntrinsics.xtion(160, 120)
@@ -71,9 +73,13 @@ def posed_times(files: tuple[Path, ...]) -> list[tuple[float, bool]]:
     return out
 
 
-def floor_flight(cfg: FlightConfig, port: int) -> tuple[Flight, list[Telemetry]]:
+def floor_flight(
+    cfg: FlightConfig,
+    port: int,
+    on_frame: Callable[[Frame, VehiclePose | None], None] | None = None,
+) -> tuple[Flight, list[Telemetry]]:
     """A flight over :class:`FloorSource` on ``udpin:127.0.0.1:PORT``, and the telemetry
-    links it opens (newest last)."""
+    links it opens (newest last); ``on_frame``: told of each frame and its pose."""
     telemetry: list[Telemetry] = []
 
     def factory(conn: str, **kw: object) -> Telemetry:
@@ -82,7 +88,12 @@ def floor_flight(cfg: FlightConfig, port: int) -> tuple[Flight, list[Telemetry]]
         return tel
 
     flight = Flight(
-        cfg, FloorSource, CAM, mavlink=f"udpin:127.0.0.1:{port}", telemetry_factory=factory
+        cfg,
+        FloorSource,
+        CAM,
+        mavlink=f"udpin:127.0.0.1:{port}",
+        telemetry_factory=factory,
+        on_frame=on_frame,
     )
     return flight, telemetry
 
@@ -97,11 +108,11 @@ def test_link_gone_10_s_then_a_rebooted_autopilot(tmp_path: Path) -> None:
     # simulator and receiver run tenths of a second late: what is tested is that frames
     # are posed.
     cfg = FlightConfig(log_prefix=tmp_path / "f", startup_sync_s=5.0, pose_wait_s=3.0)
-    flight, telemetry = floor_flight(cfg, port)
-    c = flight.counters
+    handed_on: list[bool] = []  # posed? of each frame logged (frames held are not yet)
+    flight, telemetry = floor_flight(cfg, port, lambda f, p: handed_on.append(p is not None))
 
     def posed() -> int:
-        return c.frames_captured - c.frames_unposed
+        return sum(handed_on)
 
     marks: dict[str, float] = {}
     box: dict[str, object] = {}
@@ -140,14 +151,20 @@ def test_link_gone_10_s_then_a_rebooted_autopilot(tmp_path: Path) -> None:
         f"{sum(p for _, p in after)}/{len(after)}; first posed frame {first_posed:.1f} s after "
         f"the link came back; reboots seen {tel.reboots}, rates {tel.rate_method}"
     )
-    assert sum(before) >= 0.8 * len(before)
+    # Unposed (before the link went, and once re-synchronised) only where the (CPU-starved)
+    # simulator sent no position for longer than the pose buffer bridges.
+    t_of = {r.frame.index: r.frame.t_mono_ns / 1e9 for r in read_flight_log(
+        summary.log.files, kinds={LoggedFrame}) if isinstance(r, LoggedFrame)}  # type: ignore[attr-defined]  # fmt: skip
+    unexplained = [t_of[i] for i, _ in unposed_with_telemetry(summary.log.files)]  # type: ignore[attr-defined]
+    assert not [t for t in unexplained if first <= t < marks["gone"]], unexplained
     assert not any(during)  # never a made-up pose
     # The reboot seen, rates re-requested and the clock re-synchronised: frames are posed
     # again, most of those after the first posed one. How soon against a real ArduPilot:
     # benchmarks/sitl_sortie.py --reboot-at (its "first posed" line).
     assert tel.reboots >= 1
     resynced = [p for t, p in after if t >= marks["back"] + first_posed]
-    assert sum(resynced) >= 0.8 * len(resynced) > 0
+    assert sum(resynced) > 0
+    assert not [t for t in unexplained if t >= marks["back"] + first_posed], unexplained
     assert summary.frames_logged == len(frames)  # type: ignore[attr-defined]
 
 

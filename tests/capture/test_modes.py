@@ -19,7 +19,7 @@ from holescan.detect import Frame
 from holescan.flightlog import FlightLogWriter, LoggedFrame, LoggedHealth, read_flight_log
 from holescan.sim import SimAutopilot
 from tests._support import free_udp_port, wait_for
-from tests.capture.test_daemon import CAM, ScriptedSource, hover_path
+from tests.capture.test_daemon import CAM, ScriptedSource, hover_path, unposed_with_telemetry
 
 # ArduCopter custom modes: 3 AUTO, 6 RTL, 9 LAND, 5 LOITER, 4 GUIDED
 NAMES = {3: "AUTO", 6: "RTL", 9: "LAND", 5: "LOITER", 4: "GUIDED"}
@@ -140,8 +140,11 @@ def test_mode_changes_and_arming_break_nothing(
     assert summary.frames_logged == c.frames_captured and c.frames_log_dropped == 0, c
     frames = list(read_flight_log(summary.log.files, kinds={LoggedFrame}))
     during = [r for r in frames if isinstance(r, LoggedFrame) and r.frame.t_mono_ns > marks[0]]
-    unposed = [(r.frame.index, r.t_boot_ns) for r in during if r.pose is None]
-    assert len(during) > 100 and not unposed, (unposed, c)  # posed throughout
+    # Posed throughout, but where the (CPU-starved) simulator sent no position for longer
+    # than the pose buffer bridges.
+    indices = {r.frame.index for r in during}
+    unposed = [u for u in unposed_with_telemetry(summary.log.files) if u[0] in indices]
+    assert len(during) > 100 and not unposed, (unposed, c)
     assert c.detect_errors == 0 and flight.tracker.holes(), c
     health = [
         r.values
