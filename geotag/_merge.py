@@ -25,9 +25,11 @@ How sightings are matched (deterministic; no clocks, no randomness):
   two real holes 1.2 m apart separate when the GPS error is metres.
 * Sightings from another GPS source (another flight or vehicle: :meth:`HoleTracker.update`'s
   ``source``) carry an independent GPS error: for them the bias drift is at its cap at
-  once, however close in time the flights were. The first whole view from the new source
-  moves the hole's estimate into that source's frame; a view cut by the image border
-  (its centre the visible part's) joins the hole without moving it.
+  once, however close in time the flights were. The first whole, confident view from the
+  new source (score >= ``reframe_min_score``) moves the hole's estimate into that
+  source's frame; a view cut by the image border (its centre the visible part's) or a weak
+  one (as often a distractor beside the opening as the opening) joins the hole without
+  moving it.
 * **One opening, one hole**, however the detector boxes it. Sightings of one frame whose
   openings overlap (centres closer than half the sum of their major axes: in one frame
   the GPS error is shared, so their separation is exact to centimetres) are parts of one
@@ -89,6 +91,10 @@ class MergeParams:
     max_size_ratio : sightings whose major axes differ by more than this factor are
         different holes.
     gps_decorrelation_s : time over which the GPS error becomes independent, seconds.
+    reframe_min_score : the least detector score of a view from another GPS source that
+        moves a hole's estimate into that source's frame (weaker ones join without moving
+        it: a campaign once let a 0.11 distractor beside an opening carry the opening's
+        hole 1.4 m off, and that flight's views of the opening went to the next hole).
     """
 
     min_radius_m: float = 0.5
@@ -96,12 +102,15 @@ class MergeParams:
     size_fraction: float = 0.5
     max_size_ratio: float = 3.0
     gps_decorrelation_s: float = 300.0
+    reframe_min_score: float = 0.3
 
     def __post_init__(self) -> None:
         if self.min_radius_m < 0 or self.n_sigma <= 0 or self.size_fraction < 0:
             raise InputError("merge radii and n_sigma must be non-negative (n_sigma > 0)")
         if self.max_size_ratio < 1 or self.gps_decorrelation_s <= 0:
             raise InputError("max_size_ratio must be >= 1 and gps_decorrelation_s > 0")
+        if not 0.0 <= self.reframe_min_score <= 1.0:
+            raise InputError("reframe_min_score must be within [0, 1]")
 
 
 @dataclass(frozen=True)
@@ -213,12 +222,13 @@ class _Track:
         params: MergeParams,
         source: str | None = None,
     ) -> None:
-        if s.cut_by_border and source != self.source:
-            # Another source's view cut by the image border: its centre is the visible
-            # part's, off the opening's by up to half of it. It counts as a sighting but does
-            # not carry the estimate into that source's GPS frame (with the independent GPS
-            # error the gain is ~1: the estimate would land on the cut view's centre, and
-            # the source's next whole views of the opening would no longer match it).
+        if source != self.source and (s.cut_by_border or s.score < params.reframe_min_score):
+            # Another source's view cut by the image border (its centre the visible part's,
+            # off the opening's by up to half of it) or weak (as likely a distractor beside
+            # the opening). It counts as a sighting but does not carry the estimate into
+            # that source's GPS frame (with the independent GPS error the gain is ~1: the
+            # estimate would land on this view's centre, and the source's next whole views
+            # of the opening would no longer match it).
             self._add(s, ned)
             return
         p = self.predicted_var(s, params, source)
