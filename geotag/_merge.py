@@ -50,14 +50,17 @@ Each hole's confidence ``p_hole`` comes from all its sightings (:mod:`geotag._co
 best and median score, distinct viewpoints rather than frames, size and position
 consistency, rim seen).
 
-Reported position: inverse-variance weighted mean of all sightings, weighted by their
-non-GPS variance (attitude, depth, timing, and where the detector put the opening: an
-oblique view or a rim half hidden weighs less); the GPS error, shared by sightings close in
-time, cannot tell them apart. Its sigma combines three parts: where the detector put the
-opening (the weighted mean of the sightings' ``sigma_opening_m``: views from one side share
-their error, it does not average down), the rest of the non-GPS error (averages down as
-``1/sqrt(n)``), and the GPS part, which only averages down over independent stretches of
-``gps_decorrelation_s``.
+Reported position: the views that saw the whole opening and the views cut by the image
+border are each averaged on their own, weighted by their non-GPS variance (attitude, depth,
+timing, and where the detector put the opening: an oblique view or a rim half hidden weighs
+less); the GPS error, shared by sightings close in time, cannot tell them apart. The two
+means are then combined by their variances, in which the opening's part (the weighted mean
+of the sightings' ``sigma_opening_m``) does not average down: views cut on one side share
+their error, a centre pulled towards the part in view. Twenty cut views therefore weigh as
+one cut view, not as twenty (averaged together with the whole views they once carried a
+hole 0.15 m off its opening on a loaded machine that had detected few whole views). The
+sigma combines that non-GPS part with the GPS part, which only averages down over
+independent stretches of ``gps_decorrelation_s``.
 """
 
 from __future__ import annotations
@@ -163,10 +166,8 @@ class _Track:
     def __init__(self, hole_id: int, s: HoleSighting, ned: tuple[float, float, float]) -> None:
         self.id = hole_id
         self.count = 0
-        self.w_sum = 0.0
-        self.wn = self.we = self.wd = 0.0
-        self.inv_noise_var = 0.0
-        self.w_opening = 0.0
+        self.whole = _Mean()  # the views that saw the whole opening
+        self.cut = _Mean()  # the views cut by the image border
         self.gps_sum = 0.0
         self.t_first = s.t_boot_ns
         self.t_last = s.t_boot_ns
@@ -188,14 +189,8 @@ class _Track:
     def _add(self, s: HoleSighting, ned: tuple[float, float, float]) -> None:
         self.acc.add(s, ned[0], ned[1])
         self.seen.append(s)
-        w = 1.0 / _rel_var(s)  # GPS error is shared: it cannot tell sightings apart
         self.count += 1
-        self.w_sum += w
-        self.wn += w * ned[0]
-        self.we += w * ned[1]
-        self.wd += w * ned[2]
-        self.inv_noise_var += 1.0 / _noise_var(s)
-        self.w_opening += w * s.sigma_opening_m
+        (self.cut if s.cut_by_border else self.whole).add(s, ned)
         self.gps_sum += s.sigma_gps_m
         self.t_first = min(self.t_first, s.t_boot_ns)
         self.t_last = max(self.t_last, s.t_boot_ns)
@@ -247,10 +242,8 @@ class _Track:
         self.ke = p * (self.ke / self.p + o.ke / o.p)
         self.p = p
         self.count += o.count
-        self.w_sum += o.w_sum
-        self.wn, self.we, self.wd = self.wn + o.wn, self.we + o.we, self.wd + o.wd
-        self.inv_noise_var += o.inv_noise_var
-        self.w_opening += o.w_opening
+        self.whole.merge(o.whole)
+        self.cut.merge(o.cut)
         self.gps_sum += o.gps_sum
         self.t_first, self.t_last = min(self.t_first, o.t_first), max(self.t_last, o.t_last)
         self.best_score = max(self.best_score, o.best_score)
@@ -259,6 +252,49 @@ class _Track:
         self.seen = sorted(self.seen + o.seen, key=lambda s: s.t_boot_ns)
         self.acc.merge(o.acc)
         self.apart |= o.apart
+
+
+class _Mean:
+    """The weighted mean of one kind of a hole's views, and its non-GPS variance."""
+
+    def __init__(self) -> None:
+        self.w_sum = 0.0
+        self.wn = self.we = self.wd = 0.0
+        self.inv_noise_var = 0.0
+        self.w_opening = 0.0
+
+    def add(self, s: HoleSighting, ned: tuple[float, float, float]) -> None:
+        w = 1.0 / _rel_var(s)  # GPS error is shared: it cannot tell sightings apart
+        self.w_sum += w
+        self.wn += w * ned[0]
+        self.we += w * ned[1]
+        self.wd += w * ned[2]
+        self.inv_noise_var += 1.0 / _noise_var(s)
+        self.w_opening += w * s.sigma_opening_m
+
+    def merge(self, o: _Mean) -> None:
+        self.w_sum += o.w_sum
+        self.wn, self.we, self.wd = self.wn + o.wn, self.we + o.we, self.wd + o.wd
+        self.inv_noise_var += o.inv_noise_var
+        self.w_opening += o.w_opening
+
+    def ned(self) -> tuple[float, float, float]:
+        return self.wn / self.w_sum, self.we / self.w_sum, self.wd / self.w_sum
+
+    def var(self) -> float:
+        """Where the detector put the opening (shared by these views: it does not average
+        down) and the rest (depth noise, attitude, timing: averages down as ``1/n``)."""
+        opening = self.w_opening / self.w_sum
+        return opening**2 + 1.0 / self.inv_noise_var
+
+
+def _estimate(parts: Sequence[_Mean]) -> tuple[tuple[float, float, float], float]:
+    """The means of ``parts`` (those with views) combined by their variances, and the
+    variance of the result."""
+    used = [(m.ned(), m.var()) for m in parts if m.w_sum > 0]
+    inv = sum(1.0 / v for _, v in used)
+    ned = tuple(sum(p[i] / v for p, v in used) / inv for i in range(3))
+    return (ned[0], ned[1], ned[2]), 1.0 / inv
 
 
 def _rel_var(s: HoleSighting) -> float:
@@ -463,17 +499,13 @@ class HoleTracker:
 
     def _hole(self, t: _Track) -> Hole:
         assert self._origin is not None
-        n, e, d = t.wn / t.w_sum, t.we / t.w_sum, t.wd / t.w_sum
+        (n, e, d), rel_var = _estimate((t.whole, t.cut))
         lat, lon, alt = self._origin.ned_to_geodetic(n, e, d)
         span_s = (t.t_last - t.t_first) * 1e-9
         independent = min(float(t.count), 1.0 + span_s / self.params.gps_decorrelation_s)
         gps = (t.gps_sum / t.count) / math.sqrt(independent)
-        # The opening's error is shared by views from the same side (it does not average
-        # down): the weighted mean of the sightings' opening sigmas. The rest (depth noise,
-        # attitude, timing) averages down as 1/sqrt(n).
-        opening = t.w_opening / t.w_sum
         ev = t.evidence()
-        rel = math.hypot(opening, 1.0 / math.sqrt(t.inv_noise_var))
+        rel = math.sqrt(rel_var)
         return Hole(
             id=t.id,
             lat_deg=float(lat),
