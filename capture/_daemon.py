@@ -6,10 +6,11 @@ Threads and processes of one flight:
   with a timeout, stamps each on the autopilot's clock, holds it until the telemetry after
   it has arrived (at most ``pose_wait_s`` after its time or after it reached this thread,
   whichever is later: a loaded computer reads its telemetry late, and a frame posed at once
-  could only extrapolate, or not be posed at all), then queues it to the log writer with its pose and offers it to the detection
-  worker and the live map. Nothing makes it wait (held frames go on as later frames come,
-  all of them when the sensor fails or capture ends); when the log falls behind (short of
-  CPU), the frame is logged and not offered: detection sheds first.
+  could only extrapolate, or not be posed at all), then queues it to the log writer with its
+  pose and offers it to the detection worker and the live map. Nothing makes it wait (held
+  frames go on as later frames come, all of them when the sensor fails or capture ends);
+  when the log falls behind (short of CPU), the frame is logged and not offered: detection
+  sheds first.
 - **log writer** thread (:class:`flightlog.FlightLogWriter`); **detection worker**
   process (:class:`capture._worker.DetectionWorker`); **telemetry** receiver thread
   (:class:`capture._mavlink.Telemetry`): each message logged raw, each position also as a pose.
