@@ -10,6 +10,7 @@ on. A link that cannot be opened at all (a bad connection string) is an error.
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from collections.abc import Callable
@@ -170,15 +171,27 @@ class TelemetrySupervisor:
         """Whether the telemetry after a companion monotonic time may still come: the link
         is up and synchronised, nothing as new as the time has arrived yet, and less than
         ``wait_s`` has passed since ``since_ns`` (default: the time itself; the daemon
-        passes the later of a frame's time and its arrival at the capture thread).
+        passes the later of a frame's time and its arrival at the capture thread), or less
+        than twice that while nothing at all was read from the link since the ``wait_s``
+        ran out (the process stalled: the receiver is as late as the frames).
         ``t_boot_ns``: the time's boot time as read before (else converted now).
         ``now_ns``: companion monotonic now (default: the clock). Never waits (the capture
         thread asks)."""
         tel = self._telemetry
+        if tel is None:
+            return False
         now = time.monotonic_ns() if now_ns is None else now_ns
         start = t_mono_ns if since_ns is None else max(t_mono_ns, since_ns)
-        if tel is None or now - start >= wait_s * 1e9:
-            return False
+        deadline = start + round(wait_s * 1e9)
+        if now >= deadline:
+            # Past the wait, held on (at most as long again) only while nothing at all was
+            # read since the deadline: the receiver stalled with the rest of the process
+            # (at 50 Hz of attitudes a working reader reads every 20 ms), its backlog not
+            # read yet. A link that is silent costs that much latency, no more.
+            age_s = tel.last_message_age_s()
+            last_rx = time.monotonic_ns() - age_s * 1e9 if math.isfinite(age_s) else None
+            if last_rx is None or last_rx >= deadline or now >= deadline + (deadline - start):
+                return False
         if t_boot_ns is None:
             try:
                 t_boot_ns = tel.clock.mono_to_boot_ns(t_mono_ns)

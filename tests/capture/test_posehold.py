@@ -37,8 +37,10 @@ def test_a_frame_handed_over_late_waits_from_its_arrival() -> None:
             # 0.1 s after it arrived: held (from its time alone, it would go unposed now)
             assert link.pose_pending(t_frame, 0.5, now_ns=arrived + S // 10, **late)
             assert not link.pose_pending(t_frame, 0.5, t_boot_ns=t_boot, now_ns=arrived + S // 10)
-            # the bound: pose_wait_s after its arrival it goes, telemetry or not
-            assert not link.pose_pending(t_frame, 0.5, now_ns=arrived + S // 2, **late)
+            # pose_wait_s after its arrival, with nothing read from the link since then (the
+            # receiver stalled too, or the link is silent): held as long again, no longer
+            assert link.pose_pending(t_frame, 0.5, now_ns=arrived + 6 * S // 10, **late)
+            assert not link.pose_pending(t_frame, 0.5, now_ns=arrived + S, **late)
             ap.silent = False  # the telemetry after it comes: it goes, posed
             wait_for(
                 lambda: not link.pose_pending(t_frame, 0.5, now_ns=arrived, **late),
