@@ -58,6 +58,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from holescan.detect._boxes import refine_box
 from holescan.detect._calibration import p_hole_of_score
 from holescan.detect._evaluate import overlap
 from holescan.detect._geometry import (
@@ -142,6 +143,9 @@ BRIDGED_DARK = (0.1, 0.25)
 # one (a much weaker dip is a dip in the hole's floor), and it runs on to the cut when it
 # comes within its ring and walls of it (RING_PX + options.grow_px work pixels).
 INNER_SCORE_RATIO = 0.5
+# Pixel-resolution boxes (options.pixel_boxes): a side moves at most this many work pixels
+# from the region's blocks to the opening's edge in the frame's depth.
+PIXEL_REACH = 2
 
 
 def _nms(
@@ -439,10 +443,14 @@ def _measure(
     # Sizes (and so the score) come from the rim's plane; where the opening is, from the
     # terrain's when the border cuts it: placed once the detection has outlived NMS.
     read = _ReadBox((gx0, gy0, gx1, gy1), (ww, hh), bridged, enclosed)
+    shape = _Shape(inside[by0:by1, bx0:bx1], (gx0, gy0), (opening.normal, opening.centre))
     if not (open_px and o.cut_circle):
-        return _Measured(det, None, read)
+        return _Measured(det, None, read, shape)
     return _Measured(
-        det, _Cut(opening, region_uv, (rim_u, rim_v, rim_zs), inside, inv_c, zc, (x0, y0)), read
+        det,
+        _Cut(opening, region_uv, (rim_u, rim_v, rim_zs), inside, inv_c, zc, (x0, y0)),
+        read,
+        shape,
     )
 
 
@@ -467,10 +475,47 @@ class _ReadBox(NamedTuple):
     enclosed: bool  # a pit of the basin analysis (its rim holds all round)
 
 
+class _Shape(NamedTuple):
+    """A measured region as :func:`_pixel_box` refines its box."""
+
+    mask: npt.NDArray[np.bool_]  # the region (walls included) inside its box
+    origin: tuple[int, int]  # its box's top-left, read-area work pixels
+    plane: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]  # the rim's (normal, point)
+
+
 class _Measured(NamedTuple):
     det: Detection
     cut: _Cut | None
     read: _ReadBox | None = None
+    shape: _Shape | None = None
+
+
+def _pixel_box(
+    m: _Measured, f: _FrameData, depth: npt.NDArray[np.uint16], camera: CameraIntrinsics
+) -> Detection:
+    """The detection with its box refined at the frame's own resolution
+    (``options.pixel_boxes``, :func:`detect._boxes.refine_box`): each side the read
+    area does not cut moves to the opening's edge in the depth, within
+    :data:`PIXEL_REACH` work pixels of the region's blocks."""
+    if m.shape is None or m.read is None:
+        return m.det
+    k = f.factor
+    left, top, _, _ = f.bands
+    mask, (ux, uy), plane = m.shape
+    hh, ww = f.z.shape
+    region = np.repeat(np.repeat(mask, k, axis=0), k, axis=1)
+    read_area = (left * k, top * k, (left + ww) * k, (top + hh) * k)
+    origin = ((ux + left) * k, (uy + top) * k)
+    refined = refine_box(region, origin, depth, camera, plane, PIXEL_REACH * k, read_area)
+    if refined is None:
+        return m.det
+    rx0, ry0, rx1, ry1 = refined
+    x, y, w, h = m.det.box
+    (gx0, gy0, gx1, gy1), (rw, rh) = m.read.box, m.read.size
+    # Where the read area cuts the region, its box runs on across the band (_frame_box).
+    bx0, by0 = x if gx0 == 0 else rx0, y if gy0 == 0 else ry0
+    bx1, by1 = x + w if gx1 == rw else rx1, y + h if gy1 == rh else ry1
+    return replace(m.det, box=(bx0, by0, bx1 - bx0, by1 - by0))
 
 
 def _place(m: _Measured, cam: CameraIntrinsics) -> Detection:
@@ -610,6 +655,8 @@ def detect_default(
     found += [m for r in bridged if (m := _measure(r, frame, params, bridged=True)) is not None]
     near_cut = RING_PX + o.grow_px if o.seen_rim_first else None
     kept = _nms(found, params.nms_iou, o.contained, near_cut)
+    if o.pixel_boxes:
+        kept = [m._replace(det=_pixel_box(m, frame, depth, camera)) for m in kept]
     return [replace(d, p_hole=p_hole_of_score(d.score)) for d in (_place(m, cam) for m in kept)]
 
 

@@ -1,0 +1,123 @@
+"""Pixel-resolution boxes: a detection's box refined from the full-resolution depth.
+
+The default detector finds and measures its regions on a reduced work grid (4 x 4 blocks
+at 640 x 480), so a region's box is a multiple of the block and sits where the blocks
+put it: a block counts as read when a few of its pixels are, so the region of an unread
+opening stops up to a block short of the opening's edge on every side, and the readings of
+the far wall just below the rim (behind the rim plane by less than the walls' margin) are
+left out. The labels of a hole are its *visible opening*: the pixels whose ray crosses the
+rim plane inside the outline. On the frame itself that is where the depth drops behind the
+rim's plane, or gives no reading.
+
+:func:`refine_box` takes the region at full resolution (its blocks), and lets it move by at
+most ``reach`` pixels on each side to the pixels that lie behind the rim plane (or have no
+reading) and connect to it: the box grows across the blocks the work grid counted as
+read, and shrinks off blocks that hold no such pixel. Pure: arrays in, a box out.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+from holescan.detect._types import CameraIntrinsics
+
+__all__ = ["BEHIND_M", "BEHIND_PER_M2", "behind_plane", "refine_box"]
+
+# A reading lies behind the rim plane (in the opening) when farther along its ray than the
+# plane by the structured-light depth noise: BEHIND_M + BEHIND_PER_M2 * z**2 (4.5 cm at
+# 2.7 m), the tolerance of :func:`detect._geometry.on_plane`.
+BEHIND_M = 0.02
+BEHIND_PER_M2 = 3e-3
+_K3 = np.ones((3, 3), np.uint8)
+
+
+
+def behind_plane(
+    depth_m: npt.NDArray[np.float32],
+    origin: tuple[int, int],
+    camera: CameraIntrinsics,
+    plane: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]],
+) -> npt.NDArray[np.bool_]:
+    """Which pixels of ``depth_m`` (metres, 0 or NaN = no reading; a window whose top-left
+    pixel is ``origin`` in the frame of ``camera``) read farther than the plane ``(normal,
+    point)`` (camera frame, metres) along their ray, beyond the depth noise.
+
+    >>> cam = CameraIntrinsics(8, 6, 100.0, 100.0, 3.5, 2.5)
+    >>> z = np.full((6, 8), 2.0, np.float32); z[2:4, 3:5] = 2.5
+    >>> plane = (np.array([0.0, 0.0, -1.0]), np.array([0.0, 0.0, 2.0]))
+    >>> behind_plane(z, (0, 0), cam, plane).sum()
+    4
+    """
+    normal, point = plane
+    hh, ww = depth_m.shape
+    x = (np.arange(ww, dtype=np.float64) + origin[0] - camera.cx) / camera.fx
+    y = (np.arange(hh, dtype=np.float64) + origin[1] - camera.cy) / camera.fy
+    along = x[None, :] * float(normal[0]) + y[:, None] * float(normal[1]) + float(normal[2])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z_plane = float(point @ normal) / along
+    tol = BEHIND_M + BEHIND_PER_M2 * z_plane**2
+    with np.errstate(invalid="ignore"):
+        return np.asarray((z_plane > 0) & (depth_m > z_plane + tol), bool)
+
+
+def refine_box(
+    region: npt.NDArray[np.bool_],
+    origin: tuple[int, int],
+    depth: npt.NDArray[np.uint16],
+    camera: CameraIntrinsics,
+    plane: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]],
+    reach: int,
+    read_area: tuple[int, int, int, int] | None = None,
+) -> tuple[int, int, int, int] | None:
+    """The box ``(x0, y0, x1, y1)`` (frame pixels, end exclusive) of the opening around
+    ``region``, from the frame's own depth; None when no pixel of it is behind the plane
+    or unread.
+
+    region : (h, w) bool, the region at full resolution, its top-left pixel at ``origin``.
+    depth : (H, W) the frame's depth (``camera.depth_unit_m`` units, 0 = no reading).
+    plane : ``(normal, point)``, the rim's plane (camera frame, metres).
+    reach : how far (pixels) the refined region may run beyond ``region``.
+    read_area : ``(x0, y0, x1, y1)`` the part of the frame with readings (without its
+        unread border bands); the refined region stays inside it.
+
+    The opening's pixels are those behind the plane or without a reading (:func:`
+    behind_plane`), cleared of lines one pixel wide (noise, a flying pixel's trail); the
+    refined region is those of them within ``reach`` of ``region`` and connected to its
+    own.
+    """
+    hh, ww = depth.shape
+    ax0, ay0, ax1, ay1 = read_area if read_area is not None else (0, 0, ww, hh)
+    ox, oy = origin
+    rh, rw = region.shape
+    x0, y0 = max(ax0, ox - reach), max(ay0, oy - reach)
+    x1, y1 = min(ax1, ox + rw + reach), min(ay1, oy + rh + reach)
+    if x0 >= x1 or y0 >= y1:
+        return None
+    seed = np.zeros((y1 - y0, x1 - x0), np.uint8)
+    sy0, sx0 = max(0, y0 - oy), max(0, x0 - ox)
+    sy1, sx1 = min(rh, y1 - oy), min(rw, x1 - ox)
+    seed[sy0 + oy - y0 : sy1 + oy - y0, sx0 + ox - x0 : sx1 + ox - x0] = region[sy0:sy1, sx0:sx1]
+    raw = depth[y0:y1, x0:x1]
+    z = raw.astype(np.float32) * np.float32(camera.depth_unit_m)
+    opening = (raw == 0) | behind_plane(z, (x0, y0), camera, plane)
+    # Lines one pixel wide (noise, flying pixels, a fattened edge's gaps) are no opening.
+    opening_u8 = np.asarray(cv2.morphologyEx(opening.view(np.uint8), cv2.MORPH_OPEN, _K3), np.uint8)
+    k = cv2.getStructuringElement(cv2.MORPH_RECT, (2 * reach + 1, 2 * reach + 1))
+    allowed = opening_u8 & np.asarray(cv2.dilate(seed, k), np.uint8)
+    n, lab = cv2.connectedComponents(allowed, connectivity=8)
+    if n < 2:
+        return None
+    hit = np.unique(lab[(seed > 0) & (allowed > 0)])
+    hit = hit[hit > 0]
+    if not hit.size:
+        return None
+    keep = np.isin(lab, hit)
+    cols, rows = np.nonzero(keep.any(axis=0))[0], np.nonzero(keep.any(axis=1))[0]
+    return (
+        int(cols[0]) + x0,
+        int(rows[0]) + y0,
+        int(cols[-1]) + 1 + x0,
+        int(rows[-1]) + 1 + y0,
+    )
