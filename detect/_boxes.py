@@ -23,7 +23,7 @@ import numpy.typing as npt
 
 from holescan.detect._types import CameraIntrinsics
 
-__all__ = ["BEHIND_M", "BEHIND_PER_M2", "behind_plane", "refine_box"]
+__all__ = ["BEHIND_M", "BEHIND_PER_M2", "behind_plane", "plane_depth", "refine_box"]
 
 # A reading lies behind the rim plane (in the opening) when farther along its ray than the
 # plane by the structured-light depth noise: BEHIND_M + BEHIND_PER_M2 * z**2 (4.5 cm at
@@ -32,6 +32,23 @@ BEHIND_M = 0.02
 BEHIND_PER_M2 = 3e-3
 _K3 = np.ones((3, 3), np.uint8)
 
+
+def plane_depth(
+    shape: tuple[int, int],
+    origin: tuple[int, int],
+    camera: CameraIntrinsics,
+    plane: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]],
+) -> npt.NDArray[np.float64]:
+    """The axial depth (m) at which each pixel's ray meets ``plane`` ``(normal, point)``
+    (camera frame), over a window of ``shape`` whose top-left pixel is ``origin``; not
+    positive where the ray misses it (parallel, or behind the camera)."""
+    normal, point = plane
+    hh, ww = shape
+    x = (np.arange(ww, dtype=np.float64) + origin[0] - camera.cx) / camera.fx
+    y = (np.arange(hh, dtype=np.float64) + origin[1] - camera.cy) / camera.fy
+    along = x[None, :] * float(normal[0]) + y[:, None] * float(normal[1]) + float(normal[2])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.nan_to_num(float(point @ normal) / along, nan=0.0, posinf=0.0, neginf=0.0)
 
 
 def behind_plane(
@@ -50,16 +67,13 @@ def behind_plane(
     >>> behind_plane(z, (0, 0), cam, plane).sum()
     4
     """
-    normal, point = plane
-    hh, ww = depth_m.shape
-    x = (np.arange(ww, dtype=np.float64) + origin[0] - camera.cx) / camera.fx
-    y = (np.arange(hh, dtype=np.float64) + origin[1] - camera.cy) / camera.fy
-    along = x[None, :] * float(normal[0]) + y[:, None] * float(normal[1]) + float(normal[2])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        z_plane = float(point @ normal) / along
-    tol = BEHIND_M + BEHIND_PER_M2 * z_plane**2
+    z_plane = plane_depth(depth_m.shape, origin, camera, plane)
     with np.errstate(invalid="ignore"):
-        return np.asarray((z_plane > 0) & (depth_m > z_plane + tol), bool)
+        return np.asarray((z_plane > 0) & (depth_m > z_plane + _tol(z_plane)), bool)
+
+
+def _tol(z: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    return np.asarray(BEHIND_M + BEHIND_PER_M2 * z**2)
 
 
 def refine_box(
@@ -70,6 +84,7 @@ def refine_box(
     plane: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]],
     reach: int,
     read_area: tuple[int, int, int, int] | None = None,
+    barrier: npt.NDArray[np.bool_] | None = None,
 ) -> tuple[int, int, int, int] | None:
     """The box ``(x0, y0, x1, y1)`` (frame pixels, end exclusive) of the opening around
     ``region``, from the frame's own depth; None when no pixel of it is behind the plane
@@ -81,6 +96,7 @@ def refine_box(
     reach : how far (pixels) the refined region may run beyond ``region``.
     read_area : ``(x0, y0, x1, y1)`` the part of the frame with readings (without its
         unread border bands); the refined region stays inside it.
+    barrier : (H, W) bool, pixels that are no part of the opening whatever their depth.
 
     The opening's pixels are those behind the plane or without a reading (:func:`
     behind_plane`), cleared of lines one pixel wide (noise, a flying pixel's trail); the
@@ -102,6 +118,8 @@ def refine_box(
     raw = depth[y0:y1, x0:x1]
     z = raw.astype(np.float32) * np.float32(camera.depth_unit_m)
     opening = (raw == 0) | behind_plane(z, (x0, y0), camera, plane)
+    if barrier is not None:
+        opening &= ~barrier[y0:y1, x0:x1]
     # Lines one pixel wide (noise, flying pixels, a fattened edge's gaps) are no opening.
     opening_u8 = np.asarray(cv2.morphologyEx(opening.view(np.uint8), cv2.MORPH_OPEN, _K3), np.uint8)
     k = cv2.getStructuringElement(cv2.MORPH_RECT, (2 * reach + 1, 2 * reach + 1))

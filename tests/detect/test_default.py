@@ -238,9 +238,7 @@ def _px_hole(
 
 @pytest.mark.parametrize("floor_m", [3.7, 5.0])  # a read floor 0.9 m down; a void
 @pytest.mark.parametrize("edges", [(201, 117, 341, 263), (155, 302, 421, 415)])
-def test_box_is_the_openings_to_the_pixel(
-    floor_m: float, edges: tuple[int, int, int, int]
-) -> None:
+def test_box_is_the_openings_to_the_pixel(floor_m: float, edges: tuple[int, int, int, int]) -> None:
     # An opening whose edges lie off the 4 px work grid (pixels x0 .. x1 - 1 wide open):
     # the box is the opening's to a pixel, not its work blocks' (the blocks at its edge
     # read a few of their pixels, so they count as rim and the work grid's box is up to
@@ -419,3 +417,16 @@ def test_opening_axes_on_a_tilted_plane() -> None:
 def test_bad_input_is_a_clear_error(rgb: np.ndarray, depth: np.ndarray, message: str) -> None:
     with pytest.raises(InputError, match=message):
         detect_holes(rgb, depth, CAM)
+
+
+def test_box_of_a_void_is_its_dark_part_not_the_lit_unread_area_beside_it() -> None:
+    # A void (dark inside) running into an unread area as lit as the rubble (a speckled far
+    # field, a bright surface that returns nothing): one unread region, but the hole's box
+    # is the dark part's.
+    void, lit = _px_hole(200, 150, 330, 300, 5.0), _px_hole(330, 100, 390, 350, 5.0)
+    rgb, depth, boxes = scene(holes=(void, lit))
+    rgb[100:350, 330:390] = 110
+    d = top(detect_holes(rgb, depth, CAM))
+    assert iou(d.box, boxes[0]) > 0.95
+    whole = replace(DEFAULT, options=replace(DEFAULT.options, dark_box=False))
+    assert iou(top(detect_holes(rgb, depth, CAM, whole)).box, boxes[0]) < 0.5
