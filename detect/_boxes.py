@@ -17,13 +17,15 @@ read, and shrinks off blocks that hold no such pixel. Pure: arrays in, a box out
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import cv2
 import numpy as np
 import numpy.typing as npt
 
 from holescan.detect._types import CameraIntrinsics
 
-__all__ = ["BEHIND_M", "BEHIND_PER_M2", "behind_plane", "plane_depth", "refine_box"]
+__all__ = ["BEHIND_M", "BEHIND_PER_M2", "behind_plane", "refine_box"]
 
 # A reading lies behind the rim plane (in the opening) when farther along its ray than the
 # plane by the structured-light depth noise: BEHIND_M + BEHIND_PER_M2 * z**2 (4.5 cm at
@@ -33,47 +35,38 @@ BEHIND_PER_M2 = 3e-3
 _K3 = np.ones((3, 3), np.uint8)
 
 
-def plane_depth(
-    shape: tuple[int, int],
-    origin: tuple[int, int],
-    camera: CameraIntrinsics,
-    plane: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]],
-) -> npt.NDArray[np.float64]:
-    """The axial depth (m) at which each pixel's ray meets ``plane`` ``(normal, point)``
-    (camera frame), over a window of ``shape`` whose top-left pixel is ``origin``; not
-    positive where the ray misses it (parallel, or behind the camera)."""
-    normal, point = plane
-    hh, ww = shape
-    x = (np.arange(ww, dtype=np.float64) + origin[0] - camera.cx) / camera.fx
-    y = (np.arange(hh, dtype=np.float64) + origin[1] - camera.cy) / camera.fy
-    along = x[None, :] * float(normal[0]) + y[:, None] * float(normal[1]) + float(normal[2])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.nan_to_num(float(point @ normal) / along, nan=0.0, posinf=0.0, neginf=0.0)
-
-
 def behind_plane(
-    depth_m: npt.NDArray[np.float32],
+    depth: npt.NDArray[np.uint16],
     origin: tuple[int, int],
     camera: CameraIntrinsics,
     plane: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]],
 ) -> npt.NDArray[np.bool_]:
-    """Which pixels of ``depth_m`` (metres, 0 or NaN = no reading; a window whose top-left
-    pixel is ``origin`` in the frame of ``camera``) read farther than the plane ``(normal,
-    point)`` (camera frame, metres) along their ray, beyond the depth noise.
+    """Which pixels of ``depth`` (``camera.depth_unit_m`` units, 0 = no reading; a window
+    whose top-left pixel is ``origin`` in the frame of ``camera``) read farther than the
+    plane ``(normal, point)`` (camera frame, metres) along their ray, beyond the depth
+    noise.
 
     >>> cam = CameraIntrinsics(8, 6, 100.0, 100.0, 3.5, 2.5)
-    >>> z = np.full((6, 8), 2.0, np.float32); z[2:4, 3:5] = 2.5
+    >>> z = np.full((6, 8), 2000, np.uint16); z[2:4, 3:5] = 2500
     >>> plane = (np.array([0.0, 0.0, -1.0]), np.array([0.0, 0.0, 2.0]))
-    >>> behind_plane(z, (0, 0), cam, plane).sum()
+    >>> int(behind_plane(z, (0, 0), cam, plane).sum())
     4
     """
-    z_plane = plane_depth(depth_m.shape, origin, camera, plane)
-    with np.errstate(invalid="ignore"):
-        return np.asarray((z_plane > 0) & (depth_m > z_plane + _tol(z_plane)), bool)
-
-
-def _tol(z: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-    return np.asarray(BEHIND_M + BEHIND_PER_M2 * z**2)
+    normal, point = plane
+    hh, ww = depth.shape
+    f32 = np.float32
+    x = ((np.arange(ww) + origin[0] - camera.cx) / camera.fx).astype(f32)
+    y = ((np.arange(hh) + origin[1] - camera.cy) / camera.fy).astype(f32)
+    along = x[None, :] * f32(normal[0]) + y[:, None] * f32(normal[1])
+    along += f32(normal[2])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z_plane = f32(point @ normal) / along  # where each ray meets the plane (axial, m)
+        limit = z_plane * z_plane
+        limit *= f32(BEHIND_PER_M2)
+        limit += z_plane
+        limit += f32(BEHIND_M)
+        limit *= f32(1.0 / camera.depth_unit_m)
+        return np.asarray((z_plane > 0) & (depth > limit), bool)
 
 
 def refine_box(
@@ -84,7 +77,7 @@ def refine_box(
     plane: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]],
     reach: int,
     read_area: tuple[int, int, int, int] | None = None,
-    barrier: npt.NDArray[np.bool_] | None = None,
+    barrier: Callable[[tuple[int, int, int, int]], npt.NDArray[np.bool_]] | None = None,
 ) -> tuple[int, int, int, int] | None:
     """The box ``(x0, y0, x1, y1)`` (frame pixels, end exclusive) of the opening around
     ``region``, from the frame's own depth; None when no pixel of it is behind the plane
@@ -96,7 +89,8 @@ def refine_box(
     reach : how far (pixels) the refined region may run beyond ``region``.
     read_area : ``(x0, y0, x1, y1)`` the part of the frame with readings (without its
         unread border bands); the refined region stays inside it.
-    barrier : (H, W) bool, pixels that are no part of the opening whatever their depth.
+    barrier : given a window ``(x0, y0, x1, y1)`` of the frame, its pixels (bool) that are
+        no part of the opening whatever their depth.
 
     The opening's pixels are those behind the plane or without a reading (:func:`
     behind_plane`), cleared of lines one pixel wide (noise, a flying pixel's trail); the
@@ -116,10 +110,9 @@ def refine_box(
     sy1, sx1 = min(rh, y1 - oy), min(rw, x1 - ox)
     seed[sy0 + oy - y0 : sy1 + oy - y0, sx0 + ox - x0 : sx1 + ox - x0] = region[sy0:sy1, sx0:sx1]
     raw = depth[y0:y1, x0:x1]
-    z = raw.astype(np.float32) * np.float32(camera.depth_unit_m)
-    opening = (raw == 0) | behind_plane(z, (x0, y0), camera, plane)
+    opening = (raw == 0) | behind_plane(raw, (x0, y0), camera, plane)
     if barrier is not None:
-        opening &= ~barrier[y0:y1, x0:x1]
+        opening &= ~barrier((x0, y0, x1, y1))
     # Lines one pixel wide (noise, flying pixels, a fattened edge's gaps) are no opening.
     opening_u8 = np.asarray(cv2.morphologyEx(opening.view(np.uint8), cv2.MORPH_OPEN, _K3), np.uint8)
     k = cv2.getStructuringElement(cv2.MORPH_RECT, (2 * reach + 1, 2 * reach + 1))
@@ -127,15 +120,10 @@ def refine_box(
     n, lab = cv2.connectedComponents(allowed, connectivity=8)
     if n < 2:
         return None
-    hit = np.unique(lab[(seed > 0) & (allowed > 0)])
-    hit = hit[hit > 0]
-    if not hit.size:
+    lut = np.zeros(n, np.uint8)
+    lut[lab[(seed > 0) & (allowed > 0)]] = 1
+    lut[0] = 0
+    if not lut.any():
         return None
-    keep = np.isin(lab, hit)
-    cols, rows = np.nonzero(keep.any(axis=0))[0], np.nonzero(keep.any(axis=1))[0]
-    return (
-        int(cols[0]) + x0,
-        int(rows[0]) + y0,
-        int(cols[-1]) + 1 + x0,
-        int(rows[-1]) + 1 + y0,
-    )
+    x, y, w, h = cv2.boundingRect(lut[lab])
+    return (x + x0, y + y0, x + w + x0, y + h + y0)

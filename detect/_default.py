@@ -524,7 +524,11 @@ def _pixel_box(
     origin = ((ux + left) * k, (uy + top) * k)
     barrier = None
     if dark_box and f.rel_smooth is not None:
-        barrier = f.once("lit unread", lambda: _lit_unread(f, depth.shape))
+        lit = f.once("lit unread", lambda: _lit_unread(f))
+
+        def barrier(win: tuple[int, int, int, int]) -> npt.NDArray[np.bool_]:
+            return _upsampled(lit, win, (left * k, top * k), k)
+
     refined = refine_box(region, origin, depth, camera, plane, PIXEL_REACH * k, read_area, barrier)
     if refined is None:
         return m.det
@@ -536,19 +540,29 @@ def _pixel_box(
     return replace(m.det, box=(bx0, by0, bx1 - bx0, by1 - by0))
 
 
-def _lit_unread(f: _FrameData, shape: tuple[int, ...]) -> npt.NDArray[np.bool_]:
-    """(H, W) bool: the frame's unread pixels as lit as the rubble around them (the read
-    area's work blocks, nearest-neighbour upsampled; False in the bands)."""
+def _lit_unread(f: _FrameData) -> npt.NDArray[np.bool_]:
+    """The read area's unread work pixels as lit as the rubble around them."""
     assert f.rel_smooth is not None
-    k = f.factor
-    left, top, _, _ = f.bands
-    hh, ww = f.z.shape
-    lit = (f.invalid & (f.rel_smooth >= DARK_CUT)).view(np.uint8)
-    out = np.zeros(shape[:2], bool)
-    out[top * k : (top + hh) * k, left * k : (left + ww) * k] = np.repeat(
-        np.repeat(lit, k, axis=0), k, axis=1
-    ).view(bool)
-    return out
+    return np.asarray(f.invalid & (f.rel_smooth >= DARK_CUT), bool)
+
+
+def _upsampled(
+    mask: npt.NDArray[np.bool_], win: tuple[int, int, int, int], at: tuple[int, int], k: int
+) -> npt.NDArray[np.bool_]:
+    """The window ``(x0, y0, x1, y1)`` (frame pixels, inside the mask's extent) of ``mask``
+    (work pixels, its top-left at frame pixel ``at``, ``k`` frame pixels a side),
+    nearest-neighbour.
+
+    >>> m = np.array([[True, False]]); _upsampled(m, (1, 0, 4, 2), (0, 0), 2).astype(int)
+    array([[1, 0, 0],
+           [1, 0, 0]])
+    """
+    x0, y0, x1, y1 = win[0] - at[0], win[1] - at[1], win[2] - at[0], win[3] - at[1]
+    wx0, wy0 = x0 // k, y0 // k
+    crop = mask[wy0 : (y1 - 1) // k + 1, wx0 : (x1 - 1) // k + 1]
+    up = np.repeat(np.repeat(crop, k, axis=0), k, axis=1)
+    ox, oy = x0 - wx0 * k, y0 - wy0 * k
+    return np.asarray(up[oy : oy + y1 - y0, ox : ox + x1 - x0], bool)
 
 
 def _dark_part(
