@@ -305,7 +305,11 @@ def test_projector_shadow_line_joining_a_hole_does_not_stretch_its_box() -> None
     depth[y + h // 2 : y + h // 2 + 4, x + w - 2 : x + w + 200] = 0
     d = top(detect_holes(rgb, depth, CAM))
     assert iou(d.box, boxes[0]) > 0.8
+    # Without the trim, the box is still the hole's: the line is as lit as the rubble,
+    # no part of the void's dark box (dark_box); without both, the line stretches it.
     kept = replace(DEFAULT, options=replace(DEFAULT.options, trim_spurs=False))
+    assert iou(top(detect_holes(rgb, depth, CAM, kept)).box, boxes[0]) > 0.8
+    kept = replace(kept, options=replace(kept.options, dark_box=False))
     assert iou(top(detect_holes(rgb, depth, CAM, kept)).box, boxes[0]) < 0.6
 
 
