@@ -17,9 +17,15 @@ Seeds 31, 32, 41-44 were used to set the test's cut-offs; use others to measure.
 pass over each absorbing stain and each access hole (``--frames`` views 0.25 m apart, 2.5-
 3.5 m above, a small random tilt, the structured-light model under the vehicle's motion),
 every frame detected, geotagged and merged by :class:`geotag.HoleTracker`; then each hole's
-tier by :class:`geotag.AnnounceGate` with the absorbing-surface vote off ("before") and on.
-Per stain the best tier of the holes lying on it (inside its outline or within 0.5 m of its
-centre, not at an access hole); per access hole the best tier of the holes at its opening.
+tier by :class:`geotag.AnnounceGate` three ways on the same holes: without the
+absorbing-surface vote ("vote off"), with it but without holding unread holes seen only at
+the image's edge ("before") and the default gate ("after"). Per stain the best tier of the
+holes lying on it (inside its outline or within 0.5 m of its centre, not at an access
+hole); per access hole the best tier of the holes at its opening; every hole of every pass
+by where it lies; and each hole announced elsewhere (on neither) traced: the world's
+nearest feature of any kind and its distance, its views, plane readings and sightings
+(score, verdict, cut by the image border). ``--save`` keeps the passes; ``--tables`` prints
+the tables of saved passes again (under the gate of the checkout that runs it).
 
 ``--rgb`` also prints what the colour image says inside the unread part of each detection
 shown (``p_hole >= 0.3``) on a hole and on an absorbing stain: its brightness over the read
