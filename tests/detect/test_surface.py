@@ -143,4 +143,3 @@ def test_a_candidate_the_plane_test_lowers_stays_a_detection() -> None:
         (d,) = _on(detect_holes(rgb, depth, CAM, DEFAULT), box)
         assert d.beyond_range and d.inside_on_plane is not None
         assert plane_verdict(d.inside_on_plane, d.inside_behind) == "behind"
-
