@@ -138,6 +138,9 @@ class Hole:
         its rim's plane, and of those the ones that read it on the plane (an absorbing
         surface) and behind it (a void); 0 for holes read from logs written before
         (:func:`geotag.surface_vote`).
+    seen_whole : some sighting saw the opening whole (its box not cut by the image border)
+        and scored p_hole >= 0.5; False when it was only seen cut, or weakly whole (True for
+        holes read from logs written before: never held for it).
     """
 
     id: int
@@ -158,6 +161,7 @@ class Hole:
     plane_views: int = 0
     surface_views: int = 0
     behind_views: int = 0
+    seen_whole: bool = True
 
 
 class _Track:
@@ -528,6 +532,7 @@ class HoleTracker:
             plane_views=ev.plane_views,
             surface_views=ev.surface_views,
             behind_views=ev.behind_views,
+            seen_whole=ev.whole_strong > 0,
         )
 
     def holes(self) -> list[Hole]:
