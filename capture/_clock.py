@@ -14,9 +14,22 @@ sample; a weighted line is fitted to the bins of a sliding window (``window_ns``
 
 Arrival (fallback, when no TIMESYNC answers). A message stamped ``time_boot_ms`` that arrived
 at ``t_mono`` says ``offset >= boot - t_mono`` (the link never delivers early); each bin keeps
-the largest value (the lower envelope of ``t_mono - boot``) and a line is fitted through those.
+the largest value (the lower envelope of ``t_mono - boot``) and the line is the lowest one
+above all of them (a bin whose every message came late, during a stall, is under it).
 The result is late by the link's smallest latency plus up to 1 ms of ``time_boot_ms``
 truncation, which ``arrival_floor_ns`` states as the uncertainty.
+
+Steps. A sample far off the line (``step_ns``) is not taken. It restarts the estimate only
+when it is part of consistent evidence: ``step_count`` samples in a row off the line on the
+same side, agreeing with each other within ``step_ns``, and (arrivals) spanning at least
+``step_span_ns`` of companion time; the estimate then restarts from those samples. A
+message that arrives late is not a step: an overloaded companion reads its telemetry in
+bursts after a stall, every message of the burst late by the stall (seconds at load 25-30),
+and then on time again, so the burst neither agrees with itself nor lasts. A TIMESYNC
+sample's error is bounded by half its round trip (``max_rtt_ns``), so its steps need no
+span. An autopilot reboot is found at once by its boot clock going back (the caller resets,
+:meth:`ClockSync.reset`); a reboot the boot clock does not show (the link was down longer
+than the autopilot had been up) is a step that lasts, taken after ``step_span_ns``.
 """
 
 from __future__ import annotations
@@ -90,6 +103,8 @@ class _Track:
         max_drift: float,
         step_ns: int,
         step_count: int,
+        step_span_ns: int,
+        envelope: bool,
         name: str,
     ) -> None:
         self._bin_ns = bin_ns
@@ -98,45 +113,80 @@ class _Track:
         self._max_drift = max_drift
         self._step_ns = step_ns
         self._step_count = step_count
+        self._step_span_ns = step_span_ns
+        self._envelope = envelope
         self._name = name
         self._bins: dict[int, _Point] = {}
         self._fit: tuple[int, int, float, float] | None = None  # x_ref, y_ref, drift, rms_ns
-        self._outliers = 0
+        # Samples in a row off the line on one side and agreeing with the first of them:
+        # the evidence of a step, until it is confirmed or broken.
+        self._streak: list[_Point] = []
+        self._streak_sign = 0
         self.newest_x_ns: int | None = None
+        self.n_off_line = 0  # samples off the line not taken (late arrivals, one-offs)
+        self.n_steps = 0  # confirmed steps (the estimate restarted)
 
     def clear(self) -> None:
         self._bins.clear()
         self._fit = None
-        self._outliers = 0
+        self._streak = []
+        self._streak_sign = 0
         self.newest_x_ns = None
 
     def add(self, p: _Point) -> None:
         if self._fit is not None and self._step_ns > 0:
             x_ref, y_ref, drift, _ = self._fit
-            predicted = y_ref + drift * (p.x_ns - x_ref)
-            if abs(p.y_ns - predicted) > self._step_ns:
-                self._outliers += 1
-                if self._outliers < self._step_count:
-                    return
-                _log.warning(
-                    "%s clock offset stepped by %.3f s (autopilot reboot?): restarting estimate",
-                    self._name,
-                    (p.y_ns - predicted) / _NS_PER_S,
-                )
-                self.clear()
-            else:
-                self._outliers = 0
+            off = p.y_ns - (y_ref + drift * (p.x_ns - x_ref))
+            if abs(off) > self._step_ns:
+                self.n_off_line += 1
+                if self._confirms_step(p, 1 if off > 0 else -1):
+                    self._restart(off)
+                return
+            self._streak = []
+        if self._take(p):
+            self._refit()
+
+    def _confirms_step(self, p: _Point, sign: int) -> bool:
+        """Add ``p`` (off the line) to the evidence; True when it confirms a step."""
+        streak = self._streak
+        if sign != self._streak_sign or not streak or abs(p.y_ns - streak[0].y_ns) > self._step_ns:
+            streak = self._streak = []  # a new run of evidence starts with p
+            self._streak_sign = sign
+        streak.append(p)
+        return (
+            len(streak) >= self._step_count
+            and streak[-1].x_ns - streak[0].x_ns >= self._step_span_ns
+        )
+
+    def _restart(self, off_ns: int | float) -> None:
+        streak = self._streak
+        _log.warning(
+            "%s clock offset stepped by %.3f s (%d samples over %.1f s; autopilot reboot?): "
+            "restarting estimate",
+            self._name,
+            off_ns / _NS_PER_S,
+            len(streak),
+            (streak[-1].x_ns - streak[0].x_ns) / _NS_PER_S,
+        )
+        self.clear()
+        self.n_steps += 1
+        for q in streak:  # the evidence is the new estimate's first samples
+            self._take(q)
+        self._refit()
+
+    def _take(self, p: _Point) -> bool:
+        """Bin ``p``; True when it became its bin's best sample."""
         key = p.x_ns // self._bin_ns
         best = self._bins.get(key)
         if self.newest_x_ns is None or p.x_ns > self.newest_x_ns:
             self.newest_x_ns = p.x_ns
         if best is not None and best.cost <= p.cost:
-            return
+            return False
         self._bins[key] = p
         oldest = (self.newest_x_ns - self._window_ns) // self._bin_ns
         for k in [k for k in self._bins if k < oldest]:
             del self._bins[k]
-        self._refit()
+        return True
 
     def points(self) -> list[_Point]:
         return sorted(self._bins.values(), key=lambda q: q.x_ns)
@@ -155,6 +205,11 @@ class _Track:
         x = np.array([(q.x_ns - x_ref) / _NS_PER_S for q in pts])
         y = np.array([float(q.y_ns - y_ref) for q in pts])
         w = np.array([q.weight for q in pts])
+        if self._envelope:
+            a, b = self._upper_envelope(x, y)
+            late = a + b * x - y  # >= 0: how late each bin's earliest sample was
+            self._fit = (x_ref, y_ref + round(a), b / _NS_PER_S, float(np.median(late)))
+            return
         keep = np.ones(len(pts), dtype=bool)
         a, b = 0.0, 0.0
         for _ in range(2):  # fit, drop gross outliers (3.5 robust sigma), fit again
@@ -171,6 +226,27 @@ class _Track:
         rms = float(np.sqrt(np.average(resid**2, weights=w[keep])))
         # re-anchor the line at x_ref: offset(x_ref) = y_ref + a, slope in ns/s -> ns/ns
         self._fit = (x_ref, y_ref + round(a), b / _NS_PER_S, rms)
+
+    def _upper_envelope(self, x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+        """The line above every point, lowest on average (slope within ``max_drift``).
+
+        Arrivals can only be late: each point is at or below the truth, so the truth is
+        the line over them that is as low as it can be (minimise the mean of ``a + b x - y``
+        subject to ``a + b x >= y``). The optimum has a slope between two points (or a
+        bound): try them all (a few dozen bins). Below ``min_fit_span_ns`` of data the
+        drift is 0 and the line is the highest point.
+        """
+        span_ns = (x.max() - x.min()) * _NS_PER_S
+        if len(x) < 3 or span_ns < self._min_fit_span_ns:
+            return float(y.max()), 0.0
+        limit = self._max_drift * _NS_PER_S
+        dx = x[None, :] - x[:, None]
+        pair = np.abs(dx) > 0
+        slopes = ((y[None, :] - y[:, None])[pair] / dx[pair]).clip(-limit, limit)
+        candidates = np.concatenate([slopes, [-limit, 0.0, limit]])
+        intercepts = (y[None, :] - candidates[:, None] * x[None, :]).max(axis=1)
+        best = int(np.argmin(intercepts + candidates * x.mean()))
+        return float(intercepts[best]), float(candidates[best])
 
     def _line(self, x: np.ndarray, y: np.ndarray, w: np.ndarray) -> tuple[float, float]:
         span_ns = (x.max() - x.min()) * _NS_PER_S if len(x) else 0.0
@@ -199,8 +275,11 @@ class ClockSync:
     max_drift : largest plausible drift, dimensionless (default 500 ppm).
     max_rtt_ns : TIMESYNC samples with a longer round trip are ignored, ns.
     arrival_floor_ns : uncertainty stated for the arrival fallback, ns.
-    step_ns : a new sample this far from the line (``step_count`` in a row) restarts the
-        estimate (the autopilot rebooted and its boot clock restarted), ns.
+    step_ns : a sample this far from the line is not taken; ``step_count`` of them in a row,
+        on one side and within ``step_ns`` of each other, restart the estimate (its clock
+        stepped), ns. Arrivals use at least 1 s (their latency is not bounded).
+    step_span_ns : the arrivals off the line must also span this much companion time (a
+        burst of messages read late after a stall is not a step), ns.
     """
 
     def __init__(
@@ -214,6 +293,7 @@ class ClockSync:
         arrival_floor_ns: int = 10_000_000,
         step_ns: int = 100_000_000,
         step_count: int = 3,
+        step_span_ns: int = 3 * _NS_PER_S,
     ) -> None:
         if bin_ns <= 0 or window_ns < bin_ns:
             raise ValueError("need 0 < bin_ns <= window_ns")
@@ -221,7 +301,7 @@ class ClockSync:
         self._arrival_floor_ns = arrival_floor_ns
         self._window_ns = window_ns
 
-        def track(name: str, step: int) -> _Track:
+        def track(name: str, step: int, span: int, envelope: bool) -> _Track:
             return _Track(
                 bin_ns=bin_ns,
                 window_ns=window_ns,
@@ -229,12 +309,16 @@ class ClockSync:
                 max_drift=max_drift,
                 step_ns=step,
                 step_count=step_count,
+                step_span_ns=span,
+                envelope=envelope,
                 name=name,
             )
 
-        self._timesync = track("TIMESYNC", step_ns)
-        # arrival values sit below the truth by the link latency: allow more before a "step"
-        self._arrival = track("arrival", max(step_ns, _NS_PER_S))
+        # a TIMESYNC sample is off by at most half its round trip (<= max_rtt_ns / 2)
+        self._timesync = track("TIMESYNC", step_ns, 0, False)
+        # arrival values sit below the truth by the link latency, which has no bound (a
+        # stalled process reads its messages seconds late): more before a step, and a span
+        self._arrival = track("arrival", max(step_ns, _NS_PER_S), step_span_ns, True)
         self._unix: deque[int] = deque(maxlen=16)
         self._lock = threading.Lock()
         self._estimate = _NONE
@@ -295,6 +379,17 @@ class ClockSync:
     @property
     def source(self) -> ClockSource:
         return self._estimate.source
+
+    @property
+    def n_steps(self) -> int:
+        """Clock steps confirmed (each restarted the estimate; a reset is not counted)."""
+        return self._timesync.n_steps + self._arrival.n_steps
+
+    @property
+    def n_off_line(self) -> int:
+        """Samples off the line by more than a step and not taken: late arrivals (a stalled
+        companion), one-off jumps, and the evidence of the steps."""
+        return self._timesync.n_off_line + self._arrival.n_off_line
 
     @property
     def offset_ns(self) -> int:

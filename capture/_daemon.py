@@ -4,12 +4,13 @@ Threads and processes of one flight:
 
 - **capture** (the caller's thread): reads frames from the source through a pump thread
   with a timeout, stamps each on the autopilot's clock, holds it until the telemetry after
-  it has arrived (at most ``pose_wait_s`` after its time: a loaded computer reads its
-  telemetry late, and a frame posed at once could only extrapolate, or not be posed at
-  all), then queues it to the log writer with its pose and offers it to the detection
-  worker and the live map. Nothing makes it wait (held frames go on as later frames come,
-  all of them when the sensor fails or capture ends); when the log falls behind (short of
-  CPU), the frame is logged and not offered: detection sheds first.
+  it has arrived (at most ``pose_wait_s`` after its time or after it reached this thread,
+  whichever is later: a loaded computer reads its telemetry late, and a frame posed at once
+  could only extrapolate, or not be posed at all), then queues it to the log writer with its
+  pose and offers it to the detection worker and the live map. Nothing makes it wait (held
+  frames go on as later frames come, all of them when the sensor fails or capture ends);
+  when the log falls behind (short of CPU), the frame is logged and not offered: detection
+  sheds first.
 - **log writer** thread (:class:`flightlog.FlightLogWriter`); **detection worker**
   process (:class:`capture._worker.DetectionWorker`); **telemetry** receiver thread
   (:class:`capture._mavlink.Telemetry`): each message logged raw, each position also as a pose.
@@ -61,6 +62,11 @@ from holescan.geotag import (
 from holescan.link import PoseUnavailable
 
 log = logging.getLogger(__name__)
+
+# Frames held for their telemetry at most (a VGA frame is ~1.5 MB: ~48 MB). At 30 fps
+# and pose_wait_s 0.5 s about 15 are held while the telemetry is late; a stall hands over
+# up to the pump's 8 more at once.
+_MAX_HELD = 32
 
 SourceFactory = Callable[[], FrameSource]
 FrameListener = Callable[[Frame, VehiclePose | None], None]
@@ -131,10 +137,11 @@ class Flight:
         self._policy = AnnouncePolicy(self._gate)
         self._views = BestViews()
         self._lock = threading.Lock()
-        # Captured frames waiting (at most pose_wait_s) for the telemetry after them.
-        # (frame, its Unix and boot times read at capture: a clock re-synchronised while
-        # a frame is held, after an autopilot reboot, does not restamp it).
-        self._held: deque[tuple[Frame, int, int | None]] = deque()
+        # Captured frames waiting (at most pose_wait_s after their time or their arrival
+        # here, whichever is later) for the telemetry after them: (frame, its Unix and boot
+        # times read at capture: a clock re-synchronised while a frame is held, after an
+        # autopilot reboot, does not restamp it; its arrival at this thread, mono ns).
+        self._held: deque[tuple[Frame, int, int | None, int]] = deque()
         self._finished = False  # ended by a limit or the source's end, not by a stop
 
     # -- clocks (the autopilot link's) --------------------------------------------------------
@@ -295,29 +302,40 @@ class Flight:
         frame = replace(frame, index=c.frames_captured)
         c.frames_captured += 1
         t = frame.t_mono_ns
-        self._held.append((frame, self.unix_ns(t), self._link.boot_ns(t)))
+        self._held.append((frame, self.unix_ns(t), self._link.boot_ns(t), time.monotonic_ns()))
         self._release()
 
     def _release(self, flush: bool = False) -> None:
         """Log and offer the held frames, oldest first, each once the telemetry after it
-        has arrived (its pose interpolated) or ``pose_wait_s`` after its time (extrapolated
-        if the newest telemetry is recent enough, else unposed). Never waits: a frame still
-        waiting stays held (and the ones after it) until a later frame comes.
+        has arrived (its pose interpolated) or ``pose_wait_s`` after its time or its
+        arrival here, whichever is later (extrapolated if the newest telemetry is recent
+        enough, else unposed). A stalled process hands its frames over late, and reads the
+        telemetry of their time late too: the wait starts when a frame is here to wait.
+        Never waits: a frame still waiting stays held (and the ones after it) until a later
+        frame comes; more than ``_MAX_HELD`` frames held, the oldest goes at once.
         ``flush``: all of them now, when no frame is coming (the end of capture, a sensor
         failure): their telemetry is waited for, until ``pose_wait_s`` after the last."""
         held = self._held
         wait_s = self.config.pose_wait_s
         while held:
-            if not flush and self._link.pose_pending(held[0][0].t_mono_ns, wait_s):
+            frame, _, t_boot, arrived = held[0]
+            if (
+                not flush
+                and len(held) <= _MAX_HELD
+                and self._link.pose_pending(
+                    frame.t_mono_ns, wait_s, since_ns=arrived, t_boot_ns=t_boot
+                )
+            ):
                 return
             self._log_and_offer(*held.popleft(), wait_s=wait_s if flush else 0.0)
 
     def _log_and_offer(
-        self, frame: Frame, t_unix: int, t_boot: int | None, *, wait_s: float
+        self, frame: Frame, t_unix: int, t_boot: int | None, arrived: int, *, wait_s: float
     ) -> None:
         assert self._writer is not None and self._worker is not None
         c = self.counters
-        pose = self.pose(frame.t_mono_ns, wait_s=wait_s)
+        # The pose at the boot time the frame is logged with (read at capture).
+        pose = self._link.pose(frame.t_mono_ns, wait_s=wait_s, since_ns=arrived, t_boot_ns=t_boot)
         if pose is None:
             c.frames_unposed += 1
         if not self._writer.write_frame(frame, t_unix, pose=pose, t_boot_ns=t_boot):

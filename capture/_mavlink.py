@@ -257,8 +257,21 @@ class Telemetry(RateRequests):
                 self._cond.wait(remaining)
             return self._target
 
-    def pose_at(self, t_boot_ns: int) -> VehiclePose:
-        """Pose at autopilot boot time ``t_boot_ns``; raises :class:`PoseUnavailable`."""
+    def pose_at(self, t_boot_ns: int, *, wait_s: float = 0.0) -> VehiclePose:
+        """Pose at autopilot boot time ``t_boot_ns``; raises :class:`PoseUnavailable`.
+
+        With ``wait_s > 0``, first wait up to that long for samples after the time, so the
+        pose is interpolated instead of extrapolated.
+        """
+        if wait_s > 0:
+            deadline = time.monotonic() + wait_s
+            with self._cond:
+                while True:
+                    newest = self.poses.newest_t_boot_ns
+                    remaining = deadline - time.monotonic()
+                    if (newest is not None and newest >= t_boot_ns) or remaining <= 0:
+                        break
+                    self._cond.wait(remaining)
         return self.poses.pose_at(t_boot_ns)
 
     def pose_at_mono(self, t_mono_ns: int, *, wait_s: float = 0.0) -> VehiclePose:
@@ -272,16 +285,7 @@ class Telemetry(RateRequests):
             t_boot_ns = self.clock.mono_to_boot_ns(t_mono_ns)
         except ClockUnavailable as err:
             raise PoseUnavailable(str(err)) from err
-        if wait_s > 0:
-            deadline = time.monotonic() + wait_s
-            with self._cond:
-                while True:
-                    newest = self.poses.newest_t_boot_ns
-                    remaining = deadline - time.monotonic()
-                    if (newest is not None and newest >= t_boot_ns) or remaining <= 0:
-                        break
-                    self._cond.wait(remaining)
-        return self.poses.pose_at(t_boot_ns)
+        return self.pose_at(t_boot_ns, wait_s=wait_s)
 
     def send_with(self, fn: Callable[[Any], None]) -> None:
         """``fn(mav)`` with this link's sender under its lock (for a server sharing the link;

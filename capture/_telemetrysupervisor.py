@@ -158,35 +158,61 @@ class TelemetrySupervisor:
         except ClockUnavailable:
             return None
 
-    def pose_pending(self, t_mono_ns: int, wait_s: float) -> bool:
+    def pose_pending(
+        self,
+        t_mono_ns: int,
+        wait_s: float,
+        *,
+        since_ns: int | None = None,
+        t_boot_ns: int | None = None,
+        now_ns: int | None = None,
+    ) -> bool:
         """Whether the telemetry after a companion monotonic time may still come: the link
-        is up and synchronised, nothing as new as the time has arrived yet, and the time
-        is less than ``wait_s`` old. Never waits (the capture thread asks)."""
+        is up and synchronised, nothing as new as the time has arrived yet, and less than
+        ``wait_s`` has passed since ``since_ns`` (default: the time itself; the daemon
+        passes the later of a frame's time and its arrival at the capture thread).
+        ``t_boot_ns``: the time's boot time as read before (else converted now).
+        ``now_ns``: companion monotonic now (default: the clock). Never waits (the capture
+        thread asks)."""
         tel = self._telemetry
-        if tel is None or time.monotonic_ns() - t_mono_ns >= wait_s * 1e9:
+        now = time.monotonic_ns() if now_ns is None else now_ns
+        start = t_mono_ns if since_ns is None else max(t_mono_ns, since_ns)
+        if tel is None or now - start >= wait_s * 1e9:
             return False
-        try:
-            t_boot_ns = tel.clock.mono_to_boot_ns(t_mono_ns)
-        except ClockUnavailable:
-            return False
+        if t_boot_ns is None:
+            try:
+                t_boot_ns = tel.clock.mono_to_boot_ns(t_mono_ns)
+            except ClockUnavailable:
+                return False
         newest = tel.poses.newest_t_boot_ns
         return newest is None or newest < t_boot_ns
 
     def pose(
-        self, t_mono_ns: int, wait_s: float = 0.0, invalid: list[str] | None = None
+        self,
+        t_mono_ns: int,
+        wait_s: float = 0.0,
+        invalid: list[str] | None = None,
+        *,
+        since_ns: int | None = None,
+        t_boot_ns: int | None = None,
     ) -> VehiclePose | None:
         """The vehicle pose at a companion monotonic time, or None: no link, not
         synchronised, or a position the autopilot does not have (:class:`PoseInvalid`: no
         fix, EKF without a position, 0/0, a jump; the reason appended to ``invalid``, kept
         in :attr:`invalid`). ``wait_s``: wait for the telemetry after the time until
-        ``wait_s`` after it (no longer: a frame held that long already is not waited for
-        again)."""
+        ``wait_s`` after ``since_ns`` (default: the time itself; no longer: a frame held
+        that long already is not waited for again). ``t_boot_ns``: the time's boot time as
+        read before (a frame's, at capture: its pose is the one at the time it is logged
+        with), else converted now."""
         tel = self._telemetry
         if tel is None:
             return None
-        wait_s = max(0.0, wait_s - (time.monotonic_ns() - t_mono_ns) / 1e9)
+        start = t_mono_ns if since_ns is None else max(t_mono_ns, since_ns)
+        wait_s = max(0.0, wait_s - (time.monotonic_ns() - start) / 1e9)
         try:
-            return tel.pose_at_mono(t_mono_ns, wait_s=wait_s)
+            if t_boot_ns is None:
+                return tel.pose_at_mono(t_mono_ns, wait_s=wait_s)
+            return tel.pose_at(t_boot_ns, wait_s=wait_s)
         except PoseInvalid as err:
             if str(err) != self.invalid:
                 log.info("frames not posed: %s", err)

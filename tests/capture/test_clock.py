@@ -166,3 +166,89 @@ def test_boot_to_unix_from_system_time() -> None:
     clock.add_system_time(150 * S, 0)  # no GPS time yet: ignored
     err = clock.boot_to_unix_ns(123 * S) - (123 * S + unix_minus_boot)
     assert abs(err) < 300 * US
+
+
+def _arrivals_with_stalls(
+    truth: _Truth, rng: random.Random, *, start: int, seconds: float, hz: float = 50.0
+) -> list[tuple[int, int]]:
+    """(arrival mono, ``time_boot_ms`` in ns) of messages sent at ``hz``, in arrival order.
+
+    Read 2-10 ms after sent, except that every 2-5 s the companion's process stalls for
+    1-2.5 s (an overloaded Pi): what was sent meanwhile is read at the stall's end in one
+    burst, 0.1 ms apart, each message as late as the stall left it."""
+    out: list[tuple[int, int]] = []
+    t = start
+    end = start + round(seconds * S)
+    stall_at = start + round(rng.uniform(2, 5) * S)
+    stall_end = stall_at + round(rng.uniform(1.0, 2.5) * S)
+    reader_free = start  # the reader handles one message at a time
+    while t < end:
+        if t >= stall_end:
+            stall_at = t + round(rng.uniform(2, 5) * S)
+            stall_end = stall_at + round(rng.uniform(1.0, 2.5) * S)
+        arrival = t + round(rng.uniform(2, 10) * MS)
+        if stall_at <= arrival < stall_end:
+            arrival = stall_end
+        arrival = max(arrival, reader_free + 100 * US)
+        reader_free = arrival
+        out.append((arrival, truth.boot(t) // MS * MS))
+        t += round(S / hz)
+    return out
+
+
+def test_late_arrivals_of_a_stalled_companion_are_not_a_clock_step(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    # A burst of messages read 1-2.5 s late after each stall used to read as a step
+    # ("arrival clock offset stepped by -1.4 s") and restart the estimate from a late
+    # message: seconds off, every few seconds, at load 25-30. The earliest arrivals hold
+    # the offset; a stall's burst neither lasts nor agrees with itself.
+    truth = _Truth(offset0=-321 * S + 654_321, drift=25e-6)
+    clock = ClockSync()
+    worst = 0
+    arrivals = _arrivals_with_stalls(truth, random.Random(11), start=500 * S, seconds=60)
+    assert sum(a - t_boot + truth.offset0 > 1 * S for a, t_boot in arrivals) > 300  # 1 s late
+    for i, (t_mono, t_boot) in enumerate(arrivals):
+        clock.add_arrival(t_mono, t_boot)
+        if i >= 50:  # from the second second on
+            err = clock.mono_to_boot_ns(t_mono) - truth.boot(t_mono)
+            worst = max(worst, abs(err))
+            assert -15 * MS < err < 1 * MS, (i, err)
+    assert clock.n_steps == 0 and clock.n_off_line > 300
+    assert "stepped" not in caplog.text
+    print(f"\nstalled arrivals: worst offset error {worst / MS:.1f} ms")
+
+
+def test_a_lasting_arrival_step_is_taken_despite_the_stalls(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    # The autopilot rebooted while the link was down longer than it had been up: its boot
+    # clock does not go back, but every message from then on is 40 s "late". That lasts:
+    # after step_span_ns (3 s) of it, the estimate restarts, once, stalls or not.
+    before = _Truth(offset0=50 * S, drift=0.0)
+    after = _Truth(offset0=10 * S, drift=0.0)
+    rng = random.Random(12)
+    clock = ClockSync()
+    for t_mono, t_boot in _arrivals_with_stalls(before, rng, start=500 * S, seconds=20):
+        clock.add_arrival(t_mono, t_boot)
+    t_step = 530 * S
+    errors: list[tuple[int, int]] = []
+    for t_mono, t_boot in _arrivals_with_stalls(after, rng, start=t_step, seconds=20):
+        clock.add_arrival(t_mono, t_boot)
+        errors.append((t_mono, clock.mono_to_boot_ns(t_mono) - after.boot(t_mono)))
+    assert clock.n_steps == 1 and caplog.text.count("stepped") == 1
+    late = [e for t, e in errors if t > t_step + 8 * S]  # the span, and a stall, later
+    assert late and all(-15 * MS < e < 1 * MS for e in late)
+
+
+def test_a_timesync_step_needs_no_span() -> None:
+    # TIMESYNC samples are off by at most half their round trip: three in a row that agree
+    # are a step at once (a real autopilot's reboot is also seen by its boot clock).
+    before = _Truth(offset0=100 * S, drift=0.0)
+    clock = ClockSync()
+    rng = random.Random(13)
+    t = _feed_timesync(clock, before, rng, start=500 * S, seconds=10)
+    after = _Truth(offset0=before.offset0 + 2 * S, drift=0.0)
+    end = _feed_timesync(clock, after, rng, start=t, seconds=1)
+    assert clock.n_steps == 1
+    assert abs(clock.mono_to_boot_ns(end) - after.boot(end)) < 200 * US

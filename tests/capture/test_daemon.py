@@ -15,11 +15,17 @@ import pytest
 
 from holescan.capture import DEFAULT_RATES_HZ, Flight, FlightConfig, Telemetry
 from holescan.detect import CameraIntrinsics, Frame
-from holescan.flightlog import LoggedFrame, LoggedPose, read_flight_log
+from holescan.flightlog import LoggedFrame, LoggedMavlink, LoggedPose, read_flight_log
+from holescan.link import mavlink
 from holescan.sim import SimAutopilot, SimPath
 from tests._support import free_udp_port
 
 CAM = CameraIntrinsics.xtion()
+_POSE_MESSAGES = {
+    "GLOBAL_POSITION_INT": "position",
+    "ATTITUDE": "attitude",
+    "ATTITUDE_QUATERNION": "attitude",
+}
 
 
 class ScriptedSource:
@@ -56,16 +62,28 @@ class ScriptedSource:
 
 def unposed_with_telemetry(files: tuple[Path, ...]) -> list[tuple[int, int | None]]:
     """(index, boot time) of each logged frame without a pose although the autopilot's
-    positions around it (as logged) are no more than the pose buffer's 0.5 s apart. A
-    simulator starved of CPU sends late: frames in such a gap are rightly unposed."""
-    records = list(read_flight_log(files, kinds={LoggedFrame, LoggedPose}))
-    samples = sorted(r.pose.t_boot_ns for r in records if isinstance(r, LoggedPose))
+    positions and attitudes around it (its raw messages, as logged) are each no more than
+    the pose buffer's 0.5 s apart. A simulator starved of CPU sends late, and drops what
+    is due more than 0.5 s ago (at 50 Hz, attitudes go first): frames in such a gap are
+    rightly unposed."""
+    records = list(read_flight_log(files, kinds={LoggedFrame, LoggedMavlink}))
+    mav = mavlink.MAVLink(None)
+    series: dict[str, list[int]] = {"position": [], "attitude": []}
+    for r in records:
+        if isinstance(r, LoggedMavlink) and r.name in _POSE_MESSAGES:
+            msg = mav.decode(bytearray(r.packet))
+            series[_POSE_MESSAGES[r.name]].append(int(msg.time_boot_ms) * 1_000_000)
+    samples = [sorted(v) for v in series.values()]
+
+    def bridged(t: int, times: list[int]) -> bool:
+        i = bisect.bisect_right(times, t)
+        return 0 < i < len(times) and times[i] - times[i - 1] <= 5e8
+
     out: list[tuple[int, int | None]] = []
     for r in records:
         if not isinstance(r, LoggedFrame) or r.pose is not None:
             continue
-        i = bisect.bisect_right(samples, r.t_boot_ns) if r.t_boot_ns is not None else 0
-        if r.t_boot_ns is None or (0 < i < len(samples) and samples[i] - samples[i - 1] <= 5e8):
+        if r.t_boot_ns is None or all(bridged(r.t_boot_ns, times) for times in samples):
             out.append((r.frame.index, r.t_boot_ns))
     return out
 

@@ -116,8 +116,11 @@ def test_random_datagrams_on_udp_cost_no_telemetry() -> None:
     clean = run(3.0, 0.0)
     dirty = run(3.0, 60.0, seed=3)
     print(f"\nclean {clean}\ngarbage {dirty}")
-    assert dirty["garbage_datagrams"] > 100
-    assert dirty["bad_bytes"] > 10_000
+    # 60 datagrams/s for 3 s: 180 on an idle machine, 94 once under a load of 20 (the
+    # injecting thread starved too). At least a third of them, each 1-299 bytes (150 mean),
+    # all of whose bytes the parser must have thrown away.
+    assert dirty["garbage_datagrams"] >= 60
+    assert dirty["bad_bytes"] > 50 * dirty["garbage_datagrams"]
     assert dirty["messages"] >= 0.95 * clean["messages"]  # before the fix: ~58 %
     # Garbage costs no poses beyond what the same machine loses without it (a starved CPU
     # delays every message alike: the clean run is the yardstick); before the fix: 19 of 171.

@@ -16,6 +16,7 @@ from holescan.flightlog import LoggedFrame, read_flight_log
 from holescan.geotag import local_en_m
 from holescan.sim import SimAutopilot, SimPath
 from tests._support import free_udp_port, wait_for
+from tests.capture.test_daemon import unposed_with_telemetry
 from tests.capture.test_faults import floor_flight
 
 # 1 m/s: a pose from the wrong side of a 1.5 s reboot is metres off.
@@ -59,9 +60,17 @@ def test_autopilot_reboot_in_flight(tmp_path: Path) -> None:
     after = [r for r in frames if r.frame.t_mono_ns > t_reboot + 1_500_000_000]
     posed_after = [r for r in after if r.pose is not None]
     assert posed_after  # re-synchronised (how soon on a real ArduPilot: benchmarks/sitl_sortie.py)
-    # Posed again from the first posed frame after the reboot on.
-    resynced = [r for r in after if r.frame.t_mono_ns >= posed_after[0].frame.t_mono_ns]
-    assert len(posed_after) >= 0.8 * len(resynced)
+    # Posed again from the first posed frame after the reboot on, but where the (CPU-
+    # starved) simulator left a gap in its positions or attitudes the pose buffer does not
+    # bridge.
+    unexplained = {i for i, _ in unposed_with_telemetry(box["s"].log.files)}  # type: ignore[attr-defined]
+    resynced = [
+        r
+        for r in after
+        if r.frame.t_mono_ns >= posed_after[0].frame.t_mono_ns
+        and (r.pose is not None or r.frame.index in unexplained)
+    ]
+    assert len(posed_after) >= 0.8 * len(resynced), (len(posed_after), len(resynced))
     worst = 0.0
     for r in frames:
         if r.pose is None:
