@@ -38,6 +38,8 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "no rim-plane test of unread regions (absorbing surfaces)": {"surface_plane": False},
     "thin spurs kept on candidate regions": {"trim_spurs": False},
     "NMS by score alone between bridged and seen-rim basins": {"seen_rim_first": False},
+    "boxes of the work grid (not refined at the frame's resolution)": {"pixel_boxes": False},
+    "an unread region's box takes in its lit unread part": {"dark_box": False},
 }
 
 _DATASETS: dict[Path, Any] = {}

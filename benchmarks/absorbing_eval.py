@@ -17,9 +17,15 @@ Seeds 31, 32, 41-44 were used to set the test's cut-offs; use others to measure.
 pass over each absorbing stain and each access hole (``--frames`` views 0.25 m apart, 2.5-
 3.5 m above, a small random tilt, the structured-light model under the vehicle's motion),
 every frame detected, geotagged and merged by :class:`geotag.HoleTracker`; then each hole's
-tier by :class:`geotag.AnnounceGate` with the absorbing-surface vote off ("before") and on.
-Per stain the best tier of the holes lying on it (inside its outline or within 0.5 m of its
-centre, not at an access hole); per access hole the best tier of the holes at its opening.
+tier by :class:`geotag.AnnounceGate` three ways on the same holes: without the
+absorbing-surface vote ("vote off"), with it but without holding unread holes seen only at
+the image's edge ("before") and the default gate ("after"). Per stain the best tier of the
+holes lying on it (inside its outline or within 0.5 m of its centre, not at an access
+hole); per access hole the best tier of the holes at its opening; every hole of every pass
+by where it lies; and each hole announced elsewhere (on neither) traced: the world's
+nearest feature of any kind and its distance, its views, plane readings and sightings
+(score, verdict, cut by the image border). ``--save`` keeps the passes; ``--tables`` prints
+the tables of saved passes again (under the gate of the checkout that runs it).
 
 ``--rgb`` also prints what the colour image says inside the unread part of each detection
 shown (``p_hole >= 0.3``) on a hole and on an absorbing stain: its brightness over the read
@@ -279,48 +285,97 @@ def _pass(job: tuple[int, int, str, int]) -> dict[str, Any]:
                     return kind, t.id
         return "other", -1
 
+    def nearest(h: Any) -> tuple[str, float, bool]:
+        """The world's nearest feature of any kind: its kind, distance (m), inside it."""
+        x, y, _ = anchor.to_world(h.lat_deg, h.lon_deg, h.alt_m)
+        pt = Point(float(x), float(y))
+        best = ("terrain", math.inf, False)
+        for t in world.holes:
+            poly = Polygon(t.opening)
+            dist = float(poly.distance(pt))
+            if dist < best[1]:
+                kind = "absorbing stain" if t in stains else t.kind
+                best = (kind, dist, bool(poly.contains(pt)))
+        return best
+
     holes = pipe.holes()
+    print(f"  pass {wseed}/{mode} {target.id} done", file=sys.stderr, flush=True)
     return {
         "mode": mode,
         "target": (wseed, target.id),
         "holes": [(h, *where(h)) for h in holes],
+        "near": {h.id: nearest(h) for h in holes},
+        "sightings": {
+            h.id: [
+                (s.frame_index, round(s.score, 3), s.plane, s.cut_by_border)
+                for s in pipe.tracker.sightings_of(h.id)
+            ]
+            for h in holes
+        },
     }
+
+
+def _gates() -> dict[str, Any]:
+    """The gates compared on the same holes: without the absorbing-surface vote, as before
+    (the vote, no hold for holes seen only at the image's edge), and the default."""
+    from holescan.geotag import AnnounceGate
+
+    return {
+        "vote off": AnnounceGate(surface_min_views=10**9, edge_behind_views=0),
+        "before": AnnounceGate(edge_behind_views=0),
+        "after": AnnounceGate(),
+    }
+
+
+def _trace(r: dict[str, Any], h: Any) -> str:
+    """A hole's evidence in one line, its sightings as score + verdict initial (s surface,
+    b behind, u unread, m mixed, - not measured) + c when cut by the image border."""
+    near_kind, dist, inside = r["near"][h.id]
+    sights = " ".join(
+        f"{sc:.2f}{(pl or '-')[0]}{'c' if cut else ''}" for _, sc, pl, cut in r["sightings"][h.id]
+    )
+    return (
+        f"hole {h.id}: p_hole {h.p_hole:.2f}, views {h.views}, plane views "
+        f"{h.plane_views} (surface {h.surface_views}, behind {h.behind_views}), seen whole "
+        f"{h.seen_whole}; nearest {near_kind} {'(inside)' if inside else f'{dist:.2f} m'}; "
+        f"sightings {sights}"
+    )
 
 
 def holes_table(passes: list[dict[str, Any]]) -> list[str]:
     """Per target kind, the tier its own pass gave it (the best of the holes lying on it)
-    with the vote off and on; the holes elsewhere announced; the holes the vote held."""
-    from holescan.geotag import AnnounceGate
-
-    gates = {"off": AnnounceGate(surface_min_views=10**9), "on": AnnounceGate()}
+    per gate; every hole of every pass by where it lies; the holes elsewhere announced,
+    traced to the world's nearest feature; the holes the default gate holds back."""
+    gates = _gates()
     tiers: dict[str, list[tuple[str, str]]] = {g: [] for g in gates}
     held: list[str] = []
-    false_announced = dict.fromkeys(gates, 0)
+    others: dict[str, list[str]] = {g: [] for g in gates}
     for p in passes:
         wseed, tid = p["target"]
-        best = dict.fromkeys(gates, "none")
-        for h, kind, at in p["holes"]:
-            for g, gate in gates.items():
+        where = f"{wseed} pass over {p['mode']} {tid}"
+        for g, gate in gates.items():
+            best = "none"
+            for h, kind, at in p["holes"]:
                 t = gate.tier(h)
-                if kind == "other":
-                    false_announced[g] += t == "announced"
-                elif (kind, at) == (p["mode"], tid) and _TIER_RANK[t] > _TIER_RANK[best[g]]:
-                    best[g] = t
-            if gates["on"].surface_held(h):
+                if kind == "other" and t == "announced":
+                    others[g].append(f"{where}: {_trace(p, h)}")
+                elif (kind, at) == (p["mode"], tid) and _TIER_RANK[t] > _TIER_RANK[best]:
+                    best = t
+            tiers[g].append((p["mode"], best))
+        after, before = gates["after"], gates["before"]
+        for h, kind, at in p["holes"]:
+            if after.tier(h) != before.tier(h) or after.surface_held(h):
+                why = "edge" if after.edge_held(h) else "vote"
                 held.append(
-                    f"{kind} {wseed}/{at} (pass over {p['mode']} {tid}): p_hole "
-                    f"{h.p_hole:.2f}, {h.sightings} sightings, plane views {h.plane_views} "
-                    f"(surface {h.surface_views}, behind {h.behind_views}) -> "
-                    f"{gates['off'].tier(h)} before"
+                    f"{kind} {at} ({where}), {before.tier(h)} -> {after.tier(h)} ({why}): "
+                    f"{_trace(p, h)}"
                 )
-        for g in gates:
-            tiers[g].append((p["mode"], best[g]))
     lines = [
-        "| pass over | vote | announced | review | candidate | not found |",
+        "| pass over | gate | announced | review | candidate | not found |",
         "|---|---|---|---|---|---|",
     ]
     for kind, name in (("stain", "absorbing stains"), ("hole", "access holes")):
-        n = sum(m == kind for m, _ in tiers["off"])
+        n = sum(m == kind for m, _ in tiers["after"])
         for g in gates:
             c = {t: sum(m == kind and v == t for m, v in tiers[g]) for t in _TIER_RANK}
             lines.append(
@@ -330,10 +385,14 @@ def holes_table(passes: list[dict[str, Any]]) -> list[str]:
     # Every hole of every pass (a stain is often seen in a pass over a hole nearby)
     lines += [
         "",
-        "| holes of all passes, lying | vote | announced | review | candidate |",
+        "| holes of all passes, lying | gate | announced | review | candidate |",
         "|---|---|---|---|---|",
     ]
-    for kind, name in (("stain", "on an absorbing stain"), ("hole", "at an access hole")):
+    for kind, name in (
+        ("stain", "on an absorbing stain"),
+        ("hole", "at an access hole"),
+        ("other", "elsewhere"),
+    ):
         found = [h for p in passes for h, k, _ in p["holes"] if k == kind]
         for g, gate in gates.items():
             c = {t: sum(gate.tier(h) == t for h in found) for t in _TIER_RANK}
@@ -341,25 +400,22 @@ def holes_table(passes: list[dict[str, Any]]) -> list[str]:
                 f"| {name} ({len(found)}) | {g} | {c['announced']} | {c['review']} | "
                 f"{c['candidate']} |"
             )
-    lines.append(
-        f"\nother holes announced (neither stain nor access hole): "
-        f"{false_announced['off']} before, {false_announced['on']} with the vote"
-    )
-    lines.append(f"holes the vote held back ({len(held)}):")
+    for g in gates:
+        lines.append(f"\nholes announced elsewhere (on neither), {g}: {len(others[g])}")
+        lines += [f"  {s}" for s in others[g]]
+    lines.append(f"\nholes the default gate holds back ({len(held)}):")
     lines += [f"  {s}" for s in held]
     return lines
 
 
 def plane_views_table(passes: list[dict[str, Any]]) -> list[str]:
-    """Per target kind: holes on targets with their plane-view counts (for tuning)."""
+    """Per hole on a target: its evidence (:func:`_trace`) and tier (for tuning)."""
+    gate = _gates()["after"]
     lines = []
     for p in passes:
         for h, kind, tid in p["holes"]:
-            if kind != "other" and h.plane_views:
-                lines.append(
-                    f"  {kind} {p['target'][0]}/{tid}: p {h.p_hole:.2f} views {h.views} "
-                    f"plane {h.plane_views} surface {h.surface_views} behind {h.behind_views}"
-                )
+            if kind != "other":
+                lines.append(f"  {kind} {p['target'][0]}/{tid} {gate.tier(h)}: {_trace(p, h)}")
     return sorted(lines)
 
 

@@ -28,6 +28,8 @@ Printed per gate of a grid and for the chosen one, per flight kind and overall:
 
 ``--no-surface-vote``: the chosen gate without the absorbing-surface vote
 (:meth:`geotag.AnnounceGate.surface_held`), for comparison on the same flights.
+``--no-edge-hold``: without holding unread holes seen only at the image's edge
+(:meth:`geotag.AnnounceGate.edge_held`), likewise.
 
 ``--holes``: where the thresholds can go. Per hole of every flight (true when it lies at an
 access hole, as above), the highest hole-level ``p_hole`` it reached at all (what the
@@ -210,6 +212,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--no-surface-vote", action="store_true", help="the gate without the absorbing-surface vote"
     )
+    ap.add_argument(
+        "--no-edge-hold",
+        action="store_true",
+        help="the gate without holding unread holes seen only at the image's edge",
+    )
     args = ap.parse_args(argv)
     a, _, b = args.seeds.partition("-")
     seeds = range(int(a), int(b or a) + 1)
@@ -232,13 +239,16 @@ def main(argv: list[str] | None = None) -> int:
                 if pr <= pa:
                     g = AnnounceGate(min_p_hole=pa, review_min_p_hole=pr)
                     print(_line(f"A>={pa:.2f} R>={pr:.2f}", score(everything, g)))
-    vote = {"surface_min_views": 10**9} if args.no_surface_vote else {}
+    vote: dict[str, int] = {"surface_min_views": 10**9} if args.no_surface_vote else {}
+    if args.no_edge_hold:
+        vote["edge_behind_views"] = 0
     gate = AnnounceGate(min_p_hole=args.announce, review_min_p_hole=args.review, **vote)
     if args.holes:
         hole_levels(everything, gate)
     print(
         f"gate: announce p_hole >= {gate.min_p_hole}, review p_hole >= {gate.review_min_p_hole}"
         f", surface vote {'off' if args.no_surface_vote else 'on'}"
+        f", edge hold {'off' if args.no_edge_hold else 'on'}"
     )
     for kind, rs in by_kind.items():
         print(_line(kind, score(rs, gate)))

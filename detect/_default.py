@@ -58,6 +58,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from holescan.detect._boxes import refine_box
 from holescan.detect._calibration import p_hole_of_score
 from holescan.detect._evaluate import overlap
 from holescan.detect._geometry import (
@@ -81,6 +82,7 @@ from holescan.detect._regions import (
     basin_depths,
     basin_regions,
     block_depth,
+    components,
     no_reading_regions,
     trim_spurs,
     unread_bands,
@@ -142,6 +144,13 @@ BRIDGED_DARK = (0.1, 0.25)
 # one (a much weaker dip is a dip in the hole's floor), and it runs on to the cut when it
 # comes within its ring and walls of it (RING_PX + options.grow_px work pixels).
 INNER_SCORE_RATIO = 0.5
+# Pixel-resolution boxes (options.pixel_boxes): a side moves at most this many work pixels
+# from the region's blocks to the opening's edge in the frame's depth.
+PIXEL_REACH = 2
+# The box of an unread region (options.dark_box) is its dark part's when that part is
+# at least this fraction of the region.
+DARK_BOX_KEEP = 0.5
+_K3 = np.ones((3, 3), np.uint8)
 
 
 def _nms(
@@ -260,6 +269,7 @@ class _FrameData:
     factor: int
     #: The read area's place in the work grid: unread bands (left, top, right, bottom).
     bands: tuple[int, int, int, int] = (0, 0, 0, 0)
+    rel_smooth: npt.NDArray[np.float32] | None = None
     #: What measuring a region found that the way it was found does not change (:meth:`once`).
     memo: dict[Hashable, object] = field(default_factory=dict, compare=False)
 
@@ -439,10 +449,14 @@ def _measure(
     # Sizes (and so the score) come from the rim's plane; where the opening is, from the
     # terrain's when the border cuts it: placed once the detection has outlived NMS.
     read = _ReadBox((gx0, gy0, gx1, gy1), (ww, hh), bridged, enclosed)
+    shape = _Shape(inside[by0:by1, bx0:bx1], (gx0, gy0), (opening.normal, opening.centre))
     if not (open_px and o.cut_circle):
-        return _Measured(det, None, read)
+        return _Measured(det, None, read, shape)
     return _Measured(
-        det, _Cut(opening, region_uv, (rim_u, rim_v, rim_zs), inside, inv_c, zc, (x0, y0)), read
+        det,
+        _Cut(opening, region_uv, (rim_u, rim_v, rim_zs), inside, inv_c, zc, (x0, y0)),
+        read,
+        shape,
     )
 
 
@@ -467,10 +481,120 @@ class _ReadBox(NamedTuple):
     enclosed: bool  # a pit of the basin analysis (its rim holds all round)
 
 
+class _Shape(NamedTuple):
+    """A measured region as :func:`_pixel_box` refines its box."""
+
+    mask: npt.NDArray[np.bool_]  # the region (walls included) inside its box
+    origin: tuple[int, int]  # its box's top-left, read-area work pixels
+    plane: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]  # the rim's (normal, point)
+
+
 class _Measured(NamedTuple):
     det: Detection
     cut: _Cut | None
     read: _ReadBox | None = None
+    shape: _Shape | None = None
+
+
+def _pixel_box(
+    m: _Measured,
+    f: _FrameData,
+    depth: npt.NDArray[np.uint16],
+    camera: CameraIntrinsics,
+    dark_box: bool,
+) -> Detection:
+    """The detection with its box refined at the frame's own resolution
+    (``options.pixel_boxes``, :func:`detect._boxes.refine_box`): each side the read
+    area does not cut moves to the opening's edge in the depth, within
+    :data:`PIXEL_REACH` work pixels of the region's blocks; with ``dark_box``, the
+    region's lit unread part left out first (:func:`_dark_part`). Scores, sizes and NMS
+    are the work grid's: only the box changes."""
+    if m.shape is None or m.read is None:
+        return m.det
+    k = f.factor
+    left, top, _, _ = f.bands
+    mask, (ux, uy), plane = m.shape
+    hh, ww = f.z.shape
+    (gx0, gy0, gx1, gy1), (rw, rh) = m.read.box, m.read.size
+    if dark_box:
+        mask, (ux, uy) = _dark_part(mask, (ux, uy), f)
+        gx0, gy0, gx1, gy1 = ux, uy, ux + mask.shape[1], uy + mask.shape[0]
+    region = np.repeat(np.repeat(mask, k, axis=0), k, axis=1)
+    read_area = (left * k, top * k, (left + ww) * k, (top + hh) * k)
+    origin = ((ux + left) * k, (uy + top) * k)
+    barrier = None
+    if dark_box and f.rel_smooth is not None:
+        lit = f.once("lit unread", lambda: _lit_unread(f))
+
+        def barrier(win: tuple[int, int, int, int]) -> npt.NDArray[np.bool_]:
+            return _upsampled(lit, win, (left * k, top * k), k)
+
+    refined = refine_box(region, origin, depth, camera, plane, PIXEL_REACH * k, read_area, barrier)
+    if refined is None:
+        return m.det
+    rx0, ry0, rx1, ry1 = refined
+    x, y, w, h = m.det.box
+    # Where the read area cuts the region, its box runs on across the band (_frame_box).
+    bx0, by0 = x if gx0 == 0 else rx0, y if gy0 == 0 else ry0
+    bx1, by1 = x + w if gx1 == rw else rx1, y + h if gy1 == rh else ry1
+    return replace(m.det, box=(bx0, by0, bx1 - bx0, by1 - by0))
+
+
+def _lit_unread(f: _FrameData) -> npt.NDArray[np.bool_]:
+    """The read area's unread work pixels as lit as the rubble around them."""
+    assert f.rel_smooth is not None
+    return np.asarray(f.invalid & (f.rel_smooth >= DARK_CUT), bool)
+
+
+def _upsampled(
+    mask: npt.NDArray[np.bool_], win: tuple[int, int, int, int], at: tuple[int, int], k: int
+) -> npt.NDArray[np.bool_]:
+    """The window ``(x0, y0, x1, y1)`` (frame pixels, inside the mask's extent) of ``mask``
+    (work pixels, its top-left at frame pixel ``at``, ``k`` frame pixels a side),
+    nearest-neighbour.
+
+    >>> m = np.array([[True, False]]); _upsampled(m, (1, 0, 4, 2), (0, 0), 2).astype(int)
+    array([[1, 0, 0],
+           [1, 0, 0]])
+    """
+    x0, y0, x1, y1 = win[0] - at[0], win[1] - at[1], win[2] - at[0], win[3] - at[1]
+    wx0, wy0 = x0 // k, y0 // k
+    crop = mask[wy0 : (y1 - 1) // k + 1, wx0 : (x1 - 1) // k + 1]
+    up = np.repeat(np.repeat(crop, k, axis=0), k, axis=1)
+    ox, oy = x0 - wx0 * k, y0 - wy0 * k
+    return np.asarray(up[oy : oy + y1 - y0, ox : ox + x1 - x0], bool)
+
+
+def _dark_part(
+    mask: npt.NDArray[np.bool_], origin: tuple[int, int], f: _FrameData
+) -> tuple[npt.NDArray[np.bool_], tuple[int, int]]:
+    """An unread region without its unread pixels that are lit (``options.dark_box``):
+    ``(mask, origin)`` of its largest remaining part (opened over 3 x 3), or the region as
+    it is when that part is under :data:`DARK_BOX_KEEP` of it.
+
+    A hole's unread inside is dark against the rubble (:mod:`detect._photometry`); an
+    unread area as lit as the rubble around it is terrain beyond the range, a speckled
+    far field or a bright surface that returns nothing, that the region ran into. It
+    stays in the region the detection was scored on; the box is the hole's.
+    """
+    if f.rel_smooth is None:
+        return mask, origin
+    ux, uy = origin
+    mh, mw = mask.shape
+    lit = mask & f.invalid[uy : uy + mh, ux : ux + mw]
+    lit &= f.rel_smooth[uy : uy + mh, ux : ux + mw] >= DARK_CUT
+    if not lit.any():
+        return mask, origin
+    rest = np.asarray(cv2.morphologyEx((mask & ~lit).view(np.uint8), cv2.MORPH_OPEN, _K3), np.uint8)
+    n, lab, stats = components(rest)
+    if n < 2:
+        return mask, origin
+    i = int(np.argmax(stats[1:, cv2.CC_STAT_AREA])) + 1
+    if stats[i, cv2.CC_STAT_AREA] < DARK_BOX_KEEP * np.count_nonzero(mask):
+        return mask, origin
+    x, y = int(stats[i, cv2.CC_STAT_LEFT]), int(stats[i, cv2.CC_STAT_TOP])
+    w, h = int(stats[i, cv2.CC_STAT_WIDTH]), int(stats[i, cv2.CC_STAT_HEIGHT])
+    return lab[y : y + h, x : x + w] == i, (ux + x, uy + y)
 
 
 def _place(m: _Measured, cam: CameraIntrinsics) -> Detection:
@@ -597,19 +721,23 @@ def detect_default(
     # The dark part of each spilled no-reading blob: a hole's interior cut from the bright
     # terrain beyond range (or a bright no-return surface) it runs into.
     dark: list[Candidate] = []
+    rel_smooth = np.asarray(
+        cv2.blur(rel.astype(np.float32), (DARK_SMOOTH_PX, DARK_SMOOTH_PX)), np.float32
+    )
     if o.dark_split:
-        rel_smooth = cv2.blur(rel.astype(np.float32), (DARK_SMOOTH_PX, DARK_SMOOTH_PX))
         dark_blobs = invalid & (rel_smooth < DARK_CUT)
         dark = _unique(
             [spurs(r) for r in no_reading_regions(dark_blobs, pit, min_px, o.neck_radii_px)]
         )
 
-    frame = _FrameData(z, invalid, y_img, rel, cam, z_far, range_m, factor, bands)
+    frame = _FrameData(z, invalid, y_img, rel, cam, z_far, range_m, factor, bands, rel_smooth)
     found = [m for r in regions if (m := _measure(r, frame, params)) is not None]
     found += [m for r in dark if (m := _measure(r, frame, params, dark_cut=True)) is not None]
     found += [m for r in bridged if (m := _measure(r, frame, params, bridged=True)) is not None]
     near_cut = RING_PX + o.grow_px if o.seen_rim_first else None
     kept = _nms(found, params.nms_iou, o.contained, near_cut)
+    if o.pixel_boxes:
+        kept = [m._replace(det=_pixel_box(m, frame, depth, camera, o.dark_box)) for m in kept]
     return [replace(d, p_hole=p_hole_of_score(d.score)) for d in (_place(m, cam) for m in kept)]
 
 

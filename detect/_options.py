@@ -45,6 +45,11 @@ class DefaultOptions:
         (``detect._regions.trim_spurs``).
     seen_rim_first : in NMS a basin closed across the border cut does not outrank a basin
         inside it whose rim was seen all round, unless that one runs on to the cut.
+    pixel_boxes : refine each detection's box at the frame's resolution, to the opening's
+        edge in the depth (``detect._boxes.refine_box``); off = the work grid's box.
+    dark_box : with ``pixel_boxes``, the box of a region that runs into unread pixels as
+        lit as the rubble around them (terrain beyond range, a speckled far field) is its
+        dark part's (``detect._default._dark_part``).
     """
 
     grow_px: int = 4
@@ -64,3 +69,5 @@ class DefaultOptions:
     surface_plane: bool = True
     trim_spurs: bool = True
     seen_rim_first: bool = True
+    pixel_boxes: bool = True
+    dark_box: bool = True

@@ -93,6 +93,8 @@ class HoleEvidence:
     plane_views, surface_views, behind_views : viewpoints whose sightings measured the
         inside against the rim plane, and of those the ones that read it on the plane
         (most of their sightings ``surface``) and behind it (half or more ``behind``).
+    whole_strong : sightings that saw the opening whole (not cut by the image border) and
+        scored p_hole >= 0.5.
     """
 
     sightings: int
@@ -108,6 +110,7 @@ class HoleEvidence:
     plane_views: int = 0
     surface_views: int = 0
     behind_views: int = 0
+    whole_strong: int = 0
 
     def features(self, names: Sequence[str] = FEATURES) -> tuple[float, ...]:
         """The model's inputs ``names`` (see :data:`FEATURE_NAMES`), in that order."""
@@ -177,6 +180,7 @@ class EvidenceAccumulator:
         self._major_max = 0.3
         self._rim: float | None = None
         self._cut = 0
+        self._whole_strong = 0
         self._t = (0, 0)
         # viewpoint -> sightings measured against the rim plane, read surface, read behind
         self._planes: dict[tuple[int, int, int], tuple[int, int, int]] = {}
@@ -196,6 +200,7 @@ class EvidenceAccumulator:
         if math.isfinite(s.rim_seen):
             self._rim = s.rim_seen if self._rim is None else max(self._rim, s.rim_seen)
         self._cut += bool(s.cut_by_border)
+        self._whole_strong += not s.cut_by_border and p >= STRONG_P
         t = s.t_boot_ns
         self._t = (t, t) if self.n == 0 else (min(self._t[0], t), max(self._t[1], t))
         acc = self._sum
@@ -220,6 +225,7 @@ class EvidenceAccumulator:
         if other._rim is not None:
             self._rim = other._rim if self._rim is None else max(self._rim, other._rim)
         self._cut += other._cut
+        self._whole_strong += other._whole_strong
         if other.n:
             self._t = (
                 other._t
@@ -258,6 +264,7 @@ class EvidenceAccumulator:
             plane_views=len(self._planes),
             surface_views=sum(2 * su > m for m, su, _ in self._planes.values()),
             behind_views=sum(2 * be >= m for m, _, be in self._planes.values()),
+            whole_strong=self._whole_strong,
         )
 
 

@@ -138,6 +138,9 @@ class Hole:
         its rim's plane, and of those the ones that read it on the plane (an absorbing
         surface) and behind it (a void); 0 for holes read from logs written before
         (:func:`geotag.surface_vote`).
+    seen_whole : some sighting saw the opening whole (its box not cut by the image border)
+        and scored p_hole >= 0.5; False when it was only seen cut, or weakly whole (True for
+        holes read from logs written before: never held for it).
     """
 
     id: int
@@ -158,6 +161,7 @@ class Hole:
     plane_views: int = 0
     surface_views: int = 0
     behind_views: int = 0
+    seen_whole: bool = True
 
 
 class _Track:
@@ -290,11 +294,14 @@ class _Mean:
 
 def _estimate(parts: Sequence[_Mean]) -> tuple[tuple[float, float, float], float]:
     """The means of ``parts`` (those with views) combined by their variances, and the
-    variance of the result."""
+    variance of the result: the least of theirs, not less (a whole view and a view cut by
+    the border seen from one side share part of their error: counted as independent, the
+    merged holes of 35 one-side passes lay within their sigma 63 % of the time, 33 % of
+    those 1.6 m beside the track; as the least, 69 % and 56 %)."""
     used = [(m.ned(), m.var()) for m in parts if m.w_sum > 0]
     inv = sum(1.0 / v for _, v in used)
     ned = tuple(sum(p[i] / v for p, v in used) / inv for i in range(3))
-    return (ned[0], ned[1], ned[2]), 1.0 / inv
+    return (ned[0], ned[1], ned[2]), min(v for _, v in used)
 
 
 def _rel_var(s: HoleSighting) -> float:
@@ -525,6 +532,7 @@ class HoleTracker:
             plane_views=ev.plane_views,
             surface_views=ev.surface_views,
             behind_views=ev.behind_views,
+            seen_whole=ev.whole_strong > 0,
         )
 
     def holes(self) -> list[Hole]:

@@ -81,6 +81,15 @@ class AnnounceGate:
     ``review_min_p_hole`` (recall first: the vote never drops a hole below review, it only
     keeps it from being announced).
 
+    **Seen only at the image's edge** (:meth:`edge_held`): a hole without readings inside
+    (its views measured against the rim plane) that no view saw whole (every sighting's
+    box cut by the image border, or whole only with p_hole < 0.5) is never announced,
+    unless at least ``edge_behind_views`` viewpoints read its inside behind the rim plane
+    (a void's walls). Cut by the border, an unread patch's rim is unknown on that side and
+    its inside is read too little for the vote: an absorbing stain glimpsed at the edge
+    of the frame scores like a void there. It is for review until a view sees it whole
+    (``edge_behind_views`` 0: never held).
+
     ``p_hole`` is the hole-level confidence of all its sightings (:attr:`Hole.p_hole`,
     :class:`geotag.ConfidenceModel`); holes read from logs that predate it use the best
     frame's (:func:`detect.p_hole_of_score` of the best score). It never leaves
@@ -113,6 +122,7 @@ class AnnounceGate:
     surface_min_views: int = 3
     surface_min_share: float = 0.5
     surface_max_behind_ratio: float = 0.5
+    edge_behind_views: int = 2
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.min_p_hole <= _P_HOLE_MAX:
@@ -132,6 +142,8 @@ class AnnounceGate:
             raise InputError(
                 "surface vote: min_views must be >= 1, min_share in [0, 1], max_behind_ratio >= 0"
             )
+        if self.edge_behind_views < 0:
+            raise InputError("edge_behind_views must be >= 0")
 
     def summary(self) -> str:
         """The thresholds in one line: ``announced p_hole >= 0.9, >= 2 sightings over
@@ -180,6 +192,32 @@ class AnnounceGate:
             and hole.behind_views <= self.surface_max_behind_ratio * hole.surface_views
         )
 
+    def edge_held(self, hole: Hole) -> bool:
+        """True when ``hole`` is held back from announcement for being seen only at the
+        image's edge: unread inside (measured against its rim plane from some viewpoint),
+        never seen whole with p_hole >= 0.5, and read behind its rim plane from fewer than
+        ``edge_behind_views`` viewpoints (see the class docstring).
+
+        >>> from dataclasses import replace
+        >>> from holescan.geotag import Hole
+        >>> h = Hole(1, 0, 0, 0, 1, 0.9, 9, 0, 10**9, 3, (0, 0, 9, 9), 0.7, 0.5, 0.99, 6)
+        >>> edge = replace(h, plane_views=3, seen_whole=False)
+        >>> gate = AnnounceGate()
+        >>> gate.edge_held(edge), gate.tier(edge)
+        (True, 'review')
+        >>> walls = replace(edge, behind_views=2)  # two viewpoints read walls behind the rim
+        >>> gate.edge_held(walls), gate.tier(walls)
+        (False, 'announced')
+        >>> gate.tier(replace(edge, seen_whole=True)), AnnounceGate(edge_behind_views=0).tier(edge)
+        ('announced', 'announced')
+        """
+        return (
+            self.edge_behind_views > 0
+            and not hole.seen_whole
+            and hole.plane_views >= 1
+            and hole.behind_views < self.edge_behind_views
+        )
+
     def tiers(self, holes: Sequence[Hole], announced: Iterable[int] = ()) -> dict[int, Tier]:
         """Every hole's tier, as the vehicle gives it: :meth:`select` (announced, less
         duplicates), :meth:`review` (for review, not at an announced hole's place), the
@@ -225,9 +263,10 @@ class AnnounceGate:
         return sorted(kept, key=lambda h: h.id)
 
     def passes(self, hole: Hole) -> bool:
-        """True when ``hole`` is strong enough to be announced and the absorbing-surface
-        vote does not hold it back (:meth:`surface_held`)."""
-        return self._strong(hole) and not self.surface_held(hole)
+        """True when ``hole`` is strong enough to be announced and neither the
+        absorbing-surface vote (:meth:`surface_held`) nor having been seen only at the
+        image's edge (:meth:`edge_held`) holds it back."""
+        return self._strong(hole) and not self.surface_held(hole) and not self.edge_held(hole)
 
     def _strong(self, hole: Hole) -> bool:
         """Confident enough, seen often and long enough to be announced."""

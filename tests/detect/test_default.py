@@ -10,6 +10,7 @@ import pytest
 from skimage.morphology import reconstruction
 
 from holescan.detect import DEFAULT, DOG, CameraIntrinsics, Detection, detect_holes
+from holescan.detect._boxes import refine_box
 from holescan.detect._default import basin_depth, block_depth, opening_axes
 from holescan.detect._regions import basin_depths, components
 from holescan.errors import InputError
@@ -235,6 +236,43 @@ def _px_hole(
     return ((x0 + x1) / 2, (y0 + y1) / 2, (x1 - x0) * z0 / F, (y1 - y0) * z0 / F, floor_m)
 
 
+@pytest.mark.parametrize("floor_m", [3.7, 5.0])  # a read floor 0.9 m down; a void
+@pytest.mark.parametrize("edges", [(201, 117, 341, 263), (155, 302, 421, 415)])
+def test_box_is_the_openings_to_the_pixel(floor_m: float, edges: tuple[int, int, int, int]) -> None:
+    # An opening whose edges lie off the 4 px work grid (pixels x0 .. x1 - 1 wide open):
+    # the box is the opening's to a pixel, not its work blocks' (the blocks at its edge
+    # read a few of their pixels, so they count as rim and the work grid's box is up to
+    # 3 px short on each side).
+    x0, y0, x1, y1 = edges
+    rgb, depth, _ = scene(holes=(_px_hole(x0 - 0.5, y0 - 0.5, x1 - 0.5, y1 - 0.5, floor_m),))
+    hole = depth > 3300 if floor_m < 4.0 else depth == 0
+    vs, us = np.nonzero(hole)
+    truth = (int(us.min()), int(vs.min()), int(us.max()) + 1, int(vs.max()) + 1)
+    assert truth == edges
+    bx, by, bw, bh = top(detect_holes(rgb, depth, CAM)).box
+    assert max(abs(a - b) for a, b in zip((bx, by, bx + bw, by + bh), truth, strict=True)) <= 1
+    grid = replace(DEFAULT, options=replace(DEFAULT.options, pixel_boxes=False))
+    gx, gy, gw, gh = top(detect_holes(rgb, depth, CAM, grid)).box
+    assert max(abs(a - b) for a, b in zip((gx, gy, gx + gw, gy + gh), truth, strict=True)) >= 2
+
+
+def test_refined_box_stays_within_reach_and_the_read_area() -> None:
+    # The opening runs on 30 px beyond the region it was found as: the box follows it by
+    # at most ``reach``; and never into the unread band beside it.
+    cam = CameraIntrinsics(64, 48, 50.0, 50.0, 31.5, 23.5)
+    depth = np.full((48, 64), 2000, np.uint16)
+    depth[10:30, 10:50] = 0  # the opening, unread
+    depth[:, 56:] = 0  # an unread band on the right
+    region = np.ones((20, 10), bool)  # found as x 20 .. 29 only
+    plane = (np.array([0.0, 0.0, -1.0]), np.array([0.0, 0.0, 2.0]))
+    assert refine_box(region, (20, 10), depth, cam, plane, 4) == (16, 10, 34, 30)
+    assert refine_box(region, (20, 10), depth, cam, plane, 40, (0, 0, 56, 48)) == (10, 10, 50, 30)
+    depth[10:30, 10:50] = 2600  # read, 0.6 m behind the rim plane
+    assert refine_box(region, (20, 10), depth, cam, plane, 40) == (10, 10, 50, 30)
+    depth[10:30, 10:50] = 2010  # on the plane, within the depth noise: no opening
+    assert refine_box(region, (20, 10), depth, cam, plane, 4) is None
+
+
 def test_hole_in_a_depression_the_border_cuts_is_the_hole_not_the_depression() -> None:
     # A depression 0.5 m deep running into the right border, a void inside it with 30 px
     # of the depression's floor (read) between it and the border: the basin closed across
@@ -267,7 +305,11 @@ def test_projector_shadow_line_joining_a_hole_does_not_stretch_its_box() -> None
     depth[y + h // 2 : y + h // 2 + 4, x + w - 2 : x + w + 200] = 0
     d = top(detect_holes(rgb, depth, CAM))
     assert iou(d.box, boxes[0]) > 0.8
+    # Without the trim, the box is still the hole's: the line is as lit as the rubble,
+    # no part of the void's dark box (dark_box); without both, the line stretches it.
     kept = replace(DEFAULT, options=replace(DEFAULT.options, trim_spurs=False))
+    assert iou(top(detect_holes(rgb, depth, CAM, kept)).box, boxes[0]) > 0.8
+    kept = replace(kept, options=replace(kept.options, dark_box=False))
     assert iou(top(detect_holes(rgb, depth, CAM, kept)).box, boxes[0]) < 0.6
 
 
@@ -379,3 +421,16 @@ def test_opening_axes_on_a_tilted_plane() -> None:
 def test_bad_input_is_a_clear_error(rgb: np.ndarray, depth: np.ndarray, message: str) -> None:
     with pytest.raises(InputError, match=message):
         detect_holes(rgb, depth, CAM)
+
+
+def test_box_of_a_void_is_its_dark_part_not_the_lit_unread_area_beside_it() -> None:
+    # A void (dark inside) running into an unread area as lit as the rubble (a speckled far
+    # field, a bright surface that returns nothing): one unread region, but the hole's box
+    # is the dark part's.
+    void, lit = _px_hole(200, 150, 330, 300, 5.0), _px_hole(330, 100, 390, 350, 5.0)
+    rgb, depth, boxes = scene(holes=(void, lit))
+    rgb[100:350, 330:390] = 110
+    d = top(detect_holes(rgb, depth, CAM))
+    assert iou(d.box, boxes[0]) > 0.95
+    whole = replace(DEFAULT, options=replace(DEFAULT.options, dark_box=False))
+    assert iou(top(detect_holes(rgb, depth, CAM, whole)).box, boxes[0]) < 0.5
