@@ -13,7 +13,7 @@ from holescan.detect import PlaneVerdict
 from holescan.errors import InputError
 from holescan.geotag import AnnounceGate, Hole, HoleSighting, HoleTracker
 from tests.geotag.test_one_opening import sighting
-from tests.geotag.test_surface_vote import PX_STEP, _seen
+from tests.geotag.test_surface_vote import PX_STEP, with_reading
 
 
 def _views(
@@ -21,7 +21,7 @@ def _views(
 ) -> list[HoleSighting]:
     """One opening seen from len(verdicts) viewpoints, cut by the border (``cut``)."""
     return [
-        _seen(sighting(k, 0.0, score=score, cut=cut, x_px=20 + PX_STEP * k), v)
+        with_reading(sighting(k, 0.0, score=score, cut=cut, x_px=20 + PX_STEP * k), v)
         for k, v in enumerate(verdicts)
     ]
 

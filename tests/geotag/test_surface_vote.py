@@ -26,7 +26,8 @@ READ: dict[PlaneVerdict | None, tuple[float, float]] = {
 }
 
 
-def _seen(s: HoleSighting, verdict: PlaneVerdict | None) -> HoleSighting:
+def with_reading(s: HoleSighting, verdict: PlaneVerdict | None) -> HoleSighting:
+    """``s`` with its inside read as ``verdict`` (the fractions on and behind its rim plane)."""
     on, behind = READ[verdict]
     out = replace(s, inside_on_plane=on, inside_behind=behind)
     assert out.plane == verdict
@@ -36,7 +37,7 @@ def _seen(s: HoleSighting, verdict: PlaneVerdict | None) -> HoleSighting:
 def _pass(verdicts: list[PlaneVerdict | None], score: float = 0.95) -> list[HoleSighting]:
     """One opening seen from len(verdicts) viewpoints, each reading ``verdicts[i]``."""
     return [
-        _seen(sighting(k, 0.0, score=score, x_px=20 + PX_STEP * k), v)
+        with_reading(sighting(k, 0.0, score=score, x_px=20 + PX_STEP * k), v)
         for k, v in enumerate(verdicts)
     ]
 
@@ -86,7 +87,7 @@ def test_fewer_than_three_views_never_vote() -> None:
     assert two.plane_views == 2 and not gate.surface_held(two)
     assert gate.tier(two) == "announced"
     # a hover: many frames from one place are one viewpoint, not many votes
-    hover = [_seen(sighting(k, 0.0, score=0.95), "surface") for k in range(30)]
+    hover = [with_reading(sighting(k, 0.0, score=0.95), "surface") for k in range(30)]
     h = _hole(hover)
     assert (h.sightings, h.plane_views, h.surface_views) == (30, 1, 1)
     assert gate.tier(h) == "announced"
@@ -95,8 +96,8 @@ def test_fewer_than_three_views_never_vote() -> None:
 def test_a_viewpoint_votes_by_the_majority_of_its_sightings() -> None:
     # one viewpoint, three sightings: two on the plane, one behind -> a surface view;
     # one behind and one on the plane -> a behind view (recall first)
-    a = [_seen(sighting(k, 0.0, x_px=300), "surface") for k in range(2)]
-    b = _seen(sighting(2, 0.0, x_px=300), "behind")
+    a = [with_reading(sighting(k, 0.0, x_px=300), "surface") for k in range(2)]
+    b = with_reading(sighting(2, 0.0, x_px=300), "behind")
     ev = evidence_of([*a, b])
     assert (ev.plane_views, ev.surface_views, ev.behind_views) == (1, 1, 0)
     ev = evidence_of([a[0], b])
