@@ -10,7 +10,7 @@ import pytest
 
 from holescan.detect import PlaneVerdict
 from holescan.errors import InputError
-from holescan.geotag import AnnounceGate, HoleSighting, HoleTracker, evidence_of
+from holescan.geotag import AnnounceGate, Hole, HoleSighting, HoleTracker, evidence_of
 from tests.geotag.test_one_opening import sighting
 
 PX_STEP = 100  # one sighting per 80 px image cell: each a viewpoint of its own
@@ -42,7 +42,8 @@ def _pass(verdicts: list[PlaneVerdict | None], score: float = 0.95) -> list[Hole
     ]
 
 
-def _hole(sightings: list[HoleSighting]):  # type: ignore[no-untyped-def]
+def merged_hole(sightings: list[HoleSighting]) -> Hole:
+    """The one hole ``sightings`` make, each given to a tracker on its own."""
     tracker = HoleTracker()
     for s in sightings:
         tracker.update([s])
@@ -52,7 +53,7 @@ def _hole(sightings: list[HoleSighting]):  # type: ignore[no-untyped-def]
 
 def test_a_surface_read_on_its_plane_from_most_views_is_held_for_review() -> None:
     gate = AnnounceGate()
-    stain = _hole(_pass(["surface", "surface", "unread", "surface", None]))
+    stain = merged_hole(_pass(["surface", "surface", "unread", "surface", None]))
     # four viewpoints measured it (the fifth did not: not counted), three on the plane
     assert (stain.plane_views, stain.surface_views, stain.behind_views) == (4, 3, 0)
     assert stain.p_hole >= gate.min_p_hole and stain.sightings >= gate.min_sightings
@@ -66,29 +67,29 @@ def test_a_surface_read_on_its_plane_from_most_views_is_held_for_review() -> Non
 def test_a_void_seen_behind_its_plane_is_announced() -> None:
     gate = AnnounceGate()
     # a deep hole: mostly unread inside, its walls read behind the plane from one view
-    void = _hole(_pass(["unread", "behind", "unread", "mixed", "unread"]))
+    void = merged_hole(_pass(["unread", "behind", "unread", "mixed", "unread"]))
     assert (void.plane_views, void.surface_views, void.behind_views) == (5, 0, 1)
     assert not gate.surface_held(void) and gate.tier(void) == "announced"
     # two views in five read on the plane, one behind: not half, announced
-    mixed = _hole(_pass(["surface", "behind", "surface", "unread", "unread"]))
+    mixed = merged_hole(_pass(["surface", "behind", "surface", "unread", "unread"]))
     assert not gate.surface_held(mixed) and gate.tier(mixed) == "announced"
     # half on the plane, but as many views see behind it: a void's walls (recall first)
-    walls = _hole(_pass(["surface", "surface", "behind", "behind"]))
+    walls = merged_hole(_pass(["surface", "surface", "behind", "behind"]))
     assert (walls.surface_views, walls.behind_views) == (2, 2)
     assert not gate.surface_held(walls) and gate.tier(walls) == "announced"
     # one view behind for two on the plane: few, held
-    few = _hole(_pass(["surface", "surface", "behind", "unread"]))
+    few = merged_hole(_pass(["surface", "surface", "behind", "unread"]))
     assert gate.surface_held(few) and gate.tier(few) == "review"
 
 
 def test_fewer_than_three_views_never_vote() -> None:
     gate = AnnounceGate()
-    two = _hole(_pass(["surface", "surface", None, None]))  # two views measured, of four
+    two = merged_hole(_pass(["surface", "surface", None, None]))  # two views measured, of four
     assert two.plane_views == 2 and not gate.surface_held(two)
     assert gate.tier(two) == "announced"
     # a hover: many frames from one place are one viewpoint, not many votes
     hover = [with_reading(sighting(k, 0.0, score=0.95), "surface") for k in range(30)]
-    h = _hole(hover)
+    h = merged_hole(hover)
     assert (h.sightings, h.plane_views, h.surface_views) == (30, 1, 1)
     assert gate.tier(h) == "announced"
 
@@ -106,15 +107,15 @@ def test_a_viewpoint_votes_by_the_majority_of_its_sightings() -> None:
 
 def test_the_vote_never_raises_a_weak_hole_and_old_holes_are_untouched() -> None:
     gate = AnnounceGate()
-    weak = _hole(_pass(["surface"] * 4, score=0.05))
+    weak = merged_hole(_pass(["surface"] * 4, score=0.05))
     assert gate.surface_held(weak) and gate.tier(weak) == gate.tier(replace(weak, plane_views=0))
-    strong = _hole(_pass([None] * 4))  # no plane evidence (older logs, paper mode): as before
+    strong = merged_hole(_pass([None] * 4))  # no plane evidence (older logs, paper mode): as before
     assert strong.plane_views == 0 and gate.tier(strong) == "announced"
 
 
 def test_holes_fused_later_keep_every_views_verdict() -> None:
     sightings = _pass(["surface", "surface", "unread", "surface"])
-    one = _hole(sightings)
+    one = merged_hole(sightings)
     two = HoleTracker()
     for s in sightings:
         two.update([s])
@@ -134,5 +135,5 @@ def test_the_vote_settings_are_checked() -> None:
     with pytest.raises(InputError, match="surface vote"):
         AnnounceGate(surface_max_behind_ratio=-1.0)
     off = AnnounceGate(surface_min_views=10**9)
-    stain = _hole(_pass(["surface"] * 4))
+    stain = merged_hole(_pass(["surface"] * 4))
     assert off.tier(stain) == "announced" and AnnounceGate().tier(stain) == "review"
