@@ -346,6 +346,8 @@ class SimAutopilot:
                     self._next_due[name] = due
                 next_wake = min(self._next_due.values(), default=now + 20_000_000)
             for t_sample, name in sorted(batch):
+                if t_sample < self._down_until_mono_ns:
+                    continue  # due before a reboot that came since: lost with it
                 if not self.silent:
                     try:
                         self._send(name, t_sample)
