@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 from test_station import hole, picture, wait_for
 
-from holescan.ground import StationState
+from holescan.ground import GroundHole, StationState
 from holescan.ground.station.cot import hole_cot
 from holescan.ground.station.datapackage import write_datapackage
 from holescan.ground.station.files import write_station_files
@@ -258,6 +258,14 @@ def test_a_flood_of_forged_holes_does_not_lose_the_genuine_one(tmp_path: Path) -
         save()
 
     state._save = counted  # type: ignore[method-assign]
+    given: set[str] = set()  # the HOLE texts the link handed to the station's state
+    take = state.on_statustext
+
+    def taken(text: str, sysid: int | None = None) -> GroundHole | None:
+        given.add(text)
+        return take(text, sysid=sysid)
+
+    state.on_statustext = taken  # type: ignore[method-assign]
     with VehicleLink(f"udpin:127.0.0.1:{port}", state, sysid=1) as link:
         forger = open_link(f"udpout:127.0.0.1:{port}", source_system=1, source_component=191)
         try:
@@ -274,7 +282,11 @@ def test_a_flood_of_forged_holes_does_not_lose_the_genuine_one(tmp_path: Path) -
         finally:
             forger.close()
     state.flush()
-    assert len(state.holes) == 2001  # every one kept (under max_holes): none was lost
+    # Every hole the link received is kept (under max_holes): none was lost by the station.
+    # (UDP over loopback may itself drop a few datagrams when the receiving thread is starved:
+    # 16 of 2,001 once under a full parallel test run; the flood is still a flood.)
+    assert len(given) >= 1800
+    assert len(state.holes) == len(given)
     assert writes < 200  # batched: ~2 per second of flood, not 2,000
     assert 7 in {h["id"] for h in strict_json(state.path.read_text())["holes"]}
     assert link.bad == 0
