@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -47,8 +48,11 @@ def test_an_area_of_one_survey_line_is_flown_as_a_racetrack() -> None:
     assert loop_length_m(path) > 2.0 * line_m  # out along the line and back
 
 
-@pytest.mark.slow
-def test_sim_camera_renders_from_the_reported_pose(tmp_path: Path) -> None:
+def _fly_once(tmp_path: Path) -> tuple[Any, SimAutopilot, list[Any], dict[int, int]]:
+    """One simulated sortie flown from the telemetry's poses: its report, the simulator,
+    the logged frames and, for each true hole, the frames the detector took
+    and the flight placed with the hole squarely in view (its centre in the middle of the
+    image, from the frame's logged pose)."""
     params, _ = sortie_params(TABLE)
     world = make_sortie_world(params)
     plan, path = survey_path(world, params)
@@ -76,25 +80,7 @@ def test_sim_camera_renders_from_the_reported_pose(tmp_path: Path) -> None:
     with SimAutopilot(f"udpout:127.0.0.1:{port}", path, eph_m=0.01) as ap:
         report = fly_sim(cfg, home=home)
     s = report.flight.summary
-    # fly_sim never saw the simulator: frames were rendered from the telemetry's poses,
-    # which the logged frames carry; they match the simulator's truth at the frame time.
     frames = [r for r in read_flight_log(s.log.files) if isinstance(r, LoggedFrame)]
-    errors = []
-    for f in frames:
-        if f.pose is None or f.t_boot_ns is None:
-            continue
-        t = ap.truth_pose(f.t_boot_ns)
-        errors.append(math.hypot(*local_en_m(f.pose.lat_deg, f.pose.lon_deg, t.lat_deg, t.lon_deg)))
-    assert len(errors) >= 30 and sorted(errors)[len(errors) // 2] < 0.1, errors
-    assert s.counters.frames_captured == 90, s.counters
-    assert report.render_ms_median is not None
-    truth = report.truth
-    assert len(truth) == 4 and abs(truth[0].lat_deg - params.anchor.lat_deg) < 1e-3
-    # The flight finds a true hole it looked at: squarely in view (centre in the
-    # middle of the image, from the frame's logged pose) in frames its detector took and
-    # the flight placed. Which frames those are is the machine's (the detector takes the
-    # newest frame whenever it is free: fewer loaded), so that, not the flight path, is
-    # what a hole must be found from.
     detected = {
         r.frame_index
         for r in read_flight_log(s.log.files, kinds={LoggedDetections})
@@ -105,11 +91,44 @@ def test_sim_camera_renders_from_the_reported_pose(tmp_path: Path) -> None:
     for f in frames:
         if f.pose is None or f.frame.index not in detected:
             continue
-        for t in truth:
+        for t in report.truth:
             u, v = project_to_pixel(t.lat_deg, t.lon_deg, t.alt_m, cam, cfg.flight.mount, f.pose)
             if abs(u - cam.width / 2) < cam.width / 4 and abs(v - cam.height / 2) < cam.height / 4:
                 looked[t.id] = looked.get(t.id, 0) + 1
-    looked_at = [t for t in truth if looked.get(t.id, 0) >= 2]
+    return report, ap, frames, looked
+
+
+@pytest.mark.slow
+def test_sim_camera_renders_from_the_reported_pose(tmp_path: Path) -> None:
+    params, _ = sortie_params(TABLE)
+    # The flight must find a true hole it looked at: squarely in view in at least 2 frames
+    # its detector took and the flight placed. Which frames those are is the machine's (the
+    # detector takes the newest frame whenever it is free: fewer loaded; once, in a full
+    # parallel run, none of 90 frames), so that, not the flight path, is what a hole must be
+    # found from; a flight that looked at none is flown again (at most 3 flights), every
+    # flight's poses checked.
+    for attempt in range(3):
+        report, ap, frames, looked = _fly_once(tmp_path / f"flight{attempt}")
+        s = report.flight.summary
+        # fly_sim never saw the simulator: frames were rendered from the telemetry's poses,
+        # which the logged frames carry; they match the simulator's truth at the frame time.
+        errors = []
+        for f in frames:
+            if f.pose is None or f.t_boot_ns is None:
+                continue
+            t = ap.truth_pose(f.t_boot_ns)
+            errors.append(
+                math.hypot(*local_en_m(f.pose.lat_deg, f.pose.lon_deg, t.lat_deg, t.lon_deg))
+            )
+        assert len(errors) >= 30 and sorted(errors)[len(errors) // 2] < 0.1, errors
+        assert s.counters.frames_captured == 90, s.counters
+        assert report.render_ms_median is not None
+        truth = report.truth
+        assert len(truth) == 4 and abs(truth[0].lat_deg - params.anchor.lat_deg) < 1e-3
+        assert ap.received.get("TIMESYNC", 0) > 0
+        looked_at = [t for t in truth if looked.get(t.id, 0) >= 2]
+        if looked_at:
+            break
     assert looked_at, looked  # the sortie flies over holes and the detector sees some
     off = [
         min(math.hypot(*local_en_m(h.lat_deg, h.lon_deg, t.lat_deg, t.lon_deg)) for h in s.holes)
@@ -117,4 +136,3 @@ def test_sim_camera_renders_from_the_reported_pose(tmp_path: Path) -> None:
         if s.holes
     ]
     assert off and min(off) < 0.5, (looked, off, s.holes)  # one of them found, in place
-    assert ap.received.get("TIMESYNC", 0) > 0
