@@ -49,7 +49,7 @@ class DefaultOptions:
         edge in the depth (``detect._boxes.refine_box``); off = the work grid's box.
     dark_box : with ``pixel_boxes``, the box of a region that runs into unread pixels as
         lit as the rubble around them (terrain beyond range, a speckled far field) is its
-        dark part's (``detect._default._dark_part``).
+        dark part's (``detect._boxes._dark_part``).
     """
 
     grow_px: int = 4

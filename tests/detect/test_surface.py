@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from holescan.detect import DEFAULT, CameraIntrinsics, Detection, detect_holes
-from holescan.detect._default import block_depth
 from holescan.detect._geometry import fit_plane, rays_of
+from holescan.detect._regions import block_depth
 from holescan.detect._surface import PlaneEvidence, plane_evidence, surface_factor
 from holescan.sim.structured_light import (
     SensorCamera,
@@ -134,7 +134,7 @@ def test_a_candidate_the_plane_test_lowers_stays_a_detection() -> None:
     the test can leave (the gate times the floor) is above the detector's score cut; and a
     void's detections carry their reading, behind the plane."""
     from holescan.detect import plane_verdict
-    from holescan.detect._default import SURFACE_GATE
+    from holescan.detect._measure import SURFACE_GATE
     from holescan.detect._surface import SURFACE_FLOOR
 
     assert DEFAULT.min_score < SURFACE_GATE * SURFACE_FLOOR

@@ -1,0 +1,102 @@
+"""Non-maximum suppression of the default detector's measured regions.
+
+Overlapping boxes, and boxes holding a better detection (a depression or a no-reading area
+around a hole, not a second hole), are suppressed. "Better" is the score, except between a
+basin closed by bridging its cut at the border and a basin inside it whose rim was seen all
+round (:func:`nms`). Pure: records in, records out.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from holescan.detect._evaluate import overlap
+from holescan.detect._measure import Measured, ReadBox
+
+__all__ = ["box_iou", "nms"]
+
+# NMS between a bridged basin and a basin inside it with its rim seen all round
+# (_priorities): the inner one counts when it scores at least this fraction of the bridged
+# one (a much weaker dip is a dip in the hole's floor), and it runs on to the cut when it
+# comes within its ring and walls of it (RING_PX + options.grow_px work pixels).
+INNER_SCORE_RATIO = 0.5
+
+
+def nms(
+    found: list[Measured], iou_max: float, contained: float, near_px: int | None
+) -> list[Measured]:
+    """Suppress overlaps (IoU > ``iou_max``) and containers of a better detection.
+
+    A region that holds a higher-scoring one (most of it inside) is a depression or a
+    no-reading area around that hole, not a second hole. "Better" is the score, except
+    between a bridged basin and a basin inside it (:func:`_priorities`; ``near_px`` None:
+    the score alone, ``options.seen_rim_first`` off).
+    """
+    keep: list[Measured] = []
+    rank = [m.det.score for m in found]
+    if near_px is not None:
+        rank = _priorities(found, contained, near_px)
+    for _, m in sorted(zip(rank, found, strict=True), key=lambda p: -p[0]):
+        d = m.det
+        if all(box_iou(d.box, k.det.box) <= iou_max for k in keep) and not any(
+            _inside(k.det.box, d.box) > contained for k in keep
+        ):
+            keep.append(m)
+    return keep
+
+
+def _priorities(found: list[Measured], contained: float, near_px: int) -> list[float]:
+    """The order of NMS: each candidate's score, but a bridged basin (closed by a rim
+    assumed across the border cut) and a basin inside it whose rim was seen all round (an
+    enclosed pit, not bridged, not cut) that scores at least :data:`INNER_SCORE_RATIO` of
+    it:
+
+    * when the inner basin comes within ``near_px`` of a side the bridged one is cut by,
+      it is the deep part of a hole that runs on to the cut: the bridged basin goes first
+      (its box is the hole's);
+    * otherwise seen rim lies between the inner basin and the cut: the bridged basin is
+      the depression around that hole, its depth measured against a rim partly assumed;
+      the inner basin goes first (and the bridged one, holding it, is dropped).
+    """
+    rank = [m.det.score for m in found]
+    for i, b in enumerate(found):
+        if b.read is None or not b.read.bridged:
+            continue
+        for j, e in enumerate(found):
+            if (
+                e.read is None
+                or e.read.bridged
+                or not e.read.enclosed
+                or e.det.border_cut
+                or e.det.score < INNER_SCORE_RATIO * b.det.score
+                or _inside(e.det.box, b.det.box) <= contained
+            ):
+                continue
+            first, then = (i, j) if _near_cut(e.read, b.read, near_px) else (j, i)
+            if rank[first] <= rank[then]:
+                rank[first] = np.nextafter(rank[then], np.inf)
+    return rank
+
+
+def _near_cut(inner: ReadBox, outer: ReadBox, near: int) -> bool:
+    """Whether ``inner`` comes within ``near`` work pixels of a side of the read area
+    that ``outer`` reaches."""
+    (ix0, iy0, ix1, iy1), (ox0, oy0, ox1, oy1), (ww, hh) = inner.box, outer.box, outer.size
+    return (
+        (ox0 == 0 and ix0 <= near)
+        or (oy0 == 0 and iy0 <= near)
+        or (ox1 == ww and ww - ix1 <= near)
+        or (oy1 == hh and hh - iy1 <= near)
+    )
+
+
+def _inside(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> float:
+    """Fraction of box ``a`` that lies inside box ``b``."""
+    ix = max(0, min(a[0] + a[2], b[0] + b[2]) - max(a[0], b[0]))
+    iy = max(0, min(a[1] + a[3], b[1] + b[3]) - max(a[1], b[1]))
+    return ix * iy / max(a[2] * a[3], 1)
+
+
+def box_iou(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> float:
+    """Intersection over union of two (x, y, w, h) boxes."""
+    return overlap(a, b, "iou")
