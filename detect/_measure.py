@@ -166,6 +166,31 @@ def measure(
     rv, ru = np.nonzero(ring)
     rim_u, rim_v = ru.astype(np.float64) + x0, rv.astype(np.float64) + y0
     rim_zs = zc[ring].astype(np.float64)
+    # Passable width: diameter of the largest disk inside the region (metres at the rim).
+    # Where an unread band cuts it, the opening runs on under the band: the disk may too
+    # (the region's cut edge extruded across the band), and the ellipse's minor axis,
+    # measured on the visible part only, is no bound.
+    cut_sides = (
+        f.bands[0] if gx0 == 0 else 0,
+        f.bands[1] if gy0 == 0 else 0,
+        f.bands[2] if gx1 == ww else 0,
+        f.bands[3] if gy1 == hh else 0,
+    )
+    widest = f.once(
+        (key, "disk"),
+        lambda: float(
+            cv2.distanceTransform(np.pad(_extrude(big, cut_sides), 1), cv2.DIST_L2, 5).max()
+        ),
+    )
+    s = params.searcher
+    if (
+        o.passable_width
+        and params.min_score > 0.0
+        and 2.0 * widest * float(rim_zs.max()) / f.cam.fx < s.min_fraction * s.minor_m
+    ):
+        # Too narrow to enter, whatever the rim's plane: the minor axis is at most the
+        # widest disk at the rim's median depth, and that lies within the rim's depths.
+        return None
     occ, rim_plane = f.once(
         (key, "occluders"), lambda: occluders(rim_u, rim_v, rim_zs, f.cam, o.occluder_step_m)
     )
@@ -187,22 +212,6 @@ def measure(
         opening.area_m2,
         opening.rim_depth_m,
     )
-    # Passable width: diameter of the largest disk inside the region (metres at the rim).
-    # Where an unread band cuts it, the opening runs on under the band: the disk may too
-    # (the region's cut edge extruded across the band), and the ellipse's minor axis,
-    # measured on the visible part only, is no bound.
-    cut_sides = (
-        f.bands[0] if gx0 == 0 else 0,
-        f.bands[1] if gy0 == 0 else 0,
-        f.bands[2] if gx1 == ww else 0,
-        f.bands[3] if gy1 == hh else 0,
-    )
-    widest = f.once(
-        (key, "disk"),
-        lambda: float(
-            cv2.distanceTransform(np.pad(_extrude(big, cut_sides), 1), cv2.DIST_L2, 5).max()
-        ),
-    )
     inscribed = 2.0 * widest * rim_z / f.cam.fx
     if not o.passable_width:
         minor = minor_pca
@@ -210,7 +219,6 @@ def measure(
         minor = inscribed
     else:
         minor = min(minor_pca, inscribed)
-    s = params.searcher
     sw = width_score(major, minor, s.major_m, s.minor_m, s.min_fraction)
     sw *= 1.0 - ramp(major, OVERSIZE_START_M, OVERSIZE_END_M)
     if sw == 0.0 and params.min_score > 0.0:
