@@ -88,6 +88,11 @@ _T = TypeVar("_T")
 
 @dataclass(frozen=True)
 class FrameData:
+    """One frame as the measuring sees it, on the read area's work grid: depth (m, NaN
+    unread), the no-reading mask, luminance and its relative luminance, the work camera,
+    the farthest reading and the range, the block factor, the bands cut off, and a memo of
+    what measuring a region found (:meth:`once`)."""
+
     z: npt.NDArray[np.float32]
     invalid: npt.NDArray[np.bool_]
     y_img: npt.NDArray[np.float64]
@@ -326,6 +331,10 @@ class Shape(NamedTuple):
 
 
 class Measured(NamedTuple):
+    """A measured candidate: its detection (box on the work grid), what placing it needs
+    when the border cuts it, where it lies on the read area (NMS), and its shape (the box
+    refinement)."""
+
     det: Detection
     cut: Cut | None
     read: ReadBox | None = None
