@@ -39,22 +39,31 @@ def distance_m(lat1: float, lon1: float, lat2: float, lon2: float) -> float:
 
 @pytest.fixture(scope="module")
 def demo(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
-    out = tmp_path_factory.mktemp("demo") / "run"
-    argv = ["demo", "--out", str(out), "--duration", "12", "--size", str(SIZE[0]), str(SIZE[1])]
-    # 12 s give 60-70 frames alone; on a loaded machine the renderer gives a third of that
-    # and the detector less still (it runs below capture): the flight goes on until the
-    # camera delivered as many frames as alone, so there is as much to find.
-    argv += ["--min-frames", str(MIN_FRAMES)]
-    proc = subprocess.run(
-        ["python", "-m", "holescan.cli", *argv],
-        capture_output=True,
-        text=True,
-        timeout=480,  # a hang guard: 1-2 min alone, 3-4 min on a loaded machine
-        check=False,
-        cwd=Path(__file__).resolve().parents[2],
-    )
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    assert f"flying 12 s, at least {MIN_FRAMES} frames" in proc.stderr  # the progress display
+    base = tmp_path_factory.mktemp("demo")
+    # The short run's lawnmower passes one access hole at the field's edge, whole in view
+    # in about 3 frames: on a loaded machine the camera's frames can fall so that it is
+    # whole in none (seen 2026-12-07: found for review, yet "not in view"). A run with no
+    # hole in view checks nothing below, so it is flown again (at most 3 runs).
+    for attempt in range(3):
+        out = base / ("run" if attempt == 0 else f"run{attempt}")
+        argv = ["demo", "--out", str(out), "--duration", "12", "--size", str(SIZE[0]), str(SIZE[1])]
+        # 12 s give 60-70 frames alone; on a loaded machine the renderer gives a third of
+        # that and the detector less still (it runs below capture): the flight goes on until
+        # the camera delivered as many frames as alone, so there is as much to find.
+        argv += ["--min-frames", str(MIN_FRAMES)]
+        proc = subprocess.run(
+            ["python", "-m", "holescan.cli", *argv],
+            capture_output=True,
+            text=True,
+            timeout=480,  # a hang guard: 1-2 min alone, 3-4 min on a loaded machine
+            check=False,
+            cwd=Path(__file__).resolve().parents[2],
+        )
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        assert f"flying 12 s, at least {MIN_FRAMES} frames" in proc.stderr  # the progress display
+        truth = json.loads((out / "demo.json").read_text())["truth"]
+        if any(row["status"] != "not in view" for row in truth):
+            break
     return out, proc.stdout
 
 
@@ -269,8 +278,11 @@ def test_every_output_agrees_on_ids_tiers_positions_and_sigma(demo: tuple[Path, 
     assert sorted(names) == sorted(
         f"hole {i}" if t == "announced" else f"review {i}" for i, t in tiers.items()
     )
-    with zipfile.ZipFile(out / "flight_holes_datapackage.zip") as z:
-        cots = [ET.fromstring(z.read(n)) for n in z.namelist() if n.endswith(".cot")]
+    package = out / "flight_holes_datapackage.zip"  # what TAK gets: the announced holes
+    cots = []
+    if package.exists() or any(t == "announced" for t in tiers.values()):  # none: no package
+        with zipfile.ZipFile(package) as z:
+            cots = [ET.fromstring(z.read(n)) for n in z.namelist() if n.endswith(".cot")]
     on_tak = {}
     for ev in cots:
         hid = int(ev.get("uid", "").rsplit("-", 1)[-1])
