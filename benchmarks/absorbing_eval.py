@@ -321,8 +321,10 @@ def _gates() -> dict[str, Any]:
     from holescan.geotag import AnnounceGate
 
     return {
-        "vote off": AnnounceGate(surface_min_views=10**9, edge_behind_views=0),
-        "before": AnnounceGate(edge_behind_views=0),
+        "vote off": AnnounceGate(
+            surface_min_views=10**9, surface_tie_views=0, edge_behind_views=0
+        ),
+        "before": AnnounceGate(surface_tie_views=0, edge_behind_views=0),
         "after": AnnounceGate(),
     }
 

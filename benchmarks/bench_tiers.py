@@ -213,6 +213,12 @@ def main(argv: list[str] | None = None) -> int:
         "--no-surface-vote", action="store_true", help="the gate without the absorbing-surface vote"
     )
     ap.add_argument(
+        "--surface-tie",
+        type=int,
+        default=AnnounceGate.surface_tie_views,
+        help="AnnounceGate.surface_tie_views (0: off)",
+    )
+    ap.add_argument(
         "--no-edge-hold",
         action="store_true",
         help="the gate without holding unread holes seen only at the image's edge",
@@ -242,12 +248,14 @@ def main(argv: list[str] | None = None) -> int:
     vote: dict[str, int] = {"surface_min_views": 10**9} if args.no_surface_vote else {}
     if args.no_edge_hold:
         vote["edge_behind_views"] = 0
+    vote["surface_tie_views"] = 0 if args.no_surface_vote else args.surface_tie
     gate = AnnounceGate(min_p_hole=args.announce, review_min_p_hole=args.review, **vote)
     if args.holes:
         hole_levels(everything, gate)
     print(
         f"gate: announce p_hole >= {gate.min_p_hole}, review p_hole >= {gate.review_min_p_hole}"
         f", surface vote {'off' if args.no_surface_vote else 'on'}"
+        f" (tie views {vote['surface_tie_views']})"
         f", edge hold {'off' if args.no_edge_hold else 'on'}"
     )
     for kind, rs in by_kind.items():

@@ -79,7 +79,13 @@ class AnnounceGate:
     show behind the plane and never on it. It is never announced, whatever its
     ``p_hole``: it is for review if it would otherwise have been announced or reaches
     ``review_min_p_hole`` (recall first: the vote never drops a hole below review, it only
-    keeps it from being announced).
+    keeps it from being announced). Its second arm weighs the clear readings alone: a hole
+    that at least ``surface_tie_views`` viewpoints read *on* its plane, and no more
+    viewpoints *behind* it, is held too (views reading both, or nothing, count neither way;
+    0 turns the arm off). A void's views read its walls behind the plane; a view on the
+    plane that no more views contradict is not a void's to announce unseen (measured on
+    18 simulated worlds: 3 stain holes announced without it, none with it; 2 of 144 access
+    holes reviewed instead of announced by their own pass; survey flights unchanged).
 
     **Seen only at the image's edge** (:meth:`edge_held`): a hole without readings inside
     (its views measured against the rim plane) that no view saw whole (every sighting's
@@ -123,6 +129,7 @@ class AnnounceGate:
     surface_min_share: float = 0.5
     surface_max_behind_ratio: float = 0.5
     edge_behind_views: int = 2
+    surface_tie_views: int = 1
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.min_p_hole <= _P_HOLE_MAX:
@@ -144,6 +151,8 @@ class AnnounceGate:
             )
         if self.edge_behind_views < 0:
             raise InputError("edge_behind_views must be >= 0")
+        if self.surface_tie_views < 0:
+            raise InputError("surface_tie_views must be >= 0")
 
     def summary(self) -> str:
         """The thresholds in one line: ``announced p_hole >= 0.9, >= 2 sightings over
@@ -170,7 +179,9 @@ class AnnounceGate:
         """True when the absorbing-surface vote holds ``hole`` back from announcement: at
         least ``surface_min_views`` viewpoints measured its inside against the rim plane,
         at least ``surface_min_share`` of them read it on the plane, at most
-        ``surface_max_behind_ratio`` times as many behind it (holes from older logs: never).
+        ``surface_max_behind_ratio`` times as many behind it; or at least
+        ``surface_tie_views`` read it on the plane and no more behind it (holes from older
+        logs: never).
 
         >>> from holescan.geotag import Hole
         >>> h = Hole(1, 0, 0, 0, 1, 0.9, 9, 0, 10**9, 3, (0, 0, 9, 9), 0.7, 0.5, 0.99, 6)
@@ -181,12 +192,20 @@ class AnnounceGate:
         >>> stain = replace(h, plane_views=4, surface_views=2, behind_views=0)
         >>> gate.surface_held(stain), gate.tier(stain)
         (True, 'review')
-        >>> void = replace(stain, behind_views=2)  # as many views saw behind the plane
+        >>> tie = replace(stain, behind_views=2)  # as many views saw behind the plane
+        >>> gate.surface_held(tie), gate.tier(tie)
+        (True, 'review')
+        >>> void = replace(stain, behind_views=3)  # more views saw behind the plane
         >>> gate.surface_held(void), gate.tier(void)
         (False, 'announced')
         """
         n = hole.plane_views
-        return (
+        tie = (
+            self.surface_tie_views > 0
+            and hole.surface_views >= self.surface_tie_views
+            and hole.behind_views <= hole.surface_views
+        )
+        return tie or (
             n >= self.surface_min_views
             and hole.surface_views >= self.surface_min_share * n
             and hole.behind_views <= self.surface_max_behind_ratio * hole.surface_views

@@ -80,7 +80,7 @@ def _on(target: AccessHole, holes: list[Hole]) -> list[Hole]:
 
 def test_a_black_patch_is_held_for_review_an_access_hole_is_announced() -> None:
     world = _world()
-    gate, off = AnnounceGate(), AnnounceGate(surface_min_views=10**9)
+    gate, off = AnnounceGate(), AnnounceGate(surface_min_views=10**9, surface_tie_views=0)
     stain = [h for h in world.holes if h.kind == "stain" and _absorbing(world, h)][STAIN]
     on_stain = _on(stain, _fly_over(world, stain, STAIN))
     assert on_stain, "the pass over the patch made a hole there"
