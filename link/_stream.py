@@ -86,10 +86,17 @@ class MavlinkStream:
                 shadow = max(shadow, end)
                 pos += 1  # resync: the next start byte may be inside the failed frame
                 continue
-            if msg.get_type().startswith("UNKNOWN_") and not (end == n or buf[end] in (_V1, _V2)):
-                self._skip(pos, pos + 1, shadow)  # unverifiable, not followed by a packet
-                pos += 1
-                continue
+            if msg.get_type().startswith("UNKNOWN_"):
+                # Unverifiable (no CRC seed for an unknown id): a packet only when another
+                # starts right after it. On a stream whose bytes end there, wait for the
+                # next byte (garbage ending in a start byte could otherwise take the first
+                # bytes of the real packet behind it as its CRC); a datagram ends there.
+                if end == n and not final:
+                    break
+                if not (end == n or buf[end] in (_V1, _V2)):
+                    self._skip(pos, pos + 1, shadow)  # not followed by a packet
+                    pos += 1
+                    continue
             out.append(msg)
             pos = end
         if final:
