@@ -82,7 +82,8 @@ class AnnounceGate:
     keeps it from being announced). Its second arm weighs the clear readings alone: a hole
     that at least ``surface_tie_views`` viewpoints read *on* its plane, and no more
     viewpoints *behind* it, is held too (views reading both, or nothing, count neither way;
-    0 turns the arm off). A void's views read its walls behind the plane; a view on the
+    0 turns the arm off; at 1, its default, it holds every hole the first arm holds, which
+    then matters only with the arm off or set higher). A void's views read its walls behind the plane; a view on the
     plane that no more views contradict is not a void's to announce unseen (measured on
     18 simulated worlds: 3 stain holes announced without it, none with it; 2 of 144 access
     holes reviewed instead of announced by their own pass; survey flights unchanged).
