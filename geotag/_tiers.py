@@ -83,10 +83,11 @@ class AnnounceGate:
     that at least ``surface_tie_views`` viewpoints read *on* its plane, and no more
     viewpoints *behind* it, is held too (views reading both, or nothing, count neither way;
     0 turns the arm off; at 1, its default, it holds every hole the first arm holds, which
-    then matters only with the arm off or set higher). A void's views read its walls behind the plane; a view on the
-    plane that no more views contradict is not a void's to announce unseen (measured on
-    18 simulated worlds: 3 stain holes announced without it, none with it; 2 of 144 access
-    holes reviewed instead of announced by their own pass; survey flights unchanged).
+    then matters only with the arm off or set higher). A void's views read its walls
+    behind the plane; a view on the plane that no more views contradict is not a void's
+    to announce unseen (measured on 18 simulated worlds: 3 stain holes announced without
+    it, none with it; 2 of 144 access holes reviewed instead of announced by their own
+    pass; survey flights unchanged).
 
     **Seen only at the image's edge** (:meth:`edge_held`): a hole without readings inside
     (its views measured against the rim plane) that no view saw whole (every sighting's
