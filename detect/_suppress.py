@@ -91,10 +91,8 @@ def _near_cut(inner: ReadBox, outer: ReadBox, near: int) -> bool:
 
 
 def _inside(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> float:
-    """Fraction of box ``a`` that lies inside box ``b``."""
-    ix = max(0, min(a[0] + a[2], b[0] + b[2]) - max(a[0], b[0]))
-    iy = max(0, min(a[1] + a[3], b[1] + b[3]) - max(a[1], b[1]))
-    return ix * iy / max(a[2] * a[3], 1)
+    """Fraction of box ``a`` that lies inside box ``b`` (a crowd overlap: over ``a``'s area)."""
+    return overlap(a, b, "iou", crowd=True)
 
 
 def box_iou(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> float:
