@@ -261,12 +261,12 @@ def basin_depths(z: npt.NDArray[np.float32], closed_border: bool = True) -> Basi
 
     The closed view fills more: it differs from the spilled one only in the lakes it
     holds against a bridged border dip (the spilled view's lakes never reach the border,
-    where the seed is the height itself). Such a lake drains through its dip in the
-    spilled view; everywhere else the two views agree. So the full reconstruction is the
-    closed one, and the spilled view is that one with each lake touching the border
-    reconstructed again inside its box, from the closed fill (above the spilled one, so the
-    reconstruction from it comes down to it) with the border unbridged: the lake's
-    neighbours lie at their own height in both views, so the box holds all it depends on.
+    where the seed is the height itself). So the full reconstruction is the closed one,
+    and the spilled view is reconstructed again from it with the border unbridged. That
+    start lies between the spilled view and its seed (the closed fill is above the spilled
+    one; the border is at its own height in both), and a reconstruction by erosion from any
+    marker between the two comes down to the same result: the spilled view exactly, in the
+    few steps that drain the lakes at the border.
     """
     height, invalid = _heights(z)
     z_far = float(percentile(z[~invalid], 99.5))  # robust to a few outliers
@@ -275,21 +275,11 @@ def basin_depths(z: npt.NDArray[np.float32], closed_border: bool = True) -> Basi
     if not closed_border or np.array_equal(closed_seed, spilled_seed):
         return BasinDepths(_pit(_fill(spilled_seed, height), height, invalid), None, invalid, z_far)
     closed = _fill(closed_seed, height)
-    lake = closed > height
-    edge = np.zeros_like(lake)
-    edge[[0, -1], :] = True
-    edge[:, [0, -1]] = True
-    _, lab, stats = components(lake)
-    spilled = closed.copy()
-    hh, ww = height.shape
-    for i in np.unique(lab[lake & edge]):
-        x, y = int(stats[i, cv2.CC_STAT_LEFT]), int(stats[i, cv2.CC_STAT_TOP])
-        w, h = int(stats[i, cv2.CC_STAT_WIDTH]), int(stats[i, cv2.CC_STAT_HEIGHT])
-        win = (slice(max(0, y - 1), min(hh, y + h + 1)), slice(max(0, x - 1), min(ww, x + w + 1)))
-        start = closed[win].copy()
-        start[edge[win]] = height[win][edge[win]]  # the border drains again
-        own = lab[win] == i
-        spilled[win][own] = _fill(start, height[win])[own]
+    # The border drains again: its pixels at their own height, the rest from the closed fill.
+    start = closed.copy()
+    start[[0, -1], :] = height[[0, -1], :]
+    start[:, [0, -1]] = height[:, [0, -1]]
+    spilled = closed if np.array_equal(start, closed) else _fill(start, height)
     return BasinDepths(
         _pit(spilled, height, invalid), _pit(closed, height, invalid), invalid, z_far
     )

@@ -333,8 +333,9 @@ def test_a_compressed_log_finds_the_holes_of_the_raw_log(
 ) -> None:
     """The flight's lossless log (PNG colour, zstd depth: what the reference reprocessed)
     rewritten as a raw log (the image layout of older logs) and with JPEG colour (the
-    default): the raw log gives exactly the same holes; JPEG the same holes, ids and tiers,
-    each within 10 cm (JPEG moves an opening's outline by a pixel or two)."""
+    default): the raw log gives exactly the same holes; JPEG the same holes and ids, each
+    within 10 cm (JPEG moves an opening's outline by a pixel or two), and the same tiers but
+    for a hole one view's reading puts on the other side of a line of the gate."""
     files, _ = flight
     enc = ImageEncoder(color, "raw" if color == "raw" else "zstd", 90)  # type: ignore[arg-type]
     other = transcode(files, tmp_path / color, enc)
@@ -356,8 +357,54 @@ def test_a_compressed_log_finds_the_holes_of_the_raw_log(
                 theirs = rated_at(rated, x.best_frame_index, x.best_box)
                 best = rated_at(rated, y.best_frame_index, y.best_box)
                 assert abs(theirs - best) < VIEW_TIE, (x, y, theirs, best)
-    assert f.tiers == ref.tiers  # the same tiers (the one gate)
+    if tol_m == 0.0:
+        assert f.tiers == ref.tiers  # the same tiers (the one gate)
+    else:
+        # The same tiers, but where one view decides (see one_view_apart).
+        for x, y in zip(f.holes, ref.holes, strict=True):
+            assert f.tiers[x.id] == ref.tiers[y.id] or one_view_apart(x, y), (x, y)
 
+
+def one_view_apart(a: Hole, b: Hole) -> bool:
+    """True when the same hole from two logs of one flight differs by at most one view
+    (one sighting, one viewpoint's plane verdict, p_hole by less than :data:`P_TIE`) and a
+    line of the gate lies between the two: the absorbing-surface vote, the edge rule, a
+    p_hole threshold, the sightings or the time span asked for.
+
+    Measured (29 flights of the 40-frame flight, each log reprocessed lossless and with
+    JPEG colour): JPEG changed a hole's sightings by one in 2 flights, its viewpoints read
+    against the rim plane by one in 1, one viewpoint's verdict in 1, p_hole by at most
+    0.035. The tier changed in 1: the world's stain reads as many viewpoints on its rim
+    plane as behind it in many flights (the vote on it is a tie); JPEG changed which of two
+    nested candidates on it won NMS in one frame (scores 0.2007 and 0.2027), that view
+    read "behind" instead of "surface", 3 on / 3 behind became 2 / 4 and the stain was
+    announced (the lossless log held it for review)."""
+    pa, pb = GATE.p_hole(a), GATE.p_hole(b)
+    moved = abs(a.surface_views - b.surface_views) + abs(a.behind_views - b.behind_views)
+    if (
+        abs(a.sightings - b.sightings) > 1
+        or abs(a.plane_views - b.plane_views) > 1
+        or moved > 2
+        or abs(pa - pb) >= P_TIE
+    ):
+        return False
+
+    def across(x: float, y: float, line: float) -> bool:
+        return min(x, y) < line <= max(x, y)
+
+    span_a, span_b = ((h.t_last_boot_ns - h.t_first_boot_ns) * 1e-9 for h in (a, b))
+    return (
+        GATE.surface_held(a) != GATE.surface_held(b)
+        or GATE.edge_held(a) != GATE.edge_held(b)
+        or any(across(pa, pb, t) for t in (GATE.min_p_hole, GATE.review_min_p_hole))
+        or across(a.sightings, b.sightings, GATE.min_sightings)
+        or across(span_a, span_b, GATE.min_span_s)
+    )
+
+
+P_TIE = 0.05
+"""JPEG colour moves a hole's p_hole by less than this (measured: at most 0.035, where it
+added a sighting; a view's score moves by a few thousandths)."""
 
 VIEW_TIE = 0.02
 """Two views rated this close are a tie JPEG may break either way (>= 6 times the largest
