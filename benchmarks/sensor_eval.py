@@ -1,6 +1,7 @@
 """The default detector on scene sets, per failure mode of a structured-light sensor.
 
     python benchmarks/sensor_eval.py DATASET [DATASET ...] [--workers N] [--off CHOICE ...]
+                                     [--pooled]
 
 For each dataset (a COCO-style folder from ``benchmarks/hard_scenes``, ``benchmarks/
 alien_scenes`` or ``holescan dataset synth``): AP under IoU > 0.5, recall, false positives
@@ -21,6 +22,10 @@ matches no hole. The false positives at ``p_hole >= 0.3`` (those the AP's matchi
 as such: crowd boxes take theirs) are split by the same labels into **absorbing** (on an
 absorbing stain), **shadow** (on a cast shadow), **border** (within 2 px of the read area's
 edge) and **other**, in that order.
+
+With ``--pooled`` a last row takes every set's frames as one set: the AP and false
+positives of all their detections matched together (a set of 40 frames gives AP to a few
+hundredths; the pooled AP is the figure of the sets together), the counts summed.
 """
 
 from __future__ import annotations
@@ -191,6 +196,9 @@ def evaluate(root: Path, workers: int, off: tuple[str, ...] = ()) -> dict[str, A
         "modes": {k: tuple(v) for k, v in counts.items()},
         "on_distractors_p03": on,
         "fp_p03_modes": fp_modes,
+        "scored": scored,
+        "shown": shown,
+        "gt": gt,
     }
 
 
@@ -198,6 +206,11 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("datasets", nargs="+", type=Path)
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument(
+        "--pooled",
+        action="store_true",
+        help="also a last row over all the sets as one: AP of their frames together, counts summed",
+    )
     ap.add_argument(
         "--off",
         nargs="*",
@@ -218,26 +231,70 @@ def main(argv: list[str] | None = None) -> int:
         "absorbing / announced | on shadow | FP p>=0.3: border / absorbing / shadow / other |"
     )
     print("|---|" + "---|" * 11)
+    results: list[dict[str, Any]] = []
     for root in args.datasets:
         if not (root / "annotations.json").is_file():
             print(f"{root}: not a dataset folder (no annotations.json)", file=sys.stderr)
             return 2
-        r = evaluate(root, args.workers, tuple(args.off))
-        m, on, fm = r["modes"], r["on_distractors_p03"], r["fp_p03_modes"]
-
-        def rec(k: str, m: dict[str, tuple[int, int, int]] = m) -> str:
-            n, a, s = m[k]
-            return f"{a}/{n} ({s}/{n})" if n else "-"
-
-        print(
-            f"| {r['dataset']} | {r['images']} | {r['holes']} | {r['ap_iou']:.3f} | "
-            f"{r['recall']:.3f} | {r['fp_p03']} | {rec('border')} | {rec('interior')} | "
-            f"{rec('half_read')} | {on['stain']} / {on['absorbing']} / "
-            f"{on['absorbing_announced']} | {on['cast_shadow']} | "
-            f"{fm['border']} / {fm['absorbing']} / {fm['shadow']} / {fm['other']} |",
-            flush=True,
-        )
+        results.append(evaluate(root, args.workers, tuple(args.off)))
+        _row(results[-1])
+    if args.pooled and len(results) > 1:
+        _row(_pooled(results))
     return 0
+
+
+def _pooled(results: list[dict[str, Any]]) -> dict[str, Any]:
+    """One result over every set: each set's frames renumbered apart, the AP and the false
+    positives of their detections matched together, every count summed."""
+    from dataclasses import replace
+
+    from holescan.detect import GroundTruthBox, ScoredBox, evaluate_detections
+
+    scored: list[ScoredBox] = []
+    shown: list[ScoredBox] = []
+    gt: list[GroundTruthBox] = []
+    for k, r in enumerate(results):
+        base = (k + 1) * 1_000_000
+        scored += [replace(s, image_id=base + s.image_id) for s in r["scored"]]
+        shown += [replace(s, image_id=base + s.image_id) for s in r["shown"]]
+        gt += [replace(g, image_id=base + g.image_id) for g in r["gt"]]
+    iou = evaluate_detections(scored, gt, "iou")
+
+    def summed(key: str) -> dict[str, Any]:
+        first = results[0][key]
+        if isinstance(next(iter(first.values())), tuple):
+            rows = {k: [r[key][k] for r in results] for k in first}
+            return {k: tuple(map(sum, zip(*v, strict=True))) for k, v in rows.items()}
+        return {k: sum(r[key][k] for r in results) for k in first}
+
+    return {
+        "dataset": f"all {len(results)} sets",
+        "images": sum(r["images"] for r in results),
+        "holes": iou.n_gt,
+        "ap_iou": round(iou.ap, 3),
+        "recall": round(iou.recall, 3),
+        "fp_p03": evaluate_detections(shown, gt, "iou").n_fp if shown else 0,
+        "modes": summed("modes"),
+        "on_distractors_p03": summed("on_distractors_p03"),
+        "fp_p03_modes": summed("fp_p03_modes"),
+    }
+
+
+def _row(r: dict[str, Any]) -> None:
+    m, on, fm = r["modes"], r["on_distractors_p03"], r["fp_p03_modes"]
+
+    def rec(k: str) -> str:
+        n, a, s = m[k]
+        return f"{a}/{n} ({s}/{n})" if n else "-"
+
+    print(
+        f"| {r['dataset']} | {r['images']} | {r['holes']} | {r['ap_iou']:.3f} | "
+        f"{r['recall']:.3f} | {r['fp_p03']} | {rec('border')} | {rec('interior')} | "
+        f"{rec('half_read')} | {on['stain']} / {on['absorbing']} / "
+        f"{on['absorbing_announced']} | {on['cast_shadow']} | "
+        f"{fm['border']} / {fm['absorbing']} / {fm['shadow']} / {fm['other']} |",
+        flush=True,
+    )
 
 
 if __name__ == "__main__":
