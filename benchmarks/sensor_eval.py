@@ -10,7 +10,10 @@ at ``p_hole >= 0.3``, and by failure mode:
 * **border**: holes within 2 px of the read area's edge (the frame's border or the unread
   band along it, from the scene record's ``bands_ltrb_px``) against the others; and the
   recall of every hole at least half inside the read area (crowd boxes included: a hole the
-  frame cuts is still one to find);
+  frame cuts is still one to find); and of those, the ones the sensor can read: not crowd
+  for being mostly hidden by rubble (under half of the opening visible) or for a rim beyond
+  the sensor's range (hard_scenes' ``crowd_reason``; alien_scenes' ``visible_fraction``
+  and ``rim_depth_m`` against the scene's ``max_range_m``);
 * **absorbing**: detections with ``p_hole >= 0.3`` lying on a stain (hard_scenes distractor
   ``stain``; those in ``absorbing_stains`` return no infrared) and those announced
   (``p_hole >= 0.9``, the announce tier);
@@ -91,6 +94,17 @@ def _near_edge(box: tuple[float, ...], read: tuple[float, ...]) -> bool:
     )
 
 
+def _hidden_or_beyond(a: dict[str, Any], im: dict[str, Any]) -> bool:
+    """Whether a hole's label says the sensor cannot read it: under half of the opening
+    visible (rubble in front) or its rim beyond the sensor's range."""
+    reasons = a.get("crowd_reason")
+    if reasons is not None:  # hard_scenes
+        return bool({"occluded", "beyond_range"} & set(reasons))
+    max_range = (im.get("scene") or {}).get("max_range_m")
+    far = max_range is not None and float(a.get("rim_depth_m", 0.0)) > float(max_range)
+    return bool(a.get("visible_fraction", 1.0) < 0.5 or far)
+
+
 def evaluate(root: Path, workers: int, off: tuple[str, ...] = ()) -> dict[str, Any]:
     from holescan.detect import GroundTruthBox, ScoredBox, evaluate_detections, match_image
     from holescan.ground import ground_truth, load_dataset
@@ -115,6 +129,7 @@ def evaluate(root: Path, workers: int, off: tuple[str, ...] = ()) -> dict[str, A
         "border": [0, 0, 0],  # holes, found (any score), found at p >= 0.3
         "interior": [0, 0, 0],
         "half_read": [0, 0, 0],
+        "readable": [0, 0, 0],
     }
     on = {"stain": 0, "absorbing": 0, "absorbing_announced": 0, "cast_shadow": 0}
     fp_modes = {"border": 0, "absorbing": 0, "shadow": 0, "other": 0}
@@ -138,6 +153,8 @@ def evaluate(root: Path, workers: int, off: tuple[str, ...] = ()) -> dict[str, A
                 rows.append("border" if near_edge else "interior")
             if _inside(box, read) >= 0.5:
                 rows.append("half_read")
+                if not _hidden_or_beyond(a, im):
+                    rows.append("readable")
             for r in rows:
                 counts[r][0] += 1
                 counts[r][1] += hit_any
@@ -227,10 +244,11 @@ def main(argv: list[str] | None = None) -> int:
             return 2
     print(
         "| set | frames | holes | AP IoU | recall | FP p>=0.3 | border recall (p>=0.3) | "
-        "interior recall (p>=0.3) | >= half in read area: recall (p>=0.3) | on stain / "
+        "interior recall (p>=0.3) | >= half in read area: recall (p>=0.3) | ... of them "
+        "readable: recall (p>=0.3) | on stain / "
         "absorbing / announced | on shadow | FP p>=0.3: border / absorbing / shadow / other |"
     )
-    print("|---|" + "---|" * 11)
+    print("|---|" + "---|" * 12)
     results: list[dict[str, Any]] = []
     for root in args.datasets:
         if not (root / "annotations.json").is_file():
@@ -290,7 +308,7 @@ def _row(r: dict[str, Any]) -> None:
     print(
         f"| {r['dataset']} | {r['images']} | {r['holes']} | {r['ap_iou']:.3f} | "
         f"{r['recall']:.3f} | {r['fp_p03']} | {rec('border')} | {rec('interior')} | "
-        f"{rec('half_read')} | {on['stain']} / {on['absorbing']} / "
+        f"{rec('half_read')} | {rec('readable')} | {on['stain']} / {on['absorbing']} / "
         f"{on['absorbing_announced']} | {on['cast_shadow']} | "
         f"{fm['border']} / {fm['absorbing']} / {fm['shadow']} / {fm['other']} |",
         flush=True,

@@ -27,6 +27,9 @@ BAND_MAX_PX = 64
 BORDER_BRIDGE = 0.5
 # ... and at least this many pixels long.
 BRIDGE_MIN_PX = 3
+# A bridge takes in the dip's shoulders (shallower than DEEP_M) up to this fraction of its
+# deep part's length on each side (_bridged).
+SHOULDER_REACH = 0.5
 # Dips running into a corner up to this fraction of the line are bridged at the rim on
 # their one side, when that side rises as a wall's (by DEEP_M within CORNER_STEP_PX).
 CORNER_BRIDGE = 0.25
@@ -133,13 +136,42 @@ def _bridged(
 ) -> npt.NDArray[np.float64]:
     """The border line with its deep dips bridged: where the closed profile stands more
     than :data:`DEEP_M` above it (a hole or its unread floor crossing the border), not at
-    shallow undulations of the terrain (those drain there as before)."""
+    shallow undulations of the terrain (those drain there as before).
+
+    Each bridge also takes in the dip's shoulders, where the closed profile stands more
+    than :data:`SHALLOW_M` above the line, up to :data:`SHOULDER_REACH` of the deep part's
+    length on each side: a hole's walls slope up to its rim, and a bridge over the deep
+    part alone leaves the basin to drain at a shoulder up to :data:`DEEP_M` below the rim,
+    shallower than it is by as much (an oblique 0.5 m hole cut by the border then has no
+    core at all). The reach is bounded, scaling with the dip: a long shallow stretch of
+    terrain beside a dip is no wall, and bridged would close a basin across the frame.
+
+    >>> p = -np.array([2.5, 2.5, 2.6, 2.8, 3.0, 3.0, 3.0, 3.0, 2.8, 2.6, 2.5, 2.5])
+    >>> (-_bridged(p, 9)).round(2).tolist()  # the deep part and its shoulders
+    [2.5, 2.5, 2.5, 2.5, 2.5, 2.5, 2.5, 2.5, 2.5, 2.5, 2.5, 2.5]
+    >>> (-_bridged(-np.array([2.5, 2.6, 2.6, 2.6, 2.5]), 4)).round(2).tolist()  # shallow
+    [2.5, 2.6, 2.6, 2.6, 2.5]
+    """
     closed = _closed_profile(profile, length, end)
-    deep = (closed - profile > DEEP_M).astype(np.uint8)[None, :]
+    dip = closed - profile
+    deep = (dip > DEEP_M).astype(np.uint8)[None, :]
     # Runs shorter than BRIDGE_MIN_PX (stray unread pixels at the border) are left alone.
     k = np.ones((1, BRIDGE_MIN_PX), np.uint8)
     deep = np.asarray(cv2.morphologyEx(deep, cv2.MORPH_OPEN, k), np.uint8)[0].astype(bool)
-    return np.where(deep, closed, profile)
+    if not deep.any():
+        return profile
+    wet = dip > SHALLOW_M
+    bridge = deep.copy()
+    edges = np.diff(np.concatenate(([0], deep.view(np.int8), [0])))
+    starts, stops = np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist()
+    for a, b in zip(starts, stops, strict=True):  # each deep run is [a, b)
+        reach = max(1, round(SHOULDER_REACH * (b - a)))
+        lo, hi = max(0, a - reach), min(int(wet.size), b + reach)
+        dry_before, dry_after = np.flatnonzero(~wet[lo:a]), np.flatnonzero(~wet[b:hi])
+        lo = lo + int(dry_before[-1]) + 1 if dry_before.size else lo
+        hi = b + int(dry_after[0]) if dry_after.size else hi
+        bridge[lo:hi] = True
+    return np.where(bridge, closed, profile)
 
 
 def _heights(z: npt.NDArray[np.float32]) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_]]:

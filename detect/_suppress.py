@@ -52,8 +52,9 @@ def _priorities(found: list[Measured], contained: float, near_px: int) -> list[f
     it:
 
     * when the inner basin comes within ``near_px`` of a side the bridged one is cut by,
-      it is the deep part of a hole that runs on to the cut: the bridged basin goes first
-      (its box is the hole's);
+      and the bridged one runs on beyond it only toward the cut (within ``near_px`` of it
+      on every other side), it is the deep part of a hole that runs on to the cut: the
+      bridged basin goes first (its box is the hole's);
     * otherwise seen rim lies between the inner basin and the cut: the bridged basin is
       the depression around that hole, its depth measured against a rim partly assumed;
       the inner basin goes first (and the bridged one, holding it, is dropped).
@@ -72,7 +73,8 @@ def _priorities(found: list[Measured], contained: float, near_px: int) -> list[f
                 or _inside(e.det.box, b.det.box) <= contained
             ):
                 continue
-            first, then = (i, j) if _near_cut(e.read, b.read, near_px) else (j, i)
+            runs_on = _near_cut(e.read, b.read, near_px) and _toward_cut(e.read, b.read, near_px)
+            first, then = (i, j) if runs_on else (j, i)
             if rank[first] <= rank[then]:
                 rank[first] = np.nextafter(rank[then], np.inf)
     return rank
@@ -87,6 +89,20 @@ def _near_cut(inner: ReadBox, outer: ReadBox, near: int) -> bool:
         or (oy0 == 0 and iy0 <= near)
         or (ox1 == ww and ww - ix1 <= near)
         or (oy1 == hh and hh - iy1 <= near)
+    )
+
+
+def _toward_cut(inner: ReadBox, outer: ReadBox, near: int) -> bool:
+    """Whether ``outer`` runs on beyond ``inner`` only toward the sides of the read area it
+    reaches: on every other side it ends within ``near`` work pixels of ``inner`` (its ring
+    and walls). A bridged basin that also spreads away from the cut is a depression around
+    the hole, closed across the border, not the hole running on to the cut."""
+    (ix0, iy0, ix1, iy1), (ox0, oy0, ox1, oy1), (ww, hh) = inner.box, outer.box, outer.size
+    return (
+        (ox0 == 0 or ox0 >= ix0 - near)
+        and (oy0 == 0 or oy0 >= iy0 - near)
+        and (ox1 == ww or ox1 <= ix1 + near)
+        and (oy1 == hh or oy1 <= iy1 + near)
     )
 
 
