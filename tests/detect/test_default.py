@@ -12,7 +12,9 @@ from skimage.morphology import reconstruction
 from holescan.detect import DEFAULT, DOG, CameraIntrinsics, Detection, detect_holes
 from holescan.detect._boxes import refine_box
 from holescan.detect._default import basin_depth, block_depth, opening_axes
-from holescan.detect._regions import basin_depths, components
+from holescan.detect._measure import ReadBox
+from holescan.detect._regions import _bridged, basin_depths, components
+from holescan.detect._suppress import _near_cut, _toward_cut
 from holescan.errors import InputError
 
 CAM = CameraIntrinsics.xtion()
@@ -127,6 +129,41 @@ def test_basin_cut_by_the_border_is_closed_there_not_spilled() -> None:
     assert float(spilled[15, 3]) == pytest.approx(0.0, abs=1e-6)
     assert float(closed[15, 3]) == pytest.approx(0.7, abs=1e-5)
     assert float(closed[30, 30]) == pytest.approx(0.0, abs=1e-6)  # the floor stays a floor
+
+
+def test_a_cut_basin_with_sloping_walls_is_closed_at_its_rim_not_its_shoulder() -> None:
+    # A pit 0.5 m deep the left border cuts, its walls sloping down over 6 rows each side:
+    # bridged over its deep part only, it would drain at a shoulder 0.25 m below the rim
+    # and read half as deep.
+    z = np.full((60, 50), 2.0, np.float32)
+    z[18:42, 0:12] = 2.5
+    for i in range(6):
+        z[18 + i, 0:12] = z[41 - i, 0:12] = 2.0 + 0.5 * (i + 1) / 7
+    closed, _, _ = basin_depth(z, closed_border=True)
+    assert float(closed[30, 3]) == pytest.approx(0.5, abs=1e-5)
+    assert float(closed[30, 30]) == pytest.approx(0.0, abs=1e-6)
+
+
+def test_a_shallow_stretch_beside_a_cut_dip_is_not_bridged_far_beyond_it() -> None:
+    # The border line: a dip 4 px long and 0.5 m deep beside 30 px of terrain 0.1 m low:
+    # the bridge takes in 2 px of that stretch (half the dip's length), not all of it.
+    line = -np.full(50, 2.0)
+    line[5:35] = -2.1
+    line[35:39] = -2.5
+    bridged = _bridged(line, 40)
+    assert np.all(bridged[33:39] == -2.0)
+    assert np.all(bridged[5:33] == -2.1)
+
+
+def test_a_bridged_basin_spreading_away_from_the_cut_is_no_hole_running_to_it() -> None:
+    # A hole whose box comes within 2 work px of the left side of the read area (60 x 40):
+    # a bridged basin holding it runs on to that side; when it also spreads below and to
+    # the right of it, it is a depression around the hole.
+    inner = ReadBox((2, 10, 20, 25), (60, 40), False, True)
+    hole = ReadBox((0, 8, 24, 29), (60, 40), True, True)
+    depression = ReadBox((0, 8, 40, 38), (60, 40), True, True)
+    assert _near_cut(inner, hole, 6) and _toward_cut(inner, hole, 6)
+    assert _near_cut(inner, depression, 6) and not _toward_cut(inner, depression, 6)
 
 
 @pytest.mark.parametrize("seed", range(8))
