@@ -73,14 +73,14 @@ def _priorities(found: list[Measured], contained: float, near_px: int) -> list[f
                 or _inside(e.det.box, b.det.box) <= contained
             ):
                 continue
-            runs_on = _near_cut(e.read, b.read, near_px) and _toward_cut(e.read, b.read, near_px)
+            runs_on = near_cut(e.read, b.read, near_px) and toward_cut(e.read, b.read, near_px)
             first, then = (i, j) if runs_on else (j, i)
             if rank[first] <= rank[then]:
                 rank[first] = np.nextafter(rank[then], np.inf)
     return rank
 
 
-def _near_cut(inner: ReadBox, outer: ReadBox, near: int) -> bool:
+def near_cut(inner: ReadBox, outer: ReadBox, near: int) -> bool:
     """Whether ``inner`` comes within ``near`` work pixels of a side of the read area
     that ``outer`` reaches."""
     (ix0, iy0, ix1, iy1), (ox0, oy0, ox1, oy1), (ww, hh) = inner.box, outer.box, outer.size
@@ -92,7 +92,7 @@ def _near_cut(inner: ReadBox, outer: ReadBox, near: int) -> bool:
     )
 
 
-def _toward_cut(inner: ReadBox, outer: ReadBox, near: int) -> bool:
+def toward_cut(inner: ReadBox, outer: ReadBox, near: int) -> bool:
     """Whether ``outer`` runs on beyond ``inner`` only toward the sides of the read area it
     reaches: on every other side it ends within ``near`` work pixels of ``inner`` (its ring
     and walls). A bridged basin that also spreads away from the cut is a depression around

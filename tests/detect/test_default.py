@@ -13,8 +13,8 @@ from holescan.detect import DEFAULT, DOG, CameraIntrinsics, Detection, detect_ho
 from holescan.detect._boxes import refine_box
 from holescan.detect._default import basin_depth, block_depth, opening_axes
 from holescan.detect._measure import ReadBox
-from holescan.detect._regions import _bridged, basin_depths, components
-from holescan.detect._suppress import _near_cut, _toward_cut
+from holescan.detect._regions import basin_depths, components
+from holescan.detect._suppress import near_cut, toward_cut
 from holescan.errors import InputError
 
 CAM = CameraIntrinsics.xtion()
@@ -144,15 +144,16 @@ def test_a_cut_basin_with_sloping_walls_is_closed_at_its_rim_not_its_shoulder() 
     assert float(closed[30, 30]) == pytest.approx(0.0, abs=1e-6)
 
 
-def test_a_shallow_stretch_beside_a_cut_dip_is_not_bridged_far_beyond_it() -> None:
-    # The border line: a dip 4 px long and 0.5 m deep beside 30 px of terrain 0.1 m low:
-    # the bridge takes in 2 px of that stretch (half the dip's length), not all of it.
-    line = -np.full(50, 2.0)
-    line[5:35] = -2.1
-    line[35:39] = -2.5
-    bridged = _bridged(line, 40)
-    assert np.all(bridged[33:39] == -2.0)
-    assert np.all(bridged[5:33] == -2.1)
+def test_a_shallow_stretch_beside_a_cut_dip_is_not_closed_far_beyond_it() -> None:
+    # A depression 0.1 m deep along 30 rows of the left border, a dip 0.5 m deep and 4 rows
+    # long at its end: the dip's bridge takes in the stretch's 2 rows next to it (half the
+    # dip's length), not the whole stretch, which still drains at the border.
+    z = np.full((60, 50), 2.0, np.float32)
+    z[5:35, 0:20] = 2.1
+    z[35:39, 0:4] = 2.5
+    closed, _, _ = basin_depth(z, closed_border=True)
+    assert float(closed[37, 1]) == pytest.approx(0.4, abs=1e-5)  # spills into the stretch
+    assert float(closed[10, 5]) == pytest.approx(0.0, abs=1e-6)  # bridged whole: 0.1
 
 
 def test_a_bridged_basin_spreading_away_from_the_cut_is_no_hole_running_to_it() -> None:
@@ -162,8 +163,8 @@ def test_a_bridged_basin_spreading_away_from_the_cut_is_no_hole_running_to_it() 
     inner = ReadBox((2, 10, 20, 25), (60, 40), False, True)
     hole = ReadBox((0, 8, 24, 29), (60, 40), True, True)
     depression = ReadBox((0, 8, 40, 38), (60, 40), True, True)
-    assert _near_cut(inner, hole, 6) and _toward_cut(inner, hole, 6)
-    assert _near_cut(inner, depression, 6) and not _toward_cut(inner, depression, 6)
+    assert near_cut(inner, hole, 6) and toward_cut(inner, hole, 6)
+    assert near_cut(inner, depression, 6) and not toward_cut(inner, depression, 6)
 
 
 @pytest.mark.parametrize("seed", range(8))
