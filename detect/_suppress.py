@@ -20,6 +20,10 @@ __all__ = ["box_iou", "nms"]
 # one (a much weaker dip is a dip in the hole's floor), and it runs on to the cut when it
 # comes within its ring and walls of it (RING_PX + options.grow_px work pixels).
 INNER_SCORE_RATIO = 0.5
+# A bridged basin that is the hole running on to the cut reaches beyond the enclosed deep
+# part inside it, on the sides away from the cut, by the hole's sloping walls: up to this
+# fraction of the deep part's extent (beside the ring and walls every region is grown by).
+WALLS_BEYOND = 0.25
 
 
 def nms(
@@ -52,12 +56,13 @@ def _priorities(found: list[Measured], contained: float, near_px: int) -> list[f
     it:
 
     * when the inner basin comes within ``near_px`` of a side the bridged one is cut by,
-      and the bridged one runs on beyond it only toward the cut (within ``near_px`` of it
-      on every other side), it is the deep part of a hole that runs on to the cut: the
-      bridged basin goes first (its box is the hole's);
-    * otherwise seen rim lies between the inner basin and the cut: the bridged basin is
-      the depression around that hole, its depth measured against a rim partly assumed;
-      the inner basin goes first (and the bridged one, holding it, is dropped).
+      and the bridged one runs on beyond it only toward the cut (on every other side within
+      ``near_px`` and :data:`WALLS_BEYOND` of its extent), it is the deep part of a hole
+      that runs on to the cut: the bridged basin goes first (its box is the hole's);
+    * otherwise seen rim lies between the inner basin and the cut (or the bridged basin
+      spreads away from the cut too): the bridged basin is the depression around that
+      hole, its depth measured against a rim partly assumed; the inner basin goes first
+      (and the bridged one, holding it, is dropped).
     """
     rank = [m.det.score for m in found]
     for i, b in enumerate(found):
@@ -94,15 +99,17 @@ def near_cut(inner: ReadBox, outer: ReadBox, near: int) -> bool:
 
 def toward_cut(inner: ReadBox, outer: ReadBox, near: int) -> bool:
     """Whether ``outer`` runs on beyond ``inner`` only toward the sides of the read area it
-    reaches: on every other side it ends within ``near`` work pixels of ``inner`` (its ring
-    and walls). A bridged basin that also spreads away from the cut is a depression around
-    the hole, closed across the border, not the hole running on to the cut."""
+    reaches: on every other side it ends within ``near`` work pixels (a ring and walls) and
+    :data:`WALLS_BEYOND` of ``inner``'s extent of it. A bridged basin that spreads farther
+    away from the cut is a depression around the hole, closed across the border, not the
+    hole running on to the cut."""
     (ix0, iy0, ix1, iy1), (ox0, oy0, ox1, oy1), (ww, hh) = inner.box, outer.box, outer.size
+    mx, my = near + WALLS_BEYOND * (ix1 - ix0), near + WALLS_BEYOND * (iy1 - iy0)
     return (
-        (ox0 == 0 or ox0 >= ix0 - near)
-        and (oy0 == 0 or oy0 >= iy0 - near)
-        and (ox1 == ww or ox1 <= ix1 + near)
-        and (oy1 == hh or oy1 <= iy1 + near)
+        (ox0 == 0 or ox0 >= ix0 - mx)
+        and (oy0 == 0 or oy0 >= iy0 - my)
+        and (ox1 == ww or ox1 <= ix1 + mx)
+        and (oy1 == hh or oy1 <= iy1 + my)
     )
 
 

@@ -158,8 +158,9 @@ def test_a_shallow_stretch_beside_a_cut_dip_is_not_closed_far_beyond_it() -> Non
 
 def test_a_bridged_basin_spreading_away_from_the_cut_is_no_hole_running_to_it() -> None:
     # A hole whose box comes within 2 work px of the left side of the read area (60 x 40):
-    # a bridged basin holding it runs on to that side; when it also spreads below and to
-    # the right of it, it is a depression around the hole.
+    # a bridged basin holding it runs on to that side; reaching beyond it elsewhere by its
+    # walls (2 px), it is that hole; spreading below and to the right of it by more than
+    # its ring, walls and a quarter of its size, a depression around the hole.
     inner = ReadBox((2, 10, 20, 25), (60, 40), False, True)
     hole = ReadBox((0, 8, 24, 29), (60, 40), True, True)
     depression = ReadBox((0, 8, 40, 38), (60, 40), True, True)
