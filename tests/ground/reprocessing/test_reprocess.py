@@ -117,6 +117,16 @@ def off_opening_m(world: RubbleWorld, h: Hole) -> float:
     return min(Polygon(w.opening).distance(p) for w in world.holes)
 
 
+# A flight hole whose id reprocessing does not keep lies within this of a hole reprocessing
+# found: twice the tracker's smallest gate (MergeParams().min_radius_m, 0.5 m).
+SPLIT_REACH_M = 1.0
+
+
+def _horizontal_m(a: Hole, b: Hole) -> float:
+    x, y, _ = pymap3d.geodetic2enu(a.lat_deg, a.lon_deg, 0.0, b.lat_deg, b.lon_deg, 0.0)
+    return math.hypot(float(x), float(y))
+
+
 def test_in_process_run_reads_every_frame_and_writes_a_sidecar(
     flight: Flown, reference: ReprocessResult, world: RubbleWorld
 ) -> None:
@@ -128,7 +138,15 @@ def test_in_process_run_reads_every_frame_and_writes_a_sidecar(
     found = [h for h in summary.holes if told[h.id] in FOUND_TIERS]
     assert len(f.flight_matches) == len(found) >= 1
     for m in f.flight_matches:  # every hole the flight found, found again, in place
-        assert m.found is not None, m
+        if m.found is None:
+            # Its id is gone: on a loaded machine the flight can split one opening into two
+            # holes (a sighting posed from late telemetry falls past the tracker's gate);
+            # reprocessing, every frame posed from the telemetry around it, fuses them into
+            # one, which keeps one of the two ids. The other's place is that hole's.
+            old = found[m.reference]
+            near = min(_horizontal_m(old, h) for h in f.holes)
+            assert near < SPLIT_REACH_M, (m, near)
+            continue
         if m.distance_m >= 0.3:
             # Reprocessing fuses every frame, posed from the telemetry around it; the
             # flight only the frames its detector took, posed as telemetry had arrived
