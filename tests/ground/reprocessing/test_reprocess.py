@@ -119,7 +119,7 @@ def off_opening_m(world: RubbleWorld, h: Hole) -> float:
 
 # A flight hole whose id reprocessing does not keep lies within this of a hole reprocessing
 # found: twice the tracker's smallest gate (MergeParams().min_radius_m, 0.5 m).
-SPLIT_REACH_M = 1.0
+PLACE_REACH_M = 1.0
 
 
 def _horizontal_m(a: Hole, b: Hole) -> float:
@@ -139,13 +139,14 @@ def test_in_process_run_reads_every_frame_and_writes_a_sidecar(
     assert len(f.flight_matches) == len(found) >= 1
     for m in f.flight_matches:  # every hole the flight found, found again, in place
         if m.found is None:
-            # Its id is gone: on a loaded machine the flight can split one opening into two
-            # holes (a sighting posed from late telemetry falls past the tracker's gate);
-            # reprocessing, every frame posed from the telemetry around it, fuses them into
-            # one, which keeps one of the two ids. The other's place is that hole's.
+            # Its id is gone. Reprocessing fuses every frame; on a loaded machine the
+            # flight's detector took few, posed from late telemetry. The hole reprocessing
+            # made there can lie past the gate of the flight's (one opening split in flight,
+            # fused again) or differ from it in size more than the tracker allows (a weak
+            # hole seen once, cut by the border): a new id. The place still has a hole.
             old = found[m.reference]
             near = min(_horizontal_m(old, h) for h in f.holes)
-            assert near < SPLIT_REACH_M, (m, near)
+            assert near < PLACE_REACH_M, (m, near)
             continue
         if m.distance_m >= 0.3:
             # Reprocessing fuses every frame, posed from the telemetry around it; the
