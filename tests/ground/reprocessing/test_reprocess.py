@@ -45,7 +45,7 @@ from holescan.flightlog import (
     read_flight_log,
     scan_records,
 )
-from holescan.geotag import FOUND_TIERS, AnnounceGate, Hole, box_cut_by_border
+from holescan.geotag import FOUND_TIERS, AnnounceGate, Hole, box_cut_by_border, local_en_m
 from holescan.ground import (
     Progress,
     ReprocessOptions,
@@ -123,8 +123,7 @@ PLACE_REACH_M = 1.0
 
 
 def _horizontal_m(a: Hole, b: Hole) -> float:
-    x, y, _ = pymap3d.geodetic2enu(a.lat_deg, a.lon_deg, 0.0, b.lat_deg, b.lon_deg, 0.0)
-    return math.hypot(float(x), float(y))
+    return math.hypot(*local_en_m(a.lat_deg, a.lon_deg, b.lat_deg, b.lon_deg))
 
 
 def test_in_process_run_reads_every_frame_and_writes_a_sidecar(
